@@ -1,0 +1,26 @@
+"""ROS-free HZD control core for RABBIT: Bezier virtual constraints, phase, PD tracking,
+stance switching, and the gait description. The ROS node lives in :mod:`.node`."""
+
+from .alpha import N_ALPHA, N_FREE, OUTPUTS, alpha_matrix, expand_alpha, reduce_alpha
+from .bezier import DEGREE, bezier, bezier_derivative, bezier_matrix, bernstein
+from .controller import (
+    ACTUATED_JOINTS,
+    JOINT_NAMES,
+    ControllerConfig,
+    HZDController,
+    Leg,
+    validate_alpha,
+    validate_kd,
+)
+from .gait import Gait
+from .kinematics import LegGeometry, foot_from_hip, foot_velocity_from_hip, leg_inverse_kinematics
+from .phase import PhaseBounds, phase, phase_bounds_from_alpha, phase_rate, stance_hip_position
+
+__all__ = [
+    "ACTUATED_JOINTS", "DEGREE", "JOINT_NAMES", "N_ALPHA", "N_FREE", "OUTPUTS",
+    "ControllerConfig", "Gait", "HZDController", "Leg", "LegGeometry", "PhaseBounds",
+    "alpha_matrix", "bernstein", "bezier", "bezier_derivative", "bezier_matrix",
+    "expand_alpha", "foot_from_hip", "foot_velocity_from_hip", "leg_inverse_kinematics",
+    "phase", "phase_bounds_from_alpha", "phase_rate", "reduce_alpha", "stance_hip_position",
+    "validate_alpha", "validate_kd",
+]

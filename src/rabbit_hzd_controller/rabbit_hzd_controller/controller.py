@@ -1,0 +1,268 @@
+"""The HZD controller: virtual constraints tracked by a PD law, with stance switching.
+
+One call of :meth:`HZDController.compute` is one 1 kHz control tick: joint state in,
+four joint torques out. It is written in plain Python floats (no numpy on the hot path,
+see ``scripts/bench_sim.py``) and is the very same code the ROS node, the Gymnasium
+environment, the gait optimizer and the benchmarks run.
+
+Joint state order (the model's ``qpos``/``qvel`` order, also the ``/joint_states`` order):
+``JOINT_NAMES = (x, z, torso_pitch, left_hip, left_knee, right_hip, right_knee)``; x, z
+are the world position of the hip (m), the rest angles (rad), see :mod:`.kinematics`.
+Torques come out in actuator order ``ACTUATED_JOINTS`` (N m).
+
+Per tick:
+1. relabel the legs into (stance hip, stance knee, swing hip, swing knee);
+2. if the phase has passed ``touchdown_min_phase`` and the swing foot is at or below
+   ``touchdown_height`` above the ground, switch stance (exactly once per step: right
+   after a switch the new swing foot is at phase ~0) and make the pending alpha active;
+3. tau and d tau/dt from the stance hip position (:mod:`.phase`);
+4. desired outputs ``y_d(tau, alpha)`` and ``dy_d/dt = dy_d/dtau * dtau/dt``;
+5. ``u = Kp (y_d - y) + Kd (dy_d - dy)``, saturated to the torque limit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+from math import cos, isfinite, sin
+from typing import Sequence
+
+import numpy as np
+
+from .alpha import N_ALPHA, alpha_matrix, impact_violation
+from .kinematics import LegGeometry
+from .phase import PhaseBounds, phase_bounds_from_alpha
+
+from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES  # noqa: F401  (re-exported)
+
+
+class Leg(IntEnum):
+    """Which leg is the stance leg."""
+
+    LEFT = 0
+    RIGHT = 1
+
+    def other(self) -> "Leg":
+        return Leg.RIGHT if self is Leg.LEFT else Leg.LEFT
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Fixed parameters of the HZD controller.
+
+    kp: proportional gain (N m/rad), the same for the four joints (the paper's fixed Kp).
+    torque_limit: actuator saturation (N m), RABBIT's 150 N m peak.
+    geometry: leg link lengths (m), must match the simulated model.
+    touchdown_min_phase: the swing foot may only touch down once the unsaturated phase has
+        reached this value (debounces scuffing right after a switch).
+    touchdown_height: swing-foot tip height above the ground (m) at or below which the
+        foot counts as touching down.
+    min_step_length: alpha whose implied step is shorter than this (m) is rejected.
+    """
+
+    kp: float = 3000.0
+    torque_limit: float = 150.0
+    geometry: LegGeometry = field(default_factory=LegGeometry)
+    touchdown_min_phase: float = 0.5
+    touchdown_height: float = 0.0
+    min_step_length: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("kp", "torque_limit", "min_step_length"):
+            value = getattr(self, name)
+            if not (isfinite(value) and value > 0.0):
+                raise ValueError(f"ControllerConfig.{name} must be finite and > 0, got {value}")
+        if not 0.0 < self.touchdown_min_phase < 1.0:
+            raise ValueError("ControllerConfig.touchdown_min_phase must be in (0, 1)")
+
+
+@dataclass(frozen=True)
+class _Outputs:
+    """Pre-digested alpha for the hot path: per output, the 6 coefficients and the 5
+    scaled differences ``M (a[k+1] - a[k])`` of the derivative polynomial."""
+
+    alpha: tuple[float, ...]
+    coeffs: tuple[tuple[float, ...], ...]
+    diffs: tuple[tuple[float, ...], ...]
+    bounds: PhaseBounds
+
+
+def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarray:
+    """Return ``alpha`` as a float 24-vector, or raise ``ValueError`` saying what is wrong:
+    wrong size, non-finite entries, impact equalities violated, or no forward step."""
+    arr = np.asarray(alpha, dtype=float).reshape(-1)
+    if arr.size != N_ALPHA:
+        raise ValueError(f"alpha must have {N_ALPHA} coefficients, got {arr.size}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("alpha contains NaN or infinite coefficients")
+    violation = impact_violation(arr)
+    if violation > 1e-6:
+        raise ValueError(f"alpha violates the impact equalities by {violation:.3g} rad")
+    bounds = phase_bounds_from_alpha(arr, config.geometry)
+    if bounds.span < config.min_step_length:
+        raise ValueError(
+            f"alpha implies a {bounds.span:.3f} m step, shorter than {config.min_step_length} m"
+        )
+    return arr
+
+
+def validate_kd(kd: float) -> float:
+    """Return ``kd`` as a float, or raise ``ValueError`` if it is not finite and >= 0."""
+    value = float(kd)
+    if not isfinite(value) or value < 0.0:
+        raise ValueError(f"Kd must be finite and >= 0, got {kd}")
+    return value
+
+
+def _digest(alpha: np.ndarray, config: ControllerConfig) -> _Outputs:
+    m = alpha_matrix(alpha)
+    coeffs = tuple(tuple(float(v) for v in m[:, j]) for j in range(4))
+    diffs = tuple(tuple(5.0 * (c[k + 1] - c[k]) for k in range(5)) for c in coeffs)
+    return _Outputs(
+        alpha=tuple(float(v) for v in alpha),
+        coeffs=coeffs,
+        diffs=diffs,
+        bounds=phase_bounds_from_alpha(alpha, config.geometry),
+    )
+
+
+class HZDController:
+    """Stateful HZD tracking controller (ROS-free core).
+
+    ``alpha`` (24-vector, see :mod:`.alpha`) defines the virtual constraints; a new one set
+    with :meth:`set_alpha` becomes active at the next touchdown so the constraints stay
+    continuous within a step. ``kd`` (N m s/rad) set with :meth:`set_kd` applies at once.
+    """
+
+    def __init__(
+        self,
+        alpha: Sequence[float],
+        kd: float,
+        config: ControllerConfig | None = None,
+        stance: Leg = Leg.LEFT,
+    ) -> None:
+        self.config = config or ControllerConfig()
+        self.reset(alpha, kd, stance)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, alpha: Sequence[float], kd: float, stance: Leg = Leg.LEFT) -> None:
+        """Make ``alpha`` active immediately, set ``kd`` and the stance leg, zero counters."""
+        self._active = _digest(validate_alpha(alpha, self.config), self.config)
+        self._pending: _Outputs | None = None
+        self.kd = validate_kd(kd)
+        self.stance = Leg(stance)
+        self.steps = 0
+        self.tau = 0.0
+        self.touchdown = False
+
+    def set_alpha(self, alpha: Sequence[float]) -> None:
+        """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``)."""
+        self._pending = _digest(validate_alpha(alpha, self.config), self.config)
+
+    def set_kd(self, kd: float) -> None:
+        """Set the derivative gain, effective at the next tick (raises ``ValueError``)."""
+        self.kd = validate_kd(kd)
+
+    @property
+    def alpha(self) -> tuple[float, ...]:
+        """The active 24 coefficients."""
+        return self._active.alpha
+
+    @property
+    def pending_alpha(self) -> tuple[float, ...] | None:
+        """Coefficients waiting for the next touchdown, if any."""
+        return None if self._pending is None else self._pending.alpha
+
+    @property
+    def bounds(self) -> PhaseBounds:
+        """Phase bounds of the active gait."""
+        return self._active.bounds
+
+    # --------------------------------------------------------------- hot path
+    def compute(self, q: Sequence[float], dq: Sequence[float]) -> list[float]:
+        """One control tick: joint positions ``q`` and velocities ``dq`` (7 each, in
+        ``JOINT_NAMES`` order) -> torques (N m) in ``ACTUATED_JOINTS`` order."""
+        cfg = self.config
+        lf = cfg.geometry.femur
+        lt = cfg.geometry.tibia
+        pitch = q[2]
+        dpitch = dq[2]
+        self.touchdown = False
+        for _ in range(2):
+            if self.stance is Leg.LEFT:
+                sh, sk, wh, wk = q[3], q[4], q[5], q[6]
+            else:
+                sh, sk, wh, wk = q[5], q[6], q[3], q[4]
+            out = self._active
+            bounds = out.bounds
+            phi_f = sh - pitch
+            phi_t = phi_f - sk
+            p_hip = -(lf * sin(phi_f) + lt * sin(phi_t))
+            s = (p_hip - bounds.p_plus) / bounds.span
+            if s < cfg.touchdown_min_phase or self.touchdown:
+                break
+            sw_f = wh - pitch
+            swing_height = q[1] - lf * cos(sw_f) - lt * cos(sw_f - wk)
+            if swing_height > cfg.touchdown_height:
+                break
+            self._switch_stance()
+
+        if self.stance is Leg.LEFT:
+            dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
+        else:
+            dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
+        if s <= 0.0:
+            t = 0.0
+            dtau = 0.0
+        elif s >= 1.0:
+            t = 1.0
+            dtau = 0.0
+        else:
+            t = s
+            dphi_f = dsh - dpitch
+            dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
+            dtau = dp_hip / bounds.span
+        self.tau = t
+
+        # Bernstein bases of degree 5 (values) and 4 (derivative).
+        u = 1.0 - t
+        t2 = t * t
+        t3 = t2 * t
+        u2 = u * u
+        u3 = u2 * u
+        b0 = u3 * u2
+        b1 = 5.0 * t * u2 * u2
+        b2 = 10.0 * t2 * u3
+        b3 = 10.0 * t3 * u2
+        b4 = 5.0 * t3 * t * u
+        b5 = t3 * t2
+        c0 = u2 * u2
+        c1 = 4.0 * t * u3
+        c2 = 6.0 * t2 * u2
+        c3 = 4.0 * t3 * u
+        c4 = t2 * t2
+
+        kp = cfg.kp
+        kd = self.kd
+        limit = cfg.torque_limit
+        torques = [0.0, 0.0, 0.0, 0.0]
+        ys = (sh, sk, wh, wk)
+        dys = (dsh, dsk, dwh, dwk)
+        for j in range(4):
+            a = out.coeffs[j]
+            d = out.diffs[j]
+            yd = a[0] * b0 + a[1] * b1 + a[2] * b2 + a[3] * b3 + a[4] * b4 + a[5] * b5
+            dyd = (d[0] * c0 + d[1] * c1 + d[2] * c2 + d[3] * c3 + d[4] * c4) * dtau
+            tq = kp * (yd - ys[j]) + kd * (dyd - dys[j])
+            torques[j] = limit if tq > limit else -limit if tq < -limit else tq
+        if self.stance is Leg.LEFT:
+            return torques
+        return [torques[2], torques[3], torques[0], torques[1]]
+
+    def _switch_stance(self) -> None:
+        self.stance = self.stance.other()
+        self.steps += 1
+        self.touchdown = True
+        if self._pending is not None:
+            self._active = self._pending
+            self._pending = None

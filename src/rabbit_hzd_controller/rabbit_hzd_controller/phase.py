@@ -1,0 +1,89 @@
+"""The HZD phase variable tau(q) and its time derivative.
+
+``tau = (p_hip - p_plus) / (p_minus - p_plus)``, saturated to [0, 1], where ``p_hip`` is the
+horizontal position of the hip relative to the stance foot (m, world x axis) and
+``p_plus`` / ``p_minus`` are its values at the start / end of a step. ``p_hip`` depends on
+the torso pitch and the stance-leg angles only, so tau is state based (no clock).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import atan2, hypot, pi
+from typing import Sequence
+
+from .alpha import alpha_matrix
+from .kinematics import LegGeometry, foot_from_hip
+
+
+@dataclass(frozen=True)
+class PhaseBounds:
+    """Hip position relative to the stance foot at the start (``p_plus``) and end
+    (``p_minus``) of a step, in m. ``p_minus > p_plus`` for forward walking."""
+
+    p_plus: float
+    p_minus: float
+
+    def __post_init__(self) -> None:
+        if not self.p_minus > self.p_plus:
+            raise ValueError(
+                f"phase bounds need p_minus > p_plus, got p_plus={self.p_plus}, p_minus={self.p_minus}"
+            )
+
+    @property
+    def span(self) -> float:
+        """``p_minus - p_plus`` (m): the hip travel over one step, i.e. the step length."""
+        return self.p_minus - self.p_plus
+
+
+def stance_hip_position(geom: LegGeometry, pitch: float, hip: float, knee: float) -> float:
+    """Horizontal hip position relative to the stance foot, ``p_hip(q)`` (m)."""
+    return -foot_from_hip(geom, pitch, hip, knee)[0]
+
+
+def phase(p_hip: float, bounds: PhaseBounds) -> float:
+    """Saturated phase ``tau`` in [0, 1] for a hip position ``p_hip`` (m)."""
+    s = (p_hip - bounds.p_plus) / bounds.span
+    return 0.0 if s < 0.0 else 1.0 if s > 1.0 else s
+
+
+def phase_rate(p_hip: float, p_hip_rate: float, bounds: PhaseBounds) -> float:
+    """``d tau / dt`` (1/s) by the chain rule; zero where tau is saturated."""
+    s = (p_hip - bounds.p_plus) / bounds.span
+    return p_hip_rate / bounds.span if 0.0 < s < 1.0 else 0.0
+
+
+def end_of_step_pitch(alpha: Sequence[float], geom: LegGeometry) -> float:
+    """Torso pitch (rad) at which the end-of-step posture ``alpha[5]`` has both feet at the
+    same height with the swing foot ahead: the touchdown posture of the gait."""
+    end = alpha_matrix(alpha)[-1]
+    sx, sz = foot_from_hip(geom, 0.0, end[0], end[1])
+    wx, wz = foot_from_hip(geom, 0.0, end[2], end[3])
+    dx, dz = wx - sx, wz - sz
+    if hypot(dx, dz) < 1e-6:
+        raise ValueError("end-of-step posture has both feet at the same point: no step")
+    # Pitching the torso by q rotates every foot vector by -q (angles from the downward
+    # vertical); the stance->swing vector is horizontal and forward when its angle is pi/2.
+    beta = atan2(dx, -dz)
+    q = beta - pi / 2.0
+    return (q + pi) % (2.0 * pi) - pi
+
+
+def phase_bounds_from_alpha(alpha: Sequence[float], geom: LegGeometry) -> PhaseBounds:
+    """``p_plus`` and ``p_minus`` implied by a gait's Bezier coefficients.
+
+    At the end of a step (tau = 1) the joints sit at ``alpha[5]`` and both feet are on the
+    ground; that fixes the torso pitch (:func:`end_of_step_pitch`), hence ``p_minus`` (hip
+    relative to the stance foot) and the step length ``L`` (foot to foot). Positions are
+    continuous through impact and the legs swap roles, so the next step starts at
+    ``p_plus = p_minus - L``.
+    """
+    end = alpha_matrix(alpha)[-1]
+    pitch = end_of_step_pitch(alpha, geom)
+    sx, sz = foot_from_hip(geom, pitch, end[0], end[1])
+    wx, wz = foot_from_hip(geom, pitch, end[2], end[3])
+    p_minus = -sx
+    step_length = hypot(wx - sx, wz - sz)
+    return PhaseBounds(p_plus=p_minus - step_length, p_minus=p_minus)
+
+

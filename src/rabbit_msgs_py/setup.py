@@ -1,0 +1,23 @@
+"""ament_python package rabbit_msgs_py: ``colcon build`` on a ROS 2 install, ``pip install -e`` in .venv."""
+
+from setuptools import find_packages, setup
+
+PACKAGE = "rabbit_msgs_py"
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test"]),
+    package_data={},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
+        ("share/" + PACKAGE, ["package.xml"]),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=False,
+    maintainer="rabbit-hzd maintainers",
+    maintainer_email="maintainers@rabbit-hzd.invalid",
+    description="Topic names, QoS profiles, joint orders and message conversions shared by the rabbit-hzd nodes.",
+    license="Apache-2.0",
+    entry_points={"console_scripts": []},
+)

@@ -1,0 +1,306 @@
+"""Classic HZD gait design: the Python stand-in for the paper's FROST baseline.
+
+Method: direct (single) shooting on the MuJoCo model in closed loop with the very HZD
+controller that later walks the gait, optimised with CMA-ES (the ``cma`` package).
+
+Why shooting on MuJoCo rather than collocation on a rigid hybrid model (FROST, or
+CasADi + IPOPT): the shipped gaits must walk in *this* simulator with *this* PD
+controller, which has soft contacts, a torque-saturated PD law instead of
+feedback linearisation, and no exact impact map. A gait optimised on a rigid
+model would have to be re-tuned here anyway; shooting optimises what is then run.
+CMA-ES needs no gradients through contact and copes with the objective's
+discontinuities (falls, missed touchdowns). The price is compute: each candidate
+is an ``horizon``-second closed-loop simulation (about 0.1 s of CPU).
+
+Decision variables: the 20 free Bezier coefficients (the impact equalities hold by
+construction) and Kd; Kp is fixed. ``p_plus``, ``p_minus`` follow from alpha
+(:func:`rabbit_hzd_controller.phase.phase_bounds_from_alpha`).
+
+Objective (per candidate, over the second half of the horizon, once the transient from
+the initial state has died out):
+
+* effort per step length: ``(1/L) * integral sum_j (u_j / u_max)^2 dt`` per step,
+* plus penalties for constraint violations:
+  - average speed off the design speed (the gait must *be* a ``speed`` m/s gait),
+  - periodicity: step-to-step spread of step length and period (a converged limit
+    cycle has none; impacts are part of the loop, so this is periodicity *through*
+    impact),
+  - friction cone: time-averaged excess of the stance-foot tangential/normal force
+    ratio over ``friction_limit`` (below the simulator's 0.8 so there is margin),
+  - unilateral contact: stance foot lifting off or both feet in the air,
+  - swing-foot clearance below ``min_clearance`` in mid swing,
+  - torque saturation (ticks at the 150 N m limit),
+* and a fall penalty that makes any fall worse than any walk, graded by how long it
+  walked so the optimiser can climb out of falling regions.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable
+
+import mujoco
+import numpy as np
+
+from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController
+from rabbit_hzd_controller.gait import Gait
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_sim.model import load_model
+from rabbit_sim.simulation import ClosedLoop
+
+KD_SCALE = 100.0
+"""Kd enters the decision vector divided by this, so all variables are O(0.1..1)."""
+
+
+@dataclass(frozen=True)
+class GaitProblem:
+    """One gait design problem. Speeds m/s, lengths m, times s, torques N m."""
+
+    speed: float
+    kp: float = ControllerConfig.kp
+    horizon: float = 8.0
+    friction_limit: float = 0.6
+    min_clearance: float = 0.02
+    torque_limit: float = 150.0
+    kd_bounds: tuple[float, float] = (0.0, 300.0)
+    speed_tolerance: float = 0.01
+    model_variant: str = "paper"
+
+
+@dataclass
+class GaitEvaluation:
+    """What one closed-loop rollout of a candidate measured."""
+
+    cost: float
+    fell: bool
+    walked_time: float
+    mean_speed: float = float("nan")
+    step_length: float = float("nan")
+    step_period: float = float("nan")
+    effort: float = float("nan")
+    max_friction_ratio: float = 0.0
+    min_clearance: float = float("inf")
+    saturated_fraction: float = 0.0
+    periodicity: float = float("nan")
+    liftoff: float = 0.0
+    peak_torque: float = 0.0
+    penalties: dict[str, float] = field(default_factory=dict)
+
+
+def decision_to_gait_params(x: np.ndarray, problem: GaitProblem) -> tuple[np.ndarray, float]:
+    """Decision vector -> (24-vector alpha, Kd)."""
+    alpha = expand_alpha(x[:N_FREE])
+    lo, hi = problem.kd_bounds
+    kd = float(np.clip(x[N_FREE] * KD_SCALE, lo, hi))
+    return alpha, kd
+
+
+def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None = None) -> GaitEvaluation:
+    """Roll out the candidate ``x`` from a state on its own gait and score it."""
+    model = model or load_model(problem.model_variant)
+    alpha, kd = decision_to_gait_params(np.asarray(x, dtype=float), problem)
+    config = ControllerConfig(kp=problem.kp, torque_limit=problem.torque_limit)
+    try:
+        controller = HZDController(alpha, kd, config)
+        qpos, qvel = state_on_gait(alpha, problem.speed, config.geometry)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
+    if not all(math.isfinite(v) for v in qpos + qvel) or abs(qpos[2]) > 0.5:
+        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
+
+    loop = ClosedLoop(model, controller)
+    loop.reset(qpos, qvel)
+    data = loop.data
+    feet = (model.site("left_foot").id, model.site("right_foot").id)
+    foot_geoms = (model.geom("left_foot").id, model.geom("right_foot").id)
+    n = int(round(problem.horizon / model.opt.timestep))
+    half = n // 2
+    dt = model.opt.timestep
+    limit = problem.torque_limit
+    effort = 0.0
+    saturated = 0
+    max_ratio = 0.0
+    slip = 0.0
+    min_clear = float("inf")
+    liftoff = 0.0
+    td_times: list[float] = []
+    td_x: list[float] = []
+    x_half = 0.0
+    force = np.zeros(6)
+    fell = False
+    for i in range(n):
+        torques = loop.step()
+        if controller.touchdown:
+            td_times.append(float(data.time))
+            td_x.append(float(data.site_xpos[feet[int(controller.stance)]][0]))
+        if i == half:
+            x_half = float(data.qpos[0])
+        if data.qpos[1] <= 0.6 or data.qpos[1] >= 0.801 or abs(data.qpos[2]) >= 0.5:
+            fell = True
+            break
+        if i < half:
+            continue
+        for tq in torques:
+            effort += (tq / limit) ** 2 * dt
+            if abs(tq) >= limit:
+                saturated += 1
+        stance = int(controller.stance)
+        stance_z = data.site_xpos[feet[stance]][2]
+        swing_z = data.site_xpos[feet[1 - stance]][2]
+        if stance_z > 0.005:
+            liftoff += stance_z * dt
+        if 0.25 <= controller.tau <= 0.75 and swing_z < min_clear:
+            min_clear = float(swing_z)
+        if i % 4 == 0:
+            for c in range(data.ncon):
+                con = data.contact[c]
+                if con.geom1 == foot_geoms[stance] or con.geom2 == foot_geoms[stance]:
+                    mujoco.mj_contactForce(model, data, c, force)
+                    if force[0] > 1.0:
+                        ratio = math.hypot(force[1], force[2]) / force[0]
+                        max_ratio = max(max_ratio, ratio)
+                        slip += max(0.0, ratio - problem.friction_limit) * 4 * dt
+
+    walked = float(data.time)
+    if fell or len([t for t in td_times if t >= half * dt]) < 3:
+        # Any fall (or no steady stepping) costs more than any walk; longer is better.
+        cost = 1000.0 + 500.0 * (1.0 - walked / problem.horizon)
+        return GaitEvaluation(cost=cost, fell=True, walked_time=walked)
+
+    late = [(t, px) for t, px in zip(td_times, td_x) if t >= half * dt]
+    times = np.array([t for t, _ in late])
+    xs = np.array([px for _, px in late])
+    periods = np.diff(times)
+    lengths = np.diff(xs)
+    step_length = float(np.mean(lengths))
+    step_period = float(np.mean(periods))
+    mean_speed = (float(data.qpos[0]) - x_half) / (walked - half * dt)
+    periodicity = float(np.std(periods) / step_period + np.std(lengths) / max(step_length, 1e-3))
+    steps = max(len(periods), 1)
+    effort_per_step = effort / steps / max(step_length, 1e-3)
+    rel_err = abs(mean_speed - problem.speed) / problem.speed
+    penalties = {
+        "speed": 200.0 * rel_err**2 + 1e5 * max(0.0, rel_err - problem.speed_tolerance) ** 2,
+        "periodicity": 20.0 * periodicity,
+        "friction": 1000.0 * slip / (walked - half * dt),
+        "liftoff": 1e4 * liftoff,
+        "clearance": 1e3 * max(0.0, problem.min_clearance - min_clear),
+        "saturation": 10.0 * saturated / max(1, 4 * (n - half)),
+        "step_length": 100.0 * max(0.0, 0.2 - step_length),
+    }
+    cost = effort_per_step + sum(penalties.values())
+    return GaitEvaluation(
+        cost=float(cost),
+        fell=False,
+        walked_time=walked,
+        mean_speed=mean_speed,
+        step_length=step_length,
+        step_period=step_period,
+        effort=effort_per_step,
+        max_friction_ratio=max_ratio,
+        min_clearance=min_clear,
+        saturated_fraction=saturated / max(1, 4 * (n - half)),
+        periodicity=periodicity,
+        liftoff=liftoff,
+        penalties=penalties,
+    )
+
+
+def _evaluate_cost(args: tuple[np.ndarray, GaitProblem]) -> float:
+    x, problem = args
+    return evaluate(x, problem, _worker_model(problem.model_variant)).cost
+
+
+_MODELS: dict[str, mujoco.MjModel] = {}
+
+
+def _worker_model(variant: str) -> mujoco.MjModel:
+    """One compiled model per worker process and variant."""
+    if variant not in _MODELS:
+        _MODELS[variant] = load_model(variant)
+    return _MODELS[variant]
+
+
+@dataclass
+class OptimizationResult:
+    gait: Gait
+    evaluation: GaitEvaluation
+    evaluations: int
+    generations: int
+    wall_time: float
+
+
+def optimize_gait(
+    problem: GaitProblem,
+    x0: np.ndarray,
+    sigma0: float = 0.03,
+    max_generations: int = 120,
+    popsize: int | None = None,
+    seed: int = 1,
+    workers: int = 1,
+    log: Callable[[str], None] | None = None,
+) -> OptimizationResult:
+    """Minimise :func:`evaluate` over the decision vector with CMA-ES from ``x0``."""
+    import cma  # imported here: only the optimizer needs it
+
+    start = time.perf_counter()
+    options: dict[str, Any] = {
+        "seed": seed,
+        "maxiter": max_generations,
+        "verbose": -9,
+        "tolfun": 1e-6,
+    }
+    if popsize:
+        options["popsize"] = popsize
+    es = cma.CMAEvolutionStrategy(np.asarray(x0, dtype=float), sigma0, options)
+    pool = None
+    if workers > 1:
+        import multiprocessing as mp
+
+        pool = mp.get_context("fork").Pool(workers)
+    try:
+        while not es.stop():
+            candidates = es.ask()
+            args = [(np.asarray(c), problem) for c in candidates]
+            costs = pool.map(_evaluate_cost, args) if pool else [_evaluate_cost(a) for a in args]
+            es.tell(candidates, costs)
+            if log and es.countiter % 10 == 0:
+                log(f"  v={problem.speed:.2f} gen {es.countiter:4d} best {es.result.fbest:10.4f}")
+    finally:
+        if pool:
+            pool.close()
+            pool.join()
+    best = np.asarray(es.result.xbest)
+    evaluation = evaluate(best, problem, _worker_model(problem.model_variant))
+    alpha, kd = decision_to_gait_params(best, problem)
+    gait = Gait(
+        alpha=tuple(alpha),
+        kd=kd,
+        kp=problem.kp,
+        speed=problem.speed,
+        step_length=evaluation.step_length,
+        step_period=evaluation.step_period,
+        cost=evaluation.cost,
+        info={
+            "method": "CMA-ES shooting on the MuJoCo closed loop",
+            "problem": asdict(problem),
+            "evaluation": {k: v for k, v in asdict(evaluation).items()},
+            "evaluations": int(es.countevals),
+            "generations": int(es.countiter),
+        },
+    )
+    return OptimizationResult(
+        gait=gait,
+        evaluation=evaluation,
+        evaluations=int(es.countevals),
+        generations=int(es.countiter),
+        wall_time=time.perf_counter() - start,
+    )
+
+
+def gait_to_decision(gait: Gait) -> np.ndarray:
+    """Inverse of :func:`decision_to_gait_params` (to warm-start from a gait)."""
+    return np.concatenate([gait.free, [gait.kd / KD_SCALE]])
