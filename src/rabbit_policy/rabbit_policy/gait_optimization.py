@@ -61,7 +61,7 @@ class GaitProblem:
 
     speed: float
     kp: float = ControllerConfig.kp
-    horizon: float = 8.0
+    horizon: float = 10.0
     friction_limit: float = 0.6
     min_clearance: float = 0.02
     torque_limit: float = 150.0

@@ -1,0 +1,33 @@
+# rabbit-hzd: two commands for a fresh machine (see README).
+#   make demo   set up .venv if needed, then walk RABBIT (the main job)
+#   make test   set up .venv if needed, then run the whole test suite
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+PACKAGES := src/rabbit_msgs_py src/rabbit_sim src/rabbit_hzd_controller src/rabbit_policy
+
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+
+.PHONY: setup demo test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): requirements.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xml)
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r requirements.txt
+	$(PY) -m pip install --quiet $(foreach p,$(PACKAGES),-e $(p))
+	touch $@
+
+demo: $(STAMP)
+	$(PY) scripts/walk.py --controller hzd --speed 1.0 --duration 30
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+bench: $(STAMP)
+	$(PY) scripts/bench_sim.py
+
+clean:
+	rm -rf $(VENV) build install log .pytest_cache

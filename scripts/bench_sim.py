@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""Benchmark: closed-loop (MuJoCo + HZD controller core) steps per second against raw
+``mj_step`` steps per second on the same model, in the same process.
+
+    scripts/bench_sim.py [--steps 20000] [--repeats 3] [--speed 1.0] [--model paper]
+
+Both loops start from the same state on the classic gait nearest ``--speed``:
+* raw: ``mujoco.mj_step`` in a plain Python loop with the controls held at zero;
+* closed loop: :meth:`rabbit_sim.simulation.ClosedLoop.step` (read qpos/qvel, one
+  ``HZDController.compute`` tick, write ctrl, ``mj_step``), i.e. what walk.py, the
+  gait optimizer and the training environment run.
+Each is timed ``--repeats`` times (best kept). Prints one JSON object with
+``closed_loop_steps_per_s``, ``raw_steps_per_s`` and ``ratio`` (goal: >= 0.5) plus
+the controller's own cost per tick.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+
+import mujoco
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+
+def main() -> None:
+    ensure_localhost_discovery()
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=20000)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--speed", type=float, default=1.0)
+    parser.add_argument("--model", choices=("paper", "drives"), default="paper")
+    args = parser.parse_args()
+
+    from rabbit_hzd_controller.gait_state import state_on_gait
+    from rabbit_policy.gait_library import GaitLibrary
+    from rabbit_policy.walking import setup_walk
+
+    gait = GaitLibrary.load().nearest(args.speed)
+    qpos, qvel = state_on_gait(gait.alpha, gait.speed)
+
+    def raw_rate() -> float:
+        setup = setup_walk(gait, args.model)
+        model, data = setup.loop.model, setup.loop.data
+        step = mujoco.mj_step
+        start = time.perf_counter()
+        for _ in range(args.steps):
+            step(model, data)
+        return args.steps / (time.perf_counter() - start)
+
+    def closed_rate() -> tuple[float, bool]:
+        setup = setup_walk(gait, args.model)
+        loop = setup.loop
+        step = loop.step
+        start = time.perf_counter()
+        for _ in range(args.steps):
+            step()
+        elapsed = time.perf_counter() - start
+        fell = loop.limits.fallen(loop.data.qpos[1], loop.data.qpos[2])
+        return args.steps / elapsed, fell
+
+    def controller_rate() -> float:
+        setup = setup_walk(gait, args.model)
+        compute = setup.controller.compute
+        q, dq = list(qpos), list(qvel)
+        start = time.perf_counter()
+        for _ in range(args.steps):
+            compute(q, dq)
+        return args.steps / (time.perf_counter() - start)
+
+    raw = max(raw_rate() for _ in range(args.repeats))
+    closed_runs = [closed_rate() for _ in range(args.repeats)]
+    closed = max(r for r, _ in closed_runs)
+    ctrl = max(controller_rate() for _ in range(args.repeats))
+    print(json.dumps({
+        "closed_loop_steps_per_s": round(closed, 1),
+        "raw_steps_per_s": round(raw, 1),
+        "ratio": round(closed / raw, 3),
+        "controller_ticks_per_s": round(ctrl, 1),
+        "controller_us_per_tick": round(1e6 / ctrl, 2),
+        "closed_loop_fell": any(f for _, f in closed_runs),
+        "steps": args.steps,
+        "repeats": args.repeats,
+        "model": args.model,
+        "gait_speed": gait.speed,
+        "mujoco": mujoco.__version__,
+        "python": platform.python_version(),
+    }))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,108 @@
+#!/usr/bin/env python3
+"""Regenerate the classic HZD gait library (the paper's FROST baseline, in Python).
+
+    scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--generations 100]
+                              [--workers 2] [--out DIR] [--validate 60]
+
+Speeds are solved by continuation outward from ``--start``: the first from a kinematic
+seed (:mod:`rabbit_policy.gait_seed`), each next one warm-started from the nearest speed
+already solved. Each result is then walked for ``--validate`` seconds; a gait that falls
+or misses its speed by more than 5 % is re-optimised once with twice the generations,
+and is written with ``info.validation.passed = false`` if it still fails. One JSON file
+per gait goes to ``--out`` (default: the packaged library, ``rabbit_policy/gaits``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+
+def parse_speeds(text: str) -> list[float]:
+    speeds = sorted({round(float(s), 3) for s in text.split(",") if s.strip()})
+    if not speeds or any(not 0.1 <= s <= 3.0 for s in speeds):
+        raise argparse.ArgumentTypeError("speeds must be a comma-separated list in [0.1, 3] m/s")
+    return speeds
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    from rabbit_hzd_controller.gait import Gait
+    from rabbit_policy.gait_library import packaged_gait_dir
+    from rabbit_policy.gait_optimization import (
+        KD_SCALE,
+        GaitProblem,
+        gait_to_decision,
+        optimize_gait,
+    )
+    from rabbit_policy.gait_seed import SeedPattern, seed_free_alpha
+    from rabbit_policy.walking import walk_gait
+
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--speeds", type=parse_speeds, default=parse_speeds("0.7,0.8,0.9,1.0,1.1,1.2,1.3,1.4,1.5"))
+    parser.add_argument("--start", type=float, default=1.0, help="speed solved first (m/s)")
+    parser.add_argument("--generations", type=int, default=100)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--validate", type=float, default=60.0, help="validation walk (s)")
+    parser.add_argument("--out", type=Path, default=None)
+    args = parser.parse_args(argv)
+    out = args.out or packaged_gait_dir()
+    out.mkdir(parents=True, exist_ok=True)
+
+    order = sorted(args.speeds, key=lambda s: (abs(s - args.start), s))
+    solved: dict[float, Gait] = {}
+    report = []
+    for speed in order:
+        problem = GaitProblem(speed=speed)
+        if solved:
+            nearest = min(solved, key=lambda s: abs(s - speed))
+            x0 = gait_to_decision(solved[nearest])
+            origin = f"warm start from {nearest:.2f} m/s"
+        else:
+            pattern = SeedPattern(step_length=0.4, hip_height=0.76, torso_pitch=0.05)
+            x0 = np.concatenate([seed_free_alpha(pattern), [60.0 / KD_SCALE]])
+            origin = "kinematic seed"
+        print(f"[{speed:.2f} m/s] optimising ({origin})", flush=True)
+        gait, check, attempts, wall = None, None, 0, 0.0
+        for generations in (args.generations, 2 * args.generations):
+            attempts += 1
+            result = optimize_gait(problem, x0, max_generations=generations, workers=args.workers,
+                                   seed=args.seed, log=lambda s: print(s, flush=True))
+            wall += result.wall_time
+            gait = result.gait
+            check = walk_gait(gait, args.validate)
+            ok = (not check.fell) and abs(check.mean_speed - speed) <= 0.05 * speed
+            print(f"[{speed:.2f} m/s] cost {result.evaluation.cost:.3f}, {args.validate:.0f} s walk: "
+                  f"fell={check.fell} mean speed {check.mean_speed:.3f} -> {'ok' if ok else 'FAILED'}",
+                  flush=True)
+            if ok:
+                break
+            x0 = gait_to_decision(gait)
+        assert gait is not None and check is not None
+        validation = {"duration": args.validate, **check.summary(),
+                      "passed": (not check.fell) and abs(check.mean_speed - speed) <= 0.05 * speed}
+        info = dict(gait.info, validation=validation, attempts=attempts, wall_time_s=wall)
+        gait = Gait(alpha=gait.alpha, kd=gait.kd, kp=gait.kp, speed=gait.speed,
+                    step_length=gait.step_length, step_period=gait.step_period, cost=gait.cost, info=info)
+        gait.save(out / f"gait_{speed:.2f}.json")
+        if validation["passed"]:
+            solved[speed] = gait
+        report.append({"speed": speed, "cost": gait.cost, "step_length": gait.step_length,
+                       "step_period": gait.step_period, "kd": gait.kd, **{f"validation_{k}": v for k, v in validation.items()}})
+    print(json.dumps(sorted(report, key=lambda r: r["speed"]), indent=1))
+    return 0 if all(r["validation_passed"] for r in report) else 1
+
+
+if __name__ == "__main__":
+    start = time.perf_counter()
+    code = main()
+    print(f"total wall time {time.perf_counter() - start:.0f} s", file=sys.stderr)
+    sys.exit(code)

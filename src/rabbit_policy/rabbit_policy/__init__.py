@@ -1,0 +1,2 @@
+"""Gait policies for RABBIT: the classic HZD gait library and its optimizer, and the
+learned HZD-RL policy."""

@@ -1,0 +1,138 @@
+"""The HZD controller core: the control law, gain/alpha semantics and input validation."""
+
+import math
+
+import numpy as np
+import pytest
+
+from rabbit_hzd_controller.alpha import alpha_matrix, expand_alpha
+from rabbit_hzd_controller.bezier import bezier, bezier_derivative
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
+from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip, foot_velocity_from_hip
+from rabbit_hzd_controller.pd import pd_torque
+from rabbit_hzd_controller.phase import phase, phase_bounds_from_alpha, phase_rate, stance_hip_position
+from rabbit_policy.gait_library import GaitLibrary
+
+
+@pytest.fixture(scope="module")
+def gait():
+    return GaitLibrary.load().nearest(1.0)
+
+
+def reference_torques(alpha, kp, kd, limit, stance, q, dq):
+    """The control law written out from the paper with the pure helper functions."""
+    geom = LegGeometry()
+    m = alpha_matrix(alpha)
+    idx = (3, 4, 5, 6) if stance == Leg.LEFT else (5, 6, 3, 4)
+    y = [q[i] for i in idx]
+    dy = [dq[i] for i in idx]
+    bounds = phase_bounds_from_alpha(alpha, geom)
+    p = stance_hip_position(geom, q[2], y[0], y[1])
+    dp = -foot_velocity_from_hip(geom, q[2], y[0], y[1], dq[2], dy[0], dy[1])[0]
+    tau, dtau = phase(p, bounds), phase_rate(p, dp, bounds)
+    u = [pd_torque(bezier(m[:, j], tau), bezier_derivative(m[:, j], tau) * dtau, y[j], dy[j], kp, kd, limit)
+         for j in range(4)]
+    return u if stance == Leg.LEFT else [u[2], u[3], u[0], u[1]]
+
+
+@pytest.mark.parametrize("stance", [Leg.LEFT, Leg.RIGHT])
+def test_compute_matches_the_written_out_law(gait, stance):
+    rng = np.random.default_rng(7)
+    cfg = ControllerConfig(kp=gait.kp)
+    for _ in range(200):
+        c = HZDController(gait.alpha, gait.kd, cfg, stance=stance)
+        q = [0.0, 0.9, *rng.uniform([-0.2, -0.5, 0.1, -0.5, 0.1], [0.2, 0.6, 1.0, 0.6, 1.0])]  # hip high: no touchdown
+        dq = list(rng.normal(size=7))
+        got = c.compute(q, dq)
+        want = reference_torques(gait.alpha, gait.kp, gait.kd, 150.0, stance, q, dq)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-9)
+        assert c.stance == stance  # swing foot far above ground: no switch
+
+
+def test_pd_law_and_saturation():
+    assert pd_torque(0.1, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == pytest.approx(10.0)
+    assert pd_torque(0.0, 1.0, 0.0, 0.0, 100.0, 5.0, 150.0) == pytest.approx(5.0)
+    assert pd_torque(10.0, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == 150.0
+    assert pd_torque(-10.0, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == -150.0
+
+
+def test_torques_never_exceed_the_limit(gait):
+    rng = np.random.default_rng(8)
+    c = HZDController(gait.alpha, gait.kd)
+    for _ in range(200):
+        q = [0.0, 0.9, *rng.uniform(-1.5, 1.5, size=5)]
+        u = c.compute(q, list(rng.normal(scale=20, size=7)))
+        assert max(abs(v) for v in u) <= 150.0
+
+
+def _touchdown_state(gait):
+    """A state at the end of a step: phase past 1/2, swing foot below the ground."""
+    geom = LegGeometry()
+    end = alpha_matrix(gait.alpha)[-1]
+    pitch = gait.touchdown_pitch()
+    fx, fz = foot_from_hip(geom, pitch, end[0], end[1])
+    q = [0.0, -fz - 1e-4, pitch, end[0], end[1], end[2], end[3]]
+    return q, [0.0] * 7
+
+
+def test_new_kd_applies_at_once_new_alpha_at_touchdown(gait):
+    c = HZDController(gait.alpha, gait.kd)
+    other = expand_alpha(gait.free + 0.01)
+    c.set_alpha(other)
+    c.set_kd(gait.kd + 10.0)
+    assert c.kd == gait.kd + 10.0
+    assert c.alpha == gait.alpha  # not yet
+    assert c.pending_alpha == tuple(other)
+    q_mid = [0.0, 0.9, 0.0, 0.3, 0.5, 0.1, 0.5]
+    c.compute(q_mid, [0.0] * 7)
+    assert c.alpha == gait.alpha and c.steps == 0
+    q, dq = _touchdown_state(gait)
+    c.compute(q, dq)
+    assert c.touchdown and c.steps == 1 and c.stance == Leg.RIGHT
+    assert c.alpha == tuple(other) and c.pending_alpha is None
+
+
+def test_one_switch_however_long_the_foot_stays_down(gait):
+    c = HZDController(gait.alpha, gait.kd)
+    q, dq = _touchdown_state(gait)
+    for _ in range(50):  # the same touchdown state, tick after tick (contact chatter)
+        c.compute(q, dq)
+    assert c.steps == 1
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        [0.0] * 23,
+        [float("nan")] * 24,
+        [float("inf")] + [0.0] * 23,
+        list(range(24)),  # violates the impact equalities
+    ],
+)
+def test_bad_alpha_is_rejected_and_the_last_good_kept(gait, bad):
+    c = HZDController(gait.alpha, gait.kd)
+    with pytest.raises(ValueError):
+        c.set_alpha(bad)
+    assert c.alpha == gait.alpha and c.pending_alpha is None
+
+
+@pytest.mark.parametrize("bad", [float("nan"), float("inf"), -1.0])
+def test_bad_kd_is_rejected(gait, bad):
+    c = HZDController(gait.alpha, gait.kd)
+    with pytest.raises(ValueError):
+        c.set_kd(bad)
+    assert c.kd == gait.kd
+
+
+def test_degenerate_step_is_rejected(gait):
+    standing = expand_alpha(np.tile([0.0, 0.0, 0.0, 0.0], 5))  # both legs straight together
+    with pytest.raises(ValueError):
+        HZDController(standing, 10.0)
+
+
+def test_config_validation():
+    with pytest.raises(ValueError):
+        ControllerConfig(kp=-1.0)
+    with pytest.raises(ValueError):
+        ControllerConfig(touchdown_min_phase=1.5)
+    assert math.isfinite(ControllerConfig().kp)
