@@ -2,7 +2,7 @@
 """Regenerate the classic HZD gait library (the paper's FROST baseline, in Python).
 
     scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--generations 100]
-                              [--workers 2] [--out DIR] [--validate 60]
+                              [--workers 2] [--out DIR] [--validate 60] [--resume]
 
 Speeds are solved by continuation outward from ``--start``: the first from a kinematic
 seed (:mod:`rabbit_policy.gait_seed`), each next one warm-started from the nearest speed
@@ -53,6 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--validate", type=float, default=60.0, help="validation walk (s)")
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--resume", action="store_true",
+                        help="keep gaits in --out that passed validation; solve only the other speeds")
     args = parser.parse_args(argv)
     out = args.out or packaged_gait_dir()
     out.mkdir(parents=True, exist_ok=True)
@@ -60,7 +62,15 @@ def main(argv: list[str] | None = None) -> int:
     order = sorted(args.speeds, key=lambda s: (abs(s - args.start), s))
     solved: dict[float, Gait] = {}
     report = []
+    if args.resume:
+        for path in sorted(out.glob("gait_*.json")):
+            gait = Gait.load(path)
+            if gait.info.get("validation", {}).get("passed"):
+                solved[round(gait.speed, 3)] = gait
+                print(f"[{gait.speed:.2f} m/s] kept {path.name}", flush=True)
     for speed in order:
+        if speed in solved:
+            continue
         problem = GaitProblem(speed=speed)
         if solved:
             nearest = min(solved, key=lambda s: abs(s - speed))

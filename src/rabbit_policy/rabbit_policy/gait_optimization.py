@@ -121,6 +121,7 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
     dt = model.opt.timestep
     limit = problem.torque_limit
     effort = 0.0
+    peak = 0.0
     saturated = 0
     max_ratio = 0.0
     slip = 0.0
@@ -145,6 +146,7 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
             continue
         for tq in torques:
             effort += (tq / limit) ** 2 * dt
+            peak = max(peak, abs(tq))
             if abs(tq) >= limit:
                 saturated += 1
         stance = int(controller.stance)
@@ -205,6 +207,7 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
         saturated_fraction=saturated / max(1, 4 * (n - half)),
         periodicity=periodicity,
         liftoff=liftoff,
+        peak_torque=peak,
         penalties=penalties,
     )
 

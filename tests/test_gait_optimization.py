@@ -1,0 +1,57 @@
+"""The gait optimizer: its objective is deterministic, ranks falls below walks, and CMA-ES
+improves on its starting point."""
+
+import numpy as np
+import pytest
+
+from rabbit_hzd_controller.gait import Gait
+from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.gait_optimization import (
+    KD_SCALE,
+    GaitProblem,
+    decision_to_gait_params,
+    evaluate,
+    gait_to_decision,
+    optimize_gait,
+)
+from rabbit_policy.gait_seed import SeedPattern, seed_free_alpha
+
+
+@pytest.fixture(scope="module")
+def gait() -> Gait:
+    return GaitLibrary.load().nearest(1.0)
+
+
+def test_decision_vector_round_trip(gait):
+    x = gait_to_decision(gait)
+    alpha, kd = decision_to_gait_params(x, GaitProblem(speed=gait.speed))
+    np.testing.assert_allclose(alpha, gait.alpha)
+    assert kd == pytest.approx(gait.kd)
+
+
+def test_objective_reproduces_the_stored_cost(gait):
+    result = evaluate(gait_to_decision(gait), GaitProblem(speed=gait.speed))
+    assert not result.fell
+    assert result.cost == pytest.approx(gait.cost, rel=1e-9)
+    assert result.max_friction_ratio <= 0.8
+    assert result.min_clearance > 0.0
+
+
+def test_a_fall_costs_more_than_any_walk(gait):
+    x = gait_to_decision(gait)
+    x[-1] = 0.0  # no damping at all
+    x[1] += 0.6  # and a badly bent stance knee at touchdown
+    bad = evaluate(x, GaitProblem(speed=gait.speed))
+    assert bad.fell
+    assert bad.cost > 1000.0 > evaluate(gait_to_decision(gait), GaitProblem(speed=gait.speed)).cost
+
+
+def test_cma_improves_on_the_kinematic_seed():
+    problem = GaitProblem(speed=1.0, horizon=4.0)
+    x0 = np.concatenate([seed_free_alpha(SeedPattern(step_length=0.4, hip_height=0.76, torso_pitch=0.05)),
+                         [60.0 / KD_SCALE]])
+    start = evaluate(x0, problem).cost
+    result = optimize_gait(problem, x0, max_generations=3, popsize=8, seed=3)
+    assert result.evaluations == 24
+    assert result.evaluation.cost <= start
+    assert result.gait.speed == 1.0
