@@ -8,8 +8,8 @@ Speeds are solved by continuation outward from ``--start``: the first from a kin
 seed (:mod:`rabbit_policy.gait_seed`), each next one warm-started from the nearest speed
 already solved. Each result is then walked for ``--validate`` seconds; a gait that falls
 or misses its speed by more than 5 % is re-optimised once with twice the generations,
-and is written with ``info.validation.passed = false`` if it still fails. One JSON file
-per gait goes to ``--out`` (default: the packaged library, ``rabbit_policy/gaits``).
+and if it still fails it goes to ``--out/rejected/`` (not shipped) instead. One JSON
+file per gait goes to ``--out`` (default: the packaged library, ``rabbit_policy/gaits``).
 """
 
 from __future__ import annotations
@@ -102,9 +102,12 @@ def main(argv: list[str] | None = None) -> int:
         info = dict(gait.info, validation=validation, attempts=attempts, wall_time_s=wall)
         gait = Gait(alpha=gait.alpha, kd=gait.kd, kp=gait.kp, speed=gait.speed,
                     step_length=gait.step_length, step_period=gait.step_period, cost=gait.cost, info=info)
-        gait.save(out / f"gait_{speed:.2f}.json")
         if validation["passed"]:
+            gait.save(out / f"gait_{speed:.2f}.json")
             solved[speed] = gait
+        else:  # kept for inspection, outside the shipped library
+            (out / "rejected").mkdir(exist_ok=True)
+            gait.save(out / "rejected" / f"gait_{speed:.2f}.json")
         report.append({"speed": speed, "cost": gait.cost, "step_length": gait.step_length,
                        "step_period": gait.step_period, "kd": gait.kd, **{f"validation_{k}": v for k, v in validation.items()}})
     print(json.dumps(sorted(report, key=lambda r: r["speed"]), indent=1))

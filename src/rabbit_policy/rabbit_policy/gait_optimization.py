@@ -139,7 +139,7 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
             td_x.append(float(data.site_xpos[feet[int(controller.stance)]][0]))
         if i == half:
             x_half = float(data.qpos[0])
-        if data.qpos[1] <= 0.6 or data.qpos[1] >= 0.801 or abs(data.qpos[2]) >= 0.5:
+        if loop.limits.fallen(data.qpos[1], data.qpos[2]):
             fell = True
             break
         if i < half:
@@ -168,8 +168,10 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
 
     walked = float(data.time)
     if fell or len([t for t in td_times if t >= half * dt]) < 3:
-        # Any fall (or no steady stepping) costs more than any walk; longer is better.
-        cost = 1000.0 + 500.0 * (1.0 - walked / problem.horizon)
+        # Any fall, or a stall (no steady stepping), costs more than any walk; walking
+        # longer and further is better, so the optimizer can climb out of these regions.
+        progress = float(data.qpos[0] - qpos[0]) / (problem.speed * problem.horizon)
+        cost = 1000.0 + 500.0 * (1.0 - walked / problem.horizon) + 200.0 * max(0.0, 1.0 - progress)
         return GaitEvaluation(cost=cost, fell=True, walked_time=walked)
 
     late = [(t, px) for t, px in zip(td_times, td_x) if t >= half * dt]
