@@ -1,0 +1,24 @@
+"""Topic and service names of the rabbit-hzd stack (ROS-free constants).
+
+No node spells a topic by hand: they all import these. Names are absolute, so they are
+the same in every node namespace; remap with ``--ros-args -r`` as usual.
+"""
+
+JOINT_STATES = "/joint_states"
+"""sensor_msgs/JointState, all 7 model joints (``JOINT_NAMES``), sim_node at 1 kHz."""
+HIP_VELOCITY = "/hip_velocity"
+"""geometry_msgs/TwistStamped, linear.x = forward hip speed (m/s), sim_node at 1 kHz."""
+CLOCK = "/clock"
+"""rosgraph_msgs/Clock, simulation time, sim_node."""
+JOINT_TORQUES = "/joint_torques"
+"""std_msgs/Float64MultiArray, 4 torques (N m) in ``ACTUATED_JOINTS`` order."""
+ALPHA = "/hzd/alpha"
+"""std_msgs/Float64MultiArray, 6 x 4 Bezier coefficients (rad), see conversions."""
+KD = "/hzd/kd"
+"""std_msgs/Float64, derivative gain (N m s/rad)."""
+CMD_SPEED = "/cmd_speed"
+"""std_msgs/Float64, desired forward speed (m/s)."""
+PUSH = "/push"
+"""geometry_msgs/Wrench on the torso (N, N m, world frame)."""
+FALLEN = "/fallen"
+"""std_msgs/Bool, true once the paper's limits (torso pitch, hip height) are left."""

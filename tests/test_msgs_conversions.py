@@ -1,0 +1,85 @@
+"""rabbit_msgs_py: topic names, QoS and message conversions (real ROS message types)."""
+
+import math
+
+import pytest
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from rabbit_hzd_controller.alpha import alpha_matrix
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import (
+    MessageError,
+    alpha_from_msg,
+    alpha_to_msg,
+    joint_state_vectors,
+    torques_from_msg,
+    torques_to_msg,
+)
+from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_policy.gait_library import GaitLibrary
+
+
+def test_alpha_round_trip_and_layout():
+    alpha = GaitLibrary.load().nearest(1.0).alpha
+    msg = alpha_to_msg(alpha)
+    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [("coefficient", 6, 24), ("output", 4, 4)]
+    assert alpha_from_msg(msg) == list(alpha)
+    # Row-major indexing per the layout agrees with the 6 x 4 matrix.
+    m = alpha_matrix(alpha)
+    _, d1 = msg.layout.dim
+    for k in range(6):
+        for j in range(4):
+            assert msg.data[msg.layout.data_offset + d1.stride * k + j] == m[k, j]
+
+
+@pytest.mark.parametrize(
+    "data, dims",
+    [
+        ([0.0] * 23, None),
+        ([math.nan] + [0.0] * 23, None),
+        ([0.0] * 24, [("output", 4), ("coefficient", 6)]),
+        ([0.0] * 24, [("coefficient", 4), ("output", 6)]),
+    ],
+)
+def test_malformed_alpha_is_rejected(data, dims):
+    msg = Float64MultiArray(data=data)
+    if dims:
+        msg.layout.dim = [MultiArrayDimension(label=label, size=size, stride=size) for label, size in dims]
+    with pytest.raises(MessageError):
+        alpha_from_msg(msg)
+
+
+def test_torques_round_trip_and_rejects():
+    msg = torques_to_msg([1.0, -2.0, 3.5, 0.0])
+    assert torques_from_msg(msg) == [1.0, -2.0, 3.5, 0.0]
+    assert msg.layout.dim[0].label == "joint"
+    with pytest.raises(MessageError):
+        torques_from_msg(Float64MultiArray(data=[1.0, 2.0]))
+    with pytest.raises(MessageError):
+        torques_from_msg(Float64MultiArray(data=[1.0, 2.0, math.inf, 0.0]))
+
+
+def test_joint_state_any_order():
+    names = list(reversed(JOINT_NAMES))
+    q, dq = joint_state_vectors(names, list(range(7)), [10 + i for i in range(7)])
+    assert q == [6, 5, 4, 3, 2, 1, 0]
+    assert dq == [16, 15, 14, 13, 12, 11, 10]
+    with pytest.raises(MessageError):
+        joint_state_vectors(names[:-1], list(range(6)), list(range(6)))
+    with pytest.raises(MessageError):
+        joint_state_vectors(names, list(range(6)), list(range(7)))
+
+
+def test_topic_names_are_absolute_and_unique():
+    names = [v for k, v in vars(topics).items() if k.isupper()]
+    assert len(names) == len(set(names)) == 9
+    assert all(n.startswith("/") for n in names)
+    assert topics.ALPHA == "/hzd/alpha" and topics.CMD_SPEED == "/cmd_speed"
+
+
+def test_gait_parameters_are_latched():
+    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+
+    assert qos.GAIT_QOS.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    assert qos.GAIT_QOS.reliability == ReliabilityPolicy.RELIABLE
+    assert qos.STREAM_QOS.reliability == ReliabilityPolicy.RELIABLE
