@@ -109,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
             (out / "rejected").mkdir(exist_ok=True)
             gait.save(out / "rejected" / f"gait_{speed:.2f}.json")
         report.append({"speed": speed, "cost": gait.cost, "step_length": gait.step_length,
-                       "step_period": gait.step_period, "kd": gait.kd, **{f"validation_{k}": v for k, v in validation.items()}})
+                       "step_period": gait.step_period, "kd": gait.kd,
+                       **{f"validation_{k}": v for k, v in validation.items()}})
     print(json.dumps(sorted(report, key=lambda r: r["speed"]), indent=1))
     return 0 if all(r["validation_passed"] for r in report) else 1
 

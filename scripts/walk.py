@@ -60,7 +60,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"step length     {result.step_length:.3f} m")
         print(f"step period     {result.step_period:.3f} s")
         print(f"peak torque     {result.peak_torque:.1f} N m")
-        print(f"simulated       {result.duration:.1f} s in {wall:.1f} s wall ({summary['real_time_factor']:.0f}x real time)")
+        rtf = summary["real_time_factor"]
+        print(f"simulated       {result.duration:.1f} s in {wall:.1f} s wall ({rtf:.0f}x real time)")
     return 1 if result.fell else 0
 
 

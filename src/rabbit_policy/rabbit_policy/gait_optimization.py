@@ -72,7 +72,8 @@ class GaitProblem:
 
 @dataclass
 class GaitEvaluation:
-    """What one closed-loop rollout of a candidate measured."""
+    """What one closed-loop rollout of a candidate measured. ``fell`` is also true for a
+    stall (no steady stepping in the second half): both rank below any walk."""
 
     cost: float
     fell: bool

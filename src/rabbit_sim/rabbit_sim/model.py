@@ -17,8 +17,9 @@ from pathlib import Path
 
 import mujoco
 
-MODEL_VARIANTS = ("paper", "drives")
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES  # noqa: F401  (re-exported)
+
+MODEL_VARIANTS = ("paper", "drives")
 
 
 @dataclass(frozen=True)
