@@ -22,14 +22,14 @@ from rabbit_policy.gait_library import GaitLibrary
 def test_alpha_round_trip_and_layout():
     alpha = GaitLibrary.load().nearest(1.0).alpha
     msg = alpha_to_msg(alpha)
-    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [("coefficient", 6, 24), ("output", 4, 4)]
+    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == [("output", 4, 24), ("coefficient", 6, 6)]
     assert alpha_from_msg(msg) == list(alpha)
-    # Row-major indexing per the layout agrees with the 6 x 4 matrix.
+    # Row-major indexing per the 4 x 6 layout agrees with the core's 6 x 4 matrix.
     m = alpha_matrix(alpha)
     _, d1 = msg.layout.dim
-    for k in range(6):
-        for j in range(4):
-            assert msg.data[msg.layout.data_offset + d1.stride * k + j] == m[k, j]
+    for j in range(4):
+        for k in range(6):
+            assert msg.data[msg.layout.data_offset + d1.stride * j + k] == m[k, j]
 
 
 @pytest.mark.parametrize(
@@ -37,8 +37,8 @@ def test_alpha_round_trip_and_layout():
     [
         ([0.0] * 23, None),
         ([math.nan] + [0.0] * 23, None),
-        ([0.0] * 24, [("output", 4), ("coefficient", 6)]),
-        ([0.0] * 24, [("coefficient", 4), ("output", 6)]),
+        ([0.0] * 24, [("coefficient", 6), ("output", 4)]),
+        ([0.0] * 24, [("output", 6), ("coefficient", 4)]),
     ],
 )
 def test_malformed_alpha_is_rejected(data, dims):

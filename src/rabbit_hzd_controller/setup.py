@@ -19,5 +19,5 @@ setup(
     maintainer_email="maintainers@rabbit-hzd.invalid",
     description="Hybrid Zero Dynamics PD controller for RABBIT: Bezier virtual constraints, phase, stance switching.",
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": ["hzd_controller_node = rabbit_hzd_controller.hzd_controller_node:main"]},
 )

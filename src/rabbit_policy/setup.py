@@ -19,5 +19,5 @@ setup(
     maintainer_email="maintainers@rabbit-hzd.invalid",
     description="Gait policies for RABBIT: the classic HZD gait library and the learned HZD-RL policy.",
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": ["policy_node = rabbit_policy.policy_node:main"]},
 )

@@ -19,5 +19,5 @@ setup(
     maintainer_email="maintainers@rabbit-hzd.invalid",
     description="MuJoCo model of the RABBIT biped and its simulator node.",
     license="Apache-2.0",
-    entry_points={"console_scripts": []},
+    entry_points={"console_scripts": ["sim_node = rabbit_sim.sim_node:main"]},
 )

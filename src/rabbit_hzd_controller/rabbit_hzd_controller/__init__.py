@@ -1,5 +1,5 @@
 """ROS-free HZD control core for RABBIT: Bezier virtual constraints, phase, PD tracking,
-stance switching, and the gait description. The ROS node lives in :mod:`.node`."""
+stance switching, and the gait description. The ROS node lives in :mod:`.hzd_controller_node`."""
 
 from .alpha import N_ALPHA, N_FREE, OUTPUTS, alpha_matrix, expand_alpha, reduce_alpha
 from .bezier import DEGREE, bezier, bezier_derivative, bezier_matrix, bernstein
@@ -9,6 +9,7 @@ from .controller import (
     ControllerConfig,
     HZDController,
     Leg,
+    infer_stance,
     validate_alpha,
     validate_kd,
 )
@@ -20,7 +21,7 @@ __all__ = [
     "ACTUATED_JOINTS", "DEGREE", "JOINT_NAMES", "N_ALPHA", "N_FREE", "OUTPUTS",
     "ControllerConfig", "Gait", "HZDController", "Leg", "LegGeometry", "PhaseBounds",
     "alpha_matrix", "bernstein", "bezier", "bezier_derivative", "bezier_matrix",
-    "expand_alpha", "foot_from_hip", "foot_velocity_from_hip", "leg_inverse_kinematics",
+    "expand_alpha", "foot_from_hip", "foot_velocity_from_hip", "infer_stance", "leg_inverse_kinematics",
     "phase", "phase_bounds_from_alpha", "phase_rate", "reduce_alpha", "stance_hip_position",
     "validate_alpha", "validate_kd",
 ]

@@ -29,8 +29,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .alpha import N_ALPHA, alpha_matrix, impact_violation
-from .kinematics import LegGeometry
+from .alpha import N_ALPHA, OUTPUTS, alpha_matrix, impact_violation
+from .kinematics import LegGeometry, foot_from_hip
 from .phase import PhaseBounds, phase_bounds_from_alpha
 
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES  # noqa: F401  (re-exported)
@@ -58,6 +58,12 @@ class ControllerConfig:
     touchdown_height: swing-foot tip height above the ground (m) at or below which the
         foot counts as touching down.
     min_step_length: alpha whose implied step is shorter than this (m) is rejected.
+    hip_coefficient_range, knee_coefficient_range: bounds (rad) on the Bezier
+        coefficients of the hip and knee outputs. The coefficients are joint waypoints, so
+        their range is the model's joint range (hip +-1.3 rad, knee 0..1.6 rad) widened
+        by 0.3 rad: a waypoint may lie a little outside the curve it shapes. alpha outside
+        these bounds is rejected.
+    max_kd: upper bound on the derivative gain (N m s/rad).
     """
 
     kp: float = 3000.0
@@ -66,9 +72,12 @@ class ControllerConfig:
     touchdown_min_phase: float = 0.5
     touchdown_height: float = 0.0
     min_step_length: float = 0.05
+    hip_coefficient_range: tuple[float, float] = (-1.6, 1.6)
+    knee_coefficient_range: tuple[float, float] = (-0.3, 1.9)
+    max_kd: float = 300.0
 
     def __post_init__(self) -> None:
-        for name in ("kp", "torque_limit", "min_step_length"):
+        for name in ("kp", "torque_limit", "min_step_length", "max_kd"):
             value = getattr(self, name)
             if not (isfinite(value) and value > 0.0):
                 raise ValueError(f"ControllerConfig.{name} must be finite and > 0, got {value}")
@@ -95,6 +104,15 @@ def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarr
         raise ValueError(f"alpha must have {N_ALPHA} coefficients, got {arr.size}")
     if not np.all(np.isfinite(arr)):
         raise ValueError("alpha contains NaN or infinite coefficients")
+    matrix = alpha_matrix(arr)
+    for j, output in enumerate(OUTPUTS):
+        lo, hi = config.knee_coefficient_range if j % 2 else config.hip_coefficient_range
+        column = matrix[:, j]
+        if column.min() < lo or column.max() > hi:
+            raise ValueError(
+                f"alpha {output} coefficients span [{column.min():.3f}, {column.max():.3f}] rad,"
+                f" outside the bounds [{lo}, {hi}] rad"
+            )
     violation = impact_violation(arr)
     if violation > 1e-6:
         raise ValueError(f"alpha violates the impact equalities by {violation:.3g} rad")
@@ -106,12 +124,26 @@ def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarr
     return arr
 
 
-def validate_kd(kd: float) -> float:
-    """Return ``kd`` as a float, or raise ``ValueError`` if it is not finite and >= 0."""
+def validate_kd(kd: float, config: ControllerConfig | None = None) -> float:
+    """Return ``kd`` as a float, or raise ``ValueError`` unless 0 <= kd <= ``max_kd``."""
+    max_kd = (config or ControllerConfig()).max_kd
     value = float(kd)
-    if not isfinite(value) or value < 0.0:
-        raise ValueError(f"Kd must be finite and >= 0, got {kd}")
+    if not isfinite(value) or not 0.0 <= value <= max_kd:
+        raise ValueError(f"Kd must be finite and in [0, {max_kd}] N m s/rad, got {kd}")
     return value
+
+
+def infer_stance(q: Sequence[float], geometry: LegGeometry | None = None) -> Leg:
+    """The stance leg of a state ``q`` (``JOINT_NAMES`` order): the lower foot, or, when both
+    feet are within 5 mm of each other in height (double support at a touchdown), the
+    foot further forward (the one that has just landed). Used when a controller starts
+    or restarts on a robot that is already walking."""
+    geometry = geometry or LegGeometry()
+    left = foot_from_hip(geometry, q[2], q[3], q[4])
+    right = foot_from_hip(geometry, q[2], q[5], q[6])
+    if abs(left[1] - right[1]) > 0.005:
+        return Leg.LEFT if left[1] < right[1] else Leg.RIGHT
+    return Leg.LEFT if left[0] >= right[0] else Leg.RIGHT
 
 
 def _digest(alpha: np.ndarray, config: ControllerConfig) -> _Outputs:
@@ -131,7 +163,9 @@ class HZDController:
 
     ``alpha`` (24-vector, see :mod:`.alpha`) defines the virtual constraints; a new one set
     with :meth:`set_alpha` becomes active at the next touchdown so the constraints stay
-    continuous within a step. ``kd`` (N m s/rad) set with :meth:`set_kd` applies at once.
+    continuous within a step. ``kd`` (N m s/rad) set with :meth:`set_kd` applies at once;
+    :meth:`queue_kd` holds it to the next touchdown like alpha (a gait decided for the
+    next step, as the policy node and the learning environment use it).
     """
 
     def __init__(
@@ -149,7 +183,8 @@ class HZDController:
         """Make ``alpha`` active immediately, set ``kd`` and the stance leg, zero counters."""
         self._active = _digest(validate_alpha(alpha, self.config), self.config)
         self._pending: _Outputs | None = None
-        self.kd = validate_kd(kd)
+        self._pending_kd: float | None = None
+        self.kd = validate_kd(kd, self.config)
         self.stance = Leg(stance)
         self.steps = 0
         self.tau = 0.0
@@ -161,7 +196,16 @@ class HZDController:
 
     def set_kd(self, kd: float) -> None:
         """Set the derivative gain, effective at the next tick (raises ``ValueError``)."""
-        self.kd = validate_kd(kd)
+        self.kd = validate_kd(kd, self.config)
+
+    def queue_kd(self, kd: float) -> None:
+        """Queue the derivative gain for the next touchdown (raises ``ValueError``)."""
+        self._pending_kd = validate_kd(kd, self.config)
+
+    @property
+    def pending_kd(self) -> float | None:
+        """Derivative gain waiting for the next touchdown, if any."""
+        return self._pending_kd
 
     @property
     def alpha(self) -> tuple[float, ...]:
@@ -266,3 +310,6 @@ class HZDController:
         if self._pending is not None:
             self._active = self._pending
             self._pending = None
+        if self._pending_kd is not None:
+            self.kd = self._pending_kd
+            self._pending_kd = None

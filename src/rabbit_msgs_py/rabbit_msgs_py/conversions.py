@@ -1,10 +1,12 @@
 """Conversions between ROS messages and the plain values the ROS-free cores use (needs
 the message packages, not an rclpy context).
 
-alpha travels as std_msgs/Float64MultiArray with a two-dimensional layout, row-major:
-``dim[0] = ("coefficient", size 6, stride 24)``, ``dim[1] = ("output", size 4, stride 4)``,
-``data_offset = 0``; ``data`` is then exactly the coefficient-major 24-vector of
-``rabbit_hzd_controller.alpha``. Outputs are (stance hip, stance knee, swing hip, swing knee).
+alpha travels as std_msgs/Float64MultiArray holding a 4 x 6 matrix, row-major:
+``dim[0] = ("output", size 4, stride 24)``, ``dim[1] = ("coefficient", size 6, stride 6)``,
+``data_offset = 0``; so ``data[6 j + k]`` is Bezier coefficient k (0..5) of output j, and
+the outputs are (stance hip, stance knee, swing hip, swing knee), rad. The ROS-free core
+keeps the paper's coefficient-major 24-vector (``flat[4 k + j]``, see
+``rabbit_hzd_controller.alpha``); these functions transpose between the two.
 Joint torques travel as a one-dimensional Float64MultiArray labelled ``joint`` in
 ``ACTUATED_JOINTS`` order.
 """
@@ -18,9 +20,10 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayou
 
 from .joints import ACTUATED_JOINTS, JOINT_NAMES
 
-ALPHA_ROWS = 6
-ALPHA_COLS = 4
-ALPHA_DIMENSIONS = ("coefficient", "output")
+ALPHA_OUTPUTS = 4
+ALPHA_COEFFICIENTS = 6
+ALPHA_SIZE = ALPHA_OUTPUTS * ALPHA_COEFFICIENTS
+ALPHA_DIMENSIONS = ("output", "coefficient")
 TORQUE_DIMENSION = "joint"
 
 
@@ -29,37 +32,39 @@ class MessageError(ValueError):
 
 
 def alpha_to_msg(alpha: Sequence[float]) -> Float64MultiArray:
-    """24 coefficients (coefficient-major) -> Float64MultiArray with a 6 x 4 layout."""
+    """24 coefficients (core order, coefficient-major) -> Float64MultiArray, 4 x 6 layout."""
     values = [float(a) for a in alpha]
-    if len(values) != ALPHA_ROWS * ALPHA_COLS:
-        raise MessageError(f"alpha needs {ALPHA_ROWS * ALPHA_COLS} values, got {len(values)}")
+    if len(values) != ALPHA_SIZE:
+        raise MessageError(f"alpha needs {ALPHA_SIZE} values, got {len(values)}")
     layout = MultiArrayLayout(
         dim=[
-            MultiArrayDimension(label=ALPHA_DIMENSIONS[0], size=ALPHA_ROWS, stride=ALPHA_ROWS * ALPHA_COLS),
-            MultiArrayDimension(label=ALPHA_DIMENSIONS[1], size=ALPHA_COLS, stride=ALPHA_COLS),
+            MultiArrayDimension(label=ALPHA_DIMENSIONS[0], size=ALPHA_OUTPUTS, stride=ALPHA_SIZE),
+            MultiArrayDimension(label=ALPHA_DIMENSIONS[1], size=ALPHA_COEFFICIENTS, stride=ALPHA_COEFFICIENTS),
         ],
         data_offset=0,
     )
-    return Float64MultiArray(layout=layout, data=values)
+    data = [values[ALPHA_OUTPUTS * k + j] for j in range(ALPHA_OUTPUTS) for k in range(ALPHA_COEFFICIENTS)]
+    return Float64MultiArray(layout=layout, data=data)
 
 
 def alpha_from_msg(msg: Float64MultiArray) -> list[float]:
-    """Float64MultiArray -> 24 coefficients; raises :class:`MessageError` on a wrong layout,
-    size or non-finite value. An empty layout is accepted if ``data`` has 24 values."""
+    """Float64MultiArray (4 x 6 layout) -> 24 coefficients in core order; raises
+    :class:`MessageError` on a wrong layout, size or non-finite value. An empty layout is
+    accepted if ``data`` has 24 values (then read as the documented 4 x 6 order)."""
     data = list(msg.data)
     dims = list(msg.layout.dim)
     if dims:
         shape = [(d.label, d.size) for d in dims]
-        expected = [(ALPHA_DIMENSIONS[0], ALPHA_ROWS), (ALPHA_DIMENSIONS[1], ALPHA_COLS)]
+        expected = [(ALPHA_DIMENSIONS[0], ALPHA_OUTPUTS), (ALPHA_DIMENSIONS[1], ALPHA_COEFFICIENTS)]
         if shape != expected:
             raise MessageError(f"alpha layout must be {expected}, got {shape}")
         if msg.layout.data_offset != 0:
             raise MessageError("alpha layout data_offset must be 0")
-    if len(data) != ALPHA_ROWS * ALPHA_COLS:
-        raise MessageError(f"alpha needs {ALPHA_ROWS * ALPHA_COLS} values, got {len(data)}")
+    if len(data) != ALPHA_SIZE:
+        raise MessageError(f"alpha needs {ALPHA_SIZE} values, got {len(data)}")
     if not all(math.isfinite(v) for v in data):
         raise MessageError("alpha contains NaN or infinite values")
-    return data
+    return [data[ALPHA_COEFFICIENTS * j + k] for k in range(ALPHA_COEFFICIENTS) for j in range(ALPHA_OUTPUTS)]
 
 
 def torques_to_msg(torques: Sequence[float]) -> Float64MultiArray:
@@ -92,9 +97,13 @@ def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocit
     if len(position) != len(names) or len(velocity) != len(names):
         raise MessageError("joint state needs one position and one velocity per name")
     if tuple(names) == JOINT_NAMES:
-        return list(position), list(velocity)
-    try:
-        index = [names.index(n) for n in JOINT_NAMES]
-    except ValueError as exc:
-        raise MessageError(f"joint state lacks a joint: {exc}") from None
-    return [position[i] for i in index], [velocity[i] for i in index]
+        q, dq = list(position), list(velocity)
+    else:
+        try:
+            index = [names.index(n) for n in JOINT_NAMES]
+        except ValueError as exc:
+            raise MessageError(f"joint state lacks a joint: {exc}") from None
+        q, dq = [position[i] for i in index], [velocity[i] for i in index]
+    if not all(math.isfinite(v) for v in q) or not all(math.isfinite(v) for v in dq):
+        raise MessageError("joint state contains NaN or infinite values")
+    return q, dq

@@ -1,15 +1,19 @@
 """QoS profiles of the rabbit-hzd topics (needs rclpy).
 
-* State and command streams (1 kHz): reliable, keep last 10 — lockstep simulation counts
+* State and torque streams (1 kHz): reliable, keep last 10 — lockstep simulation counts
   on every torque arriving; depth 10 rides out short scheduling hiccups.
+* Hip velocity (1 kHz): reliable, keep last 250 — the policy averages the last 200
+  samples at every step and must not lose one while it is busy.
 * Gait parameters (alpha, Kd): reliable, transient local, depth 1 — a controller started
   late still receives the gait currently in force.
 * User commands (speed, push): reliable, keep last 10.
+* Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
+  the current state.
+* Events (``/hzd/step``): reliable, keep last 10.
 * Clock: reliable, keep last 1 (the newest time is the only one that matters).
 """
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
 
 
 def _reliable(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATILE) -> QoSProfile:
@@ -23,6 +27,9 @@ def _reliable(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATI
 
 
 STREAM_QOS = _reliable(10)
+HIP_VELOCITY_QOS = _reliable(250)
 GAIT_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
+STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
+EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(1)

@@ -22,3 +22,13 @@ PUSH = "/push"
 """geometry_msgs/Wrench on the torso (N, N m, world frame)."""
 FALLEN = "/fallen"
 """std_msgs/Bool, true once the paper's limits (torso pitch, hip height) are left."""
+STEP = "/hzd/step"
+"""std_msgs/Header, published by hzd_controller_node at each touchdown: ``stamp`` = sim time
+of the state on which the stance switched, ``frame_id`` = the new stance foot
+(``left_foot`` / ``right_foot``, the model's foot sites). The policy node evaluates its
+policy on this event."""
+
+RESET_SERVICE = "/sim/reset"
+"""std_srvs/Trigger: put the robot back on the current gait at t = 0."""
+PAUSE_SERVICE = "/sim/pause"
+"""std_srvs/SetBool: data=true pauses the physics, false resumes."""

@@ -78,6 +78,70 @@ class WalkResult:
         }
 
 
+class Simulator:
+    """The RABBIT model stepped with given joint torques (no controller inside).
+
+    One :meth:`step` applies four torques (N m, ``ACTUATED_JOINTS`` order, clipped by the
+    actuators to +-150 N m) and advances one model timestep (1 ms). External pushes are a
+    wrench on the torso (world frame) held for a duration. ``sim_node`` and
+    :class:`ClosedLoop` both step through this class, so a ROS run and a ROS-free run of
+    the same controller produce the same numbers.
+    """
+
+    def __init__(self, model: mujoco.MjModel, limits: FallLimits | None = None) -> None:
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.limits = limits or FallLimits()
+        self._torso = model.body("torso").id
+        self._push_until = -1.0
+
+    @property
+    def time(self) -> float:
+        """Simulation time (s)."""
+        return float(self.data.time)
+
+    @property
+    def timestep(self) -> float:
+        """Model timestep (s)."""
+        return float(self.model.opt.timestep)
+
+    def reset(self, qpos: Sequence[float], qvel: Sequence[float]) -> None:
+        """Set the state (``JOINT_NAMES`` order) at t = 0 and zero controls and pushes."""
+        mujoco.mj_resetData(self.model, self.data)
+        self.data.qpos[:] = qpos
+        self.data.qvel[:] = qvel
+        self._push_until = -1.0
+        mujoco.mj_forward(self.model, self.data)
+
+    def push(self, force_x: float, duration: float, force_z: float = 0.0, torque_y: float = 0.0) -> None:
+        """Apply a wrench at the torso CoM, world frame (N, N, N m), for ``duration`` s
+        from now. Replaces a push still in progress."""
+        wrench = self.data.xfrc_applied[self._torso]
+        wrench[:] = 0.0
+        wrench[0] = force_x
+        wrench[2] = force_z
+        wrench[4] = torque_y
+        self._push_until = self.data.time + duration
+
+    @property
+    def pushing(self) -> bool:
+        return self._push_until >= 0.0
+
+    def step(self, torques: Sequence[float]) -> None:
+        """Apply ``torques`` (N m) for one timestep and advance the physics."""
+        data = self.data
+        data.ctrl[:] = torques
+        mujoco.mj_step(self.model, data)
+        if self._push_until >= 0.0 and data.time >= self._push_until:
+            data.xfrc_applied[self._torso, :] = 0.0
+            self._push_until = -1.0
+
+    def fallen(self) -> bool:
+        """True when the paper's limits (torso pitch, hip height) are left."""
+        qpos = self.data.qpos
+        return self.limits.fallen(qpos[1], qpos[2])
+
+
 class ClosedLoop:
     """MuJoCo model + controller, stepped together at the model timestep."""
 
@@ -87,41 +151,30 @@ class ClosedLoop:
         controller: Controller,
         limits: FallLimits | None = None,
     ) -> None:
+        self.sim = Simulator(model, limits)
         self.model = model
-        self.data = mujoco.MjData(model)
+        self.data = self.sim.data
         self.controller = controller
-        self.limits = limits or FallLimits()
-        self._torso = model.body("torso").id
+        self.limits = self.sim.limits
         self._feet = (model.site("left_foot").id, model.site("right_foot").id)
-        self._push_until = -1.0
 
     @property
     def time(self) -> float:
-        return float(self.data.time)
+        return self.sim.time
 
     def reset(self, qpos: Sequence[float], qvel: Sequence[float]) -> None:
         """Set the state (``JOINT_NAMES`` order) at t = 0 and zero the controls."""
-        mujoco.mj_resetData(self.model, self.data)
-        self.data.qpos[:] = qpos
-        self.data.qvel[:] = qvel
-        self._push_until = -1.0
-        mujoco.mj_forward(self.model, self.data)
+        self.sim.reset(qpos, qvel)
 
     def push(self, force_x: float, duration: float, force_z: float = 0.0) -> None:
         """Apply a force (N, world frame) at the torso CoM for ``duration`` s from now."""
-        self.data.xfrc_applied[self._torso, 0] = force_x
-        self.data.xfrc_applied[self._torso, 2] = force_z
-        self._push_until = self.data.time + duration
+        self.sim.push(force_x, duration, force_z)
 
     def step(self) -> list[float]:
         """One control tick + one physics step; returns the commanded torques (N m)."""
         data = self.data
         torques = self.controller.compute(data.qpos.tolist(), data.qvel.tolist())
-        data.ctrl[:] = torques
-        mujoco.mj_step(self.model, data)
-        if self._push_until >= 0.0 and data.time >= self._push_until:
-            data.xfrc_applied[self._torso, :] = 0.0
-            self._push_until = -1.0
+        self.sim.step(torques)
         return torques
 
     def run(

@@ -1,0 +1,160 @@
+"""``hzd_controller_node``: the HZD PD controller as a ROS 2 node (1 kHz, one torque
+command per state).
+
+Subscribes ``/joint_states`` and the gait (``/hzd/alpha``, ``/hzd/kd``, transient local, so a
+controller started late gets the gait in force); publishes ``/joint_torques`` (4 values,
+``ACTUATED_JOINTS`` order) for every distinct state and ``/hzd/step`` at each touchdown.
+The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
+the ROS-free loop runs.
+
+* Time is the simulation's: the stamp of each ``/joint_states`` message. A stamp older
+  than the last one means the simulation was reset: the controller restarts on the gait
+  in force, with the stance leg read from the state.
+* The first gait received becomes active at once; later ones (alpha and Kd alike) are
+  queued to the next touchdown, so the constraints stay continuous within a step.
+* Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
+  violated) are rejected with a logged error; the last good gait stays in force.
+* A state identical to the last one answered (a lockstep re-send) is not answered twice;
+  a freshly (re)started controller answers it, which is how lockstep resumes after a
+  controller restart.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+ensure_localhost_discovery()
+
+from rclpy.node import Node  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
+
+from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.conversions import (  # noqa: E402
+    MessageError,
+    alpha_from_msg,
+    joint_state_vectors,
+    torques_to_msg,
+)
+from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+
+from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd  # noqa: E402
+
+FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
+
+
+class HZDControllerNode(Node):
+    """Parameters: ``kp`` (N m/rad), ``torque_limit`` (N m), ``touchdown_min_phase``,
+    ``max_kd`` (N m s/rad)."""
+
+    def __init__(self, context=None, **overrides) -> None:
+        super().__init__("hzd_controller_node", context=context)
+        defaults = ControllerConfig()
+        for name in ("kp", "torque_limit", "touchdown_min_phase", "max_kd"):
+            self.declare_parameter(name, float(overrides.get(name, getattr(defaults, name))))
+        try:
+            self.config = ControllerConfig(
+                kp=self.get_parameter("kp").value,
+                torque_limit=self.get_parameter("torque_limit").value,
+                touchdown_min_phase=self.get_parameter("touchdown_min_phase").value,
+                max_kd=self.get_parameter("max_kd").value,
+            )
+        except (ValueError, TypeError) as exc:
+            raise NodeStartError(f"hzd_controller_node: {exc}") from exc
+
+        self.controller: HZDController | None = None
+        self._alpha: list[float] | None = None  # last good gait received
+        self._kd: float | None = None
+        self._last_key: tuple | None = None
+        self._last_stamp = -1
+        self._waiting_state: JointState | None = None  # arrived before the gait was complete
+        self.states_received = 0
+        self.torques_published = 0
+        self.rejected_gaits = 0
+        self.rejected_states = 0
+
+        self._torque_pub = self.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
+        self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
+        self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
+        self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
+        self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
+
+    # --------------------------------------------------------------- gait
+    def _on_alpha(self, msg: Float64MultiArray) -> None:
+        try:
+            alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
+        except (MessageError, ValueError) as exc:
+            self.rejected_gaits += 1
+            self.get_logger().error(f"rejected {topics.ALPHA}: {exc}; keeping the last good gait")
+            return
+        self._alpha = alpha
+        if self.controller is not None:
+            self.controller.set_alpha(alpha)
+        self._answer_waiting_state()
+
+    def _on_kd(self, msg: Float64) -> None:
+        try:
+            kd = validate_kd(msg.data, self.config)
+        except ValueError as exc:
+            self.rejected_gaits += 1
+            self.get_logger().error(f"rejected {topics.KD}: {exc}; keeping the last good value")
+            return
+        self._kd = kd
+        if self.controller is not None:
+            self.controller.queue_kd(kd)
+        self._answer_waiting_state()
+
+    def _answer_waiting_state(self) -> None:
+        """Answer the state that arrived before the first complete gait, if any."""
+        if self._waiting_state is not None and self._alpha is not None and self._kd is not None:
+            msg, self._waiting_state = self._waiting_state, None
+            self._on_state(msg)
+
+    # -------------------------------------------------------------- state
+    def _on_state(self, msg: JointState) -> None:
+        try:
+            q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
+        except MessageError as exc:
+            self.rejected_states += 1
+            self.get_logger().error(f"ignoring malformed {topics.JOINT_STATES}: {exc}", throttle_duration_sec=1.0)
+            return
+        self.states_received += 1
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        key = (stamp, tuple(q), tuple(dq))
+        if key == self._last_key:
+            return  # a re-send of the state answered last
+        if self._alpha is None or self._kd is None:
+            self._waiting_state = msg
+            self.get_logger().warning(
+                f"no gait yet (waiting for {topics.ALPHA} and {topics.KD}); the state will be answered once it is "
+                "complete",
+                throttle_duration_sec=2.0,
+            )
+            return
+        controller = self.controller
+        if controller is None or stamp < self._last_stamp:
+            stance = infer_stance(q, self.config.geometry)
+            if controller is None:
+                controller = self.controller = HZDController(self._alpha, self._kd, self.config, stance)
+            else:
+                controller.reset(self._alpha, self._kd, stance)
+                self.get_logger().info("simulation time went back (reset): controller restarted on the gait")
+        torques = controller.compute(q, dq)
+        self._last_key = key
+        self._last_stamp = stamp
+        self._torque_pub.publish(torques_to_msg(torques))
+        self.torques_published += 1
+        if controller.touchdown:
+            self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script / ``ros2 run rabbit_hzd_controller hzd_controller_node``."""
+    return run_node(HZDControllerNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

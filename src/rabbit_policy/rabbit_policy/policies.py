@@ -1,0 +1,72 @@
+"""Gait policies: observation (:class:`~.speed_window.Observation`) -> gait for the next
+step (24 Bezier coefficients alpha, derivative gain Kd). ROS-free; ``policy_node`` and the
+scripts pick one with :func:`make_policy`.
+
+* ``library``: the classic HZD gait library (``rabbit_policy/gaits``), the gait nearest
+  to the commanded speed or a linear blend of the two around it. Uses only v_d.
+* ``learned``: the HZD-RL network (arrives with the learning issue).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+from .gait_library import GaitLibrary
+from .speed_window import Observation
+
+POLICY_KINDS = ("library", "learned")
+LIBRARY_MODES = ("nearest", "interpolate")
+
+
+@dataclass(frozen=True)
+class GaitCommand:
+    """What a policy decides for the next step: alpha (24, rad, core order) and Kd
+    (N m s/rad)."""
+
+    alpha: tuple[float, ...]
+    kd: float
+
+
+class Policy(Protocol):
+    """Anything that maps an observation to a gait command."""
+
+    name: str
+
+    def act(self, observation: Observation) -> GaitCommand: ...
+
+
+class PolicyUnavailable(RuntimeError):
+    """The requested policy cannot be loaded (missing files, not shipped yet)."""
+
+
+class LibraryPolicy:
+    """Classic HZD: the library gait for the commanded speed (``nearest`` or
+    ``interpolate``); the measured speeds are not used."""
+
+    def __init__(self, library: GaitLibrary, mode: str = "nearest") -> None:
+        if mode not in LIBRARY_MODES:
+            raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
+        self.library = library
+        self.mode = mode
+        self.name = f"library/{mode}"
+
+    def act(self, observation: Observation) -> GaitCommand:
+        speed = observation.desired_speed
+        gait = self.library.nearest(speed) if self.mode == "nearest" else self.library.interpolate(speed)
+        return GaitCommand(alpha=gait.alpha, kd=gait.kd)
+
+
+def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode: str = "nearest") -> Policy:
+    """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
+    message a user can act on."""
+    if kind == "library":
+        try:
+            library = GaitLibrary.load(gait_dir or None)
+        except (FileNotFoundError, ValueError) as exc:
+            raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
+        return LibraryPolicy(library, mode)
+    if kind == "learned":
+        raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=library")
+    raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")

@@ -1,0 +1,147 @@
+"""``policy_node``: picks the gait (alpha, Kd) for each step from the commanded speed and the
+averaged hip speed, as in the paper's Fig. 2.
+
+Subscribes ``/cmd_speed`` (m/s), ``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns,
+from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
+start and then at every step. The policy's inputs are the paper's: the commanded speed v_d,
+the mean hip speed and the mean of (v_d - hip speed) over the last ``window`` samples
+(200 ticks, about one step) up to the touchdown stamp; the decision takes effect at the
+next touchdown (the controller queues it). Parameters:
+
+* ``policy``: ``library`` (classic HZD gait library) or ``learned`` (HZD-RL network).
+* ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
+* ``gait_dir``: gait library directory ('' = the packaged one).
+* ``initial_speed``: v_d before the first ``/cmd_speed`` (m/s).
+* ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
+* ``window``: averaging window (ticks).
+
+NaN/inf commands are rejected with an error; the last good command stays in force.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+ensure_localhost_discovery()
+
+from geometry_msgs.msg import TwistStamped  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
+
+from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.conversions import alpha_to_msg  # noqa: E402
+from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+
+from .policies import GaitCommand, PolicyUnavailable, make_policy  # noqa: E402
+from .speed_window import Observation, SpeedWindow  # noqa: E402
+
+
+def clamp_speed(value: float, low: float, high: float) -> float:
+    """``value`` limited to [low, high]; raises ``ValueError`` if it is NaN or infinite."""
+    if not math.isfinite(value):
+        raise ValueError(f"speed command must be finite, got {value}")
+    return min(max(value, low), high)
+
+
+class PolicyNode(Node):
+    """The gait policy node."""
+
+    def __init__(self, context=None, **overrides) -> None:
+        super().__init__("policy_node", context=context)
+        params = {
+            "policy": "library",
+            "library_mode": "nearest",
+            "gait_dir": "",
+            "initial_speed": 1.0,
+            "min_speed": 0.7,
+            "max_speed": 1.5,
+            "window": 200,
+        }
+        for name, default in params.items():
+            self.declare_parameter(name, overrides.get(name, default))
+        value = lambda name: self.get_parameter(name).value  # noqa: E731
+        self.min_speed = float(value("min_speed"))
+        self.max_speed = float(value("max_speed"))
+        try:
+            if not self.min_speed < self.max_speed:
+                raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
+            self.policy = make_policy(value("policy"), value("gait_dir") or None, value("library_mode"))
+            self.window = SpeedWindow(int(value("window")))
+            self.desired_speed = clamp_speed(float(value("initial_speed")), self.min_speed, self.max_speed)
+        except (PolicyUnavailable, ValueError, TypeError) as exc:
+            raise NodeStartError(f"policy_node: {exc}") from exc
+
+        self.decisions = 0
+        self.rejected_commands = 0
+        self.last_observation: Observation | None = None
+        self._pending_steps: list[int] = []
+        self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
+        self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
+        self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
+        self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
+        self._decide(self.window.observation(self.desired_speed))
+        self.get_logger().info(
+            f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; send speeds on {topics.CMD_SPEED}"
+        )
+
+    def _on_cmd_speed(self, msg: Float64) -> None:
+        try:
+            speed = clamp_speed(msg.data, self.min_speed, self.max_speed)
+        except ValueError as exc:
+            self.rejected_commands += 1
+            self.get_logger().error(f"rejected {topics.CMD_SPEED}: {exc}; keeping {self.desired_speed:.2f} m/s")
+            return
+        if speed != msg.data:
+            self.get_logger().warning(
+                f"{topics.CMD_SPEED} {msg.data:.3f} m/s is outside [{self.min_speed}, {self.max_speed}]; "
+                f"clamped to {speed:.2f} m/s"
+            )
+        if speed != self.desired_speed:
+            self.get_logger().info(f"commanded speed {speed:.2f} m/s")
+        self.desired_speed = speed
+
+    def _on_hip_velocity(self, msg: TwistStamped) -> None:
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        newest = self.window.newest_stamp
+        if newest is not None and stamp < newest:
+            self._pending_steps.clear()  # simulation reset: old step events are void
+        try:
+            self.window.add(stamp, msg.twist.linear.x, self.desired_speed)
+        except ValueError as exc:
+            self.get_logger().error(f"ignoring {topics.HIP_VELOCITY}: {exc}", throttle_duration_sec=1.0)
+            return
+        if self._pending_steps and stamp >= self._pending_steps[0]:
+            self._flush_steps(stamp)
+
+    def _on_step(self, msg: Header) -> None:
+        stamp = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+        self._pending_steps.append(stamp)
+        newest = self.window.newest_stamp
+        if newest is not None and newest >= stamp:
+            self._flush_steps(newest)
+
+    def _flush_steps(self, newest: int) -> None:
+        """Decide for every step event whose window is complete (samples up to its stamp)."""
+        while self._pending_steps and self._pending_steps[0] <= newest:
+            stamp = self._pending_steps.pop(0)
+            self._decide(self.window.observation(self.desired_speed, stamp))
+
+    def _decide(self, observation: Observation) -> None:
+        command: GaitCommand = self.policy.act(observation)
+        self.last_observation = observation
+        self._alpha_pub.publish(alpha_to_msg(command.alpha))
+        self._kd_pub.publish(Float64(data=float(command.kd)))
+        self.decisions += 1
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script / ``ros2 run rabbit_policy policy_node``."""
+    return run_node(PolicyNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

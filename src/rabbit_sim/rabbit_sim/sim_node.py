@@ -1,0 +1,444 @@
+"""``sim_node``: the RABBIT MuJoCo simulation as a ROS 2 node.
+
+Publishes ``/joint_states`` (7 joints: position, velocity, applied effort), ``/hip_velocity``
+and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes; applies the
+four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset`` and ``/sim/pause``.
+
+Modes (parameter ``mode``):
+
+* ``lockstep`` (default): after publishing the state of tick n the node waits for one
+  torque message, applies it for one step and publishes tick n+1. Runs as fast as the
+  loop allows and is deterministic: the same stack gives the same trajectory as the
+  ROS-free ``ClosedLoop`` (``scripts/walk.py``). If no torque arrives within
+  ``resend_timeout`` s (wall) the state is re-sent: a restarted controller picks it up,
+  a live one ignores the duplicate (it answers each distinct state once), so exactly one
+  reply per state is ever applied. A reset or pause requested while a reply is due takes
+  effect when that reply arrives.
+* ``realtime``: a physics thread steps at 1 kHz of wall-clock time, zero-order hold on the
+  newest torque. A watchdog applies damping torques ``-damping * joint rate`` when no
+  torque arrived for ``watchdog_timeout`` s and says so in the log; it logs again when
+  commands resume. Ticks whose torque (the reply to the previous state) had not arrived
+  when the next step was due are counted as late.
+
+The robot starts (and restarts on ``/sim/reset``) at phase 0 of the gait in force on
+``/hzd/alpha`` (transient local, published by the policy node), moving at
+``initial_speed``; until a gait arrives the simulation waits. When the robot falls (the
+paper's limits) ``/fallen`` turns true and the physics halts until a reset.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+ensure_localhost_discovery()
+
+from builtin_interfaces.msg import Time  # noqa: E402
+from geometry_msgs.msg import TwistStamped, Wrench  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Bool, Float64MultiArray  # noqa: E402
+from std_srvs.srv import SetBool, Trigger  # noqa: E402
+
+from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
+from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.conversions import MessageError, alpha_from_msg, torques_from_msg  # noqa: E402
+from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
+from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+
+from .model import load_model  # noqa: E402
+from .simulation import Simulator  # noqa: E402
+
+MODES = ("lockstep", "realtime")
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """sim_node parameters (see the README's parameter table).
+
+    model: ``paper`` or ``drives`` (see :func:`rabbit_sim.model.load_model`).
+    mode: ``lockstep`` or ``realtime``. initial_speed: hip speed (m/s) at start and reset.
+    push_duration: how long a ``/push`` wrench is held (s, sim time).
+    max_push_force: larger pushes (N, each component) are rejected.
+    stop_time: pause the physics at this sim time (s); 0 = run until stopped.
+    resend_timeout: lockstep, wall s without a torque before the state is re-sent.
+    watchdog_timeout: realtime, wall s without a torque before damping takes over.
+    damping: realtime watchdog damping gain (N m s/rad).
+    """
+
+    model: str = "paper"
+    mode: str = "lockstep"
+    initial_speed: float = 1.0
+    push_duration: float = 0.1
+    max_push_force: float = 2000.0
+    stop_time: float = 0.0
+    resend_timeout: float = 0.2
+    watchdog_timeout: float = 0.05
+    damping: float = 20.0
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise NodeStartError(f"mode must be one of {MODES}, got {self.mode!r}")
+        for name in ("initial_speed", "push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
+            if not getattr(self, name) > 0.0:
+                raise NodeStartError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.stop_time < 0.0 or self.damping < 0.0:
+            raise NodeStartError("stop_time and damping must be >= 0")
+
+
+def stamp_of(seconds: float) -> Time:
+    """Sim time (s) -> builtin_interfaces/Time, rounded to the nanosecond."""
+    ns = int(round(seconds * 1e9))
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+class SimNode(Node):
+    """The simulator node. All physics runs under ``self._lock``."""
+
+    def __init__(self, context=None, **overrides) -> None:
+        super().__init__("sim_node", context=context)
+        defaults = SimSettings()
+        for name in SimSettings.__dataclass_fields__:
+            self.declare_parameter(name, overrides.get(name, getattr(defaults, name)))
+        try:
+            self.settings = SimSettings(
+                **{n: self.get_parameter(n).value for n in SimSettings.__dataclass_fields__}
+            )
+            self.sim = Simulator(load_model(self.settings.model))
+        except (ValueError, TypeError) as exc:
+            raise NodeStartError(f"sim_node: {exc}") from exc
+
+        self._lock = threading.RLock()
+        self._alpha: list[float] | None = None
+        self._started = False
+        self._paused = False
+        self._halted = False  # fell or reached stop_time
+        self._fallen = False
+        # lockstep bookkeeping
+        self._awaiting_reply = False
+        self._held_torques: list[float] | None = None
+        self._reset_requested = False
+        self._last_publish_wall = 0.0
+        # realtime bookkeeping
+        self._latest_torques = [0.0] * N_ACTUATED
+        self._latest_torque_wall = -1.0
+        self._unanswered: deque[float] = deque()
+        self._damping_active = False
+        self.latencies_ms: deque[float] = deque(maxlen=600_000)
+        # counters (read by tests, run_stack and the benchmarks)
+        self.ticks = 0
+        self.states_published = 0
+        self.torques_received = 0
+        self.torques_rejected = 0
+        self.late_ticks = 0
+        self.damped_ticks = 0
+        self.resends = 0
+
+        self._joint_msg = JointState(name=list(JOINT_NAMES))
+        self._hip_msg = TwistStamped()
+        self._hip_msg.header.frame_id = "world"
+        self._state_pub = self.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        self._hip_pub = self.create_publisher(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
+        self._clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK_QOS)
+        self._fallen_pub = self.create_publisher(Bool, topics.FALLEN, qos.STATUS_QOS)
+        self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
+        self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
+        self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
+        self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
+        self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause)
+        self._fallen_pub.publish(Bool(data=False))
+
+        self._running = True
+        self._physics_thread: threading.Thread | None = None
+        if self.settings.mode == "lockstep":
+            self.create_timer(0.05, self._lockstep_supervise)
+        else:
+            sys.setswitchinterval(0.0005)  # let the executor thread in between physics ticks
+            self._physics_thread = threading.Thread(target=self._realtime_loop, name="physics", daemon=True)
+            self._physics_thread.start()
+        self.get_logger().info(
+            f"RABBIT simulation ({self.settings.model} model, {self.settings.mode} mode) waiting for a gait on "
+            f"{topics.ALPHA}"
+        )
+
+    # ----------------------------------------------------------------- status
+    @property
+    def mode(self) -> str:
+        return self.settings.mode
+
+    @property
+    def started(self) -> bool:
+        return self._started
+
+    @property
+    def fallen(self) -> bool:
+        return self._fallen
+
+    @property
+    def halted(self) -> bool:
+        return self._halted
+
+    @property
+    def time(self) -> float:
+        """Simulation time (s)."""
+        return self.sim.time
+
+    def close(self) -> None:
+        """Stop the physics thread (realtime mode); called before the node is destroyed."""
+        self._running = False
+        if self._physics_thread is not None:
+            self._physics_thread.join(timeout=1.0)
+
+    # -------------------------------------------------------------- callbacks
+    def _on_alpha(self, msg: Float64MultiArray) -> None:
+        try:
+            alpha = alpha_from_msg(msg)
+            state_on_gait(alpha, self.settings.initial_speed)  # a gait the robot can be placed on
+        except (MessageError, ValueError) as exc:
+            self.get_logger().error(f"ignoring malformed {topics.ALPHA}: {exc}")
+            return
+        with self._lock:
+            self._alpha = alpha
+            if not self._started:
+                self._place_on_gait()
+                self.get_logger().info(
+                    f"robot placed on the gait at {self.settings.initial_speed:.2f} m/s; simulation running"
+                )
+
+    def _on_torques(self, msg: Float64MultiArray) -> None:
+        now = time.perf_counter()
+        try:
+            torques = torques_from_msg(msg)
+        except MessageError as exc:
+            self.torques_rejected += 1
+            self.get_logger().error(f"ignoring malformed {topics.JOINT_TORQUES}: {exc}", throttle_duration_sec=1.0)
+            return
+        with self._lock:
+            self.torques_received += 1
+            if self.settings.mode == "realtime":
+                self._latest_torques = torques
+                self._latest_torque_wall = now
+                if self._unanswered:
+                    self.latencies_ms.append((now - self._unanswered.popleft()) * 1e3)
+                return
+            if not self._awaiting_reply:
+                return  # unsolicited (a second controller?); the supervisor timer warns
+            if self._reset_requested:
+                self._awaiting_reply = False
+                self._reset_requested = False
+                self._place_on_gait()
+                self.get_logger().info(f"robot back on the gait at t = 0 s, {self.settings.initial_speed:.2f} m/s")
+                return
+            if self._paused:
+                self._held_torques = torques
+                self._awaiting_reply = False
+                return
+            self._advance(torques)
+
+    def _on_push(self, msg: Wrench) -> None:
+        values = (msg.force.x, msg.force.z, msg.torque.y)
+        bad = [v for v in values if not (abs(v) <= self.settings.max_push_force)]
+        if bad:
+            self.get_logger().error(
+                f"ignoring push {values}: components must be finite and within +-{self.settings.max_push_force} N"
+            )
+            return
+        if msg.force.y or msg.torque.x or msg.torque.z:
+            self.get_logger().warning("push: the model is planar; force.y, torque.x and torque.z are ignored")
+        with self._lock:
+            self.sim.push(msg.force.x, self.settings.push_duration, msg.force.z, msg.torque.y)
+            self.get_logger().info(
+                f"push at t = {self.sim.time:.3f} s: fx = {msg.force.x:.1f} N, fz = {msg.force.z:.1f} N, "
+                f"ty = {msg.torque.y:.1f} N m for {self.settings.push_duration:.3f} s"
+            )
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            if self._alpha is None:
+                response.success = False
+                response.message = f"no gait received on {topics.ALPHA} yet"
+                return response
+            if self._awaiting_reply:
+                # the reply to the state in flight is still due: reset when it arrives
+                self._reset_requested = True
+                response.success = True
+                response.message = "reset at the next tick"
+                return response
+            self._place_on_gait()
+        response.success = True
+        response.message = f"robot back on the gait at t = 0 s, {self.settings.initial_speed:.2f} m/s"
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        with self._lock:
+            self._paused = bool(request.data)
+            if not self._paused and self.settings.mode == "lockstep" and self._held_torques is not None:
+                torques, self._held_torques = self._held_torques, None
+                self._advance(torques)
+        response.success = True
+        response.message = "paused" if request.data else "running"
+        self.get_logger().info(f"simulation {response.message} at t = {self.sim.time:.3f} s")
+        return response
+
+    # ---------------------------------------------------------------- physics
+    def _place_on_gait(self) -> None:
+        qpos, qvel = state_on_gait(self._alpha, self.settings.initial_speed)
+        self.sim.reset(qpos, qvel)
+        self._started = True
+        self._halted = False
+        self._held_torques = None
+        self._unanswered.clear()
+        self._latest_torque_wall = -1.0
+        if self._fallen:
+            self._fallen = False
+            self._fallen_pub.publish(Bool(data=False))
+        if self.settings.mode == "lockstep":
+            self._publish_state()
+            self._awaiting_reply = True
+
+    def _advance(self, torques: list[float]) -> None:
+        """Lockstep: apply one reply, step, publish the next state (or halt)."""
+        self._awaiting_reply = False
+        self._step(torques)
+        self._publish_state()
+        if self._halted:
+            return
+        self._awaiting_reply = True
+
+    def _step(self, torques: list[float]) -> None:
+        sim = self.sim
+        sim.step(torques)
+        self.ticks += 1
+        if sim.fallen():
+            self._halted = True
+            self._fallen = True
+            self._fallen_pub.publish(Bool(data=True))
+            qpos = sim.data.qpos
+            self.get_logger().warning(
+                f"RABBIT fell at t = {sim.time:.3f} s (hip height {qpos[1]:.3f} m, torso pitch {qpos[2]:.3f} rad); "
+                f"physics halted, call {topics.RESET_SERVICE} to start again"
+            )
+        elif self.settings.stop_time and sim.time >= self.settings.stop_time - 1e-9:
+            self._halted = True
+            self.get_logger().info(f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
+
+    def _publish_state(self) -> None:
+        data = self.sim.data
+        stamp = stamp_of(data.time)
+        msg = self._joint_msg
+        msg.header.stamp = stamp
+        msg.position = data.qpos.tolist()
+        msg.velocity = data.qvel.tolist()
+        msg.effort = data.qfrc_actuator.tolist()
+        hip = self._hip_msg
+        hip.header.stamp = stamp
+        hip.twist.linear.x = float(data.qvel[0])
+        hip.twist.linear.z = float(data.qvel[1])
+        hip.twist.angular.y = float(data.qvel[2])
+        self._last_publish_wall = time.perf_counter()
+        self._state_pub.publish(msg)
+        self._hip_pub.publish(hip)
+        self._clock_pub.publish(Clock(clock=stamp))
+        self.states_published += 1
+
+    def _lockstep_supervise(self) -> None:
+        """Wall-clock timer (20 Hz): re-send the state when its reply is overdue."""
+        controllers = self.count_publishers(topics.JOINT_TORQUES)
+        if controllers > 1:
+            self.get_logger().warning(
+                f"{controllers} publishers on {topics.JOINT_TORQUES}: lockstep expects exactly one controller",
+                throttle_duration_sec=10.0,
+            )
+        with self._lock:
+            if not self._awaiting_reply or self._paused:
+                return
+            waited = time.perf_counter() - self._last_publish_wall
+            if waited < self.settings.resend_timeout:
+                return
+            self.resends += 1
+            self.get_logger().warning(
+                f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
+                f"re-sending it (is hzd_controller_node running?)",
+                throttle_duration_sec=5.0,
+            )
+            self._publish_state()
+
+    def _realtime_loop(self) -> None:
+        """Physics thread: one step per 1 ms of wall-clock time, zero-order hold."""
+        dt = self.sim.timestep
+        next_tick = time.perf_counter()
+        while self._running:
+            next_tick += dt
+            while True:
+                remaining = next_tick - time.perf_counter()
+                if remaining <= 0.0:
+                    break
+                time.sleep(min(remaining, 0.0002))
+            if next_tick < time.perf_counter() - 0.05:  # fell behind by more than 50 ticks
+                next_tick = time.perf_counter()
+            with self._lock:
+                if not self._started or self._paused or self._halted:
+                    self._unanswered.clear()
+                    continue
+                self._realtime_tick()
+
+    def _realtime_tick(self) -> None:
+        now = time.perf_counter()
+        if self._unanswered:
+            if self.states_published:
+                self.late_ticks += 1
+            while self._unanswered and now - self._unanswered[0] > 0.02:
+                self._unanswered.popleft()  # lost: never answered within 20 ms
+        fresh = self._latest_torque_wall >= 0.0 and now - self._latest_torque_wall <= self.settings.watchdog_timeout
+        if fresh:
+            torques = self._latest_torques
+            if self._damping_active:
+                self._damping_active = False
+                self.get_logger().info(f"torque commands resumed at t = {self.sim.time:.3f} s; damping off")
+        else:
+            qvel = self.sim.data.qvel
+            d = self.settings.damping
+            torques = [-d * qvel[i] for i in range(3, 3 + N_ACTUATED)]
+            self.damped_ticks += 1
+            if not self._damping_active:
+                self._damping_active = True
+                self.get_logger().warning(
+                    f"watchdog: no torque for {self.settings.watchdog_timeout * 1e3:.0f} ms at t = {self.sim.time:.3f} s; "
+                    f"applying damping ({d:.0f} N m s/rad) until commands resume"
+                )
+        self._step(torques)
+        self._publish_state()
+        self._unanswered.append(self._last_publish_wall)
+
+    def statistics(self) -> dict[str, float | int]:
+        """Counters for scripts and benchmarks."""
+        lat = sorted(self.latencies_ms)
+        pick = (lambda q: lat[min(len(lat) - 1, int(q * len(lat)))]) if lat else (lambda q: float("nan"))
+        return {
+            "ticks": self.ticks,
+            "sim_time": self.sim.time,
+            "states_published": self.states_published,
+            "torques_received": self.torques_received,
+            "torques_rejected": self.torques_rejected,
+            "late_ticks": self.late_ticks,
+            "damped_ticks": self.damped_ticks,
+            "resends": self.resends,
+            "latency_p50_ms": pick(0.5),
+            "latency_p99_ms": pick(0.99),
+        }
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script / ``ros2 run rabbit_sim sim_node``."""
+    return run_node(SimNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
