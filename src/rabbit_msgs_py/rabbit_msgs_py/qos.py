@@ -10,6 +10,8 @@
 * Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
   the current state.
 * Events (``/hzd/step``): reliable, keep last 10.
+* Monitors that only need the newest state (run_stack's supervisor): best effort,
+  keep last 1 — a slow monitor never holds the 1 kHz loop back.
 * Clock: reliable, keep last 1 (the newest time is the only one that matters).
 """
 
@@ -33,3 +35,9 @@ STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(1)
+MONITOR_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.BEST_EFFORT,
+    durability=DurabilityPolicy.VOLATILE,
+)

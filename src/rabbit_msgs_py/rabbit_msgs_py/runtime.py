@@ -7,8 +7,9 @@ Executor: rclpy's experimental ``EventsExecutor`` by default — measured on thi
 2-core machine it turns a 1 kHz state->torque round trip about 5x faster than the
 ``SingleThreadedExecutor`` (see README, "Executors"). ``RABBIT_EXECUTOR=single`` selects
 the SingleThreadedExecutor instead. The EventsExecutor is only ever spun with
-``spin()`` or with a timeout (rclpy 7.1's ``spin_until_future_complete`` without a
-timeout busy-loops and starves timers).
+``spin()`` or with a timeout: in rclpy 7.1 both ``EventsExecutor.spin()`` and ``spin_until_future_complete``
+without a timeout busy-loop at 100 % CPU and ignore shutdown (measured here), so nodes
+spin with ``spin_once(timeout_sec=0.1)`` until the context shuts down.
 """
 
 from __future__ import annotations
@@ -52,7 +53,8 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         node = factory(context=context)
         executor = make_executor(context)
         executor.add_node(node)
-        executor.spin()
+        while context.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except NodeStartError as exc:

@@ -32,7 +32,7 @@ import sys
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -40,6 +40,7 @@ ensure_localhost_discovery()
 
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import TwistStamped, Wrench  # noqa: E402
+from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -70,6 +71,8 @@ class SimSettings:
     resend_timeout: lockstep, wall s without a torque before the state is re-sent.
     watchdog_timeout: realtime, wall s without a torque before damping takes over.
     damping: realtime watchdog damping gain (N m s/rad).
+    start_paused: start with the physics paused (``/sim/pause`` false starts it); the
+        launch script uses it to start the run once every node is connected.
     """
 
     model: str = "paper"
@@ -81,6 +84,7 @@ class SimSettings:
     resend_timeout: float = 0.2
     watchdog_timeout: float = 0.05
     damping: float = 20.0
+    start_paused: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -117,7 +121,7 @@ class SimNode(Node):
         self._lock = threading.RLock()
         self._alpha: list[float] | None = None
         self._started = False
-        self._paused = False
+        self._paused = self.settings.start_paused
         self._halted = False  # fell or reached stop_time
         self._fallen = False
         # lockstep bookkeeping
@@ -153,6 +157,7 @@ class SimNode(Node):
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
         self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause)
         self._fallen_pub.publish(Bool(data=False))
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._running = True
         self._physics_thread: threading.Thread | None = None
@@ -196,6 +201,17 @@ class SimNode(Node):
             self._physics_thread.join(timeout=1.0)
 
     # -------------------------------------------------------------- callbacks
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        """Only ``push_duration`` may change at run time (``ros2 param set``)."""
+        for param in parameters:
+            if param.name != "push_duration":
+                return SetParametersResult(successful=False, reason=f"{param.name} is fixed at start-up")
+            value = param.value
+            if not isinstance(value, (int, float)) or not value > 0.0:
+                return SetParametersResult(successful=False, reason="push_duration must be a number > 0 (s)")
+            self.settings = replace(self.settings, push_duration=float(value))
+        return SetParametersResult(successful=True)
+
     def _on_alpha(self, msg: Float64MultiArray) -> None:
         try:
             alpha = alpha_from_msg(msg)

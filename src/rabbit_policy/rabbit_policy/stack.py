@@ -1,0 +1,434 @@
+"""Bring-up of the whole stack in place of a launch file (used by ``scripts/run_stack.py``,
+``scripts/bench_stack.py`` and the tests).
+
+* :class:`StackConfig` says what to run; :func:`parse_schedule` / :func:`parse_pushes`
+  read the script's ``--speed-schedule "0:0.8,10:1.2"`` and ``--push "t:fx:duration"``.
+* :class:`Supervisor` is the experiment node: it publishes ``/cmd_speed`` and ``/push`` at
+  the scheduled sim times (read from ``/joint_states`` stamps), counts steps, watches
+  ``/fallen`` and measures each segment's mean speed (hip x over the segment's second
+  half, so the transient after a speed change is left out). It samples the newest state
+  (best effort, depth 1) so it never slows the loop; events therefore fire at the first
+  state it sees at or after their time — within a few ms of sim time in lockstep, which
+  is why a run with speed changes repeats only to that precision, while a constant-speed
+  lockstep run repeats exactly.
+* :func:`run_in_process` spins policy, controller, simulator and supervisor on one
+  executor; :func:`run_multi_process` starts the three nodes as separate processes
+  (``python -m <module> --ros-args ...``, exactly what ``ros2 run`` executes) and runs the
+  supervisor here.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Sequence
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+ensure_localhost_discovery()
+
+from geometry_msgs.msg import Wrench  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
+from std_msgs.msg import Bool, Float64, Header  # noqa: E402
+from std_srvs.srv import SetBool  # noqa: E402
+
+from rabbit_msgs_py import qos, topics  # noqa: E402
+
+CONTROLLERS = {"hzd": "library", "rl": "learned"}
+NODE_MODULES = {
+    "policy_node": "rabbit_policy.policy_node",
+    "hzd_controller_node": "rabbit_hzd_controller.hzd_controller_node",
+    "sim_node": "rabbit_sim.sim_node",
+}
+
+
+@dataclass(frozen=True)
+class Push:
+    """A push on the torso: at sim time ``time`` (s), force ``force_x`` (N, world x) held
+    for ``duration`` s."""
+
+    time: float
+    force_x: float
+    duration: float
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0."""
+
+    duration: float
+    schedule: tuple[tuple[float, float], ...]
+    controller: str = "hzd"
+    mode: str = "lockstep"
+    model: str = "paper"
+    library_mode: str = "nearest"
+    gait_dir: str = ""
+    pushes: tuple[Push, ...] = ()
+    push_duration: float = 0.1
+
+    def __post_init__(self) -> None:
+        if not self.duration > 0.0:
+            raise ValueError("duration must be > 0 s")
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}")
+        if not self.schedule or self.schedule[0][0] != 0.0:
+            raise ValueError("the speed schedule must start at t = 0")
+        times = [t for t, _ in self.schedule]
+        if times != sorted(times) or len(set(times)) != len(times):
+            raise ValueError("speed schedule times must increase")
+
+    def node_parameters(self) -> dict[str, dict[str, object]]:
+        """The ROS parameters of each node for this run."""
+        return {
+            "policy_node": {
+                "policy": CONTROLLERS[self.controller],
+                "library_mode": self.library_mode,
+                "gait_dir": self.gait_dir,
+                "initial_speed": self.schedule[0][1],
+            },
+            "hzd_controller_node": {},
+            "sim_node": {
+                "model": self.model,
+                "mode": self.mode,
+                "initial_speed": self.schedule[0][1],
+                "stop_time": self.duration,
+                "push_duration": self.push_duration,
+                "start_paused": True,
+            },
+        }
+
+
+def parse_schedule(text: str) -> tuple[tuple[float, float], ...]:
+    """``"0:0.8,10:1.2"`` -> ((0.0, 0.8), (10.0, 1.2)); raises ``ValueError``."""
+    pairs = []
+    for item in text.split(","):
+        try:
+            t, v = (float(x) for x in item.split(":"))
+        except ValueError:
+            raise ValueError(f"speed schedule entries are time:speed, got {item!r}") from None
+        if not (math.isfinite(t) and math.isfinite(v)) or t < 0:
+            raise ValueError(f"bad speed schedule entry {item!r}")
+        pairs.append((t, v))
+    return tuple(pairs)
+
+
+def parse_pushes(text: str) -> tuple[Push, ...]:
+    """``"2:60:0.1,4:-80:0.2"`` -> pushes (time s : force N : duration s)."""
+    pushes = []
+    for item in text.split(","):
+        try:
+            t, f, d = (float(x) for x in item.split(":"))
+        except ValueError:
+            raise ValueError(f"pushes are time:force:duration, got {item!r}") from None
+        if not all(math.isfinite(x) for x in (t, f, d)) or t < 0 or d <= 0:
+            raise ValueError(f"bad push {item!r}")
+        pushes.append(Push(t, f, d))
+    return tuple(sorted(pushes, key=lambda p: p.time))
+
+
+@dataclass
+class Segment:
+    """One constant-command stretch of a run; speeds in m/s, times in s."""
+
+    command: float
+    start: float
+    end: float
+    x_mid: float | None = None
+    t_mid: float | None = None
+    x_end: float | None = None
+    t_end: float | None = None
+
+    @property
+    def mean_speed(self) -> float:
+        """Mean hip speed over the segment's second half (NaN if not reached)."""
+        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end) or self.t_end <= self.t_mid:
+            return float("nan")
+        return (self.x_end - self.x_mid) / (self.t_end - self.t_mid)
+
+    def summary(self) -> dict[str, float]:
+        return {"command": self.command, "start": self.start, "end": self.end, "mean_speed": self.mean_speed}
+
+
+@dataclass
+class RunReport:
+    """What a run did: the JSON printed by ``run_stack.py --json``."""
+
+    fell: bool
+    fall_time: float | None
+    sim_time: float
+    wall_time: float
+    steps: int
+    segments: list[Segment] = field(default_factory=list)
+    completed: bool = True
+    error: str | None = None
+
+    @property
+    def rtf(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else float("nan")
+
+    def summary(self) -> dict[str, object]:
+        return {
+            "fell": self.fell,
+            "fall_time": self.fall_time,
+            "completed": self.completed,
+            "error": self.error,
+            "sim_time": self.sim_time,
+            "wall_time": self.wall_time,
+            "rtf": self.rtf,
+            "steps": self.steps,
+            "segments": [s.summary() for s in self.segments],
+        }
+
+
+class Supervisor(Node):
+    """Runs the experiment: speed schedule, pushes, segment statistics, end of run."""
+
+    def __init__(self, config: StackConfig, context=None) -> None:
+        super().__init__("run_stack_supervisor", context=context)
+        self.config = config
+        bounds = [t for t, _ in config.schedule[1:]] + [config.duration]
+        self.segments = [
+            Segment(v, t, end) for (t, v), end in zip(config.schedule, bounds) if t < config.duration
+        ]
+        self._next_segment = 1
+        self._pushes = list(config.pushes)
+        self._push_duration = config.push_duration
+        self.steps = 0
+        self.fell = False
+        self.fall_time: float | None = None
+        self.sim_time = 0.0
+        self.first_state_wall: float | None = None
+        self.last_state_wall: float | None = None
+        self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
+        self._push_pub = self.create_publisher(Wrench, topics.PUSH, qos.COMMAND_QOS)
+        self._params = AsyncParameterClient(self, "sim_node")
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
+        self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
+        self.create_subscription(Header, topics.STEP, lambda _msg: self._count_step(), qos.EVENT_QOS)
+        self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE)
+
+    def connected(self) -> bool:
+        """True once simulator, controller and policy are all visible to this node."""
+        return (
+            self._pause_client.service_is_ready()
+            and self.count_publishers(topics.JOINT_STATES) > 0
+            and self.count_publishers(topics.JOINT_TORQUES) > 0
+            and self.count_publishers(topics.ALPHA) > 0
+            and self.count_subscribers(topics.CMD_SPEED) > 0
+        )
+
+    def request_start(self):
+        """Ask the (paused) simulator to run; returns the service future."""
+        return self._pause_client.call_async(SetBool.Request(data=False))
+
+    @property
+    def done(self) -> bool:
+        return self.fell or self.sim_time >= self.config.duration - 1e-9
+
+    def _count_step(self) -> None:
+        self.steps += 1
+
+    def _on_fallen(self, msg: Bool) -> None:
+        if msg.data and not self.fell:
+            self.fell = True
+            self.fall_time = self.sim_time
+
+    def _on_state(self, msg: JointState) -> None:
+        now = time.perf_counter()
+        if self.first_state_wall is None:
+            self.first_state_wall = now
+        self.last_state_wall = now
+        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        x = msg.position[0]
+        self.sim_time = t
+        while self._next_segment < len(self.segments) and t >= self.segments[self._next_segment].start - 1e-9:
+            segment = self.segments[self._next_segment]
+            self._speed_pub.publish(Float64(data=segment.command))
+            self.get_logger().info(f"t = {t:.2f} s: commanding {segment.command:.2f} m/s")
+            self._next_segment += 1
+        for segment in self.segments:
+            mid = 0.5 * (segment.start + segment.end)
+            if segment.x_mid is None and t >= mid - 1e-9:
+                segment.x_mid, segment.t_mid = x, t
+            if segment.start <= t <= segment.end + 1e-9 and segment.x_mid is not None:
+                segment.x_end, segment.t_end = x, t
+        while self._pushes and t >= self._pushes[0].time - 1e-9:
+            self._push(self._pushes.pop(0))
+
+    def _push(self, push: Push) -> None:
+        wrench = Wrench()
+        wrench.force.x = push.force_x
+        if push.duration == self._push_duration:
+            self._push_pub.publish(wrench)
+            return
+        # set the simulator's push duration first, publish once it is accepted
+        self._push_duration = push.duration
+        future = self._params.set_parameters([Parameter("push_duration", value=push.duration)])
+        future.add_done_callback(lambda _f: self._push_pub.publish(wrench))
+
+    def report(self, error: str | None = None) -> RunReport:
+        wall = (
+            self.last_state_wall - self.first_state_wall
+            if self.first_state_wall is not None and self.last_state_wall is not None
+            else 0.0
+        )
+        return RunReport(
+            fell=self.fell,
+            fall_time=self.fall_time,
+            sim_time=self.sim_time,
+            wall_time=wall,
+            steps=self.steps,
+            segments=self.segments,
+            completed=self.done and error is None,
+            error=error,
+        )
+
+
+def ros_arguments(parameters: dict[str, object]) -> list[str]:
+    """``{"mode": "lockstep", "stop_time": 5.0}`` ->
+    ``["--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0"]``; empty strings are
+    left out (the node's default applies)."""
+    args = ["--ros-args"]
+    for name, value in parameters.items():
+        if value == "":
+            continue
+        text = str(value).lower() if isinstance(value, bool) else repr(value) if isinstance(value, float) else str(value)
+        args += ["-p", f"{name}:={text}"]
+    return args
+
+
+def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None) -> str | None:
+    """Spin until the run is over; returns an error message or None."""
+    from rclpy.executors import ExternalShutdownException
+
+    start = time.perf_counter()
+    started = None
+    while started is None or not started.done():
+        try:
+            executor.spin_once(timeout_sec=0.02)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return "interrupted"
+        problem = alive()
+        if problem:
+            return problem
+        if started is None and supervisor.connected():
+            started = supervisor.request_start()
+        if time.perf_counter() - start > stall_timeout:
+            return f"the nodes did not connect within {stall_timeout:.0f} s"
+    while not supervisor.done:
+        try:
+            executor.spin_once(timeout_sec=0.05)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return "interrupted"
+        problem = alive()
+        if problem:
+            return problem
+        last = supervisor.last_state_wall or start
+        if time.perf_counter() - last > stall_timeout:
+            return f"no simulation progress for {stall_timeout:.0f} s (at t = {supervisor.sim_time:.3f} s)"
+    return None
+
+
+def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_kind: str | None = None,
+                   observers: Sequence[object] = ()) -> tuple[RunReport, dict[str, object]]:
+    """Run the stack in this process on one executor; returns the report and the nodes
+    (for tests and benchmarks). ``observers``: extra node factories ``f(context)``."""
+    import rclpy
+
+    from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+    from rabbit_msgs_py.runtime import make_executor
+    from rabbit_sim.sim_node import SimNode
+
+    from .policy_node import PolicyNode
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    nodes: dict[str, object] = {}
+    try:
+        params = config.node_parameters()
+        nodes["policy_node"] = PolicyNode(context=context, **params["policy_node"])
+        nodes["hzd_controller_node"] = HZDControllerNode(context=context, **params["hzd_controller_node"])
+        nodes["sim_node"] = SimNode(context=context, **params["sim_node"])
+        supervisor = nodes["supervisor"] = Supervisor(config, context=context)
+        for i, factory in enumerate(observers):
+            nodes[f"observer_{i}"] = factory(context)
+        executor = make_executor(context, executor_kind)
+        for node in nodes.values():
+            executor.add_node(node)
+        error = _spin_until_done(executor, supervisor, stall_timeout)
+        for _ in range(20):  # deliver what is still in flight (last states, counters)
+            executor.spin_once(timeout_sec=0.005)
+        report = supervisor.report(error)
+        return report, nodes
+    finally:
+        for node in nodes.values():
+            close = getattr(node, "close", None)
+            if close:
+                close()
+            node.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
+
+
+class NodeProcesses:
+    """The three nodes as child processes, each in its own session so that Ctrl-C at the
+    terminal reaches only run_stack, which then stops them in order (SIGINT, then SIGTERM,
+    then SIGKILL)."""
+
+    def __init__(self, config: StackConfig, log=sys.stderr) -> None:
+        self.procs: dict[str, subprocess.Popen] = {}
+        env = dict(os.environ)
+        for name, params in config.node_parameters().items():
+            cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params)]
+            self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True)
+
+    def dead(self) -> str | None:
+        for name, proc in self.procs.items():
+            if proc.poll() is not None:
+                return f"{name} exited early with status {proc.returncode}"
+        return None
+
+    def stop(self, timeout: float = 5.0) -> dict[str, int]:
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            alive = [p for p in self.procs.values() if p.poll() is None]
+            if not alive:
+                break
+            for proc in alive:
+                proc.send_signal(sig)
+            deadline = time.monotonic() + timeout
+            for proc in alive:
+                try:
+                    proc.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    pass
+        return {name: proc.wait() for name, proc in self.procs.items()}
+
+
+def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr) -> RunReport:
+    """Start the nodes as processes, supervise the run here, stop them; returns the report."""
+    import rclpy
+
+    from rabbit_msgs_py.runtime import make_executor
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    procs = NodeProcesses(config, log=log)
+    supervisor = Supervisor(config, context=context)
+    try:
+        executor = make_executor(context)
+        executor.add_node(supervisor)
+        error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead)
+        return supervisor.report(error)
+    finally:
+        procs.stop()
+        supervisor.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
