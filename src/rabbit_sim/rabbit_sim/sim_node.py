@@ -15,7 +15,8 @@ Modes (parameter ``mode``):
   reply per state is ever applied. A reset or pause requested while a reply is due takes
   effect when that reply arrives.
 * ``realtime``: a physics thread steps at 1 kHz of wall-clock time, zero-order hold on the
-  newest torque. A watchdog applies damping torques ``-damping * joint rate`` when no
+  newest torque. After start and reset the physics holds the initial state (re-publishing
+  it) until the first torque arrives, so the robot does not start under damping. A watchdog applies damping torques ``-damping * joint rate`` when no
   torque arrived for ``watchdog_timeout`` s and says so in the log; it logs again when
   commands resume. Ticks whose torque (the reply to the previous state) had not arrived
   when the next step was due are counted as late.
@@ -390,6 +391,7 @@ class SimNode(Node):
         """Physics thread: one step per 1 ms of wall-clock time, zero-order hold."""
         dt = self.sim.timestep
         next_tick = time.perf_counter()
+        held = 0
         while self._running:
             next_tick += dt
             while True:
@@ -403,6 +405,13 @@ class SimNode(Node):
                 if not self._started or self._paused or self._halted:
                     self._unanswered.clear()
                     continue
+                if self._latest_torque_wall < 0.0:
+                    # hold the initial state (re-published every 10 ms) until the controller answers
+                    held += 1
+                    if held % 10 == 1:
+                        self._publish_state()
+                    continue
+                held = 0
                 self._realtime_tick()
 
     def _realtime_tick(self) -> None:

@@ -1,0 +1,55 @@
+"""Helpers for tests that spin the real nodes in the test process."""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from typing import Callable, Iterator
+
+import rclpy
+
+from rabbit_msgs_py.runtime import make_executor
+
+
+@contextmanager
+def ros_context(executor_kind: str = "events") -> Iterator[tuple[object, object]]:
+    """A fresh rclpy context and executor; nodes added to it are destroyed afterwards."""
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = make_executor(context, executor_kind)
+    try:
+        yield context, executor
+    finally:
+        for node in list(executor.get_nodes()):
+            close = getattr(node, "close", None)
+            if close:
+                close()
+            executor.remove_node(node)
+            node.destroy_node()
+        if context.ok():
+            rclpy.shutdown(context=context)
+
+
+def _executors(executor) -> tuple:
+    return tuple(executor) if isinstance(executor, (tuple, list)) else (executor,)
+
+
+def spin_until(executor, condition: Callable[[], bool], timeout: float = 20.0) -> bool:
+    """Spin ``executor`` (or several, in turn: nodes of separate contexts stand in for
+    separate processes) until ``condition()`` holds or ``timeout`` wall seconds pass."""
+    deadline = time.monotonic() + timeout
+    executors = _executors(executor)
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        for ex in executors:
+            ex.spin_once(timeout_sec=0.002 if len(executors) > 1 else 0.01)
+    return True
+
+
+def spin_for(executor, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    executors = _executors(executor)
+    while time.monotonic() < deadline:
+        for ex in executors:
+            ex.spin_once(timeout_sec=0.002 if len(executors) > 1 else 0.01)

@@ -1,0 +1,212 @@
+"""The ROS 2 node stack, spun in the test process with real MuJoCo (lockstep unless said):
+walking, speed commands, determinism against the ROS-free loop, reset, bad input and a
+controller restart."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray
+from std_srvs.srv import Trigger
+
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import alpha_to_msg
+from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.policy_node import PolicyNode
+from rabbit_policy.stack import StackConfig, run_in_process
+from rabbit_policy.walking import setup_walk
+from rabbit_sim.sim_node import SimNode
+
+from ros_helpers import ros_context, spin_for, spin_until
+
+
+def _recorder(store: list):
+    def factory(context):
+        import rclpy
+
+        node = rclpy.create_node("trajectory_recorder", context=context)
+        node.create_subscription(
+            JointState, topics.JOINT_STATES,
+            lambda m: store.append(list(m.position) + list(m.velocity)), qos.STREAM_QOS,
+        )
+        return node
+    return factory
+
+
+def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
+    walk = setup_walk(GaitLibrary.load().nearest(speed))
+    data = walk.loop.data
+    rows = [data.qpos.tolist() + data.qvel.tolist()]
+    for _ in range(int(round(duration / 0.001))):
+        walk.loop.step()
+        rows.append(data.qpos.tolist() + data.qvel.tolist())
+    return np.array(rows)
+
+
+def test_lockstep_is_reproducible_and_matches_the_ros_free_loop():
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
+    runs = []
+    for _ in range(2):
+        states: list = []
+        report, nodes = run_in_process(config, observers=[_recorder(states)])
+        assert report.completed and not report.fell
+        assert nodes["sim_node"].torques_rejected == 0
+        runs.append(np.array(states))
+    reference = _reference(2.0)
+    # every state the simulator published, t = 0 ... 2 s, bit for bit
+    assert runs[0].shape == reference.shape == runs[1].shape
+    assert np.array_equal(runs[0], runs[1])
+    assert np.array_equal(runs[0], reference)
+
+
+def test_stack_walks_and_cmd_speed_changes_the_speed():
+    config = StackConfig(duration=12.0, schedule=((0.0, 0.8), (6.0, 1.3)))
+    report, nodes = run_in_process(config)
+    assert report.completed and not report.fell
+    slow, fast = report.segments
+    assert slow.mean_speed == pytest.approx(0.8, abs=0.05)
+    # the classic controller switches gait at once but settles slowly (measured 1.16 m/s
+    # over 9-12 s for the 1.3 m/s gait); the command clearly takes effect
+    assert fast.mean_speed > slow.mean_speed + 0.25
+    assert report.steps >= 18
+    # the policy decided once at start and once per step
+    assert nodes["policy_node"].decisions == pytest.approx(report.steps + 1, abs=2)
+
+
+def test_bad_speed_commands_are_clamped_or_rejected():
+    with ros_context() as (context, executor):
+        policy = PolicyNode(context=context)
+        executor.add_node(policy)
+        import rclpy
+
+        user = rclpy.create_node("user", context=context)
+        executor.add_node(user)
+        pub = user.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        pub.publish(Float64(data=1.2))
+        assert spin_until(executor, lambda: policy.desired_speed == 1.2)
+        for bad in (math.nan, math.inf, -math.inf):
+            pub.publish(Float64(data=bad))
+        assert spin_until(executor, lambda: policy.rejected_commands == 3)
+        assert policy.desired_speed == 1.2
+        pub.publish(Float64(data=3.0))
+        assert spin_until(executor, lambda: policy.desired_speed == 1.5)
+        pub.publish(Float64(data=0.1))
+        assert spin_until(executor, lambda: policy.desired_speed == 0.7)
+
+
+def test_malformed_gaits_are_rejected_and_the_last_good_one_kept():
+    gait = GaitLibrary.load().nearest(1.0)
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)
+        user = rclpy.create_node("gait_sender", context=context)
+        for node in (controller, user):
+            executor.add_node(node)
+        alpha_pub = user.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        kd_pub = user.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
+        alpha_pub.publish(alpha_to_msg(gait.alpha))
+        kd_pub.publish(Float64(data=gait.kd))
+        assert spin_until(executor, lambda: controller._alpha is not None and controller._kd is not None)
+        good_alpha, good_kd = list(controller._alpha), controller._kd
+
+        wrong_size = Float64MultiArray(data=[0.1] * 23)
+        nan_alpha = alpha_to_msg(gait.alpha)
+        nan_alpha.data[3] = math.nan
+        out_of_bounds = alpha_to_msg([a + 3.0 for a in gait.alpha])
+        swapped = alpha_to_msg(gait.alpha)
+        swapped.layout.dim = list(reversed(swapped.layout.dim))
+        for bad in (wrong_size, nan_alpha, out_of_bounds, swapped):
+            alpha_pub.publish(bad)
+            spin_for(executor, 0.05)
+        for bad_kd in (math.nan, -1.0, 1e6):
+            kd_pub.publish(Float64(data=bad_kd))
+            spin_for(executor, 0.05)
+        assert spin_until(executor, lambda: controller.rejected_gaits == 7)
+        assert controller._alpha == good_alpha and controller._kd == good_kd
+
+
+def _start_stack(context, executor, **sim_params):
+    nodes = {
+        "policy": PolicyNode(context=context),
+        "controller": HZDControllerNode(context=context),
+        "sim": SimNode(context=context, **sim_params),
+    }
+    for node in nodes.values():
+        executor.add_node(node)
+    return nodes
+
+
+def test_reset_service_puts_the_robot_back_on_the_gait():
+    with ros_context() as (context, executor):
+        import rclpy
+
+        nodes = _start_stack(context, executor)
+        sim = nodes["sim"]
+        assert spin_until(executor, lambda: sim.time >= 1.0)
+        resetter = rclpy.create_node("resetter", context=context)
+        executor.add_node(resetter)
+        client = resetter.create_client(Trigger, topics.RESET_SERVICE)
+        assert spin_until(executor, client.service_is_ready)
+        future = client.call_async(Trigger.Request())
+        assert spin_until(executor, future.done)
+        assert future.result().success
+        assert spin_until(executor, lambda: sim.time < 0.5)
+        x_after_reset = float(sim.sim.data.qpos[0])
+        assert x_after_reset < 0.3
+        assert spin_until(executor, lambda: sim.time >= 1.5)
+        assert not sim.fallen
+        assert nodes["controller"].controller.steps >= 2  # restarted, walking again
+
+
+def _start_sim_and_policy(context, executor, **sim_params):
+    nodes = {"policy": PolicyNode(context=context), "sim": SimNode(context=context, **sim_params)}
+    for node in nodes.values():
+        executor.add_node(node)
+    return nodes
+
+
+def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
+    # the controller lives in a context of its own, standing in for its own process
+    with ros_context() as (context, executor):
+        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1)
+        sim = nodes["sim"]
+        with ros_context() as (ctx_a, ex_a):
+            ex_a.add_node(HZDControllerNode(context=ctx_a))
+            assert spin_until((executor, ex_a), lambda: sim.time >= 1.0)
+        # controller "process" gone: its context is shut down (a reply in flight may land)
+        spin_for(executor, 0.05)
+        t_stopped = sim.time
+        spin_for(executor, 0.5)
+        assert sim.time == t_stopped  # lockstep: the physics waits for a torque
+        assert sim.resends >= 2
+        with ros_context() as (ctx_b, ex_b):
+            new = HZDControllerNode(context=ctx_b)
+            ex_b.add_node(new)
+            assert spin_until((executor, ex_b), lambda: sim.time >= t_stopped + 2.0)
+            assert not sim.fallen
+            assert new.controller.steps >= 3
+
+
+def test_realtime_watchdog_damps_while_the_controller_is_gone():
+    with ros_context() as (context, executor):
+        nodes = _start_sim_and_policy(context, executor, mode="realtime", watchdog_timeout=0.05)
+        sim = nodes["sim"]
+        with ros_context() as (ctx_a, ex_a):
+            ex_a.add_node(HZDControllerNode(context=ctx_a))
+            assert spin_until((executor, ex_a), lambda: sim.time >= 1.0)
+        damped_before = sim.damped_ticks
+        spin_for(executor, 0.3)
+        assert sim.damped_ticks - damped_before > 100  # ~250 ticks of damping
+        assert sim._damping_active or sim.fallen
+        received = sim.torques_received
+        with ros_context() as (ctx_b, ex_b):
+            ex_b.add_node(HZDControllerNode(context=ctx_b))
+            # the node kept running: it takes torques again (unless RABBIT fell meanwhile)
+            assert spin_until((executor, ex_b), lambda: sim.fallen or sim.torques_received > received + 50, 5.0)
+            assert sim.ticks > 1000
