@@ -75,6 +75,7 @@ class HZDControllerNode(Node):
         self.rejected_gaits = 0
         self.rejected_states = 0
 
+        self._torque_msg = torques_to_msg([0.0] * 4)  # layout built once, data replaced per tick
         self._torque_pub = self.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
@@ -145,7 +146,9 @@ class HZDControllerNode(Node):
         torques = controller.compute(q, dq)
         self._last_key = key
         self._last_stamp = stamp
-        self._torque_pub.publish(torques_to_msg(torques))
+        torque_msg = self._torque_msg
+        torque_msg.data = torques
+        self._torque_pub.publish(torque_msg)
         self.torques_published += 1
         if controller.touchdown:
             self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))

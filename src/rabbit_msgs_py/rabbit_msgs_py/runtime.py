@@ -9,12 +9,13 @@ Executor: rclpy's experimental ``EventsExecutor`` by default — measured on thi
 the SingleThreadedExecutor instead. The EventsExecutor is only ever spun with
 ``spin()`` or with a timeout: in rclpy 7.1 both ``EventsExecutor.spin()`` and ``spin_until_future_complete``
 without a timeout busy-loop at 100 % CPU and ignore shutdown (measured here), so nodes
-spin with ``spin_once(timeout_sec=0.1)`` until the context shuts down.
+spin with ``spin_once(timeout_sec=0.1)`` until a signal asks them to stop.
 """
 
 from __future__ import annotations
 
 import os
+import signal
 from typing import Callable, Sequence
 
 from .environment import ensure_localhost_discovery
@@ -39,24 +40,28 @@ def make_executor(context, kind: str | None = None):
 
 def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) -> int:
     """Initialise rclpy with ``args`` (``--ros-args ...`` included), build the node with
-    ``factory(context=...)``, spin it until Ctrl-C / SIGTERM / shutdown, then clean up.
+    ``factory(context=...)``, spin it until SIGINT (Ctrl-C) or SIGTERM, then clean up.
+
+    rclpy's own signal handlers are turned off: they shut the context down under a running
+    callback (whose next publish then fails). Here a signal only sets a flag; the callback
+    in progress finishes, then the node is closed and destroyed in order.
     Returns the process exit status (0, or 1 if the node could not be built)."""
     ensure_localhost_discovery()
     import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
+    stop = []
+    previous = {sig: signal.signal(sig, lambda *_: stop.append(True)) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
-    rclpy.init(args=args, context=context)  # default handlers: SIGINT and SIGTERM shut down
+    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     status = 0
     try:
         node = factory(context=context)
         executor = make_executor(context)
         executor.add_node(node)
-        while context.ok():
+        while not stop and context.ok():
             executor.spin_once(timeout_sec=0.1)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     except NodeStartError as exc:
         print(f"error: {exc}", flush=True)
         status = 1
@@ -68,6 +73,8 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
             node.destroy_node()
         if context.ok():
             rclpy.shutdown(context=context)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return status
 
 

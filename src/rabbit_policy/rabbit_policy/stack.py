@@ -73,6 +73,7 @@ class StackConfig:
     gait_dir: str = ""
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
+    stats_file: str = ""
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
@@ -102,6 +103,7 @@ class StackConfig:
                 "stop_time": self.duration,
                 "push_duration": self.push_duration,
                 "start_paused": True,
+                "stats_file": self.stats_file,
             },
         }
 

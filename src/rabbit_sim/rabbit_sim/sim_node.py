@@ -29,11 +29,13 @@ paper's limits) ``/fallen`` turns true and the physics halts until a reset.
 
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -74,6 +76,8 @@ class SimSettings:
     damping: realtime watchdog damping gain (N m s/rad).
     start_paused: start with the physics paused (``/sim/pause`` false starts it); the
         launch script uses it to start the run once every node is connected.
+    stats_file: write :meth:`SimNode.statistics` as JSON to this path when the node
+        closes ('' = don't); the benchmarks read it.
     """
 
     model: str = "paper"
@@ -86,6 +90,7 @@ class SimSettings:
     watchdog_timeout: float = 0.05
     damping: float = 20.0
     start_paused: bool = False
+    stats_file: str = ""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -144,6 +149,8 @@ class SimNode(Node):
         self.late_ticks = 0
         self.damped_ticks = 0
         self.resends = 0
+        self._first_tick_wall: float | None = None
+        self._last_tick_wall = 0.0
 
         self._joint_msg = JointState(name=list(JOINT_NAMES))
         self._hip_msg = TwistStamped()
@@ -200,6 +207,11 @@ class SimNode(Node):
         self._running = False
         if self._physics_thread is not None:
             self._physics_thread.join(timeout=1.0)
+        if self.settings.stats_file:
+            try:
+                Path(self.settings.stats_file).write_text(json.dumps(self.statistics()) + "\n")
+            except OSError as exc:
+                self.get_logger().error(f"cannot write stats_file {self.settings.stats_file}: {exc}")
 
     # -------------------------------------------------------------- callbacks
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
@@ -296,9 +308,12 @@ class SimNode(Node):
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         with self._lock:
             self._paused = bool(request.data)
-            if not self._paused and self.settings.mode == "lockstep" and self._held_torques is not None:
-                torques, self._held_torques = self._held_torques, None
-                self._advance(torques)
+            if not self._paused and self.settings.mode == "lockstep":
+                if self._held_torques is not None:
+                    torques, self._held_torques = self._held_torques, None
+                    self._advance(torques)
+                elif self._awaiting_reply:
+                    self._publish_state()  # the reply is still due: a controller that came late gets the state
         response.success = True
         response.message = "paused" if request.data else "running"
         self.get_logger().info(f"simulation {response.message} at t = {self.sim.time:.3f} s")
@@ -333,6 +348,9 @@ class SimNode(Node):
         sim = self.sim
         sim.step(torques)
         self.ticks += 1
+        self._last_tick_wall = time.perf_counter()
+        if self._first_tick_wall is None:
+            self._first_tick_wall = self._last_tick_wall
         if sim.fallen():
             self._halted = True
             self._fallen = True
@@ -394,11 +412,9 @@ class SimNode(Node):
         held = 0
         while self._running:
             next_tick += dt
-            while True:
-                remaining = next_tick - time.perf_counter()
-                if remaining <= 0.0:
-                    break
-                time.sleep(min(remaining, 0.0002))
+            remaining = next_tick - time.perf_counter()
+            if remaining > 0.0:
+                time.sleep(remaining)  # releases the GIL for the executor thread
             if next_tick < time.perf_counter() - 0.05:  # fell behind by more than 50 ticks
                 next_tick = time.perf_counter()
             with self._lock:
@@ -455,6 +471,9 @@ class SimNode(Node):
             "late_ticks": self.late_ticks,
             "damped_ticks": self.damped_ticks,
             "resends": self.resends,
+            "tick_rate_hz": (self.ticks - 1) / (self._last_tick_wall - self._first_tick_wall)
+            if self._first_tick_wall is not None and self._last_tick_wall > self._first_tick_wall else float("nan"),
+            "late_fraction": self.late_ticks / self.ticks if self.ticks else float("nan"),
             "latency_p50_ms": pick(0.5),
             "latency_p99_ms": pick(0.99),
         }

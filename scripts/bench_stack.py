@@ -1,0 +1,71 @@
+#!/usr/bin/env python3
+"""Benchmark the ROS 2 stack; prints one JSON object.
+
+* ``lockstep_rtf_in_process``: real-time factor (sim s / wall s) of a lockstep walk with
+  all nodes on one EventsExecutor in this process (goal >= 3).
+* ``lockstep_rtf_multi_process``: the same with the three nodes as separate processes
+  (goal >= 1.5).
+* realtime mode, nodes as separate processes: ``realtime_rate_hz`` (physics/control ticks
+  per wall second), ``realtime_late_fraction`` (share of ticks whose torque, the reply to
+  the previous state, had not arrived when the step was due; goal < 1 %),
+  ``latency_p50_ms`` / ``latency_p99_ms`` (state published -> its torque received, as
+  seen by sim_node), ``realtime_damped_ticks``.
+
+RTFs are measured from the first to the last state the supervisor saw (start-up
+excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
+    parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime run, s")
+    parser.add_argument("--speed", type=float, default=1.0)
+    args = parser.parse_args(argv)
+
+    from rabbit_policy.stack import StackConfig, run_in_process, run_multi_process
+
+    schedule = ((0.0, args.speed),)
+    out: dict[str, object] = {}
+    report, _ = run_in_process(StackConfig(duration=args.duration, schedule=schedule))
+    out["lockstep_rtf_in_process"] = round(report.rtf, 3)
+    report = run_multi_process(StackConfig(duration=args.duration, schedule=schedule), log=sys.stderr)
+    out["lockstep_rtf_multi_process"] = round(report.rtf, 3)
+    out["lockstep_fell"] = report.fell
+
+    with tempfile.TemporaryDirectory() as tmp:
+        stats_path = Path(tmp) / "sim_stats.json"
+        config = StackConfig(duration=args.realtime_duration, schedule=schedule, mode="realtime",
+                             stats_file=str(stats_path))
+        report = run_multi_process(config, log=sys.stderr)
+        stats = json.loads(stats_path.read_text())
+    out.update({
+        "realtime_rtf": round(report.rtf, 3),
+        "realtime_rate_hz": round(stats["tick_rate_hz"], 1),
+        "realtime_late_fraction": round(stats["late_fraction"], 5),
+        "latency_p50_ms": round(stats["latency_p50_ms"], 3),
+        "latency_p99_ms": round(stats["latency_p99_ms"], 3),
+        "realtime_ticks": stats["ticks"],
+        "realtime_damped_ticks": stats["damped_ticks"],
+        "realtime_fell": report.fell,
+        "duration_s": args.duration,
+        "realtime_duration_s": args.realtime_duration,
+        "executor": "EventsExecutor",
+    })
+    print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,106 @@
+"""ROS-free parts of the stack: the speed window, speed clamping, schedule parsing, the
+controller's stance inference, gait queuing and alpha bounds."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from rabbit_hzd_controller.controller import HZDController, Leg, infer_stance
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.policies import LibraryPolicy, PolicyUnavailable, make_policy
+from rabbit_policy.policy_node import clamp_speed
+from rabbit_policy.speed_window import SpeedWindow
+from rabbit_policy.stack import Push, StackConfig, parse_pushes, parse_schedule, ros_arguments
+
+MS = 1_000_000
+
+
+def test_speed_window_averages_up_to_a_stamp():
+    window = SpeedWindow(size=3)
+    for i, v in enumerate([1.0, 2.0, 3.0, 4.0, 5.0]):
+        window.add(i * MS, v, desired_speed=3.0)
+    obs = window.observation(3.0)
+    assert (obs.mean_speed, obs.mean_error) == (4.0, -1.0)  # last three: 3, 4, 5
+    obs = window.observation(3.0, stamp_ns=2 * MS)  # samples 1, 2, 3 (stamps 0..2)
+    assert (obs.mean_speed, obs.mean_error) == (2.0, 1.0)
+    assert window.observation(1.0, stamp_ns=-1).as_tuple() == (1.0, 1.0, 0.0)
+    window.add(0, 9.0, 3.0)  # time went back: a reset starts afresh
+    assert len(window) == 1 and window.observation(3.0).mean_speed == 9.0
+    with pytest.raises(ValueError):
+        window.add(MS, math.nan, 1.0)
+
+
+def test_clamp_speed():
+    assert clamp_speed(1.2, 0.7, 1.5) == 1.2
+    assert clamp_speed(9.0, 0.7, 1.5) == 1.5 and clamp_speed(-1.0, 0.7, 1.5) == 0.7
+    for bad in (math.nan, math.inf):
+        with pytest.raises(ValueError):
+            clamp_speed(bad, 0.7, 1.5)
+
+
+def test_schedule_and_push_parsing():
+    assert parse_schedule("0:0.8,10:1.2,20:1.0") == ((0.0, 0.8), (10.0, 1.2), (20.0, 1.0))
+    assert parse_pushes("4:-80:0.2,2:60:0.1") == (Push(2.0, 60.0, 0.1), Push(4.0, -80.0, 0.2))
+    for bad in ("0:0.8,x", "0:nan", "-1:1.0"):
+        with pytest.raises(ValueError):
+            parse_schedule(bad)
+    with pytest.raises(ValueError):
+        parse_pushes("1:50:0")
+    with pytest.raises(ValueError):
+        StackConfig(duration=5.0, schedule=((1.0, 0.8),))
+    with pytest.raises(ValueError):
+        StackConfig(duration=5.0, schedule=((0.0, 0.8), (0.0, 1.0)))
+
+
+def test_ros_arguments():
+    assert ros_arguments({"mode": "lockstep", "stop_time": 5.0, "start_paused": True, "gait_dir": ""}) == [
+        "--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0", "-p", "start_paused:=true",
+    ]
+
+
+@pytest.mark.parametrize("stance", [Leg.LEFT, Leg.RIGHT])
+@pytest.mark.parametrize("tau", [0.0, 0.3, 0.7])
+def test_infer_stance_on_the_gait(stance, tau):
+    gait = GaitLibrary.load().nearest(1.0)
+    q, _ = state_on_gait(gait.alpha, gait.speed, tau=tau, stance=stance)
+    assert infer_stance(q) is stance
+
+
+def test_queued_kd_and_alpha_take_effect_at_touchdown():
+    lib = GaitLibrary.load()
+    slow, fast = lib.nearest(0.8), lib.nearest(1.2)
+    controller = HZDController(slow.alpha, slow.kd)
+    controller.set_alpha(fast.alpha)
+    controller.queue_kd(fast.kd)
+    assert controller.kd == slow.kd and controller.alpha == slow.alpha
+    controller._switch_stance()
+    assert controller.kd == fast.kd and controller.alpha == fast.alpha
+    assert controller.pending_kd is None and controller.pending_alpha is None
+
+
+def test_alpha_outside_joint_waypoint_bounds_is_rejected():
+    gait = GaitLibrary.load().nearest(1.0)
+    controller = HZDController(gait.alpha, gait.kd)
+    with pytest.raises(ValueError, match="outside the bounds"):
+        controller.set_alpha([a + 2.0 for a in gait.alpha])
+    with pytest.raises(ValueError):
+        controller.queue_kd(1e6)
+    assert controller.pending_alpha is None and controller.pending_kd is None
+
+
+def test_policies():
+    library = GaitLibrary.load()
+    policy = make_policy("library", mode="interpolate")
+    assert isinstance(policy, LibraryPolicy)
+    from rabbit_policy.speed_window import Observation
+
+    command = policy.act(Observation(1.05, 0.9, 0.15))
+    expected = library.interpolate(1.05)
+    assert command.alpha == expected.alpha and command.kd == expected.kd
+    with pytest.raises(PolicyUnavailable):
+        make_policy("learned")
+    with pytest.raises(ValueError):
+        make_policy("library", mode="best")
