@@ -53,3 +53,34 @@ def spin_for(executor, seconds: float) -> None:
     while time.monotonic() < deadline:
         for ex in executors:
             ex.spin_once(timeout_sec=0.002 if len(executors) > 1 else 0.01)
+
+
+@contextmanager
+def spinning(executor) -> Iterator[None]:
+    """Spin ``executor`` in a background thread for the duration of the block (a node of
+    its own context then behaves like a separate process, timing-wise)."""
+    import threading
+
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.01)
+
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(timeout=2.0)
+
+
+def wait_until(condition: Callable[[], bool], timeout: float = 20.0) -> bool:
+    """Poll ``condition()`` (nodes spin elsewhere) until it holds or ``timeout`` passes."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
