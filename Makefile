@@ -1,5 +1,5 @@
 # rabbit-hzd: two commands for a fresh machine (see README).
-#   make demo   set up .venv if needed, then walk RABBIT (the main job)
+#   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks, changing speed
 #   make test   set up .venv if needed, then run the whole test suite
 PYTHON ?= python3
 VENV := .venv
@@ -21,13 +21,14 @@ $(STAMP): requirements.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xm
 	touch $@
 
 demo: $(STAMP)
-	$(PY) scripts/walk.py --controller hzd --speed 1.0 --duration 30
+	$(PY) scripts/run_stack.py --controller hzd --speed-schedule "0:0.8,10:1.1" --duration 20
 
 test: $(STAMP)
 	$(PY) -m pytest
 
 bench: $(STAMP)
 	$(PY) scripts/bench_sim.py
+	$(PY) scripts/bench_stack.py
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

@@ -11,6 +11,8 @@
   ``latency_p50_ms`` / ``latency_p99_ms`` (state published -> its torque received, as
   seen by sim_node), ``realtime_damped_ticks``.
 
+* ``realtime_in_process_*``: the realtime run with all nodes in this process.
+
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
 """
@@ -19,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -26,31 +29,35 @@ from pathlib import Path
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-def main(argv: list[str] | None = None) -> int:
-    ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
-    parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime run, s")
-    parser.add_argument("--speed", type=float, default=1.0)
-    args = parser.parse_args(argv)
+SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_process", "realtime_in_process")
 
+
+def run_scenario(name: str, duration: float, realtime_duration: float, speed: float) -> dict[str, object]:
+    """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.stack import StackConfig, run_in_process, run_multi_process
 
-    schedule = ((0.0, args.speed),)
-    out: dict[str, object] = {}
-    report, _ = run_in_process(StackConfig(duration=args.duration, schedule=schedule))
-    out["lockstep_rtf_in_process"] = round(report.rtf, 3)
-    report = run_multi_process(StackConfig(duration=args.duration, schedule=schedule), log=sys.stderr)
-    out["lockstep_rtf_multi_process"] = round(report.rtf, 3)
-    out["lockstep_fell"] = report.fell
-
+    schedule = ((0.0, speed),)
+    if name == "lockstep_in_process":
+        report, _ = run_in_process(StackConfig(duration=duration, schedule=schedule))
+        return {"lockstep_rtf_in_process": round(report.rtf, 3), "lockstep_in_process_fell": report.fell}
+    if name == "lockstep_multi_process":
+        report = run_multi_process(StackConfig(duration=duration, schedule=schedule), log=sys.stderr)
+        return {"lockstep_rtf_multi_process": round(report.rtf, 3), "lockstep_multi_process_fell": report.fell}
+    if name == "realtime_in_process":
+        report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
+        stats = nodes["sim_node"].statistics()
+        return {
+            "realtime_in_process_late_fraction": round(stats["late_fraction"], 5),
+            "realtime_in_process_latency_p50_ms": round(stats["latency_p50_ms"], 3),
+            "realtime_in_process_latency_p99_ms": round(stats["latency_p99_ms"], 3),
+            "realtime_in_process_fell": report.fell,
+        }
     with tempfile.TemporaryDirectory() as tmp:
         stats_path = Path(tmp) / "sim_stats.json"
-        config = StackConfig(duration=args.realtime_duration, schedule=schedule, mode="realtime",
-                             stats_file=str(stats_path))
+        config = StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime", stats_file=str(stats_path))
         report = run_multi_process(config, log=sys.stderr)
         stats = json.loads(stats_path.read_text())
-    out.update({
+    return {
         "realtime_rtf": round(report.rtf, 3),
         "realtime_rate_hz": round(stats["tick_rate_hz"], 1),
         "realtime_late_fraction": round(stats["late_fraction"], 5),
@@ -59,10 +66,32 @@ def main(argv: list[str] | None = None) -> int:
         "realtime_ticks": stats["ticks"],
         "realtime_damped_ticks": stats["damped_ticks"],
         "realtime_fell": report.fell,
-        "duration_s": args.duration,
-        "realtime_duration_s": args.realtime_duration,
-        "executor": "EventsExecutor",
-    })
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
+    parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime runs, s")
+    parser.add_argument("--speed", type=float, default=1.0)
+    parser.add_argument("--only", choices=SCENARIOS, help="run one scenario in this process")
+    args = parser.parse_args(argv)
+    if args.only:
+        print(json.dumps(run_scenario(args.only, args.duration, args.realtime_duration, args.speed)))
+        return 0
+    # every scenario in a fresh interpreter: a run must not inherit another's ROS state
+    out: dict[str, object] = {}
+    for name in SCENARIOS:
+        cmd = [sys.executable, __file__, "--only", name, "--duration", str(args.duration),
+               "--realtime-duration", str(args.realtime_duration), "--speed", str(args.speed)]
+        result = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+        if result.returncode != 0:
+            print(f"error: scenario {name} failed with status {result.returncode}", file=sys.stderr)
+            return 1
+        out.update(json.loads(result.stdout.strip().splitlines()[-1]))
+    out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration,
+                "executor": "EventsExecutor"})
     print(json.dumps(out))
     return 0
 

@@ -65,3 +65,18 @@ def test_installed_executable_runs_and_reports_bad_parameters(install_space):
     )
     assert result.returncode == 1
     assert "mode must be one of" in result.stdout + result.stderr
+
+
+def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
+    params = tmp_path / "policy.yaml"
+    params.write_text("policy_node:\n  ros__parameters:\n    policy: learned\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "--params-file", str(params)],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 1 and "no learned HZD-RL policy" in result.stdout
+    result = subprocess.run(
+        [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "-p", "min_speed:=2.0"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 1 and "min_speed (2.0) must be below max_speed" in result.stdout

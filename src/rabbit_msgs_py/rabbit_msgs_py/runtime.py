@@ -38,6 +38,18 @@ def make_executor(context, kind: str | None = None):
     raise ValueError(f"{EXECUTOR_VARIABLE} must be 'events' or 'single', got {kind!r}")
 
 
+DEFAULT_SPIN_TIMEOUT = 0.1
+
+
+def spin_timeout_of(node: object) -> float:
+    """How long one ``spin_once`` may wait for ``node`` (s): its ``spin_timeout`` attribute,
+    else 0.1 s. A node with a thread of its own that must run on time (the realtime
+    simulator's physics thread) asks for a short one: measured here, a realtime run with a
+    0.05 s wait had 80-99 % late ticks in one process, with 1 ms 0.5 %, with 0.5 ms
+    0.1 %; the waiting executor delays the other thread."""
+    return float(getattr(node, "spin_timeout", DEFAULT_SPIN_TIMEOUT))
+
+
 def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) -> int:
     """Initialise rclpy with ``args`` (``--ros-args ...`` included), build the node with
     ``factory(context=...)``, spin it until SIGINT (Ctrl-C) or SIGTERM, then clean up.
@@ -60,8 +72,9 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         node = factory(context=context)
         executor = make_executor(context)
         executor.add_node(node)
+        timeout = spin_timeout_of(node)
         while not stop and context.ok():
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=timeout)
     except NodeStartError as exc:
         print(f"error: {exc}", flush=True)
         status = 1

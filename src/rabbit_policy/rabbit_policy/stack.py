@@ -41,6 +41,7 @@ from std_msgs.msg import Bool, Float64, Header  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
 CONTROLLERS = {"hzd": "library", "rl": "learned"}
 NODE_MODULES = {
@@ -307,7 +308,8 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
     return args
 
 
-def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None) -> str | None:
+def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
+                     spin_timeout: float = 0.05) -> str | None:
     """Spin until the run is over; returns an error message or None."""
     from rclpy.executors import ExternalShutdownException
 
@@ -327,7 +329,7 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             return f"the nodes did not connect within {stall_timeout:.0f} s"
     while not supervisor.done:
         try:
-            executor.spin_once(timeout_sec=0.05)
+            executor.spin_once(timeout_sec=spin_timeout)
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
         problem = alive()
@@ -354,6 +356,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     context = rclpy.Context()
     rclpy.init(context=context)
     nodes: dict[str, object] = {}
+    executor = None
     try:
         params = config.node_parameters()
         nodes["policy_node"] = PolicyNode(context=context, **params["policy_node"])
@@ -365,12 +368,15 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         executor = make_executor(context, executor_kind)
         for node in nodes.values():
             executor.add_node(node)
-        error = _spin_until_done(executor, supervisor, stall_timeout)
+        spin_timeout = min(spin_timeout_of(node) for node in nodes.values())
+        error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout)
         for _ in range(20):  # deliver what is still in flight (last states, counters)
             executor.spin_once(timeout_sec=0.005)
         report = supervisor.report(error)
         return report, nodes
     finally:
+        if executor is not None:
+            executor.shutdown()  # an executor left alive keeps its wait thread busy
         for node in nodes.values():
             close = getattr(node, "close", None)
             if close:

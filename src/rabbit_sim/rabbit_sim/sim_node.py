@@ -169,6 +169,9 @@ class SimNode(Node):
 
         self._running = True
         self._physics_thread: threading.Thread | None = None
+        # realtime: executors spinning this node wait at most 0.5 ms so the physics thread
+        # gets the interpreter on time (see rabbit_msgs_py.runtime.spin_timeout_of)
+        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.0005
         if self.settings.mode == "lockstep":
             self.create_timer(0.05, self._lockstep_supervise)
         else:
