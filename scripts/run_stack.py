@@ -27,6 +27,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
@@ -86,10 +87,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
+    # Ctrl-C / SIGTERM end the run cleanly: the loop sees the flag, stops the nodes and
+    # prints what was measured so far
+    interrupted: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: interrupted.append(signum))
+    stop = lambda: bool(interrupted)  # noqa: E731
     if args.in_process:
-        report, _nodes = run_in_process(config)
+        report, _nodes = run_in_process(config, stop=stop)
     else:
-        report = run_multi_process(config, log=sys.stderr if args.json else None)
+        report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
     if args.json:
         print(json.dumps(report.summary()))
     else:

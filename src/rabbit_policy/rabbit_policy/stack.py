@@ -36,6 +36,7 @@ from geometry_msgs.msg import Wrench  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64, Header  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
@@ -309,8 +310,9 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
 
 
 def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
-                     spin_timeout: float = 0.05) -> str | None:
-    """Spin until the run is over; returns an error message or None."""
+                     spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
+    """Spin until the run is over; returns an error message or None. ``stop()`` true
+    (a signal arrived) ends the run as "interrupted"."""
     from rclpy.executors import ExternalShutdownException
 
     start = time.perf_counter()
@@ -320,7 +322,7 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             executor.spin_once(timeout_sec=0.02)
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
-        problem = alive()
+        problem = "interrupted" if stop() else alive()
         if problem:
             return problem
         if started is None and supervisor.connected():
@@ -332,7 +334,7 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             executor.spin_once(timeout_sec=spin_timeout)
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
-        problem = alive()
+        problem = "interrupted" if stop() else alive()
         if problem:
             return problem
         last = supervisor.last_state_wall or start
@@ -342,9 +344,10 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
 
 
 def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_kind: str | None = None,
-                   observers: Sequence[object] = ()) -> tuple[RunReport, dict[str, object]]:
+                   observers: Sequence[object] = (), stop=lambda: False) -> tuple[RunReport, dict[str, object]]:
     """Run the stack in this process on one executor; returns the report and the nodes
-    (for tests and benchmarks). ``observers``: extra node factories ``f(context)``."""
+    (for tests and benchmarks). ``observers``: extra node factories ``f(context)``;
+    ``stop()``: polled, true ends the run early (the caller's signal handling)."""
     import rclpy
 
     from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
@@ -354,7 +357,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     from .policy_node import PolicyNode
 
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     nodes: dict[str, object] = {}
     executor = None
     try:
@@ -369,7 +372,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         for node in nodes.values():
             executor.add_node(node)
         spin_timeout = min(spin_timeout_of(node) for node in nodes.values())
-        error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout)
+        error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout, stop=stop)
         for _ in range(20):  # deliver what is still in flight (last states, counters)
             executor.spin_once(timeout_sec=0.005)
         report = supervisor.report(error)
@@ -420,20 +423,22 @@ class NodeProcesses:
         return {name: proc.wait() for name, proc in self.procs.items()}
 
 
-def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr) -> RunReport:
-    """Start the nodes as processes, supervise the run here, stop them; returns the report."""
+def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr,
+                      stop=lambda: False) -> RunReport:
+    """Start the nodes as processes, supervise the run here, stop them; returns the report.
+    ``stop()``: polled, true ends the run early."""
     import rclpy
 
     from rabbit_msgs_py.runtime import make_executor
 
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     procs = NodeProcesses(config, log=log)
     supervisor = Supervisor(config, context=context)
     try:
         executor = make_executor(context)
         executor.add_node(supervisor)
-        error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead)
+        error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
         return supervisor.report(error)
     finally:
         procs.stop()
