@@ -50,6 +50,7 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
+from rabbit_hzd_controller.controller import ControllerConfig, validate_alpha  # noqa: E402
 from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import MessageError, alpha_from_msg, torques_from_msg  # noqa: E402
@@ -223,7 +224,7 @@ class SimNode(Node):
             if param.name != "push_duration":
                 return SetParametersResult(successful=False, reason=f"{param.name} is fixed at start-up")
             value = param.value
-            if not isinstance(value, (int, float)) or not value > 0.0:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0.0:
                 return SetParametersResult(successful=False, reason="push_duration must be a number > 0 (s)")
             self.settings = replace(self.settings, push_duration=float(value))
         return SetParametersResult(successful=True)
@@ -231,6 +232,7 @@ class SimNode(Node):
     def _on_alpha(self, msg: Float64MultiArray) -> None:
         try:
             alpha = alpha_from_msg(msg)
+            validate_alpha(alpha, ControllerConfig())  # the same checks the controller applies
             state_on_gait(alpha, self.settings.initial_speed)  # a gait the robot can be placed on
         except (MessageError, ValueError) as exc:
             self.get_logger().error(f"ignoring malformed {topics.ALPHA}: {exc}")
@@ -240,7 +242,8 @@ class SimNode(Node):
             if not self._started:
                 self._place_on_gait()
                 self.get_logger().info(
-                    f"robot placed on the gait at {self.settings.initial_speed:.2f} m/s; simulation running"
+                    f"robot placed on the gait at {self.settings.initial_speed:.2f} m/s; simulation "
+                    + ("paused" if self._paused else "running")
                 )
 
     def _on_torques(self, msg: Float64MultiArray) -> None:
