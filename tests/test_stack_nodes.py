@@ -226,3 +226,16 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
                 # torques flow again, damping is off and the robot walks on
                 assert wait_until(lambda: sim.torques_received > received + 500, 10.0), sim.statistics()
                 assert not sim.fallen and not sim._damping_active
+
+
+def test_pushes_reach_the_torso_with_their_own_duration():
+    from rabbit_policy.stack import Push
+
+    base = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
+    pushed = StackConfig(duration=2.0, schedule=((0.0, 1.0),), pushes=(Push(0.5, -60.0, 0.3),))
+    _, plain_nodes = run_in_process(base)
+    _, pushed_nodes = run_in_process(pushed)
+    assert pushed_nodes["sim_node"].settings.push_duration == 0.3  # set through the parameter service
+    x_plain = float(plain_nodes["sim_node"].sim.data.qpos[0])
+    x_pushed = float(pushed_nodes["sim_node"].sim.data.qpos[0])
+    assert x_pushed < x_plain - 0.02  # pushed backwards: less distance covered
