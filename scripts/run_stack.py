@@ -5,6 +5,7 @@
     scripts/run_stack.py --speed-schedule "0:0.8,10:1.2,20:1.0" --duration 30
     scripts/run_stack.py --speed 1.0 --duration 20 --push "5:60:0.1" --mode realtime
     scripts/run_stack.py --speed 1.0 --duration 10 --in-process --json
+    scripts/run_stack.py --speed 1.0 --duration 30 --record runs/walk1   # rosbag2 (MCAP) bag
 
 By default the three nodes start as separate processes (``python -m <package>.<node>
 --ros-args -p ...``, as ``ros2 run`` would) and this script supervises the run: it sends
@@ -48,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
                         help="classic policy: nearest gait or blend of the two around the speed")
     parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
+    parser.add_argument("--record", default="", metavar="DIR",
+                        help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
+    parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
     parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
@@ -79,7 +84,11 @@ def main(argv: list[str] | None = None) -> int:
         config = StackConfig(
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
             model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir, pushes=pushes,
+            record=os.path.abspath(args.record) if args.record else "",
+            record_compression=args.record_compression, record_overwrite=args.overwrite,
         )
+        if args.record and os.path.exists(args.record) and not args.overwrite:
+            raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
         make_policy("learned" if args.controller == "rl" else "library", args.gait_dir or None, args.library_mode)
     except ValueError as exc:
         parser.error(str(exc))

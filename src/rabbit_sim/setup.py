@@ -19,5 +19,8 @@ setup(
     maintainer_email="maintainers@rabbit-hzd.invalid",
     description="MuJoCo model of the RABBIT biped and its simulator node.",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["sim_node = rabbit_sim.sim_node:main"]},
+    entry_points={"console_scripts": [
+        "sim_node = rabbit_sim.sim_node:main",
+        "recorder_node = rabbit_sim.recorder_node:main",
+    ]},
 )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from typing import Callable, Sequence
 
 from .environment import ensure_localhost_discovery
@@ -75,6 +76,10 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         timeout = spin_timeout_of(node)
         while not stop and context.ok():
             executor.spin_once(timeout_sec=timeout)
+        # a node that must not lose what is queued (the recorder) spins on a little
+        drain_until = time.monotonic() + float(getattr(node, "drain_on_exit", 0.0))
+        while context.ok() and time.monotonic() < drain_until:
+            executor.spin_once(timeout_sec=0.01)
     except NodeStartError as exc:
         print(f"error: {exc}", flush=True)
         status = 1

@@ -49,6 +49,7 @@ NODE_MODULES = {
     "policy_node": "rabbit_policy.policy_node",
     "hzd_controller_node": "rabbit_hzd_controller.hzd_controller_node",
     "sim_node": "rabbit_sim.sim_node",
+    "recorder_node": "rabbit_sim.recorder_node",
 }
 
 
@@ -76,6 +77,9 @@ class StackConfig:
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
     stats_file: str = ""
+    record: str = ""
+    record_compression: str = "none"
+    record_overwrite: bool = False
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
@@ -89,8 +93,8 @@ class StackConfig:
             raise ValueError("speed schedule times must increase")
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
-        """The ROS parameters of each node for this run."""
-        return {
+        """The ROS parameters of each node for this run (the recorder only if recording)."""
+        params: dict[str, dict[str, object]] = {
             "policy_node": {
                 "policy": CONTROLLERS[self.controller],
                 "library_mode": self.library_mode,
@@ -108,6 +112,13 @@ class StackConfig:
                 "stats_file": self.stats_file,
             },
         }
+        if self.record:
+            params["recorder_node"] = {
+                "output": self.record,
+                "compression": self.record_compression,
+                "overwrite": self.record_overwrite,
+            }
+        return params
 
 
 def parse_schedule(text: str) -> tuple[tuple[float, float], ...]:
@@ -227,10 +238,14 @@ class Supervisor(Node):
             and self.count_publishers(topics.JOINT_TORQUES) > 0
             and self.count_publishers(topics.ALPHA) > 0
             and self.count_subscribers(topics.CMD_SPEED) > 0
+            # sim_node and, when recording, the recorder take the torques
+            and self.count_subscribers(topics.JOINT_TORQUES) >= (2 if self.config.record else 1)
         )
 
     def request_start(self):
-        """Ask the (paused) simulator to run; returns the service future."""
+        """Send the first commanded speed (so a recording holds the whole command history)
+        and ask the (paused) simulator to run; returns the service future."""
+        self._speed_pub.publish(Float64(data=self.segments[0].command))
         return self._pause_client.call_async(SetBool.Request(data=False))
 
     @property
@@ -365,6 +380,10 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         nodes["policy_node"] = PolicyNode(context=context, **params["policy_node"])
         nodes["hzd_controller_node"] = HZDControllerNode(context=context, **params["hzd_controller_node"])
         nodes["sim_node"] = SimNode(context=context, **params["sim_node"])
+        if "recorder_node" in params:
+            from rabbit_sim.recorder_node import RecorderNode
+
+            nodes["recorder_node"] = RecorderNode(context=context, **params["recorder_node"])
         supervisor = nodes["supervisor"] = Supervisor(config, context=context)
         for i, factory in enumerate(observers):
             nodes[f"observer_{i}"] = factory(context)
@@ -373,7 +392,8 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
             executor.add_node(node)
         spin_timeout = min(spin_timeout_of(node) for node in nodes.values())
         error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout, stop=stop)
-        for _ in range(20):  # deliver what is still in flight (last states, counters)
+        drain_until = time.monotonic() + 0.3  # deliver what is in flight (last states, recorder)
+        while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=0.005)
         report = supervisor.report(error)
         return report, nodes

@@ -1,0 +1,135 @@
+"""``recorder_node``: records the stack's topics to a rosbag2 bag (MCAP storage).
+
+Subscribes to every stack topic (``rabbit_msgs_py.catalog``) or the ``topics`` parameter's
+list, takes messages *serialized* (no deserialisation on the hot path) and writes them with
+:class:`rabbit_sim.bag.BagWriter`. Parameters:
+
+* ``output`` (required): bag directory to create; an existing one is never overwritten
+  unless ``overwrite`` is true.
+* ``topics`` (string list, empty = all stack topics).
+* ``compression``: ``none`` or ``zstd`` (MCAP chunk compression).
+* ``log_time``: ``receive`` (default; wall-clock time of reception, what ``ros2 bag
+  record`` writes) or ``sim`` (the newest ``/clock`` time received, so a lockstep bag has
+  the simulation's time axis).
+
+Subscriptions are reliable with a deep queue (1000; transient local where the publisher
+offers it) so nothing is dropped while the bag is being written. SIGINT/SIGTERM close the
+bag cleanly (``run_node`` lets the current callback finish, drains what is queued, then
+calls :meth:`RecorderNode.close`).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+ensure_localhost_discovery()
+
+from rclpy.node import Node  # noqa: E402
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.serialization import deserialize_message  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+
+from rabbit_msgs_py import topics as topic_names  # noqa: E402
+from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec  # noqa: E402
+from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+
+from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
+
+LOG_TIMES = ("receive", "sim")
+RECORD_DEPTH = 1000
+
+
+def _subscription_qos(spec: TopicSpec) -> QoSProfile:
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST,
+        depth=RECORD_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE,
+        durability=spec.qos.durability,
+    )
+
+
+class RecorderNode(Node):
+    """Bag recorder. ``counts`` holds messages written per topic."""
+
+    # run_node keeps spinning this long after a stop signal so queued messages are written
+    drain_on_exit = 0.5
+
+    def __init__(self, context=None, **overrides) -> None:
+        super().__init__("recorder_node", context=context)
+        defaults = {"output": "", "topics": [""], "compression": "none", "log_time": "receive", "overwrite": False}
+        for name, default in defaults.items():
+            self.declare_parameter(name, overrides.get(name, default))
+        value = lambda name: self.get_parameter(name).value  # noqa: E731
+        output = value("output")
+        names = [t for t in value("topics") if t] or list(STACK_TOPICS)
+        unknown = [t for t in names if t not in STACK_TOPICS]
+        try:
+            if not output:
+                raise ValueError("parameter 'output' (the bag directory) is required")
+            if unknown:
+                raise ValueError(f"unknown topics {unknown}; known: {sorted(STACK_TOPICS)}")
+            if value("log_time") not in LOG_TIMES:
+                raise ValueError(f"log_time must be one of {LOG_TIMES}")
+            if value("compression") not in COMPRESSIONS:
+                raise ValueError(f"compression must be one of {COMPRESSIONS}")
+            self.bag = BagWriter(output, value("compression"), bool(value("overwrite")))
+        except (ValueError, BagError) as exc:
+            raise NodeStartError(f"recorder_node: {exc}") from exc
+        self.sim_log_time = value("log_time") == "sim"
+        self._sim_now = 0
+        self.error: str | None = None
+        for name in names:
+            spec = STACK_TOPICS[name]
+            self.bag.add_topic(name, spec.type_name, QosSpec(
+                reliable=spec.qos.reliability == ReliabilityPolicy.RELIABLE,
+                transient_local=spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL,
+                depth=spec.qos.depth,
+            ))
+            self.create_subscription(
+                spec.msg_class, name, self._writer_for(name), _subscription_qos(spec), raw=True
+            )
+        self.get_logger().info(f"recording {len(names)} topics to {self.bag.path}")
+
+    @property
+    def counts(self) -> dict[str, int]:
+        return self.bag.counts
+
+    def _writer_for(self, topic: str):
+        is_clock = topic == topic_names.CLOCK
+
+        def write(data: bytes) -> None:
+            if self.error is not None:
+                return
+            if is_clock and self.sim_log_time:
+                clock = deserialize_message(data, Clock).clock
+                self._sim_now = clock.sec * 1_000_000_000 + clock.nanosec
+            stamp = self._sim_now if self.sim_log_time else time.time_ns()
+            try:
+                self.bag.write(topic, stamp, data)
+            except BagError as exc:
+                self.error = str(exc)
+                self.get_logger().error(f"recording stopped: {exc}")
+
+        return write
+
+    def close(self) -> None:
+        """Finish the bag (MCAP summary, metadata.yaml)."""
+        try:
+            self.bag.close()
+        except BagError as exc:
+            self.get_logger().error(str(exc))
+            return
+        total = sum(self.bag.counts.values())
+        self.get_logger().info(f"bag {self.bag.path} closed: {total} messages")
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script / ``ros2 run rabbit_sim recorder_node``."""
+    return run_node(RecorderNode, args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
