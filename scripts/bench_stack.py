@@ -12,6 +12,10 @@
   seen by sim_node), ``realtime_damped_ticks``.
 
 * ``realtime_in_process_*``: the realtime run with all nodes in this process.
+* ``recorder_*``: the realtime multi-process run with ``--record``: the recorder process's
+  CPU share (CPU s / wall s over its life), messages written per wall second (its life
+  includes start-up and shutdown, so this understates the rate during the walk), and
+  /joint_states recorded vs published.
 
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
@@ -29,7 +33,8 @@ from pathlib import Path
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_process", "realtime_in_process")
+SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_process", "realtime_in_process",
+             "realtime_recording")
 
 
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float) -> dict[str, object]:
@@ -51,6 +56,22 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             "realtime_in_process_latency_p50_ms": round(stats["latency_p50_ms"], 3),
             "realtime_in_process_latency_p99_ms": round(stats["latency_p99_ms"], 3),
             "realtime_in_process_fell": report.fell,
+        }
+    if name == "realtime_recording":
+        with tempfile.TemporaryDirectory() as tmp:
+            sim_stats, rec_stats = Path(tmp) / "sim.json", Path(tmp) / "rec.json"
+            config = StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime",
+                                 stats_file=str(sim_stats), record=str(Path(tmp) / "bag"),
+                                 record_stats_file=str(rec_stats))
+            report = run_multi_process(config, log=sys.stderr)
+            sim, rec = json.loads(sim_stats.read_text()), json.loads(rec_stats.read_text())
+        return {
+            "recorder_cpu_share": round(rec["cpu_share"], 3),
+            "recorder_msgs_per_s": round(rec["messages"] / rec["wall_s"], 1),
+            "recorder_joint_states_recorded": rec["counts"]["/joint_states"],
+            "recorder_joint_states_published": sim["states_published"],
+            "recorder_realtime_late_fraction": round(sim["late_fraction"], 5),
+            "recorder_run_fell": report.fell,
         }
     with tempfile.TemporaryDirectory() as tmp:
         stats_path = Path(tmp) / "sim_stats.json"

@@ -27,7 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module", params=["none", "zstd"])
 def recorded(request, tmp_path_factory):
     bag = tmp_path_factory.mktemp("bags") / f"run_{request.param}"
-    config = StackConfig(duration=3.0, schedule=((0.0, 0.9), (1.5, 1.1)), record=str(bag),
+    duration = 30.0 if request.param == "none" else 3.0  # the 30 s lockstep run, once
+    config = StackConfig(duration=duration, schedule=((0.0, 0.9), (duration / 2, 1.1)), record=str(bag),
                          record_compression=request.param)
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell

@@ -80,6 +80,7 @@ class StackConfig:
     record: str = ""
     record_compression: str = "none"
     record_overwrite: bool = False
+    record_stats_file: str = ""
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
@@ -117,6 +118,7 @@ class StackConfig:
                 "output": self.record,
                 "compression": self.record_compression,
                 "overwrite": self.record_overwrite,
+                "stats_file": self.record_stats_file,
             }
         return params
 

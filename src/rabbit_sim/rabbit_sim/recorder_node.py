@@ -8,6 +8,7 @@ list, takes messages *serialized* (no deserialisation on the hot path) and write
   unless ``overwrite`` is true.
 * ``topics`` (string list, empty = all stack topics).
 * ``compression``: ``none`` or ``zstd`` (MCAP chunk compression).
+* ``stats_file``: write message counts, CPU time and rate as JSON here on close ('' = no).
 * ``log_time``: ``receive`` (default; wall-clock time of reception, what ``ros2 bag
   record`` writes) or ``sim`` (the newest ``/clock`` time received, so a lockstep bag has
   the simulation's time axis).
@@ -20,8 +21,10 @@ calls :meth:`RecorderNode.close`).
 
 from __future__ import annotations
 
+import json
 import sys
 import time
+from pathlib import Path
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -59,7 +62,8 @@ class RecorderNode(Node):
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("recorder_node", context=context)
-        defaults = {"output": "", "topics": [""], "compression": "none", "log_time": "receive", "overwrite": False}
+        defaults = {"output": "", "topics": [""], "compression": "none", "log_time": "receive", "overwrite": False,
+                    "stats_file": ""}
         for name, default in defaults.items():
             self.declare_parameter(name, overrides.get(name, default))
         value = lambda name: self.get_parameter(name).value  # noqa: E731
@@ -79,6 +83,9 @@ class RecorderNode(Node):
         except (ValueError, BagError) as exc:
             raise NodeStartError(f"recorder_node: {exc}") from exc
         self.sim_log_time = value("log_time") == "sim"
+        self.stats_file = value("stats_file")
+        self._start_wall = time.perf_counter()
+        self._start_cpu = time.process_time()
         self._sim_now = 0
         self.error: str | None = None
         for name in names:
@@ -124,6 +131,12 @@ class RecorderNode(Node):
             return
         total = sum(self.bag.counts.values())
         self.get_logger().info(f"bag {self.bag.path} closed: {total} messages")
+        if self.stats_file:
+            wall = time.perf_counter() - self._start_wall
+            cpu = time.process_time() - self._start_cpu
+            stats = {"messages": total, "counts": self.bag.counts, "wall_s": wall, "cpu_s": cpu,
+                     "cpu_share": cpu / wall if wall > 0 else None, "error": self.error}
+            Path(self.stats_file).write_text(json.dumps(stats) + "\n")
 
 
 def main(args: list[str] | None = None) -> int:
