@@ -14,11 +14,12 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("rabbit_msgs_py", "rabbit_sim", "rabbit_hzd_controller", "rabbit_policy")
-NODES = {
-    "rabbit_sim": "sim_node",
-    "rabbit_hzd_controller": "hzd_controller_node",
-    "rabbit_policy": "policy_node",
-}
+NODES = (
+    ("rabbit_sim", "sim_node"),
+    ("rabbit_sim", "recorder_node"),
+    ("rabbit_hzd_controller", "hzd_controller_node"),
+    ("rabbit_policy", "policy_node"),
+)
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +48,7 @@ def test_ament_index_lists_the_packages_and_nodes(install_space):
         found = get_packages_with_prefixes()
         for package in PACKAGES:
             assert Path(found[package]) == install_space / package
-        for package, node in NODES.items():
+        for package, node in NODES:
             executable = Path(get_package_prefix(package)) / "lib" / package / node  # ros2 run's lookup
             assert executable.is_file() and os.access(executable, os.X_OK)
     finally:
