@@ -1,0 +1,158 @@
+"""``RabbitHZD-v0``: the paper's HZD-RL learning problem as a Gymnasium environment.
+
+One environment step is one walking step. No ROS inside: the same MuJoCo model
+(:mod:`rabbit_sim`) and the same HZD controller core (:class:`HZDController`) the nodes run,
+with the same decision timing as the node stack: the action chosen at a touchdown is
+queued and takes effect at the next touchdown.
+
+* Observation (m/s): the paper's three inputs — desired speed v_d, the mean hip speed over
+  the last ``window`` ticks (200, about one step) and the mean of (v_d - hip speed) over
+  the same ticks, taken at the touchdown (:class:`~.speed_window.SpeedWindow`).
+* Action: the 20 free Bezier coefficients (rad, the core's order, see
+  ``rabbit_hzd_controller.alpha``) and Kd (N m s/rad), inside :class:`ActionBounds`.
+  The coefficients are joint waypoints, so the bounds come from the classic gaits'
+  range widened by ``margin`` and clipped to the controller's joint-waypoint bounds.
+  An action the controller rejects (e.g. an implied step shorter than 5 cm) leaves the
+  previous gait in force, as the controller node does; ``info["rejected"]`` says so.
+* Reward per step: ``-(mean hip speed - v_d)^2`` (the paper), plus ``fall_penalty`` once
+  when the episode ends by a fall: with only negative rewards an early end would
+  otherwise pay. Terminated when |torso pitch| >= 0.5 rad or the hip height leaves
+  (0.6, 0.8] m, or when no touchdown comes within ``max_step_time`` (stalled).
+  Truncated after ``max_steps`` steps.
+* v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
+  uniformly from the middle half of the episode.
+* Reset: the robot starts at phase 0 of the classic gait nearest v_d, on it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+
+from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_sim.model import load_model
+from rabbit_sim.simulation import ClosedLoop
+
+from .gait_library import GaitLibrary
+from .speed_window import SpeedWindow
+
+
+@dataclass(frozen=True)
+class ActionBounds:
+    """Lower/upper bounds of the 21-dimensional action (20 coefficients in rad, Kd)."""
+
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def from_library(cls, library: GaitLibrary, margin: float = 0.15,
+                     kd_range: tuple[float, float] = (20.0, 150.0),
+                     config: ControllerConfig | None = None) -> "ActionBounds":
+        config = config or ControllerConfig()
+        free = np.array([g.free for g in library.gaits])
+        low, high = free.min(axis=0) - margin, free.max(axis=0) + margin
+        for i in range(N_FREE):  # output j = i % 4: hips even, knees odd
+            lo, hi = config.knee_coefficient_range if (i % 4) % 2 else config.hip_coefficient_range
+            low[i], high[i] = max(low[i], lo), min(high[i], hi)
+        return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
+
+
+class RabbitHZDEnv(gym.Env):
+    """See the module docstring."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, model: str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
+                 max_steps: int = 60, window: int = 200, fall_penalty: float = -10.0,
+                 max_step_time: float = 1.5, margin: float = 0.15) -> None:
+        self.library = GaitLibrary.load()
+        self.bounds = ActionBounds.from_library(self.library, margin)
+        self.action_space = gym.spaces.Box(self.bounds.low.astype(np.float32), self.bounds.high.astype(np.float32),
+                                           dtype=np.float32)
+        self.observation_space = gym.spaces.Box(
+            low=np.array([speed_range[0], -3.0, -3.0], dtype=np.float32),
+            high=np.array([speed_range[1], 3.0, 3.0], dtype=np.float32), dtype=np.float32,
+        )
+        self.speed_range = speed_range
+        self.max_steps = max_steps
+        self.window_size = window
+        self.fall_penalty = fall_penalty
+        self.max_ticks = int(round(max_step_time / 0.001))
+        self._model = load_model(model)
+        self._loop: ClosedLoop | None = None
+        self._controller: HZDController | None = None
+
+    # ------------------------------------------------------------------ helpers
+    def _observation(self) -> np.ndarray:
+        obs = self._window.observation(self.desired_speed)
+        clipped = np.clip(obs.as_tuple(), self.observation_space.low, self.observation_space.high)
+        return clipped.astype(np.float32)
+
+    def _run_to_touchdown(self) -> tuple[bool, bool]:
+        """Simulate until the next touchdown; returns (fell, stalled)."""
+        loop, controller, window = self._loop, self._controller, self._window
+        data = loop.data
+        for _ in range(self.max_ticks):
+            loop.step()
+            self._tick += 1
+            window.add(self._tick, float(data.qvel[0]), self.desired_speed)
+            if loop.limits.fallen(data.qpos[1], data.qpos[2]):
+                return True, False
+            if controller.touchdown:
+                return False, False
+        return False, True
+
+    # ---------------------------------------------------------------- gym API
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        lo, hi = self.speed_range
+        self.desired_speed = float(self.np_random.uniform(lo, hi))
+        self._switch_step = int(self.np_random.integers(self.max_steps // 4, 3 * self.max_steps // 4 + 1))
+        gait = self.library.nearest(self.desired_speed)
+        self._controller = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp), Leg.LEFT)
+        self._loop = ClosedLoop(self._model, self._controller)
+        self._loop.reset(*state_on_gait(gait.alpha, gait.speed, self._controller.config.geometry))
+        self._window = SpeedWindow(self.window_size)
+        self._tick = 0
+        self._steps = 0
+        fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
+        if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
+            raise RuntimeError("the starting gait did not reach its first touchdown")
+        return self._observation(), {"desired_speed": self.desired_speed}
+
+    def step(self, action):
+        if self._loop is None:
+            raise RuntimeError("call reset() before step()")
+        action = np.clip(np.asarray(action, dtype=float), self.bounds.low, self.bounds.high)
+        rejected = False
+        try:
+            alpha = expand_alpha(action[:N_FREE])
+            self._controller.set_alpha(alpha)
+            self._controller.queue_kd(float(action[N_FREE]))
+        except ValueError:
+            rejected = True
+        fell, stalled = self._run_to_touchdown()
+        self._steps += 1
+        obs = self._observation()
+        mean_speed = float(obs[1])
+        reward = -((mean_speed - self.desired_speed) ** 2)
+        terminated = fell or stalled
+        if terminated:
+            reward += self.fall_penalty
+        truncated = not terminated and self._steps >= self.max_steps
+        info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
+                "stalled": stalled, "rejected": rejected, "time": self._loop.time}
+        if self._steps == self._switch_step:  # the mid-episode change of command
+            lo, hi = self.speed_range
+            self.desired_speed = float(self.np_random.uniform(lo, hi))
+        return obs, float(reward), terminated, truncated, info
+
+
+def register() -> None:
+    """Register ``RabbitHZD-v0`` with Gymnasium (done on ``import rabbit_policy``)."""
+    if "RabbitHZD-v0" not in gym.registry:
+        gym.register(id="RabbitHZD-v0", entry_point="rabbit_policy.env:RabbitHZDEnv")

@@ -1,0 +1,66 @@
+"""The RabbitHZD-v0 Gymnasium environment: API conformance, and the classic gait as an
+action walks with a small tracking error."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import rabbit_policy  # noqa: F401  (registers RabbitHZD-v0)
+from rabbit_policy.env import RabbitHZDEnv
+from rabbit_policy.gait_library import GaitLibrary
+
+
+@pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # physical units by design
+def test_env_passes_the_gymnasium_checker():
+    env = gym.make("RabbitHZD-v0")
+    check_env(env.unwrapped, skip_render_check=True)
+    assert env.observation_space.shape == (3,) and env.action_space.shape == (21,)
+
+
+def test_classic_gaits_lie_inside_the_action_bounds():
+    env = RabbitHZDEnv()
+    for gait in GaitLibrary.load().gaits:
+        action = np.append(gait.free, gait.kd)
+        assert np.all(action >= env.bounds.low) and np.all(action <= env.bounds.high)
+
+
+def test_library_gait_as_action_walks_and_tracks():
+    env = RabbitHZDEnv(max_steps=30)
+    obs, info = env.reset(seed=3)
+    library = GaitLibrary.load()
+    rewards, last = [], None
+    for _ in range(30):
+        gait = library.nearest(info["desired_speed"])
+        obs, reward, terminated, truncated, info = env.step(np.append(gait.free, gait.kd).astype(np.float32))
+        rewards.append(reward)
+        assert not info["rejected"]
+        if terminated or truncated:
+            last = (terminated, truncated)
+            break
+    assert last == (False, True)  # walked the whole episode
+    assert np.mean(rewards[-5:]) > -0.02  # within ~0.14 m/s of the command on average
+
+
+def test_a_bad_action_is_rejected_and_the_episode_goes_on():
+    # inside the bounds every waypoint set is a valid gait (the bounds keep stance and swing
+    # hips apart at the switch); a non-finite action is what the controller must refuse
+    env = RabbitHZDEnv(max_steps=5)
+    env.reset(seed=0)
+    action = np.full(21, np.nan, dtype=np.float32)
+    _obs, _r, terminated, _t, info = env.step(action)
+    assert info["rejected"] and not terminated
+
+
+def test_determinism_for_a_seed():
+    def rollout():
+        env = RabbitHZDEnv(max_steps=5)
+        env.reset(seed=7)
+        out = []
+        for _ in range(5):
+            out.append(env.step(np.full(21, 0.5, np.float32) * (env.bounds.low + env.bounds.high))[:2])
+        return out
+    a, b = rollout(), rollout()
+    assert all(np.array_equal(x[0], y[0]) and x[1] == y[1] for x, y in zip(a, b))
