@@ -104,3 +104,28 @@ def test_policies():
         make_policy("learned")
     with pytest.raises(ValueError):
         make_policy("library", mode="best")
+
+
+def test_learned_policy_checkpoint_round_trip(tmp_path):
+    import torch
+
+    from rabbit_hzd_controller.controller import ControllerConfig, validate_alpha
+    from rabbit_policy.env import RabbitHZDEnv
+    from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
+    from rabbit_policy.speed_window import Observation
+
+    bounds = RabbitHZDEnv().bounds
+    torch.manual_seed(0)
+    net = HZDPolicyNet(bounds.low, bounds.high)
+    assert parameter_count(net) == 633  # 620 in the paper's count + Kd as the 21st output
+    path = tmp_path / "policy.pt"
+    PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, {"algo": "untrained"}).save(path)
+    policy = make_policy("learned", policy_file=path)
+    command = policy.act(Observation(1.2, 1.1, 0.1))
+    validate_alpha(command.alpha, ControllerConfig())  # a gait the controller accepts
+    assert bounds.low[-1] <= command.kd <= bounds.high[-1]
+    (tmp_path / "broken.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(PolicyUnavailable, match="cannot load"):
+        make_policy("learned", policy_file=tmp_path / "broken.pt")
+    with pytest.raises(PolicyUnavailable, match="does not exist"):
+        make_policy("learned", policy_file=tmp_path / "missing.pt")

@@ -4,12 +4,15 @@ scripts pick one with :func:`make_policy`.
 
 * ``library``: the classic HZD gait library (``rabbit_policy/gaits``), the gait nearest
   to the commanded speed or a linear blend of the two around it. Uses only v_d.
-* ``learned``: the HZD-RL network (arrives with the learning issue).
+* ``learned``: the HZD-RL network (:mod:`.network`) from a checkpoint file (default: the
+  packaged ``rabbit_policy/trained/hzd_rl_policy.pt``, shipped once trained).
 """
 
 from __future__ import annotations
 
+import pickle
 from dataclasses import dataclass
+from importlib.resources import files
 from pathlib import Path
 from typing import Protocol
 
@@ -58,7 +61,32 @@ class LibraryPolicy:
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
 
 
-def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode: str = "nearest") -> Policy:
+def packaged_policy_file() -> Path:
+    """Where the shipped learned policy lives (it may not exist yet)."""
+    return Path(str(files("rabbit_policy") / "trained" / "hzd_rl_policy.pt"))
+
+
+class LearnedPolicy:
+    """The HZD-RL network: observation -> 20 free coefficients + Kd -> (alpha, Kd)."""
+
+    def __init__(self, path: str | Path) -> None:
+        from .network import PolicyCheckpoint  # torch is imported only when needed
+
+        self.checkpoint = PolicyCheckpoint.load(path)
+        self.net = self.checkpoint.network()
+        self.name = f"learned/{Path(path).name}"
+
+    def act(self, observation: Observation) -> GaitCommand:
+        from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
+
+        from .network import act
+
+        action = act(self.net, observation)
+        return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
+
+
+def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode: str = "nearest",
+                policy_file: str | Path | None = None) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on."""
     if kind == "library":
@@ -68,5 +96,14 @@ def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode:
             raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
         return LibraryPolicy(library, mode)
     if kind == "learned":
-        raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=library")
+        path = Path(policy_file) if policy_file else packaged_policy_file()
+        if not path.is_file():
+            if policy_file:
+                raise PolicyUnavailable(f"policy file {path} does not exist")
+            raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=library "
+                                    "or give policy_file")
+        try:
+            return LearnedPolicy(path)
+        except (OSError, RuntimeError, KeyError, ValueError, EOFError, pickle.UnpicklingError) as exc:
+            raise PolicyUnavailable(f"cannot load policy file {path}: {exc}") from exc
     raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")

@@ -11,6 +11,7 @@ next touchdown (the controller queues it). Parameters:
 * ``policy``: ``library`` (classic HZD gait library) or ``learned`` (HZD-RL network).
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
+* ``policy_file``: learned policy checkpoint ('' = the packaged one).
 * ``initial_speed``: v_d before the first ``/cmd_speed`` (m/s).
 * ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
 * ``window``: averaging window (ticks).
@@ -55,6 +56,7 @@ class PolicyNode(Node):
             "policy": "library",
             "library_mode": "nearest",
             "gait_dir": "",
+            "policy_file": "",
             "initial_speed": 1.0,
             "min_speed": 0.7,
             "max_speed": 1.5,
@@ -68,7 +70,8 @@ class PolicyNode(Node):
         try:
             if not self.min_speed < self.max_speed:
                 raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
-            self.policy = make_policy(value("policy"), value("gait_dir") or None, value("library_mode"))
+            self.policy = make_policy(value("policy"), value("gait_dir") or None, value("library_mode"),
+                                      value("policy_file") or None)
             self.window = SpeedWindow(int(value("window")))
             self.desired_speed = clamp_speed(float(value("initial_speed")), self.min_speed, self.max_speed)
         except (PolicyUnavailable, ValueError, TypeError) as exc:

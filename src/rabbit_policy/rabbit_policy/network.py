@@ -1,0 +1,85 @@
+"""The HZD-RL policy network (paper, Fig. 3): 3 inputs -> three hidden layers of 12 ->
+21 outputs (20 free Bezier coefficients + Kd), sigmoid output scaled to the action bounds.
+
+Parameter count: 3*12+12 + 2*(12*12+12) + 12*21+21 = 633. The paper states 620, which is
+the same network with 20 outputs (Kd not an output); its text makes Kd an output, which
+we follow.
+
+Inputs are normalised inside the network from physical units (m/s): the desired speed
+is centred on the middle of [0.7, 1.5] m/s, and all three are divided by ``input_scale``,
+so a checkpoint carries everything needed to run it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from .speed_window import Observation
+
+HIDDEN = 12
+N_INPUTS = 3
+N_OUTPUTS = 21
+
+
+class HZDPolicyNet(nn.Module):
+    """obs (..., 3) in m/s -> action (..., 21) inside [low, high]."""
+
+    def __init__(self, low: np.ndarray, high: np.ndarray, speed_centre: float = 1.1,
+                 input_scale: float = 0.4) -> None:
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Linear(N_INPUTS, HIDDEN), nn.Tanh(),
+            nn.Linear(HIDDEN, HIDDEN), nn.Tanh(),
+            nn.Linear(HIDDEN, HIDDEN), nn.Tanh(),
+            nn.Linear(HIDDEN, N_OUTPUTS),
+        )
+        self.register_buffer("low", torch.as_tensor(low, dtype=torch.float64).float())
+        self.register_buffer("high", torch.as_tensor(high, dtype=torch.float64).float())
+        self.register_buffer("offset", torch.tensor([speed_centre, speed_centre, 0.0]))
+        self.register_buffer("scale", torch.full((N_INPUTS,), float(input_scale)))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        x = (obs - self.offset) / self.scale
+        return self.low + (self.high - self.low) * torch.sigmoid(self.body(x))
+
+
+def parameter_count(net: nn.Module) -> int:
+    """Trainable parameters."""
+    return sum(p.numel() for p in net.parameters() if p.requires_grad)
+
+
+@dataclass(frozen=True)
+class PolicyCheckpoint:
+    """What a trained policy file holds."""
+
+    state_dict: dict
+    low: np.ndarray
+    high: np.ndarray
+    info: dict
+
+    def network(self) -> HZDPolicyNet:
+        net = HZDPolicyNet(self.low, self.high)
+        net.load_state_dict(self.state_dict)
+        net.eval()
+        return net
+
+    def save(self, path: str | Path) -> None:
+        torch.save({"state_dict": self.state_dict, "low": self.low.tolist(), "high": self.high.tolist(),
+                    "info": self.info}, Path(path))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "PolicyCheckpoint":
+        data = torch.load(Path(path), map_location="cpu", weights_only=True)
+        return cls(data["state_dict"], np.array(data["low"]), np.array(data["high"]), data.get("info", {}))
+
+
+def act(net: HZDPolicyNet, observation: Observation) -> np.ndarray:
+    """One deterministic action (21 floats) for an observation."""
+    with torch.no_grad():
+        out = net(torch.tensor(observation.as_tuple(), dtype=torch.float32))
+    return out.numpy().astype(float)
