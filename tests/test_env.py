@@ -64,3 +64,21 @@ def test_determinism_for_a_seed():
         return out
     a, b = rollout(), rollout()
     assert all(np.array_equal(x[0], y[0]) and x[1] == y[1] for x, y in zip(a, b))
+
+
+def test_warm_started_network_reproduces_the_library_and_walks():
+    from rabbit_policy.network import HZDPolicyNet, act
+    from rabbit_policy.speed_window import Observation
+    from rabbit_policy.warm_start import library_targets, warm_start
+
+    env = RabbitHZDEnv(max_steps=20)
+    net = HZDPolicyNet(env.bounds.low, env.bounds.high)
+    warm_start(net, env.library, seed=0, iterations=1500)
+    for v in (0.75, 1.1, 1.45):
+        error = np.abs(act(net, Observation(v, v, 0.0)) - library_targets(env.library, np.array([v]))[0])
+        assert error[:20].max() < 0.05  # rad
+    obs, _info = env.reset(seed=2)
+    for _ in range(20):
+        obs, _r, terminated, truncated, info = env.step(act(net, Observation(*obs.astype(float))).astype(np.float32))
+        assert not terminated and not info["rejected"]
+    assert truncated
