@@ -82,3 +82,25 @@ def test_warm_started_network_reproduces_the_library_and_walks():
         obs, _r, terminated, truncated, info = env.step(act(net, Observation(*obs.astype(float))).astype(np.float32))
         assert not terminated and not info["rejected"]
     assert truncated
+
+
+def test_es_generation_is_deterministic_for_a_seed_and_worker_count():
+    from rabbit_policy.es import ESConfig, EvolutionStrategy, centred_ranks
+    from rabbit_policy.network import HZDPolicyNet
+
+    assert np.allclose(centred_ranks(np.array([3.0, -1.0, 2.0])), [0.5, -0.5, 0.0])
+    bounds = RabbitHZDEnv().bounds
+    thetas = []
+    for _ in range(2):
+        import torch
+
+        torch.manual_seed(0)
+        es = EvolutionStrategy(HZDPolicyNet(bounds.low, bounds.high),
+                               ESConfig(pairs=2, episodes=1, max_steps=3, workers=2, seed=5))
+        try:
+            stats = es.step()
+        finally:
+            es.close()
+        thetas.append(es.theta)
+        assert stats["env_steps"] > 0
+    assert np.array_equal(thetas[0], thetas[1])

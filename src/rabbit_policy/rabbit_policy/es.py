@@ -1,0 +1,156 @@
+"""Evolution Strategies for the HZD-RL policy (the paper's ES; modern practice after
+OpenAI-ES and ARS), readable top to bottom.
+
+Per generation, from the current parameters theta (flat vector of the network's 633):
+1. draw ``pairs`` Gaussian directions eps_i and evaluate theta + sigma eps_i and
+   theta - sigma eps_i (antithetic sampling) on the *same* episodes (common random
+   numbers: every member sees the same v_d draws, ``episodes`` per evaluation);
+2. replace the returns by centred ranks in [-0.5, 0.5] (rank normalisation: robust to
+   the fall penalty's scale);
+3. gradient estimate g = sum_i (rank+_i - rank-_i) eps_i / (2 pairs sigma), plus weight
+   decay; Adam step on theta.
+Evaluations run in a process pool (``workers``); results come back in order, so a run is
+deterministic for a given seed and worker count.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+
+import numpy as np
+import torch
+
+from .env import RabbitHZDEnv
+from .network import HZDPolicyNet
+
+
+@dataclass(frozen=True)
+class ESConfig:
+    """ES hyper-parameters. sigma: perturbation std in parameter units; lr: Adam step."""
+
+    pairs: int = 16
+    sigma: float = 0.02
+    lr: float = 0.01
+    weight_decay: float = 0.005
+    episodes: int = 2
+    max_steps: int = 40
+    seed: int = 0
+    workers: int = 1
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+def get_flat(net: torch.nn.Module) -> np.ndarray:
+    return torch.nn.utils.parameters_to_vector(net.parameters()).detach().double().numpy()
+
+
+def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
+    torch.nn.utils.vector_to_parameters(torch.as_tensor(theta, dtype=torch.float32), net.parameters())
+
+
+# ---------------------------------------------------------------- rollouts (per worker)
+_WORKER: dict = {}
+
+
+def _init_worker(max_steps: int) -> None:
+    torch.set_num_threads(1)
+    env = RabbitHZDEnv(max_steps=max_steps)
+    _WORKER["env"] = env
+    _WORKER["net"] = HZDPolicyNet(env.bounds.low, env.bounds.high)
+
+
+def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, seed: int) -> tuple[float, int]:
+    """Deterministic policy rollout; returns (undiscounted return, steps)."""
+    obs, _info = env.reset(seed=seed)
+    total, steps = 0.0, 0
+    with torch.no_grad():
+        while True:
+            action = net(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+            obs, reward, terminated, truncated, _info = env.step(action)
+            total += reward
+            steps += 1
+            if terminated or truncated:
+                return total, steps
+
+
+def _evaluate(args: tuple[np.ndarray, tuple[int, ...]]) -> tuple[float, int]:
+    theta, seeds = args
+    env, net = _WORKER["env"], _WORKER["net"]
+    set_flat(net, theta)
+    results = [episode_return(env, net, s) for s in seeds]
+    return float(np.mean([r for r, _ in results])), int(sum(n for _, n in results))
+
+
+def centred_ranks(values: np.ndarray) -> np.ndarray:
+    """Ranks mapped to [-0.5, 0.5] (ties broken by order, as in OpenAI-ES)."""
+    ranks = np.empty(len(values))
+    ranks[np.argsort(values, kind="stable")] = np.arange(len(values))
+    return ranks / (len(values) - 1) - 0.5
+
+
+@dataclass
+class Adam:
+    """Adam on a flat vector (ascent)."""
+
+    lr: float
+    beta1: float = 0.9
+    beta2: float = 0.999
+    eps: float = 1e-8
+    t: int = 0
+    m: np.ndarray | None = None
+    v: np.ndarray | None = None
+
+    def step(self, theta: np.ndarray, grad: np.ndarray) -> np.ndarray:
+        if self.m is None:
+            self.m, self.v = np.zeros_like(theta), np.zeros_like(theta)
+        self.t += 1
+        self.m = self.beta1 * self.m + (1 - self.beta1) * grad
+        self.v = self.beta2 * self.v + (1 - self.beta2) * grad * grad
+        m_hat = self.m / (1 - self.beta1 ** self.t)
+        v_hat = self.v / (1 - self.beta2 ** self.t)
+        return theta + self.lr * m_hat / (np.sqrt(v_hat) + self.eps)
+
+
+class EvolutionStrategy:
+    """Stateful ES optimiser over a policy network's parameters."""
+
+    def __init__(self, net: HZDPolicyNet, config: ESConfig) -> None:
+        self.net = net
+        self.config = config
+        self.theta = get_flat(net)
+        self.rng = np.random.default_rng(config.seed)
+        self.adam = Adam(config.lr)
+        self.generation = 0
+        self.env_steps = 0
+        ctx = get_context("fork")
+        self.pool = ctx.Pool(config.workers, initializer=_init_worker, initargs=(config.max_steps,))
+
+    def close(self) -> None:
+        self.pool.close()
+        self.pool.join()
+
+    def step(self) -> dict[str, float]:
+        """One generation; returns statistics: mean/best population return, the return of
+        the parameters the generation started from (same episodes), env steps so far."""
+        cfg = self.config
+        seeds = tuple(int(s) for s in self.rng.integers(0, 2**31 - 1, cfg.episodes))
+        eps = self.rng.standard_normal((cfg.pairs, self.theta.size))
+        candidates = [self.theta + cfg.sigma * e for e in eps] + [self.theta - cfg.sigma * e for e in eps]
+        results = self.pool.map(_evaluate, [(c, seeds) for c in candidates] + [(self.theta, seeds)])
+        returns = np.array([r for r, _ in results[:-1]])
+        self.env_steps += sum(n for _, n in results)
+        ranks = centred_ranks(returns)
+        grad = (ranks[: cfg.pairs] - ranks[cfg.pairs:]) @ eps / (2 * cfg.pairs * cfg.sigma)
+        grad -= cfg.weight_decay * self.theta
+        self.theta = self.adam.step(self.theta, grad)
+        set_flat(self.net, self.theta)
+        self.generation += 1
+        return {
+            "generation": self.generation,
+            "population_mean": float(returns.mean()),
+            "population_best": float(returns.max()),
+            "policy_return": float(results[-1][0]),
+            "env_steps": self.env_steps,
+        }
