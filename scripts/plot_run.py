@@ -26,6 +26,8 @@ def read_run(bag: Path) -> dict[str, np.ndarray]:
     """Arrays from the bag: t, q (n x 7), dq, effort from /joint_states; tv, v from
     /hip_velocity; tau (n x 4) from /joint_torques; cmd (time by log order) from /cmd_speed."""
     from rosbags.highlevel import AnyReader
+
+    from rabbit_msgs_py.conversions import stamp_to_seconds
     from rosbags.typesys import Stores, get_typestore
 
     t, q, dq, eff, tv, v, tau, cmd = [], [], [], [], [], [], [], []
@@ -36,13 +38,13 @@ def read_run(bag: Path) -> dict[str, np.ndarray]:
         for conn, _log_time, raw in reader.messages(connections=connections):
             msg = reader.deserialize(raw, conn.msgtype)
             if conn.topic == "/joint_states":
-                last_t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+                last_t = stamp_to_seconds(msg.header.stamp)
                 t.append(last_t)
                 q.append(msg.position)
                 dq.append(msg.velocity)
                 eff.append(msg.effort)
             elif conn.topic == "/hip_velocity":
-                tv.append(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9)
+                tv.append(stamp_to_seconds(msg.header.stamp))
                 v.append(msg.twist.linear.x)
             elif conn.topic == "/joint_torques":
                 tau.append(msg.data)

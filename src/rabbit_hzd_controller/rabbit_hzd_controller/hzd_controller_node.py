@@ -36,6 +36,7 @@ from rabbit_msgs_py.conversions import (  # noqa: E402
     MessageError,
     alpha_from_msg,
     joint_state_vectors,
+    stamp_to_ns,
     torques_to_msg,
 )
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
@@ -123,7 +124,7 @@ class HZDControllerNode(Node):
             self.get_logger().error(f"ignoring malformed {topics.JOINT_STATES}: {exc}", throttle_duration_sec=1.0)
             return
         self.states_received += 1
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp = stamp_to_ns(msg.header.stamp)
         key = (stamp, tuple(q), tuple(dq))
         if key == self._last_key:
             return  # a re-send of the state answered last

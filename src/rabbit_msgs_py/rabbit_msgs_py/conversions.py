@@ -107,3 +107,13 @@ def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocit
     if not all(math.isfinite(v) for v in q) or not all(math.isfinite(v) for v in dq):
         raise MessageError("joint state contains NaN or infinite values")
     return q, dq
+
+
+def stamp_to_ns(stamp) -> int:
+    """builtin_interfaces/Time (``sec``, ``nanosec``) -> integer nanoseconds."""
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+def stamp_to_seconds(stamp) -> float:
+    """builtin_interfaces/Time -> seconds (float)."""
+    return stamp.sec + stamp.nanosec * 1e-9

@@ -33,7 +33,7 @@ from rclpy.node import Node  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import alpha_to_msg  # noqa: E402
+from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .policies import GaitCommand, PolicyUnavailable, make_policy  # noqa: E402
@@ -108,7 +108,7 @@ class PolicyNode(Node):
         self.desired_speed = speed
 
     def _on_hip_velocity(self, msg: TwistStamped) -> None:
-        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp = stamp_to_ns(msg.header.stamp)
         newest = self.window.newest_stamp
         if newest is not None and stamp < newest:
             self._pending_steps.clear()  # simulation reset: old step events are void
@@ -121,7 +121,7 @@ class PolicyNode(Node):
             self._flush_steps(stamp)
 
     def _on_step(self, msg: Header) -> None:
-        stamp = msg.stamp.sec * 1_000_000_000 + msg.stamp.nanosec
+        stamp = stamp_to_ns(msg.stamp)
         self._pending_steps.append(stamp)
         newest = self.window.newest_stamp
         if newest is not None and newest >= stamp:

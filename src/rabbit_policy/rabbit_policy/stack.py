@@ -42,6 +42,7 @@ from std_msgs.msg import Bool, Float64, Header  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
 CONTROLLERS = {"hzd": "library", "rl": "learned"}
@@ -267,7 +268,7 @@ class Supervisor(Node):
         if self.first_state_wall is None:
             self.first_state_wall = now
         self.last_state_wall = now
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+        t = stamp_to_seconds(msg.header.stamp)
         x = msg.position[0]
         self.sim_time = t
         while self._next_segment < len(self.segments) and t >= self.segments[self._next_segment].start - 1e-9:

@@ -37,6 +37,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 
 from rabbit_msgs_py import topics as topic_names  # noqa: E402
 from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec  # noqa: E402
+from rabbit_msgs_py.conversions import stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
@@ -112,7 +113,7 @@ class RecorderNode(Node):
                 return
             if is_clock and self.sim_log_time:
                 clock = deserialize_message(data, Clock).clock
-                self._sim_now = clock.sec * 1_000_000_000 + clock.nanosec
+                self._sim_now = stamp_to_ns(clock)
             stamp = self._sim_now if self.sim_log_time else time.time_ns()
             try:
                 self.bag.write(topic, stamp, data)
