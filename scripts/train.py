@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import signal
 import sys
 import time
 from pathlib import Path
@@ -89,6 +90,10 @@ def main(argv: list[str] | None = None) -> int:
                 "env_steps": es.env_steps, "wall_s": wall, "config": config.to_dict()}
         PolicyCheckpoint(net.state_dict(), env.bounds.low, env.bounds.high, info).save(out / "policy.pt")
 
+    def interrupt(_signum, _frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)  # SIGTERM saves a checkpoint like Ctrl-C
     log_path = out / "log.csv"
     new_log = not log_path.exists()
     try:
