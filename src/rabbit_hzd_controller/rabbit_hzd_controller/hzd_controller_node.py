@@ -68,8 +68,8 @@ class HZDControllerNode(Node):
         self.controller: HZDController | None = None
         self._alpha: list[float] | None = None  # last good gait received
         self._kd: float | None = None
-        self._last_key: tuple | None = None
         self._last_stamp = -1
+        self._last_state: tuple[list[float], list[float]] | None = None
         self._waiting_state: JointState | None = None  # arrived before the gait was complete
         self.states_received = 0
         self.torques_published = 0
@@ -125,8 +125,7 @@ class HZDControllerNode(Node):
             return
         self.states_received += 1
         stamp = stamp_to_ns(msg.header.stamp)
-        key = (stamp, tuple(q), tuple(dq))
-        if key == self._last_key:
+        if stamp == self._last_stamp and (q, dq) == self._last_state:
             return  # a re-send of the state answered last
         if self._alpha is None or self._kd is None:
             self._waiting_state = msg
@@ -145,8 +144,8 @@ class HZDControllerNode(Node):
                 controller.reset(self._alpha, self._kd, stance)
                 self.get_logger().info("simulation time went back (reset): controller restarted on the gait")
         torques = controller.compute(q, dq)
-        self._last_key = key
         self._last_stamp = stamp
+        self._last_state = (q, dq)
         torque_msg = self._torque_msg
         torque_msg.data = torques
         self._torque_pub.publish(torque_msg)

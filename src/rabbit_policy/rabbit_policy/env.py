@@ -55,8 +55,8 @@ class ActionBounds:
         config = config or ControllerConfig()
         free = np.array([g.free for g in library.gaits])
         low, high = free.min(axis=0) - margin, free.max(axis=0) + margin
-        for i in range(N_FREE):  # output j = i % 4: hips even, knees odd
-            lo, hi = config.knee_coefficient_range if (i % 4) % 2 else config.hip_coefficient_range
+        for i in range(N_FREE):  # output i % 4: hips even, knees odd
+            lo, hi = config.knee_coefficient_range if i % 2 else config.hip_coefficient_range
             low[i], high[i] = max(low[i], lo), min(high[i], hi)
         return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
 

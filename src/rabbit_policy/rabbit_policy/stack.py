@@ -329,15 +329,17 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
 
 def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
                      spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
-    """Spin until the run is over; returns an error message or None. ``stop()`` true
-    (a signal arrived) ends the run as "interrupted"."""
+    """Start the (paused) simulation once every node is connected, then spin until the run
+    is over; returns an error message or None. ``stop()`` true (a signal arrived) ends
+    the run as "interrupted"; ``alive()`` returns a message when a node process died."""
     from rclpy.executors import ExternalShutdownException
 
     start = time.perf_counter()
     started = None
-    while started is None or not started.done():
+    while not supervisor.done:
+        running = started is not None and started.done()
         try:
-            executor.spin_once(timeout_sec=0.02)
+            executor.spin_once(timeout_sec=spin_timeout if running else 0.02)
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
         problem = "interrupted" if stop() else alive()
@@ -345,18 +347,9 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             return problem
         if started is None and supervisor.connected():
             started = supervisor.request_start()
-        if time.perf_counter() - start > stall_timeout:
+        if not running and time.perf_counter() - start > stall_timeout:
             return f"the nodes did not connect within {stall_timeout:.0f} s"
-    while not supervisor.done:
-        try:
-            executor.spin_once(timeout_sec=spin_timeout)
-        except (KeyboardInterrupt, ExternalShutdownException):
-            return "interrupted"
-        problem = "interrupted" if stop() else alive()
-        if problem:
-            return problem
-        last = supervisor.last_state_wall or start
-        if time.perf_counter() - last > stall_timeout:
+        if running and time.perf_counter() - (supervisor.last_state_wall or start) > stall_timeout:
             return f"no simulation progress for {stall_timeout:.0f} s (at t = {supervisor.sim_time:.3f} s)"
     return None
 

@@ -186,14 +186,6 @@ class SimNode(Node):
 
     # ----------------------------------------------------------------- status
     @property
-    def mode(self) -> str:
-        return self.settings.mode
-
-    @property
-    def started(self) -> bool:
-        return self._started
-
-    @property
     def fallen(self) -> bool:
         return self._fallen
 
@@ -438,9 +430,8 @@ class SimNode(Node):
 
     def _realtime_tick(self) -> None:
         now = time.perf_counter()
-        if self._unanswered:
-            if self.states_published:
-                self.late_ticks += 1
+        if self._unanswered:  # the reply to the previous state has not come yet
+            self.late_ticks += 1
             while self._unanswered and now - self._unanswered[0] > 0.02:
                 self._unanswered.popleft()  # lost: never answered within 20 ms
         fresh = self._latest_torque_wall >= 0.0 and now - self._latest_torque_wall <= self.settings.watchdog_timeout

@@ -123,10 +123,6 @@ class Simulator:
         wrench[4] = torque_y
         self._push_until = self.data.time + duration
 
-    @property
-    def pushing(self) -> bool:
-        return self._push_until >= 0.0
-
     def step(self, torques: Sequence[float]) -> None:
         """Apply ``torques`` (N m) for one timestep and advance the physics."""
         data = self.data
