@@ -49,6 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
                         help="classic policy: nearest gait or blend of the two around the speed")
     parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
+    parser.add_argument("--policy-file", default="", help="--controller rl: policy checkpoint (default: packaged)")
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
@@ -76,20 +77,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from rabbit_policy.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.stack import StackConfig, parse_pushes, parse_schedule, run_in_process, run_multi_process
+    from rabbit_policy.scenario import parse_pushes, parse_schedule
+    from rabbit_policy.stack import StackConfig, run_in_process, run_multi_process
 
     try:
         schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
         pushes = parse_pushes(args.push) if args.push else ()
         config = StackConfig(
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
-            model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir, pushes=pushes,
+            model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir,
+            policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
         )
         if args.record and os.path.exists(args.record) and not args.overwrite:
             raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
-        make_policy("learned" if args.controller == "rl" else "library", args.gait_dir or None, args.library_mode)
+        make_policy("learned" if args.controller == "rl" else "library", args.gait_dir or None, args.library_mode,
+                    args.policy_file or None)
     except ValueError as exc:
         parser.error(str(exc))
     except PolicyUnavailable as exc:

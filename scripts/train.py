@@ -1,17 +1,31 @@
 #!/usr/bin/env python3
-"""Train the HZD-RL policy on ``RabbitHZD-v0``.
+"""Train the HZD-RL policy on ``RabbitHZD-v0`` with Evolution Strategies or PPO.
 
-    scripts/train.py --algo es --seed 0 --workers 2 --out runs/es0 [--generations 100] [--resume]
+    scripts/train.py --algo es  --seed 0 --workers 2 --out runs/es0 [--iterations 60]
+    scripts/train.py --algo ppo --seed 0 --workers 2 --out runs/ppo0 [--iterations 200]
+    scripts/train.py ... --resume          # continue from OUT/checkpoint.pt
 
-ES (``rabbit_policy.es``): the network is first warm-started on the classic gait library
-(``rabbit_policy.warm_start``, a few seconds), then improved by antithetic ES with centred
-ranks. Each generation appends a row to ``OUT/log.csv`` (generation, wall time, env
-steps, population mean/best return, the return of the generation's starting parameters)
-and prints a progress line; ``OUT/checkpoint.pt`` (policy + optimiser state) is written
-every ``--checkpoint-every`` generations and at the end, ``OUT/policy.pt`` holds the
-policy alone (the file ``policy_node`` loads with ``policy_file``). ``--resume``
-continues from ``OUT/checkpoint.pt``. Deterministic for a given seed and worker count.
-PPO arrives with the rest of the learning issue.
+Both start from the same network warm-started on the classic gait library
+(``rabbit_policy.warm_start``, a few seconds; ``--no-warm-start`` starts from random
+weights). ES: ``rabbit_policy.es`` (antithetic pairs, centred ranks, Adam; one iteration =
+one generation; ``--workers`` processes evaluate the population). PPO:
+``rabbit_policy.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
+of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
+
+Outputs in OUT:
+* ``log.csv``: one row per iteration (wall time, env steps, returns, fall fraction, mean
+  |v̄ - v_d| per step, algorithm statistics); a progress bar on the terminal.
+* ``eval.csv``: every ``--eval-every`` iterations the current deterministic policy runs
+  the acceptance checks (``rabbit_policy.acceptance``: 9 constant speeds x 30 s and the
+  0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
+* ``policy.pt``: the latest policy; ``best.pt``: the policy that did best on the
+  acceptance checks so far (the file to ship); ``checkpoint.pt``: everything needed to
+  ``--resume`` (written every ``--checkpoint-every`` iterations, at the end, on Ctrl-C and
+  on SIGTERM); ``summary.json``: when the acceptance first passed (iteration, wall time,
+  env steps) and the best result.
+``--stop-when-passed`` ends training at the first passing evaluation.
+Deterministic for a given seed and worker count (ES: exactly, also across --resume; PPO:
+a resumed run starts fresh episodes).
 """
 
 from __future__ import annotations
@@ -25,101 +39,195 @@ import time
 from pathlib import Path
 
 
-def main(argv: list[str] | None = None) -> int:
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--algo", choices=("es",), default="es")
+    parser.add_argument("--algo", choices=("es", "ppo"), required=True)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--workers", type=int, default=2, help="processes for rollouts and evaluation")
     parser.add_argument("--out", type=Path, required=True)
-    parser.add_argument("--generations", type=int, default=100)
-    parser.add_argument("--pairs", type=int, default=16)
-    parser.add_argument("--sigma", type=float, default=0.02)
-    parser.add_argument("--lr", type=float, default=0.01)
-    parser.add_argument("--episodes", type=int, default=2)
-    parser.add_argument("--max-steps", type=int, default=40)
+    parser.add_argument("--iterations", "--generations", type=int, default=60, dest="iterations",
+                        help="ES generations / PPO iterations in all (including resumed ones)")
+    parser.add_argument("--max-steps", type=int, default=40, help="walking steps per training episode")
     parser.add_argument("--checkpoint-every", type=int, default=5)
+    parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
+    parser.add_argument("--stop-when-passed", action="store_true")
+    parser.add_argument("--no-warm-start", action="store_true")
+    parser.add_argument("--no-progress", action="store_true", help="plain lines instead of a progress bar")
     parser.add_argument("--resume", action="store_true")
+    es = parser.add_argument_group("ES")
+    es.add_argument("--pairs", type=int, default=8, help="antithetic pairs per generation")
+    es.add_argument("--sigma", type=float, default=0.02, help="perturbation std (parameter units)")
+    es.add_argument("--lr", type=float, default=0.01, help="Adam step size")
+    es.add_argument("--episodes", type=int, default=8, help="episodes per population member")
+    ppo = parser.add_argument_group("PPO")
+    ppo.add_argument("--envs", type=int, default=None, help="parallel environments (default: 2 x workers)")
+    ppo.add_argument("--steps", type=int, default=128, help="steps per environment per iteration")
+    ppo.add_argument("--epochs", type=int, default=10)
+    ppo.add_argument("--minibatches", type=int, default=4)
+    ppo.add_argument("--ppo-lr", type=float, default=1e-4)
+    ppo.add_argument("--target-kl", type=float, default=0.02, help="early stop of the epochs (0: off)")
+    ppo.add_argument("--init-log-std", type=float, default=-3.5, help="initial log std (normalised units)")
     args = parser.parse_args(argv)
-    if args.workers < 1 or args.generations < 1:
-        parser.error("--workers and --generations must be >= 1")
+    if min(args.workers, args.iterations, args.max_steps, args.checkpoint_every) < 1 or args.eval_every < 0:
+        parser.error("--workers, --iterations, --max-steps, --checkpoint-every must be >= 1, --eval-every >= 0")
+    if args.envs is None:
+        args.envs = 2 * args.workers
+    return args
 
-    import numpy as np
+
+def make_trainer(args: argparse.Namespace, net):
+    """The ES or PPO trainer and its configuration."""
+    if args.algo == "es":
+        from rabbit_policy.es import ESConfig, EvolutionStrategy
+
+        config = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
+                          max_steps=args.max_steps, seed=args.seed, workers=args.workers)
+        return EvolutionStrategy(net, config), config
+    from rabbit_policy.ppo import PPOConfig, PPOTrainer
+
+    config = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
+                       lr=args.ppo_lr, init_log_std=args.init_log_std,
+                       target_kl=args.target_kl or None, max_steps=args.max_steps, seed=args.seed)
+    return PPOTrainer(net, config), config
+
+
+def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) -> dict:
+    """One ``eval.csv`` row from an acceptance result."""
+    errors = [abs(c["error"]) for c in result["constant"] if c["error"] is not None]
+    reaches = [s["reach_time"] for s in result["schedule"]["segments"][1:]]
+    return {"iteration": iteration, "wall_s": round(wall, 1), "env_steps": env_steps, "passed": result["passed"],
+            "failures": result["failures"], "total_error": round(result["total_error"], 4),
+            "worst_speed_error": round(max(errors), 4) if errors else None,
+            "falls": sum(c["fell"] for c in result["constant"]) + int(result["schedule"]["fell"]),
+            "slowest_reach_s": None if None in reaches else round(max(reaches), 2)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    out: Path = args.out
+    if out.exists() and not args.resume and any(out.iterdir()):
+        print(f"error: {out} is not empty; use --resume or another --out", file=sys.stderr)
+        return 2
+    checkpoint_path = out / "checkpoint.pt"
+    if args.resume and not checkpoint_path.is_file():
+        print(f"error: --resume: no {checkpoint_path}", file=sys.stderr)
+        return 2
+
+    from multiprocessing import get_context
+
     import torch
+    from tqdm import tqdm
 
-    from rabbit_policy.env import RabbitHZDEnv
-    from rabbit_policy.es import Adam, ESConfig, EvolutionStrategy, set_flat
-    from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint
+    from rabbit_policy.acceptance import acceptance, acceptance_rank
+    from rabbit_policy.env import ActionBounds
+    from rabbit_policy.gait_library import GaitLibrary
+    from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
+    from rabbit_policy.policies import NetworkPolicy
     from rabbit_policy.warm_start import warm_start
 
-    out: Path = args.out
-    checkpoint_path = out / "checkpoint.pt"
-    if out.exists() and not args.resume and any(out.iterdir()):
-        parser.error(f"{out} is not empty; use --resume or another --out")
-    out.mkdir(parents=True, exist_ok=True)
-    config = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
-                      max_steps=args.max_steps, seed=args.seed, workers=args.workers)
+    start = time.perf_counter()  # wall time includes the warm start and the evaluations
+    torch.set_num_threads(1)
     torch.manual_seed(args.seed)
-    env = RabbitHZDEnv(max_steps=args.max_steps)
-    net = HZDPolicyNet(env.bounds.low, env.bounds.high)
-    start_wall = time.perf_counter()
-    elapsed_before = 0.0
+    out.mkdir(parents=True, exist_ok=True)
+    library = GaitLibrary.load()
+    bounds = ActionBounds.from_library(library)
+    net = HZDPolicyNet(bounds.low, bounds.high)
+    state: dict = {}
     if args.resume:
-        if not checkpoint_path.is_file():
-            parser.error(f"--resume: no {checkpoint_path}")
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
-        net.load_state_dict(state["state_dict"])
-    else:
-        mse = warm_start(net, env.library, seed=args.seed)
+        if state["algo"] != args.algo:
+            print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
+            return 2
+        net.load_state_dict(state["net"])
+    elif not args.no_warm_start:
+        mse = warm_start(net, library, seed=args.seed)
         print(f"warm start on the classic gait library: mse {mse:.2e} (normalised action units)", flush=True)
-    es = EvolutionStrategy(net, config)
-    if args.resume:
-        es.theta = np.asarray(state["theta"])
-        set_flat(net, es.theta)
-        es.rng.bit_generator.state = state["rng"]
-        es.adam = Adam(**state["adam"])
-        es.generation, es.env_steps = state["generation"], state["env_steps"]
-        elapsed_before = state["wall_s"]
+    eval_pool = get_context("fork").Pool(args.workers) if args.eval_every else None
+    trainer, config = make_trainer(args, net)
+    if state:
+        trainer.load_state_dict(state["trainer"])
+    elapsed_before = state.get("wall_s", 0.0)
+    best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
+    first_pass = state.get("first_pass")
 
-    def save() -> None:
-        wall = elapsed_before + time.perf_counter() - start_wall
-        torch.save({"state_dict": net.state_dict(), "theta": es.theta.tolist(), "rng": es.rng.bit_generator.state,
-                    "adam": {"lr": es.adam.lr, "t": es.adam.t, "m": es.adam.m, "v": es.adam.v},
-                    "generation": es.generation, "env_steps": es.env_steps, "wall_s": wall,
-                    "config": config.to_dict()}, checkpoint_path)
-        info = {"algorithm": "es", "seed": args.seed, "workers": args.workers, "generation": es.generation,
-                "env_steps": es.env_steps, "wall_s": wall, "config": config.to_dict()}
-        PolicyCheckpoint(net.state_dict(), env.bounds.low, env.bounds.high, info).save(out / "policy.pt")
+    def wall() -> float:
+        return elapsed_before + time.perf_counter() - start
+
+    def info(extra: dict | None = None) -> dict:
+        return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
+                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config.to_dict(),
+                "warm_start": not args.no_warm_start, "parameters": parameter_count(net), **(extra or {})}
+
+    def save_checkpoint() -> None:
+        torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
+                    "best": best, "first_pass": first_pass}, checkpoint_path)
+        PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()).save(out / "policy.pt")
+        (out / "summary.json").write_text(json.dumps({"info": info(), "first_pass": first_pass, "best": best},
+                                                     indent=2) + "\n")
+
+    def evaluate() -> None:
+        nonlocal best, first_pass
+        result = acceptance(NetworkPolicy(net), map_fn=eval_pool.map)
+        row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
+        append_csv(out / "eval.csv", row)
+        if result["passed"] and first_pass is None:
+            first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
+        if best is None or list(acceptance_rank(result)) < best["rank"]:
+            best = {**row, "rank": list(acceptance_rank(result))}
+            PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result})).save(
+                out / "best.pt")
+        bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
+                  f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
+                  f"slowest reach {row['slowest_reach_s']} s)")
 
     def interrupt(_signum, _frame):
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, interrupt)  # SIGTERM saves a checkpoint like Ctrl-C
-    log_path = out / "log.csv"
-    new_log = not log_path.exists()
+    bar = tqdm(total=args.iterations, initial=trainer.iteration, unit="it", disable=args.no_progress,
+               dynamic_ncols=True)
+    if args.no_progress:
+        bar.write = print  # type: ignore[method-assign]
     try:
-        with log_path.open("a", newline="") as f:
-            writer = csv.writer(f)
-            if new_log:
-                writer.writerow(["generation", "wall_s", "env_steps", "population_mean", "population_best",
-                                 "policy_return"])
-            while es.generation < args.generations:
-                stats = es.step()
-                wall = elapsed_before + time.perf_counter() - start_wall
-                writer.writerow([stats["generation"], f"{wall:.1f}", stats["env_steps"], stats["population_mean"],
-                                 stats["population_best"], stats["policy_return"]])
-                f.flush()
-                print(f"gen {stats['generation']:4d}/{args.generations}  {wall:7.1f} s  "
-                      f"steps {stats['env_steps']:8d}  mean {stats['population_mean']:8.3f}  "
-                      f"best {stats['population_best']:8.3f}  policy {stats['policy_return']:8.3f}", flush=True)
-                if stats["generation"] % args.checkpoint_every == 0:
-                    save()
+        if args.eval_every and trainer.iteration == 0:
+            evaluate()  # the starting point (warm start) as a baseline
+        while trainer.iteration < args.iterations:
+            stats = trainer.step()
+            append_csv(out / "log.csv", {"wall_s": round(wall(), 1), **stats})
+            bar.update(1)
+            bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
+                            falls=f"{stats['fall_fraction']:.2f}")
+            if args.no_progress:
+                print(json.dumps(stats), flush=True)
+            if args.eval_every and trainer.iteration % args.eval_every == 0:
+                evaluate()
+                if args.stop_when_passed and first_pass is not None:
+                    break
+            if trainer.iteration % args.checkpoint_every == 0:
+                save_checkpoint()
     except KeyboardInterrupt:
-        print("interrupted: saving a checkpoint", file=sys.stderr)
+        bar.write("interrupted: saving a checkpoint")
     finally:
-        save()
-        es.close()
-    print(json.dumps({"out": str(out), "generation": es.generation, "env_steps": es.env_steps}))
+        bar.close()
+        save_checkpoint()
+        trainer.close()
+        if eval_pool is not None:
+            eval_pool.close()
+            eval_pool.join()
+    print(json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
+                      "wall_s": round(wall(), 1), "first_pass": first_pass,
+                      "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
     return 0
+
+
+def append_csv(path: Path, row: dict) -> None:
+    """Append ``row``; write the header first if the file is new."""
+    new = not path.exists()
+    with path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(row))
+        if new:
+            writer.writeheader()
+        writer.writerow(row)
 
 
 if __name__ == "__main__":

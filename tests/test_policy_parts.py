@@ -13,7 +13,8 @@ from rabbit_policy.gait_library import GaitLibrary
 from rabbit_policy.policies import LibraryPolicy, PolicyUnavailable, make_policy
 from rabbit_policy.policy_node import clamp_speed
 from rabbit_policy.speed_window import SpeedWindow
-from rabbit_policy.stack import Push, StackConfig, parse_pushes, parse_schedule, ros_arguments
+from rabbit_policy.scenario import Push, parse_pushes, parse_schedule
+from rabbit_policy.stack import StackConfig, ros_arguments
 
 MS = 1_000_000
 

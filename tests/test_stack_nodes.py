@@ -229,7 +229,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
 
 
 def test_pushes_reach_the_torso_with_their_own_duration():
-    from rabbit_policy.stack import Push
+    from rabbit_policy.scenario import Push
 
     base = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
     pushed = StackConfig(duration=2.0, schedule=((0.0, 1.0),), pushes=(Push(0.5, -60.0, 0.3),))

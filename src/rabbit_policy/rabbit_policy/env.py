@@ -6,8 +6,9 @@ with the same decision timing as the node stack: the action chosen at a touchdow
 queued and takes effect at the next touchdown.
 
 * Observation (m/s): the paper's three inputs — desired speed v_d, the mean hip speed over
-  the last ``window`` ticks (200, about one step) and the mean of (v_d - hip speed) over
-  the same ticks, taken at the touchdown (:class:`~.speed_window.SpeedWindow`).
+  the last step (touchdown to touchdown, at most ``window`` ticks) and the mean of
+  (v_d - hip speed) over the same ticks, taken at the touchdown
+  (:class:`~.speed_window.SpeedWindow`; why one step and not 200 ticks: see there).
 * Action: the 20 free Bezier coefficients (rad, the core's order, see
   ``rabbit_hzd_controller.alpha``) and Kd (N m s/rad), inside :class:`ActionBounds`.
   The coefficients are joint waypoints, so the bounds come from the classic gaits'
@@ -22,6 +23,8 @@ queued and takes effect at the next touchdown.
 * v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
   uniformly from the middle half of the episode.
 * Reset: the robot starts at phase 0 of the classic gait nearest v_d, on it.
+  ``reset(options={"desired_speed": v0, "next_speed": v1})`` fixes the two commands
+  (stratified sampling in ES, evaluation); otherwise both are drawn.
 """
 
 from __future__ import annotations
@@ -67,7 +70,7 @@ class RabbitHZDEnv(gym.Env):
     metadata = {"render_modes": []}
 
     def __init__(self, model: str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
-                 max_steps: int = 60, window: int = 200, fall_penalty: float = -10.0,
+                 max_steps: int = 60, window: int = 1000, fall_penalty: float = -10.0,
                  max_step_time: float = 1.5, margin: float = 0.15) -> None:
         self.library = GaitLibrary.load()
         self.bounds = ActionBounds.from_library(self.library, margin)
@@ -88,7 +91,7 @@ class RabbitHZDEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _observation(self) -> np.ndarray:
-        obs = self._window.observation(self.desired_speed)
+        obs = self._window.observation(self.desired_speed, since_ns=self._previous_touchdown)
         clipped = np.clip(obs.as_tuple(), self.observation_space.low, self.observation_space.high)
         return clipped.astype(np.float32)
 
@@ -96,6 +99,7 @@ class RabbitHZDEnv(gym.Env):
         """Simulate until the next touchdown; returns (fell, stalled)."""
         loop, controller, window = self._loop, self._controller, self._window
         data = loop.data
+        self._previous_touchdown = self._touchdown_tick
         for _ in range(self.max_ticks):
             loop.step()
             self._tick += 1
@@ -103,6 +107,7 @@ class RabbitHZDEnv(gym.Env):
             if loop.limits.fallen(data.qpos[1], data.qpos[2]):
                 return True, False
             if controller.touchdown:
+                self._touchdown_tick = self._tick
                 return False, False
         return False, True
 
@@ -110,14 +115,24 @@ class RabbitHZDEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         lo, hi = self.speed_range
+        options = options or {}
         self.desired_speed = float(self.np_random.uniform(lo, hi))
+        self._next_speed = float(self.np_random.uniform(lo, hi))
         self._switch_step = int(self.np_random.integers(self.max_steps // 4, 3 * self.max_steps // 4 + 1))
+        for key in ("desired_speed", "next_speed"):
+            if key in options:
+                value = float(options[key])
+                if not lo <= value <= hi:
+                    raise ValueError(f"reset option {key} = {value} is outside [{lo}, {hi}] m/s")
+                setattr(self, "desired_speed" if key == "desired_speed" else "_next_speed", value)
         gait = self.library.nearest(self.desired_speed)
         self._controller = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp), Leg.LEFT)
         self._loop = ClosedLoop(self._model, self._controller)
         self._loop.reset(*state_on_gait(gait.alpha, gait.speed, self._controller.config.geometry))
         self._window = SpeedWindow(self.window_size)
         self._tick = 0
+        self._touchdown_tick: int | None = None  # window stamps are ticks
+        self._previous_touchdown: int | None = None
         self._steps = 0
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
@@ -147,8 +162,7 @@ class RabbitHZDEnv(gym.Env):
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time}
         if self._steps == self._switch_step:  # the mid-episode change of command
-            lo, hi = self.speed_range
-            self.desired_speed = float(self.np_random.uniform(lo, hi))
+            self.desired_speed = self._next_speed
         return obs, float(reward), terminated, truncated, info
 
 

@@ -4,7 +4,8 @@ OpenAI-ES and ARS), readable top to bottom.
 Per generation, from the current parameters theta (flat vector of the network's 633):
 1. draw ``pairs`` Gaussian directions eps_i and evaluate theta + sigma eps_i and
    theta - sigma eps_i (antithetic sampling) on the *same* episodes (common random
-   numbers: every member sees the same v_d draws, ``episodes`` per evaluation);
+   numbers: every member sees the same v_d draws, ``episodes`` per evaluation, the
+   commands stratified over 0.7-1.5 m/s, see :func:`stratified_episodes`);
 2. replace the returns by centred ranks in [-0.5, 0.5] (rank normalisation: robust to
    the fall penalty's scale);
 3. gradient estimate g = sum_i (rank+_i - rank-_i) eps_i / (2 pairs sigma), plus weight
@@ -33,7 +34,7 @@ class ESConfig:
     sigma: float = 0.02
     lr: float = 0.01
     weight_decay: float = 0.005
-    episodes: int = 2
+    episodes: int = 8
     max_steps: int = 40
     seed: int = 0
     workers: int = 1
@@ -61,26 +62,61 @@ def _init_worker(max_steps: int) -> None:
     _WORKER["net"] = HZDPolicyNet(env.bounds.low, env.bounds.high)
 
 
-def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, seed: int) -> tuple[float, int]:
-    """Deterministic policy rollout; returns (undiscounted return, steps)."""
-    obs, _info = env.reset(seed=seed)
-    total, steps = 0.0, 0
+@dataclass(frozen=True)
+class Rollout:
+    """One deterministic episode: undiscounted return, steps, summed |v̄ - v_d| (m/s), fell."""
+
+    total: float
+    steps: int
+    abs_error: float
+    fell: bool
+
+
+Episode = tuple[int, float, float]  # (seed, first commanded speed, second commanded speed)
+
+
+def stratified_episodes(rng: np.random.Generator, count: int, speed_range: tuple[float, float]) -> list[Episode]:
+    """``count`` episodes whose first and second commands are stratified over the speed
+    range (one draw in each of ``count`` equal sub-intervals, so each command is still
+    uniform over the range). The first half of the episodes pairs the strata in reverse
+    order (slowest start -> fastest end, ...): large speed changes, up and down, in every
+    generation; the rest pair them at random. Less variance than independent draws, and the
+    large changes — rare under independent draws, and where tracking is hardest — are
+    always in the sample."""
+    lo, hi = speed_range
+    width = (hi - lo) / count
+    first = lo + width * (np.arange(count) + rng.uniform(0.0, 1.0, count))
+    order = np.arange(count)[::-1].copy()
+    half = count // 2
+    chosen = rng.choice(count, half, replace=False)  # which episodes get the reversed pairing
+    rest = np.setdiff1d(np.arange(count), chosen)
+    order[rest] = rng.permutation(order[rest])
+    second = lo + width * (order + rng.uniform(0.0, 1.0, count))
+    seeds = rng.integers(0, 2**31 - 1, count)
+    return [(int(s), float(a), float(b)) for s, a, b in zip(seeds, first, second)]
+
+
+def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, episode: Episode) -> Rollout:
+    """Deterministic policy rollout (the network's output is the action)."""
+    seed, first, second = episode
+    obs, _info = env.reset(seed=seed, options={"desired_speed": first, "next_speed": second})
+    total, steps, abs_error = 0.0, 0, 0.0
     with torch.no_grad():
         while True:
             action = net(torch.as_tensor(obs, dtype=torch.float32)).numpy()
-            obs, reward, terminated, truncated, _info = env.step(action)
+            obs, reward, terminated, truncated, info = env.step(action)
             total += reward
             steps += 1
+            abs_error += abs(info["mean_speed"] - info["desired_speed"])
             if terminated or truncated:
-                return total, steps
+                return Rollout(total, steps, abs_error, terminated)
 
 
-def _evaluate(args: tuple[np.ndarray, tuple[int, ...]]) -> tuple[float, int]:
-    theta, seeds = args
+def _evaluate(args: tuple[np.ndarray, list[Episode]]) -> list[Rollout]:
+    theta, episodes = args
     env, net = _WORKER["env"], _WORKER["net"]
     set_flat(net, theta)
-    results = [episode_return(env, net, s) for s in seeds]
-    return float(np.mean([r for r, _ in results])), int(sum(n for _, n in results))
+    return [episode_return(env, net, e) for e in episodes]
 
 
 def centred_ranks(values: np.ndarray) -> np.ndarray:
@@ -132,15 +168,17 @@ class EvolutionStrategy:
         self.pool.join()
 
     def step(self) -> dict[str, float]:
-        """One generation; returns statistics: mean/best population return, the return of
-        the parameters the generation started from (same episodes), env steps so far."""
+        """One generation; returns statistics: mean/best population return; return, fall
+        fraction and mean |v̄ - v_d| per step of the parameters the generation started
+        from (same episodes); env steps so far."""
         cfg = self.config
-        seeds = tuple(int(s) for s in self.rng.integers(0, 2**31 - 1, cfg.episodes))
+        seeds = stratified_episodes(self.rng, cfg.episodes, (0.7, 1.5))
         eps = self.rng.standard_normal((cfg.pairs, self.theta.size))
         candidates = [self.theta + cfg.sigma * e for e in eps] + [self.theta - cfg.sigma * e for e in eps]
         results = self.pool.map(_evaluate, [(c, seeds) for c in candidates] + [(self.theta, seeds)])
-        returns = np.array([r for r, _ in results[:-1]])
-        self.env_steps += sum(n for _, n in results)
+        returns = np.array([np.mean([r.total for r in member]) for member in results[:-1]])
+        self.env_steps += sum(r.steps for member in results for r in member)
+        centre = results[-1]
         ranks = centred_ranks(returns)
         grad = (ranks[: cfg.pairs] - ranks[cfg.pairs:]) @ eps / (2 * cfg.pairs * cfg.sigma)
         grad -= cfg.weight_decay * self.theta
@@ -148,9 +186,28 @@ class EvolutionStrategy:
         set_flat(self.net, self.theta)
         self.generation += 1
         return {
-            "generation": self.generation,
+            "iteration": self.generation,
+            "env_steps": self.env_steps,
             "population_mean": float(returns.mean()),
             "population_best": float(returns.max()),
-            "policy_return": float(results[-1][0]),
-            "env_steps": self.env_steps,
+            "episode_return": float(np.mean([r.total for r in centre])),
+            "fall_fraction": float(np.mean([r.fell for r in centre])),
+            "mean_abs_error": sum(r.abs_error for r in centre) / sum(r.steps for r in centre),
         }
+
+    def state_dict(self) -> dict:
+        """Everything :meth:`load_state_dict` needs to continue exactly where this left off."""
+        return {"theta": self.theta.tolist(), "rng": self.rng.bit_generator.state,
+                "adam": {"lr": self.adam.lr, "t": self.adam.t, "m": self.adam.m, "v": self.adam.v},
+                "generation": self.generation, "env_steps": self.env_steps}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.theta = np.asarray(state["theta"])
+        set_flat(self.net, self.theta)
+        self.rng.bit_generator.state = state["rng"]
+        self.adam = Adam(**state["adam"])
+        self.generation, self.env_steps = state["generation"], state["env_steps"]
+
+    @property
+    def iteration(self) -> int:
+        return self.generation

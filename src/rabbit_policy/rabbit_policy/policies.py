@@ -66,15 +66,13 @@ def packaged_policy_file() -> Path:
     return Path(str(files("rabbit_policy") / "trained" / "hzd_rl_policy.pt"))
 
 
-class LearnedPolicy:
-    """The HZD-RL network: observation -> 20 free coefficients + Kd -> (alpha, Kd)."""
+class NetworkPolicy:
+    """An HZD-RL network in memory (``HZDPolicyNet``): observation -> 20 free
+    coefficients + Kd -> (alpha, Kd). Training evaluates its current network with it."""
 
-    def __init__(self, path: str | Path) -> None:
-        from .network import PolicyCheckpoint  # torch is imported only when needed
-
-        self.checkpoint = PolicyCheckpoint.load(path)
-        self.net = self.checkpoint.network()
-        self.name = f"learned/{Path(path).name}"
+    def __init__(self, net, name: str = "learned") -> None:
+        self.net = net
+        self.name = name
 
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
@@ -83,6 +81,16 @@ class LearnedPolicy:
 
         action = act(self.net, observation)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
+
+
+class LearnedPolicy(NetworkPolicy):
+    """The HZD-RL network loaded from a checkpoint file (``info`` says how it was trained)."""
+
+    def __init__(self, path: str | Path) -> None:
+        from .network import PolicyCheckpoint  # torch is imported only when needed
+
+        self.checkpoint = PolicyCheckpoint.load(path)
+        super().__init__(self.checkpoint.network(), f"learned/{Path(path).name}")
 
 
 def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode: str = "nearest",

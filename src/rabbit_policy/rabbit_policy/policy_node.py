@@ -4,8 +4,9 @@ averaged hip speed, as in the paper's Fig. 2.
 Subscribes ``/cmd_speed`` (m/s), ``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns,
 from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
 start and then at every step. The policy's inputs are the paper's: the commanded speed v_d,
-the mean hip speed and the mean of (v_d - hip speed) over the last ``window`` samples
-(200 ticks, about one step) up to the touchdown stamp; the decision takes effect at the
+the mean hip speed and the mean of (v_d - hip speed) over the last step (the samples after
+the previous touchdown up to this touchdown's stamp, at most ``window``; see
+:mod:`.speed_window`); the decision takes effect at the
 next touchdown (the controller queues it). Parameters:
 
 * ``policy``: ``library`` (classic HZD gait library) or ``learned`` (HZD-RL network).
@@ -14,7 +15,7 @@ next touchdown (the controller queues it). Parameters:
 * ``policy_file``: learned policy checkpoint ('' = the packaged one).
 * ``initial_speed``: v_d before the first ``/cmd_speed`` (m/s).
 * ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
-* ``window``: averaging window (ticks).
+* ``window``: longest averaging window (ticks, 1000).
 
 NaN/inf commands are rejected with an error; the last good command stays in force.
 """
@@ -60,7 +61,7 @@ class PolicyNode(Node):
             "initial_speed": 1.0,
             "min_speed": 0.7,
             "max_speed": 1.5,
-            "window": 200,
+            "window": 1000,
         }
         for name, default in params.items():
             self.declare_parameter(name, overrides.get(name, default))
@@ -81,6 +82,7 @@ class PolicyNode(Node):
         self.rejected_commands = 0
         self.last_observation: Observation | None = None
         self._pending_steps: list[int] = []
+        self._previous_step: int | None = None  # stamp (ns) of the last touchdown decided on
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
@@ -112,6 +114,7 @@ class PolicyNode(Node):
         newest = self.window.newest_stamp
         if newest is not None and stamp < newest:
             self._pending_steps.clear()  # simulation reset: old step events are void
+            self._previous_step = None
         try:
             self.window.add(stamp, msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
@@ -131,7 +134,8 @@ class PolicyNode(Node):
         """Decide for every step event whose window is complete (samples up to its stamp)."""
         while self._pending_steps and self._pending_steps[0] <= newest:
             stamp = self._pending_steps.pop(0)
-            self._decide(self.window.observation(self.desired_speed, stamp))
+            self._decide(self.window.observation(self.desired_speed, stamp, self._previous_step))
+            self._previous_step = stamp
 
     def _decide(self, observation: Observation) -> None:
         command: GaitCommand = self.policy.act(observation)

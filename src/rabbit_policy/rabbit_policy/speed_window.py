@@ -1,7 +1,14 @@
-"""The paper's policy inputs: desired speed, mean hip speed and mean speed error over a
-window of about one step (200 ticks at 1 kHz). ROS-free and deterministic: samples carry
-their sim-time stamp, and an observation is taken at a given stamp from the samples up to
-and including it, however late they were delivered."""
+"""The paper's policy inputs: desired speed, mean hip speed and mean speed error over about
+one walking step. ROS-free and deterministic: samples carry their sim-time stamp, and an
+observation is taken at a given stamp from the samples up to and including it, however
+late they were delivered.
+
+The paper averages over "about one walking step, which takes about 200 simulation steps"
+(its simulator's steps). Here a step lasts 390-730 ticks of 1 ms, so the window is *the
+last step itself*: the samples after the previous touchdown up to this one (``since_ns``),
+at most ``size`` of them. The mean over a whole step is the step's average speed, the
+quantity the speed command is about; a fixed 200-tick window would read only the end of
+the step, which is 0.1-0.2 m/s faster than the step average on the slow gaits."""
 
 from __future__ import annotations
 
@@ -28,7 +35,7 @@ class SpeedWindow:
     Keeps ``2 * size`` samples so an observation can still be taken at a stamp a little
     older than the newest sample (the step event may arrive after later samples)."""
 
-    def __init__(self, size: int = 200) -> None:
+    def __init__(self, size: int = 1000) -> None:
         if size < 1:
             raise ValueError(f"window size must be >= 1, got {size}")
         self.size = size
@@ -53,9 +60,10 @@ class SpeedWindow:
             self._samples.clear()
         self._samples.append((stamp_ns, speed, desired_speed - speed))
 
-    def observation(self, desired_speed: float, stamp_ns: int | None = None) -> Observation:
-        """Averages over the newest ``size`` samples with stamp <= ``stamp_ns`` (all
-        samples if None). An empty window gives (v_d, v_d, 0): on the commanded speed."""
+    def observation(self, desired_speed: float, stamp_ns: int | None = None,
+                    since_ns: int | None = None) -> Observation:
+        """Averages over the newest ``size`` samples with ``since_ns`` < stamp <= ``stamp_ns``
+        (no bound if None). An empty window gives (v_d, v_d, 0): on the commanded speed."""
         samples = list(self._samples)
         if stamp_ns is not None:
             end = len(samples)
@@ -63,6 +71,11 @@ class SpeedWindow:
                 end -= 1
             samples = samples[:end]
         samples = samples[-self.size:]
+        if since_ns is not None:
+            begin = 0
+            while begin < len(samples) and samples[begin][0] <= since_ns:
+                begin += 1
+            samples = samples[begin:]
         if not samples:
             return Observation(desired_speed, desired_speed, 0.0)
         n = len(samples)

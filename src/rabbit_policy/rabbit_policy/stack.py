@@ -1,8 +1,8 @@
 """Bring-up of the whole stack in place of a launch file (used by ``scripts/run_stack.py``,
 ``scripts/bench_stack.py`` and the tests).
 
-* :class:`StackConfig` says what to run; :func:`parse_schedule` / :func:`parse_pushes`
-  read the script's ``--speed-schedule "0:0.8,10:1.2"`` and ``--push "t:fx:duration"``.
+* :class:`StackConfig` says what to run; :mod:`.scenario` parses
+  the script's ``--speed-schedule "0:0.8,10:1.2"`` and ``--push "t:fx:duration"``.
 * :class:`Supervisor` is the experiment node: it publishes ``/cmd_speed`` and ``/push`` at
   the scheduled sim times (read from ``/joint_states`` stamps), counts steps, watches
   ``/fallen`` and measures each segment's mean speed (hip x over the segment's second
@@ -19,7 +19,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 import signal
 import subprocess
@@ -45,6 +44,8 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
+from .scenario import Push, validate_schedule  # noqa: E402
+
 CONTROLLERS = {"hzd": "library", "rl": "learned"}
 NODE_MODULES = {
     "policy_node": "rabbit_policy.policy_node",
@@ -52,16 +53,6 @@ NODE_MODULES = {
     "sim_node": "rabbit_sim.sim_node",
     "recorder_node": "rabbit_sim.recorder_node",
 }
-
-
-@dataclass(frozen=True)
-class Push:
-    """A push on the torso: at sim time ``time`` (s), force ``force_x`` (N, world x) held
-    for ``duration`` s."""
-
-    time: float
-    force_x: float
-    duration: float
 
 
 @dataclass(frozen=True)
@@ -75,6 +66,7 @@ class StackConfig:
     model: str = "paper"
     library_mode: str = "nearest"
     gait_dir: str = ""
+    policy_file: str = ""
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
     stats_file: str = ""
@@ -88,11 +80,7 @@ class StackConfig:
             raise ValueError("duration must be > 0 s")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}")
-        if not self.schedule or self.schedule[0][0] != 0.0:
-            raise ValueError("the speed schedule must start at t = 0")
-        times = [t for t, _ in self.schedule]
-        if times != sorted(times) or len(set(times)) != len(times):
-            raise ValueError("speed schedule times must increase")
+        validate_schedule(self.schedule)
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
         """The ROS parameters of each node for this run (the recorder only if recording)."""
@@ -101,6 +89,7 @@ class StackConfig:
                 "policy": CONTROLLERS[self.controller],
                 "library_mode": self.library_mode,
                 "gait_dir": self.gait_dir,
+                "policy_file": self.policy_file,
                 "initial_speed": self.schedule[0][1],
             },
             "hzd_controller_node": {},
@@ -122,34 +111,6 @@ class StackConfig:
                 "stats_file": self.record_stats_file,
             }
         return params
-
-
-def parse_schedule(text: str) -> tuple[tuple[float, float], ...]:
-    """``"0:0.8,10:1.2"`` -> ((0.0, 0.8), (10.0, 1.2)); raises ``ValueError``."""
-    pairs = []
-    for item in text.split(","):
-        try:
-            t, v = (float(x) for x in item.split(":"))
-        except ValueError:
-            raise ValueError(f"speed schedule entries are time:speed, got {item!r}") from None
-        if not (math.isfinite(t) and math.isfinite(v)) or t < 0:
-            raise ValueError(f"bad speed schedule entry {item!r}")
-        pairs.append((t, v))
-    return tuple(pairs)
-
-
-def parse_pushes(text: str) -> tuple[Push, ...]:
-    """``"2:60:0.1,4:-80:0.2"`` -> pushes (time s : force N : duration s)."""
-    pushes = []
-    for item in text.split(","):
-        try:
-            t, f, d = (float(x) for x in item.split(":"))
-        except ValueError:
-            raise ValueError(f"pushes are time:force:duration, got {item!r}") from None
-        if not all(math.isfinite(x) for x in (t, f, d)) or t < 0 or d <= 0:
-            raise ValueError(f"bad push {item!r}")
-        pushes.append(Push(t, f, d))
-    return tuple(sorted(pushes, key=lambda p: p.time))
 
 
 @dataclass

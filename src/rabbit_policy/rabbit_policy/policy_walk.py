@@ -1,0 +1,123 @@
+"""Walk RABBIT with a gait policy in the loop, without ROS: the fast path of the node stack.
+
+Each tick the closed loop (same MuJoCo model, same :class:`HZDController` as the nodes)
+steps once and the hip speed goes into a :class:`~.speed_window.SpeedWindow`. At each
+touchdown the policy sees the window's observation and its gait is queued for the next
+touchdown, exactly as ``policy_node`` answers ``/hzd/step`` and as ``RabbitHZD-v0``
+applies an action. The commanded speed follows a schedule of (start time s, speed m/s);
+pushes are forces on the torso. The robot starts at phase 0 of the policy's first gait
+(observation (v0, v0, 0)), moving at v0, as the node stack places it.
+
+Used by ``scripts/walk.py``, the acceptance checks (:mod:`.acceptance`), training
+(time to a passing policy) and the evaluation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_sim.model import load_model
+from rabbit_sim.simulation import ClosedLoop
+
+from .policies import Policy
+from .scenario import Push, validate_schedule
+from .speed_window import Observation, SpeedWindow
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One completed step: touchdown time (s), mean hip speed over the step (m/s), the
+    commanded speed at the touchdown (m/s) and the Kd the policy chose for the next step."""
+
+    time: float
+    mean_speed: float
+    desired_speed: float
+    kd: float
+
+
+@dataclass
+class PolicyWalk:
+    """What happened: per-tick sim time (s) and hip speed (m/s, world x), per-step records,
+    whether and when it fell, how many policy decisions the controller rejected."""
+
+    fell: bool
+    fall_time: float | None
+    times: np.ndarray
+    hip_speed: np.ndarray
+    desired_speed: np.ndarray
+    steps: list[StepRecord] = field(default_factory=list)
+    rejected: int = 0
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1]) if len(self.times) else 0.0
+
+    def mean_speed(self, start: float, end: float | None = None) -> float:
+        """Time average of the hip speed over [start, end] s (NaN if no sample)."""
+        end = self.duration if end is None else end
+        mask = (self.times > start) & (self.times <= end + 1e-9)
+        return float(self.hip_speed[mask].mean()) if mask.any() else float("nan")
+
+
+def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duration: float,
+                pushes: Sequence[Push] = (), model_variant: str = "paper", window: int = 1000,
+                stop_on_fall: bool = True) -> PolicyWalk:
+    """Walk ``duration`` s of sim time with ``policy`` choosing every step's gait.
+
+    ``schedule``: (start time s, commanded speed m/s), first at t = 0, times increasing."""
+    validate_schedule(schedule)
+    if not duration > 0:
+        raise ValueError("duration must be > 0")
+    model = load_model(model_variant)
+    speed = float(schedule[0][1])
+    first = policy.act(Observation(speed, speed, 0.0))
+    controller = HZDController(first.alpha, first.kd, ControllerConfig(), Leg.LEFT)
+    loop = ClosedLoop(model, controller)
+    loop.reset(*state_on_gait(first.alpha, speed, controller.config.geometry))
+    data, limits = loop.data, loop.limits
+    speed_window = SpeedWindow(window)
+
+    n = int(round(duration / model.opt.timestep))
+    times, speeds, desired = np.empty(n), np.empty(n), np.empty(n)
+    changes = list(schedule[1:])
+    pending_pushes = sorted(pushes, key=lambda p: p.time)
+    steps: list[StepRecord] = []
+    rejected = 0
+    fell, fall_time = False, None
+    step_sum, step_ticks = 0.0, 0
+    count = 0
+    previous_touchdown: int | None = None
+    for i in range(n):
+        loop.step()
+        t = float(data.time)
+        while changes and t >= changes[0][0] - 1e-9:
+            speed = float(changes.pop(0)[1])
+        while pending_pushes and t >= pending_pushes[0].time - 1e-9:
+            push = pending_pushes.pop(0)
+            loop.push(push.force_x, push.duration)
+        v = float(data.qvel[0])
+        times[i], speeds[i], desired[i] = t, v, speed
+        count = i + 1
+        speed_window.add(i, v, speed)
+        step_sum += v
+        step_ticks += 1
+        if limits.fallen(data.qpos[1], data.qpos[2]):
+            fell, fall_time = True, t
+            if stop_on_fall:
+                break
+        if controller.touchdown:
+            command = policy.act(speed_window.observation(speed, since_ns=previous_touchdown))
+            previous_touchdown = i
+            try:
+                controller.set_alpha(command.alpha)
+                controller.queue_kd(command.kd)
+            except ValueError:
+                rejected += 1  # the controller keeps the gait in force, as the node does
+            steps.append(StepRecord(t, step_sum / step_ticks, speed, command.kd))
+            step_sum, step_ticks = 0.0, 0
+    return PolicyWalk(fell, fall_time, times[:count], speeds[:count], desired[:count], steps, rejected)

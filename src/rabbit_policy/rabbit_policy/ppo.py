@@ -1,0 +1,244 @@
+"""Proximal Policy Optimisation for the HZD-RL policy, after CleanRL's
+``ppo_continuous_action.py``, readable top to bottom.
+
+* Actor: the shipped policy network itself (:class:`HZDPolicyNet`, 633 parameters) gives
+  the mean action inside the bounds; exploration is a diagonal Gaussian around it whose
+  standard deviation is ``exp(log_std)`` times the action range (one learned log-std per
+  action dimension, in normalised units). The deterministic policy used after training is
+  the mean, so a PPO checkpoint is the same file as an ES one.
+* Critic: a separate 3 -> 64 -> 64 -> 1 tanh network on the same normalised inputs.
+* One iteration: ``steps`` transitions from each of ``envs`` environments (a Gymnasium
+  ``AsyncVectorEnv``, one process per environment, same-step autoreset); generalised
+  advantage estimation (gamma, lambda); a truncated episode is bootstrapped with the
+  critic's value of its final observation (a time limit is not a terminal state);
+  ``epochs`` passes of minibatch updates of the clipped surrogate objective + value loss,
+  advantages normalised per minibatch, gradients clipped; the epochs stop early once the
+  approximate KL divergence from the rollout policy exceeds ``target_kl`` (as CleanRL's
+  option).
+
+Deterministic for a given seed and number of environments: every environment is seeded
+from the seed, sampling uses a seeded torch generator, and the update is single-threaded.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import gymnasium as gym
+import numpy as np
+import torch
+from torch import nn
+
+from .env import RabbitHZDEnv
+from .network import HZDPolicyNet
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyper-parameters (CleanRL's names; ``init_log_std`` in normalised action units)."""
+
+    envs: int = 4
+    steps: int = 128
+    epochs: int = 10
+    minibatches: int = 4
+    lr: float = 1e-4
+    gamma: float = 0.99
+    gae_lambda: float = 0.95
+    clip: float = 0.2
+    value_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    target_kl: float | None = 0.02
+    init_log_std: float = -3.5
+    max_steps: int = 40
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class Critic(nn.Module):
+    """State value from the policy's three inputs (m/s), normalised like the actor's."""
+
+    def __init__(self, actor: HZDPolicyNet, hidden: int = 64) -> None:
+        super().__init__()
+        self.register_buffer("offset", actor.offset.clone())
+        self.register_buffer("scale", actor.scale.clone())
+        self.body = nn.Sequential(nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
+                                  nn.Linear(hidden, 1))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.body((obs - self.offset) / self.scale).squeeze(-1)
+
+
+class GaussianPolicy(nn.Module):
+    """The actor network plus a learned per-dimension log standard deviation."""
+
+    def __init__(self, actor: HZDPolicyNet, init_log_std: float) -> None:
+        super().__init__()
+        self.actor = actor
+        self.log_std = nn.Parameter(torch.full((actor.low.numel(),), float(init_log_std)))
+
+    def distribution(self, obs: torch.Tensor) -> torch.distributions.Normal:
+        std = torch.exp(self.log_std) * (self.actor.high - self.actor.low)
+        return torch.distributions.Normal(self.actor(obs), std)
+
+
+def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
+    """|mean hip speed - v_d| (m/s) of this step in every environment; an environment that
+    ended reports it in ``final_info`` (same-step autoreset)."""
+    final = info.get("final_info", {})
+    errors = []
+    for i, done in enumerate(ended):
+        source = final if done else info
+        errors.append(abs(float(source["mean_speed"][i]) - float(source["desired_speed"][i])))
+    return errors
+
+
+def _make_env(max_steps: int):
+    return lambda: RabbitHZDEnv(max_steps=max_steps)
+
+
+class PPOTrainer:
+    """Stateful PPO over ``envs`` parallel environments; :meth:`step` is one iteration."""
+
+    def __init__(self, net: HZDPolicyNet, config: PPOConfig) -> None:
+        torch.set_num_threads(1)
+        self.config = config
+        self.net = net
+        self.policy = GaussianPolicy(net, config.init_log_std)
+        torch.manual_seed(config.seed)
+        self.critic = Critic(net)
+        self.optimiser = torch.optim.Adam(list(self.policy.parameters()) + list(self.critic.parameters()),
+                                          lr=config.lr, eps=1e-5)
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.rng = np.random.default_rng(config.seed)
+        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps) for _ in range(config.envs)],
+                                              context="fork", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+        self.iteration = 0
+        self.env_steps = 0
+        self._obs: np.ndarray | None = None
+        self._episode_return = np.zeros(config.envs)
+        self._episode_length = np.zeros(config.envs, dtype=int)
+
+    def close(self) -> None:
+        self.envs.close()
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict:
+        return {"policy": self.policy.state_dict(), "critic": self.critic.state_dict(),
+                "optimiser": self.optimiser.state_dict(), "generator": self.generator.get_state(),
+                "rng": self.rng.bit_generator.state, "iteration": self.iteration, "env_steps": self.env_steps}
+
+    def load_state_dict(self, state: dict) -> None:
+        """Resume: networks, optimiser and random streams; the environments start fresh
+        episodes (seeded from the seed and the iteration)."""
+        self.policy.load_state_dict(state["policy"])
+        self.critic.load_state_dict(state["critic"])
+        self.optimiser.load_state_dict(state["optimiser"])
+        self.generator.set_state(state["generator"])
+        self.rng.bit_generator.state = state["rng"]
+        self.iteration, self.env_steps = state["iteration"], state["env_steps"]
+        self._obs = None
+
+    # --------------------------------------------------------------- rollout
+    def _collect(self) -> dict[str, torch.Tensor | list]:
+        cfg = self.config
+        if self._obs is None:
+            seed = int(self.rng.integers(0, 2**31 - 1))
+            self._obs, _ = self.envs.reset(seed=seed)
+            self._episode_return[:] = 0.0
+            self._episode_length[:] = 0
+        shape = (cfg.steps, cfg.envs)
+        obs_buf = torch.zeros(shape + (3,))
+        act_buf = torch.zeros(shape + (self.net.low.numel(),))
+        logp_buf, rew_buf, done_buf, val_buf = (torch.zeros(shape) for _ in range(4))
+        finished: list[tuple[float, int, bool]] = []
+        errors: list[float] = []
+        for t in range(cfg.steps):
+            obs = torch.as_tensor(self._obs, dtype=torch.float32)
+            with torch.no_grad():
+                dist = self.policy.distribution(obs)
+                action = dist.mean + dist.stddev * torch.randn(dist.mean.shape, generator=self.generator)
+                logp = dist.log_prob(action).sum(-1)
+                value = self.critic(obs)
+            next_obs, reward, terminated, truncated, info = self.envs.step(action.numpy())
+            reward = np.asarray(reward, dtype=float).copy()
+            self._episode_return += reward
+            self._episode_length += 1
+            errors.extend(_tracking_errors(info, terminated | truncated))
+            for i in np.flatnonzero(truncated & ~terminated):  # bootstrap through the time limit
+                final = torch.as_tensor(info["final_obs"][i], dtype=torch.float32)
+                with torch.no_grad():
+                    reward[i] += cfg.gamma * float(self.critic(final))
+            for i in np.flatnonzero(terminated | truncated):
+                finished.append((float(self._episode_return[i]), int(self._episode_length[i]), bool(terminated[i])))
+                self._episode_return[i], self._episode_length[i] = 0.0, 0
+            obs_buf[t], act_buf[t], logp_buf[t], val_buf[t] = obs, action, logp, value
+            rew_buf[t] = torch.as_tensor(reward, dtype=torch.float32)
+            done_buf[t] = torch.as_tensor(terminated | truncated, dtype=torch.float32)
+            self._obs = next_obs
+        self.env_steps += cfg.steps * cfg.envs
+        with torch.no_grad():
+            next_value = self.critic(torch.as_tensor(self._obs, dtype=torch.float32))
+        advantages = torch.zeros(shape)
+        last = torch.zeros(cfg.envs)
+        for t in reversed(range(cfg.steps)):
+            following = next_value if t == cfg.steps - 1 else val_buf[t + 1]
+            not_done = 1.0 - done_buf[t]
+            delta = rew_buf[t] + cfg.gamma * following * not_done - val_buf[t]
+            last = delta + cfg.gamma * cfg.gae_lambda * not_done * last
+            advantages[t] = last
+        return {"obs": obs_buf.reshape(-1, 3), "actions": act_buf.reshape(-1, act_buf.shape[-1]),
+                "logp": logp_buf.reshape(-1), "advantages": advantages.reshape(-1),
+                "returns": (advantages + val_buf).reshape(-1), "finished": finished, "errors": errors}
+
+    # ---------------------------------------------------------------- update
+    def step(self) -> dict[str, float]:
+        """One iteration (rollout + update); returns statistics of the finished episodes
+        (mean return, fall fraction), the mean |v̄ - v_d| per step, losses, env steps."""
+        cfg = self.config
+        batch = self._collect()
+        n = batch["obs"].shape[0]
+        size = n // cfg.minibatches
+        clip_fractions, policy_losses, value_losses = [], [], []
+        approx_kl = 0.0
+        for _ in range(cfg.epochs):
+            order = torch.randperm(n, generator=self.generator)
+            for start in range(0, n, size):
+                idx = order[start:start + size]
+                dist = self.policy.distribution(batch["obs"][idx])
+                logp = dist.log_prob(batch["actions"][idx]).sum(-1)
+                log_ratio = logp - batch["logp"][idx]
+                ratio = torch.exp(log_ratio)
+                with torch.no_grad():
+                    approx_kl = ((ratio - 1) - log_ratio).mean().item()  # CleanRL's k3 estimator
+                adv = batch["advantages"][idx]
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+                policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - cfg.clip, 1 + cfg.clip)).mean()
+                value_loss = 0.5 * ((self.critic(batch["obs"][idx]) - batch["returns"][idx]) ** 2).mean()
+                loss = policy_loss + cfg.value_coef * value_loss
+                self.optimiser.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(list(self.policy.parameters()) + list(self.critic.parameters()),
+                                         cfg.max_grad_norm)
+                self.optimiser.step()
+                clip_fractions.append(((ratio - 1).abs() > cfg.clip).float().mean().item())
+                policy_losses.append(policy_loss.item())
+                value_losses.append(value_loss.item())
+            if cfg.target_kl is not None and approx_kl > cfg.target_kl:
+                break
+        self.iteration += 1
+        finished = batch["finished"]
+        return {
+            "iteration": self.iteration,
+            "env_steps": self.env_steps,
+            "episodes": len(finished),
+            "episode_return": float(np.mean([r for r, _, _ in finished])) if finished else float("nan"),
+            "fall_fraction": float(np.mean([f for _, _, f in finished])) if finished else float("nan"),
+            "mean_abs_error": float(np.mean(batch["errors"])),
+            "policy_loss": float(np.mean(policy_losses)),
+            "value_loss": float(np.mean(value_losses)),
+            "clip_fraction": float(np.mean(clip_fractions)),
+            "approx_kl": approx_kl,
+            "log_std": float(self.policy.log_std.mean()),
+        }

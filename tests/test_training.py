@@ -1,0 +1,159 @@
+"""HZD-RL training and evaluation: the policy-in-the-loop walk, the acceptance checks, the
+trainers (ES, PPO) through ``scripts/train.py``, and the shipped policy."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from rabbit_policy.acceptance import ACCEPTANCE_SPEEDS, acceptance, reach_times
+from rabbit_policy.env import RabbitHZDEnv
+from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.network import PolicyCheckpoint
+from rabbit_policy.policies import LearnedPolicy, LibraryPolicy, make_policy, packaged_policy_file
+from rabbit_policy.policy_walk import PolicyWalk, StepRecord, walk_policy
+from rabbit_policy.walking import walk_gait
+
+ROOT = Path(__file__).resolve().parents[1]
+LIBRARY = GaitLibrary.load()
+
+
+def run_script(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+
+
+# ------------------------------------------------------------------ policy in the loop
+def test_walk_with_a_library_policy_matches_the_plain_gait_walk():
+    gait = LIBRARY.nearest(1.1)
+    walk = walk_policy(LibraryPolicy(LIBRARY, "nearest"), ((0.0, gait.speed),), 10.0)
+    plain = walk_gait(gait, 10.0)
+    assert not walk.fell and walk.rejected == 0
+    assert len(walk.steps) == plain.steps
+    assert walk.mean_speed(5.0) == pytest.approx(plain.mean_speed, abs=0.01)
+    # the one-step averages are the step's mean hip speed and sit on the gait's speed
+    assert np.mean([s.mean_speed for s in walk.steps[-5:]]) == pytest.approx(gait.speed, abs=0.06)
+
+
+def test_speed_schedule_and_a_fatal_push_are_applied():
+    policy = LibraryPolicy(LIBRARY, "nearest")
+    walk = walk_policy(policy, ((0.0, 0.8), (4.0, 1.2)), 8.0)
+    assert set(np.unique(walk.desired_speed)) == {0.8, 1.2}
+    assert walk.desired_speed[walk.times < 4.0 - 1e-6].max() == 0.8
+    from rabbit_policy.scenario import Push
+
+    pushed = walk_policy(policy, ((0.0, 1.0),), 6.0, pushes=(Push(2.0, -400.0, 0.2),))
+    assert pushed.fell and 2.0 < pushed.fall_time < 6.0
+    with pytest.raises(ValueError, match="start at t = 0"):
+        walk_policy(policy, ((1.0, 1.0),), 1.0)
+
+
+def test_reach_times_take_the_first_step_inside_the_tolerance_after_the_change():
+    steps = [StepRecord(t, v, 0.0, 50.0) for t, v in
+             [(0.5, 0.79), (1.0, 0.81), (1.5, 0.9), (2.0, 1.0), (2.5, 1.16), (3.0, 1.21), (3.5, 1.2)]]
+    walk = PolicyWalk(False, None, np.array([3.5]), np.array([1.2]), np.array([1.2]), steps)
+    # the step ending at 1.5 s started at 1.0 s, before the change at 1.2 s: not counted
+    assert reach_times(walk, ((0.0, 0.8), (1.2, 1.2)), 0.05) == [pytest.approx(0.5), pytest.approx(1.3)]
+    assert reach_times(walk, ((0.0, 0.8), (1.2, 1.5)), 0.05) == [pytest.approx(0.5), None]
+
+
+def test_env_reset_options_fix_the_two_commands():
+    env = RabbitHZDEnv(max_steps=4)
+    obs, info = env.reset(seed=3, options={"desired_speed": 0.8, "next_speed": 1.4})
+    assert info["desired_speed"] == obs[0] == pytest.approx(0.8)
+    seen = []
+    for _ in range(4):
+        obs, _r, _te, _tr, info = env.step(np.float32(0.5) * (env.bounds.low + env.bounds.high))
+        seen.append(float(obs[0]))
+    assert seen[-1] == pytest.approx(1.4) and seen[0] == pytest.approx(0.8)
+    with pytest.raises(ValueError, match="outside"):
+        env.reset(options={"desired_speed": 2.0})
+
+
+# ------------------------------------------------------------------------- trainers
+def read_csv(path: Path) -> list[dict]:
+    with path.open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
+    common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
+              "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1"]
+    straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2")
+    assert straight.returncode == 0, straight.stderr
+    log = read_csv(tmp_path / "a" / "log.csv")
+    assert [int(r["iteration"]) for r in log] == [1, 2]
+    for key in ("episode_return", "mean_abs_error", "fall_fraction", "env_steps", "wall_s"):
+        assert key in log[0]
+    evals = read_csv(tmp_path / "a" / "eval.csv")
+    assert [int(r["iteration"]) for r in evals] == [0, 2]  # the warm start, then every 2
+    assert int(evals[0]["failures"]) >= 0 and (tmp_path / "a" / "best.pt").is_file()
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert summary["info"]["algorithm"] == "es" and summary["info"]["parameters"] == 633
+
+    first = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "1", "--eval-every", "0")
+    assert first.returncode == 0, first.stderr
+    again = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "2", "--eval-every", "0")
+    assert again.returncode == 2 and "not empty" in again.stderr
+    resumed = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "2", "--eval-every", "0",
+                         "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    a = PolicyCheckpoint.load(tmp_path / "a" / "policy.pt").state_dict
+    b = PolicyCheckpoint.load(tmp_path / "b" / "policy.pt").state_dict
+    assert all(torch.equal(a[k], b[k]) for k in a)  # 1 + resumed 1 == 2 straight
+    assert make_policy("learned", policy_file=tmp_path / "b" / "policy.pt").name == "learned/policy.pt"
+
+
+def test_train_ppo_runs_is_deterministic_and_refuses_a_foreign_resume(tmp_path):
+    common = ["scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
+              "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
+              "--no-progress", "--iterations", "2"]
+    results = [run_script(*common, "--out", str(tmp_path / name)) for name in ("a", "b")]
+    assert all(r.returncode == 0 for r in results), results[0].stderr
+    log = read_csv(tmp_path / "a" / "log.csv")
+    assert [int(r["iteration"]) for r in log] == [1, 2] and int(log[-1]["env_steps"]) == 24
+    for key in ("policy_loss", "value_loss", "clip_fraction", "mean_abs_error"):
+        assert np.isfinite(float(log[-1][key]))
+    a = PolicyCheckpoint.load(tmp_path / "a" / "policy.pt")
+    b = PolicyCheckpoint.load(tmp_path / "b" / "policy.pt")
+    assert all(torch.equal(a.state_dict[k], b.state_dict[k]) for k in a.state_dict)
+    assert a.info["algorithm"] == "ppo"
+    wrong = run_script("scripts/train.py", "--algo", "es", "--out", str(tmp_path / "a"), "--resume")
+    assert wrong.returncode == 2 and "is an ppo run" in wrong.stderr
+
+
+# ------------------------------------------------------------------- shipped policy
+def test_a_learned_policy_is_shipped_with_a_model_card():
+    path = packaged_policy_file()
+    assert path.is_file()
+    assert (path.parent / "MODEL_CARD.md").is_file()
+    policy = make_policy("learned")
+    assert isinstance(policy, LearnedPolicy)
+    info = policy.checkpoint.info
+    assert info["algorithm"] in ("es", "ppo") and info["parameters"] == 633
+
+
+def test_the_shipped_policy_passes_the_acceptance_checks():
+    result = acceptance(make_policy("learned"))
+    table = [(c["speed"], c["fell"], c["error"]) for c in result["constant"]]
+    assert [c["speed"] for c in result["constant"]] == list(ACCEPTANCE_SPEEDS)
+    assert all(c["passed"] for c in result["constant"]), table
+    assert result["schedule"]["passed"], result["schedule"]
+    assert result["passed"]
+
+
+def test_walk_script_runs_the_learned_policy():
+    out = run_script("scripts/walk.py", "--controller", "rl", "--speed", "1.3", "--duration", "12", "--json",
+                     timeout=120)
+    assert out.returncode == 0, out.stderr
+    summary = json.loads(out.stdout)
+    assert summary["controller"] == "rl" and summary["fell"] is False
+    assert summary["mean_speed"] == pytest.approx(1.3, abs=0.05)
+    missing = run_script("scripts/walk.py", "--controller", "rl", "--policy-file", "/nonexistent.pt")
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
