@@ -40,13 +40,13 @@ def env_throughput(steps: int, seed: int = 0) -> tuple[float, float]:
 
     from rabbit_policy.env import RabbitHZDEnv
     from rabbit_policy.network import HZDPolicyNet
-    from rabbit_policy.warm_start import warm_start
+    from rabbit_policy.warm_start import WARM_STARTS, warm_start
 
     torch.set_num_threads(1)
     torch.manual_seed(seed)
     env = RabbitHZDEnv(max_steps=30)
     net = HZDPolicyNet(env.bounds.low, env.bounds.high)
-    warm_start(net, env.library, seed=seed, iterations=500)
+    warm_start(net, env.library, seed=seed, config=WARM_STARTS["interpolate"])
     obs, _ = env.reset(seed=seed)
     sim_time, episode_start = 0.0, 0.0
     start = time.perf_counter()

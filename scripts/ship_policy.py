@@ -6,7 +6,7 @@
 Runs the acceptance checks (``rabbit_policy.acceptance``) on the policy file, and on each
 ``--compare`` file and the classic HZD library for the card's evaluation table, then copies
 the file to ``src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt`` and writes
-``MODEL_CARD.md`` beside it (algorithm, seed, workers, training time and steps from the
+``MODEL_CARD.md`` and ``evaluation.json`` (every figure of the table) beside it (algorithm, seed, workers, training time and steps from the
 checkpoint's ``info``, the evaluation table). Refuses a policy that fails the checks unless
 ``--allow-failing``. ``--dry-run`` prints the card without writing anything.
 """
@@ -110,6 +110,7 @@ def main(argv: list[str] | None = None) -> int:
         TARGET.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(args.policy, TARGET / "hzd_rl_policy.pt")
         (TARGET / "MODEL_CARD.md").write_text(card)
+        (TARGET / "evaluation.json").write_text(json.dumps(dict(results), indent=1) + "\n")
         print(f"shipped to {TARGET / 'hzd_rl_policy.pt'}", file=sys.stderr)
     return 0
 

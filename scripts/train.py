@@ -6,8 +6,8 @@
     scripts/train.py ... --resume          # continue from OUT/checkpoint.pt
 
 Both start from the same network warm-started on the classic gait library
-(``rabbit_policy.warm_start``, a few seconds; ``--no-warm-start`` starts from random
-weights). ES: ``rabbit_policy.es`` (antithetic pairs, centred ranks, Adam; one iteration =
+(``rabbit_policy.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
+``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.es`` (antithetic pairs, centred ranks, Adam; one iteration =
 one generation; ``--workers`` processes evaluate the population). PPO:
 ``rabbit_policy.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
 of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
@@ -18,8 +18,9 @@ Outputs in OUT:
 * ``eval.csv``: every ``--eval-every`` iterations the current deterministic policy runs
   the acceptance checks (``rabbit_policy.acceptance``: 9 constant speeds x 30 s and the
   0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
-* ``policy.pt``: the latest policy; ``best.pt``: the policy that did best on the
-  acceptance checks so far (the file to ship); ``checkpoint.pt``: everything needed to
+* ``policy.pt``: the latest policy; ``best.pt``: the trained policy (iteration >= 1; the
+  warm start is evaluated at iteration 0 as a baseline only) that did best on the
+  acceptance checks so far (fewest failed checks, then smallest summed error); ``checkpoint.pt``: everything needed to
   ``--resume`` (written every ``--checkpoint-every`` iterations, at the end, on Ctrl-C and
   on SIGTERM); ``summary.json``: when the acceptance first passed (iteration, wall time,
   env steps) and the best result.
@@ -51,7 +52,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--checkpoint-every", type=int, default=5)
     parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
     parser.add_argument("--stop-when-passed", action="store_true")
-    parser.add_argument("--no-warm-start", action="store_true")
+    parser.add_argument("--warm-start", choices=("scheduled", "interpolate", "none"), default="scheduled",
+                        help="fit the network to the classic library first (rabbit_policy.warm_start)")
     parser.add_argument("--no-progress", action="store_true", help="plain lines instead of a progress bar")
     parser.add_argument("--resume", action="store_true")
     es = parser.add_argument_group("ES")
@@ -66,6 +68,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     ppo.add_argument("--minibatches", type=int, default=4)
     ppo.add_argument("--ppo-lr", type=float, default=1e-4)
     ppo.add_argument("--target-kl", type=float, default=0.02, help="early stop of the epochs (0: off)")
+    ppo.add_argument("--gae-lambda", type=float, default=0.95)
+    ppo.add_argument("--gamma", type=float, default=0.99, help="discount (the paper: 0.99)")
     ppo.add_argument("--init-log-std", type=float, default=-3.5, help="initial log std (normalised units)")
     args = parser.parse_args(argv)
     if min(args.workers, args.iterations, args.max_steps, args.checkpoint_every) < 1 or args.eval_every < 0:
@@ -87,7 +91,7 @@ def make_trainer(args: argparse.Namespace, net):
 
     config = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
                        lr=args.ppo_lr, init_log_std=args.init_log_std,
-                       target_kl=args.target_kl or None, max_steps=args.max_steps, seed=args.seed)
+                       target_kl=args.target_kl or None, gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed)
     return PPOTrainer(net, config), config
 
 
@@ -123,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.gait_library import GaitLibrary
     from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
     from rabbit_policy.policies import NetworkPolicy
-    from rabbit_policy.warm_start import warm_start
+    from rabbit_policy.warm_start import WARM_STARTS, warm_start
 
     start = time.perf_counter()  # wall time includes the warm start and the evaluations
     torch.set_num_threads(1)
@@ -139,9 +143,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
             return 2
         net.load_state_dict(state["net"])
-    elif not args.no_warm_start:
-        mse = warm_start(net, library, seed=args.seed)
-        print(f"warm start on the classic gait library: mse {mse:.2e} (normalised action units)", flush=True)
+    elif args.warm_start != "none":
+        mse = warm_start(net, library, seed=args.seed, config=WARM_STARTS[args.warm_start])
+        print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
+              "(normalised action units)", flush=True)
     eval_pool = get_context("fork").Pool(args.workers) if args.eval_every else None
     trainer, config = make_trainer(args, net)
     if state:
@@ -156,7 +161,7 @@ def main(argv: list[str] | None = None) -> int:
     def info(extra: dict | None = None) -> dict:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
                 "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config.to_dict(),
-                "warm_start": not args.no_warm_start, "parameters": parameter_count(net), **(extra or {})}
+                "warm_start": args.warm_start, "parameters": parameter_count(net), **(extra or {})}
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
@@ -172,7 +177,8 @@ def main(argv: list[str] | None = None) -> int:
         append_csv(out / "eval.csv", row)
         if result["passed"] and first_pass is None:
             first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
-        if best is None or list(acceptance_rank(result)) < best["rank"]:
+        baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
+        if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
             best = {**row, "rank": list(acceptance_rank(result))}
             PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result})).save(
                 out / "best.pt")

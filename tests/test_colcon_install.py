@@ -70,12 +70,12 @@ def test_installed_executable_runs_and_reports_bad_parameters(install_space):
 
 def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
     params = tmp_path / "policy.yaml"
-    params.write_text("policy_node:\n  ros__parameters:\n    policy: learned\n")
+    params.write_text("policy_node:\n  ros__parameters:\n    policy: learned\n    policy_file: /nonexistent/p.pt\n")
     result = subprocess.run(
         [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "--params-file", str(params)],
         capture_output=True, text=True, timeout=60,
     )
-    assert result.returncode == 1 and "no learned HZD-RL policy" in result.stdout
+    assert result.returncode == 1 and "policy file /nonexistent/p.pt does not exist" in result.stdout
     result = subprocess.run(
         [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "-p", "min_speed:=2.0"],
         capture_output=True, text=True, timeout=60,

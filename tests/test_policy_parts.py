@@ -101,8 +101,8 @@ def test_policies():
     command = policy.act(Observation(1.05, 0.9, 0.15))
     expected = library.interpolate(1.05)
     assert command.alpha == expected.alpha and command.kd == expected.kd
-    with pytest.raises(PolicyUnavailable):
-        make_policy("learned")
+    with pytest.raises(PolicyUnavailable, match="does not exist"):
+        make_policy("learned", policy_file="/nonexistent/policy.pt")
     with pytest.raises(ValueError):
         make_policy("library", mode="best")
 
