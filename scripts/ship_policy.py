@@ -49,6 +49,31 @@ def evaluation_table(results: list[tuple[str, dict]]) -> list[str]:
     return lines
 
 
+CLI_FLAGS = {  # training configuration key -> scripts/train.py flag
+    "es": {"pairs": "--pairs", "sigma": "--sigma", "lr": "--lr", "episodes": "--episodes",
+           "max_steps": "--max-steps"},
+    "ppo": {"envs": "--envs", "steps": "--steps", "epochs": "--epochs", "minibatches": "--minibatches",
+            "lr": "--ppo-lr", "gamma": "--gamma", "gae_lambda": "--gae-lambda", "target_kl": "--target-kl",
+            "init_log_std": "--init-log-std", "max_steps": "--max-steps"},
+}
+
+
+def train_command(info: dict) -> str:
+    """The ``scripts/train.py`` command line that reproduces a checkpoint (deterministic
+    for the seed and worker count; ``best.pt`` also depends on ``--eval-every``)."""
+    algo = info.get("algorithm")
+    parts = ["scripts/train.py", "--algo", str(algo), "--seed", str(info.get("seed")), "--workers",
+             str(info.get("workers")), "--warm-start", str(info.get("warm_start")), "--iterations",
+             str(info.get("iteration"))]
+    if info.get("eval_every") is not None:
+        parts += ["--eval-every", str(info["eval_every"])]
+    for key, flag in CLI_FLAGS.get(algo, {}).items():
+        value = info.get("config", {}).get(key)
+        if value is not None:
+            parts += [flag, str(value)]
+    return " ".join(parts + ["--out", "runs/X"])
+
+
 def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
     cfg = info.get("config", {})
     lines = [
@@ -66,9 +91,9 @@ def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
         f"- configuration: `{json.dumps(cfg)}`",
         "- environment: `RabbitHZD-v0` (one env step = one walking step; reward −(v̄ − v_d)², "
         "fall penalty −10; v_d uniform in [0.7, 1.5] m/s, changed once per episode)",
-        "- regenerate: `scripts/train.py --algo {algo} --seed {seed} --workers {workers} --out runs/X` "
-        "with the configuration above, then `scripts/ship_policy.py runs/X/best.pt`".format(
-            algo=info.get("algorithm"), seed=info.get("seed"), workers=info.get("workers")),
+        f"- regenerate: `{train_command(info)}`, then `scripts/ship_policy.py runs/X/best.pt` "
+        "(this file is that run's `best.pt`: the evaluated iteration with the fewest failed "
+        "acceptance checks)",
         "", "## Evaluation (ROS-free fast path, `rabbit_policy.acceptance`)", "",
         *evaluation_table(results), "",
         "Limits: trained and evaluated on the `paper` model only (not `drives`), flat ground, "

@@ -161,7 +161,8 @@ def main(argv: list[str] | None = None) -> int:
     def info(extra: dict | None = None) -> dict:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
                 "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config.to_dict(),
-                "warm_start": args.warm_start, "parameters": parameter_count(net), **(extra or {})}
+                "warm_start": args.warm_start, "eval_every": args.eval_every,
+                "parameters": parameter_count(net), **(extra or {})}
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),

@@ -81,3 +81,12 @@ def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 1 and "min_speed (2.0) must be below max_speed" in result.stdout
+
+
+def test_the_install_space_carries_the_package_data(install_space):
+    """The gait library and the shipped HZD-RL policy + model card are installed."""
+    site = list((install_space / "rabbit_policy" / "lib").glob("python3*/site-packages/rabbit_policy"))
+    assert len(site) == 1, site
+    assert len(list((site[0] / "gaits").glob("gait_*.json"))) == 9
+    for name in ("hzd_rl_policy.pt", "MODEL_CARD.md", "evaluation.json"):
+        assert (site[0] / "trained" / name).is_file(), name

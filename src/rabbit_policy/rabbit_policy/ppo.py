@@ -240,5 +240,5 @@ class PPOTrainer:
             "value_loss": float(np.mean(value_losses)),
             "clip_fraction": float(np.mean(clip_fractions)),
             "approx_kl": approx_kl,
-            "log_std": float(self.policy.log_std.mean()),
+            "log_std": self.policy.log_std.detach().mean().item(),
         }
