@@ -1,6 +1,7 @@
 # rabbit-hzd: two commands for a fresh machine (see README).
 #   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks, changing speed
 #   make test   set up .venv if needed, then run the whole test suite
+#   make bench  the benchmarks (simulation, ROS stack, training throughput), JSON lines
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -29,6 +30,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(PY) scripts/bench_sim.py
 	$(PY) scripts/bench_stack.py
+	$(PY) scripts/bench_train.py
 
 clean:
 	rm -rf $(VENV) build install log .pytest_cache

@@ -124,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.acceptance import acceptance, acceptance_rank
     from rabbit_policy.env import ActionBounds
+    from rabbit_policy.es import ignore_interrupts
     from rabbit_policy.gait_library import GaitLibrary
     from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
     from rabbit_policy.policies import NetworkPolicy
@@ -147,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
         mse = warm_start(net, library, seed=args.seed, config=WARM_STARTS[args.warm_start])
         print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
               "(normalised action units)", flush=True)
-    eval_pool = get_context("fork").Pool(args.workers) if args.eval_every else None
+    eval_pool = get_context("fork").Pool(args.workers, initializer=ignore_interrupts) if args.eval_every else None
     trainer, config = make_trainer(args, net)
     if state:
         trainer.load_state_dict(state["trainer"])
@@ -195,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
                dynamic_ncols=True)
     if args.no_progress:
         bar.write = print  # type: ignore[method-assign]
+    interrupted = False
     try:
         if args.eval_every and trainer.iteration == 0:
             evaluate()  # the starting point (warm start) as a baseline
@@ -213,13 +215,17 @@ def main(argv: list[str] | None = None) -> int:
             if trainer.iteration % args.checkpoint_every == 0:
                 save_checkpoint()
     except KeyboardInterrupt:
+        interrupted = True
         bar.write("interrupted: saving a checkpoint")
     finally:
         bar.close()
         save_checkpoint()
-        trainer.close()
+        trainer.close(terminate=interrupted)
         if eval_pool is not None:
-            eval_pool.close()
+            if interrupted:
+                eval_pool.terminate()
+            else:
+                eval_pool.close()
             eval_pool.join()
     print(json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
                       "wall_s": round(wall(), 1), "first_pass": first_pass,

@@ -164,3 +164,39 @@ def test_walk_script_runs_the_learned_policy():
     assert summary["mean_speed"] == pytest.approx(1.3, abs=0.05)
     missing = run_script("scripts/walk.py", "--controller", "rl", "--policy-file", "/nonexistent.pt")
     assert missing.returncode == 2 and "does not exist" in missing.stderr
+
+
+@pytest.mark.parametrize("algo, sig", [("es", "SIGINT"), ("ppo", "SIGTERM")])
+def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig):
+    """Ctrl-C reaches the whole process group, SIGTERM only the main process: either way
+    a checkpoint is written, the workers are gone and the exit is clean."""
+    import os
+    import signal
+    import time
+
+    small = (["--pairs", "2", "--episodes", "1"] if algo == "es" else ["--envs", "2", "--steps", "4"])
+    proc = subprocess.Popen(
+        [sys.executable, "scripts/train.py", "--algo", algo, "--workers", "2", "--out", str(tmp_path / "run"),
+         "--iterations", "100000", "--max-steps", "4", "--eval-every", "3", "--no-progress",
+         "--warm-start", "interpolate", *small],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not (tmp_path / "run" / "log.csv").exists() or len(read_csv(tmp_path / "run" / "log.csv")) < 2:
+            assert time.monotonic() < deadline and proc.poll() is None, proc.stderr.read() if proc.poll() else ""
+            time.sleep(0.2)
+        if sig == "SIGINT":
+            os.killpg(proc.pid, signal.SIGINT)
+        else:
+            proc.send_signal(signal.SIGTERM)
+        _out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    assert "interrupted: saving a checkpoint" in _out + err and "Traceback" not in err
+    state = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)
+    assert state["algo"] == algo and state["trainer"]["env_steps"] > 0
+    time.sleep(0.5)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(proc.pid, 0)  # no worker of the group is left

@@ -17,6 +17,7 @@ deterministic for a given seed and worker count.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+import signal
 from multiprocessing import get_context
 
 import numpy as np
@@ -55,7 +56,14 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 _WORKER: dict = {}
 
 
+def ignore_interrupts() -> None:
+    """For worker processes: Ctrl-C (SIGINT to the whole process group) is the parent's
+    to handle; it then stops the workers itself."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _init_worker(max_steps: int) -> None:
+    ignore_interrupts()
     torch.set_num_threads(1)
     env = RabbitHZDEnv(max_steps=max_steps)
     _WORKER["env"] = env
@@ -163,8 +171,12 @@ class EvolutionStrategy:
         ctx = get_context("fork")
         self.pool = ctx.Pool(config.workers, initializer=_init_worker, initargs=(config.max_steps,))
 
-    def close(self) -> None:
-        self.pool.close()
+    def close(self, terminate: bool = False) -> None:
+        """Stop the worker pool (``terminate``: at once, after an interruption)."""
+        if terminate:
+            self.pool.terminate()
+        else:
+            self.pool.close()
         self.pool.join()
 
     def step(self) -> dict[str, float]:

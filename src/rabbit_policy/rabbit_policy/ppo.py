@@ -30,6 +30,7 @@ import torch
 from torch import nn
 
 from .env import RabbitHZDEnv
+from .es import ignore_interrupts
 from .network import HZDPolicyNet
 
 
@@ -95,7 +96,11 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
 
 
 def _make_env(max_steps: int):
-    return lambda: RabbitHZDEnv(max_steps=max_steps)
+    def make() -> RabbitHZDEnv:  # runs in the environment's worker process
+        ignore_interrupts()
+        return RabbitHZDEnv(max_steps=max_steps)
+
+    return make
 
 
 class PPOTrainer:
@@ -120,8 +125,9 @@ class PPOTrainer:
         self._episode_return = np.zeros(config.envs)
         self._episode_length = np.zeros(config.envs, dtype=int)
 
-    def close(self) -> None:
-        self.envs.close()
+    def close(self, terminate: bool = False) -> None:
+        """Stop the environment processes (``terminate``: at once, after an interruption)."""
+        self.envs.close(terminate=terminate)
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
