@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.duration > 0:
         parser.error("--duration must be > 0")
 
-    from rabbit_policy.acceptance import reach_times
+    from rabbit_policy.acceptance import segment_summaries
     from rabbit_policy.gait_library import GaitLibrary
     from rabbit_policy.policies import PolicyUnavailable, make_policy
     from rabbit_policy.policy_walk import walk_policy
@@ -71,6 +71,7 @@ def main(argv: list[str] | None = None) -> int:
         except (PolicyUnavailable, ValueError) as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        start = time.perf_counter()  # the walk, not loading torch and the policy
         walk = walk_policy(policy, schedule, args.duration, model_variant=args.model)
         fell = walk.fell
         half = 0.5 * args.duration
@@ -78,12 +79,7 @@ def main(argv: list[str] | None = None) -> int:
                    "fall_time": walk.fall_time, "duration": walk.duration, "steps": len(walk.steps),
                    "mean_speed": None if walk.fell else walk.mean_speed(half), "rejected": walk.rejected}
         if args.schedule:
-            bounds = [t for t, _ in schedule[1:]] + [args.duration]
-            summary["segments"] = [
-                {"start": t, "speed": v, "reach_time": reach,
-                 "mean_speed_second_half": walk.mean_speed(0.5 * (t + end), end)}
-                for (t, v), end, reach in zip(schedule, bounds, reach_times(walk, schedule, args.tolerance))
-                if t < args.duration]
+            summary["segments"] = segment_summaries(walk, schedule, args.duration, args.tolerance)
     wall = time.perf_counter() - start
     summary = {"model": args.model, "commanded_speed": None if args.schedule else args.speed,
                **summary, "real_time_factor": summary["duration"] / wall if wall > 0 else None}
@@ -100,8 +96,9 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{key.replace('_', ' '):15s} {summary[key]:.3f}")
         for seg in summary.get("segments", []):
             reach = "not reached" if seg["reach_time"] is None else f"reached in {seg['reach_time']:.2f} s"
-            print(f"  from {seg['start']:5.1f} s  {seg['speed']:.2f} m/s  {reach}, "
-                  f"second-half mean {seg['mean_speed_second_half']:.3f} m/s")
+            mean = seg["mean_speed_second_half"]
+            print(f"  from {seg['start']:5.1f} s  {seg['speed']:.2f} m/s  {reach}, second-half mean "
+                  + ("—" if mean is None else f"{mean:.3f} m/s"))
         print(f"simulated       {summary['duration']:.1f} s in {wall:.1f} s wall "
               f"({summary['real_time_factor']:.0f}x real time)")
     return 1 if fell else 0

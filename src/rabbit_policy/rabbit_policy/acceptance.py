@@ -69,19 +69,31 @@ def reach_times(walk: PolicyWalk, schedule: tuple[tuple[float, float], ...], tol
     return result
 
 
-def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] = ACCEPTANCE_SCHEDULE,
-                   criteria: Criteria = Criteria(), model_variant: str = "paper") -> dict:
-    """Walk the speed schedule; per segment: time to reach, mean error over its last half."""
-    duration = schedule[-1][0] + criteria.segment_duration
-    walk = walk_policy(policy, schedule, duration, model_variant=model_variant)
-    times = reach_times(walk, schedule, criteria.speed_tolerance)
+def segment_summaries(walk: PolicyWalk, schedule: tuple[tuple[float, float], ...], duration: float,
+                      tolerance: float) -> list[dict]:
+    """Per schedule segment (starting before ``duration``): start (s), speed (m/s), time to
+    reach it (s, None if never, see :func:`reach_times`) and the mean hip speed over the
+    segment's second half (m/s, None if the walk ended before)."""
     bounds = [t for t, _ in schedule[1:]] + [duration]
     segments = []
-    for (start, speed), end, reach in zip(schedule, bounds, times):
+    for (start, speed), end, reach in zip(schedule, bounds, reach_times(walk, schedule, tolerance)):
+        if start >= duration:
+            break
         mean = walk.mean_speed(0.5 * (start + end), end)
         segments.append({"start": start, "speed": speed, "reach_time": reach,
-                         "mean_speed_second_half": None if np.isnan(mean) else mean,
-                         "passed": reach is not None and reach <= criteria.reach_within})
+                         "mean_speed_second_half": None if np.isnan(mean) else mean})
+    return segments
+
+
+def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] = ACCEPTANCE_SCHEDULE,
+                   criteria: Criteria = Criteria(), model_variant: str = "paper") -> dict:
+    """Walk the speed schedule; per segment: time to reach, mean over its second half."""
+    duration = schedule[-1][0] + criteria.segment_duration
+    walk = walk_policy(policy, schedule, duration, model_variant=model_variant)
+    segments = segment_summaries(walk, schedule, duration, criteria.speed_tolerance)
+    for segment in segments:
+        reach = segment["reach_time"]
+        segment["passed"] = reach is not None and reach <= criteria.reach_within
     return {
         "schedule": [list(s) for s in schedule],
         "fell": walk.fell,
