@@ -7,7 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from rabbit_policy.poincare import analyse_return_map, finite_difference_jacobian, section_crossing
+from rabbit_policy.poincare import (
+    analyse_return_map,
+    finite_difference_jacobian,
+    regression_jacobian,
+    section_crossing,
+)
 
 
 def test_linear_map_with_a_complex_pair_and_a_real_eigenvalue():
@@ -66,8 +71,29 @@ def test_limit_cycle_multiplier_of_a_sampled_flow_through_an_interpolated_sectio
     assert result.magnitudes[0] == pytest.approx(math.exp(-2.0), rel=1e-3)
 
 
+def test_regression_jacobian_sees_through_sample_grain_jumps():
+    """A linear map plus a square wave of +-1e-4 on a 1e-3 grain (as a 1 ms simulation
+    sampling an event; zero mean slope): central differences across a jump are ruined, the
+    regression over moderate perturbations recovers the eigenvalues."""
+    a = np.array([[0.5, 0.2], [-0.1, 0.8]])
+    grain = lambda v: 1e-4 * (-1.0) ** np.floor(v / 1e-3)  # noqa: E731  jumps at every 1e-3
+    step = lambda v: a @ v + grain(v[::-1])  # noqa: E731
+    expected = sorted(np.abs(np.linalg.eigvals(a)))
+    x = np.array([0.01234, -0.00567])
+    fd = np.linalg.eigvals(finite_difference_jacobian(step, x, 1e-7))
+    on_a_jump = np.array([0.0130000042, 0.0065])  # x[0] +- 1e-5 crosses the jump at 0.013
+    fd_jumpy = np.linalg.eigvals(finite_difference_jacobian(step, on_a_jump, 1e-5))
+    assert sorted(np.abs(fd)) == pytest.approx(expected, abs=1e-6)  # lucky: no jump within +-1e-7
+    assert max(np.abs(fd_jumpy)) > 1.5  # 2e-4 / 2e-5 = 10 added to J[1, 0]: looks unstable
+    regression = regression_jacobian(step, x, 0.05, samples=400)
+    assert sorted(np.abs(np.linalg.eigvals(regression))) == pytest.approx(expected, abs=0.02)
+    assert np.allclose(regression_jacobian(lambda v: a @ v, x, 0.01), a)  # exact on a linear map
+
+
 def test_bad_inputs_are_refused():
     with pytest.raises(ValueError, match="> 0"):
         finite_difference_jacobian(lambda x: x, np.zeros(2), 0.0)
+    with pytest.raises(ValueError, match="at least 2 samples"):
+        regression_jacobian(lambda x: x, np.zeros(2), 0.1, samples=1)
     with pytest.raises(ValueError, match="no crossing"):
         section_crossing(1.0, 2.0, np.zeros(1), np.ones(1))
