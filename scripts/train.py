@@ -20,10 +20,11 @@ Outputs in OUT:
   0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
 * ``policy.pt``: the latest policy; ``best.pt``: the trained policy (iteration >= 1; the
   warm start is evaluated at iteration 0 as a baseline only) that did best on the
-  acceptance checks so far (fewest failed checks, then smallest summed error); ``checkpoint.pt``: everything needed to
-  ``--resume`` (written every ``--checkpoint-every`` iterations, at the end, on Ctrl-C and
-  on SIGTERM); ``summary.json``: when the acceptance first passed (iteration, wall time,
-  env steps) and the best result.
+  acceptance checks so far (fewest failed checks, then smallest summed error);
+  ``checkpoint.pt``: everything needed to ``--resume`` (written every
+  ``--checkpoint-every`` iterations, at the end, on Ctrl-C and on SIGTERM — then the
+  worker processes are killed); ``summary.json``: when the acceptance first passed
+  (iteration, wall time, env steps) and the best result.
 ``--stop-when-passed`` ends training at the first passing evaluation.
 Deterministic for a given seed and worker count (ES: exactly, also across --resume; PPO:
 a resumed run starts fresh episodes).
@@ -34,9 +35,12 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import signal
 import sys
+import threading
 import time
+from multiprocessing import active_children
 from pathlib import Path
 
 
@@ -220,17 +224,43 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         bar.close()
         save_checkpoint()
-        trainer.close(terminate=interrupted)
-        if eval_pool is not None:
-            if interrupted:
-                eval_pool.terminate()
-            else:
+        if not interrupted:
+            trainer.close()
+            if eval_pool is not None:
                 eval_pool.close()
-            eval_pool.join()
+                eval_pool.join()
     print(json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
                       "wall_s": round(wall(), 1), "first_pass": first_pass,
                       "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
+    if interrupted:
+        stop_workers(trainer, eval_pool)
     return 0
+
+
+def stop_workers(trainer, eval_pool) -> None:
+    """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
+    them from starting replacement workers), kill and reap whatever worker is left, and
+    leave without multiprocessing's exit handlers. ``Pool.terminate()`` can block on a
+    queue lock held by an interrupted worker (an ES run hung on Ctrl-C once in CI), so it
+    gets a few seconds in a thread and the kill does not depend on it."""
+    def terminate() -> None:
+        trainer.close(terminate=True)
+        if eval_pool is not None:
+            eval_pool.terminate()
+
+    stopper = threading.Thread(target=terminate, daemon=True)
+    stopper.start()
+    stopper.join(timeout=5.0)
+    for _ in range(2):  # a second pass for a replacement started meanwhile
+        children = active_children()
+        for child in children:
+            child.kill()
+        for child in children:
+            child.join(timeout=5.0)  # reap: no zombies left behind
+        time.sleep(0.2)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def append_csv(path: Path, row: dict) -> None:

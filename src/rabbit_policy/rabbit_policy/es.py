@@ -172,11 +172,11 @@ class EvolutionStrategy:
         self.pool = ctx.Pool(config.workers, initializer=_init_worker, initargs=(config.max_steps,))
 
     def close(self, terminate: bool = False) -> None:
-        """Stop the worker pool (``terminate``: at once, after an interruption)."""
+        """Stop the worker pool (``terminate``: at once, without joining; after Ctrl-C)."""
         if terminate:
             self.pool.terminate()
-        else:
-            self.pool.close()
+            return
+        self.pool.close()
         self.pool.join()
 
     def step(self) -> dict[str, float]:

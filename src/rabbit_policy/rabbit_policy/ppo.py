@@ -126,7 +126,7 @@ class PPOTrainer:
         self._episode_length = np.zeros(config.envs, dtype=int)
 
     def close(self, terminate: bool = False) -> None:
-        """Stop the environment processes (``terminate``: at once, after an interruption)."""
+        """Stop the environment processes (``terminate``: at once; after Ctrl-C)."""
         self.envs.close(terminate=terminate)
 
     # ------------------------------------------------------------------ state
