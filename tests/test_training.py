@@ -166,7 +166,7 @@ def test_walk_script_runs_the_learned_policy():
     assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
-@pytest.mark.parametrize("algo, sig", [("es", "SIGINT"), ("ppo", "SIGTERM")])
+@pytest.mark.parametrize("algo, sig", [("es", "SIGINT"), ("ppo", "SIGINT"), ("ppo", "SIGTERM")])
 def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig):
     """Ctrl-C reaches the whole process group, SIGTERM only the main process: either way
     a checkpoint is written, the workers are gone and the exit is clean."""
@@ -179,7 +179,10 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig):
         [sys.executable, "scripts/train.py", "--algo", algo, "--workers", "2", "--out", str(tmp_path / "run"),
          "--iterations", "100000", "--max-steps", "4", "--eval-every", "3", "--no-progress",
          "--warm-start", "interpolate", *small],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        # as from a terminal: a suite started in the background (`cmd &` in a script) has
+        # SIGINT ignored, which children inherit, and Python then installs no handler
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 120
         while not (tmp_path / "run" / "log.csv").exists() or len(read_csv(tmp_path / "run" / "log.csv")) < 2:

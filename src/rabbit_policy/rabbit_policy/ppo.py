@@ -23,6 +23,7 @@ from the seed, sampling uses a seeded torch generator, and the update is single-
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from multiprocessing import parent_process
 
 import gymnasium as gym
 import numpy as np
@@ -96,8 +97,9 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
 
 
 def _make_env(max_steps: int):
-    def make() -> RabbitHZDEnv:  # runs in the environment's worker process
-        ignore_interrupts()
+    def make() -> RabbitHZDEnv:
+        if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
+            ignore_interrupts()
         return RabbitHZDEnv(max_steps=max_steps)
 
     return make
