@@ -241,8 +241,9 @@ def stop_workers(trainer, eval_pool) -> None:
     """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
     them from starting replacement workers), kill and reap whatever worker is left, and
     leave without multiprocessing's exit handlers. ``Pool.terminate()`` can block on a
-    queue lock held by an interrupted worker (an ES run hung on Ctrl-C once in CI), so it
-    gets a few seconds in a thread and the kill does not depend on it."""
+    queue lock held by an interrupted worker (runs hung after ``pkill -f train.py``, which
+    signals the workers too), so it gets a few seconds in a thread and the kill does not
+    depend on it."""
     def terminate() -> None:
         trainer.close(terminate=True)
         if eval_pool is not None:
