@@ -35,13 +35,13 @@ import gymnasium as gym
 import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
-from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
-from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController
 from rabbit_sim.model import load_model
 from rabbit_sim.simulation import ClosedLoop
 
 from .gait_library import GaitLibrary
 from .speed_window import SpeedWindow
+from .walking import loop_on_gait
 
 
 @dataclass(frozen=True)
@@ -111,24 +111,27 @@ class RabbitHZDEnv(gym.Env):
                 return False, False
         return False, True
 
+    def _speed_option(self, options: dict, key: str, drawn: float) -> float:
+        """``options[key]`` (m/s) if given and inside the speed range, else ``drawn``."""
+        if key not in options:
+            return drawn
+        value, (lo, hi) = float(options[key]), self.speed_range
+        if not lo <= value <= hi:
+            raise ValueError(f"reset option {key} = {value} is outside [{lo}, {hi}] m/s")
+        return value
+
     # ---------------------------------------------------------------- gym API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         lo, hi = self.speed_range
         options = options or {}
-        self.desired_speed = float(self.np_random.uniform(lo, hi))
-        self._next_speed = float(self.np_random.uniform(lo, hi))
+        first, second = (float(self.np_random.uniform(lo, hi)) for _ in range(2))  # drawn even if given
         self._switch_step = int(self.np_random.integers(self.max_steps // 4, 3 * self.max_steps // 4 + 1))
-        for key in ("desired_speed", "next_speed"):
-            if key in options:
-                value = float(options[key])
-                if not lo <= value <= hi:
-                    raise ValueError(f"reset option {key} = {value} is outside [{lo}, {hi}] m/s")
-                setattr(self, "desired_speed" if key == "desired_speed" else "_next_speed", value)
+        self.desired_speed = self._speed_option(options, "desired_speed", first)
+        self._next_speed = self._speed_option(options, "next_speed", second)
         gait = self.library.nearest(self.desired_speed)
-        self._controller = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp), Leg.LEFT)
-        self._loop = ClosedLoop(self._model, self._controller)
-        self._loop.reset(*state_on_gait(gait.alpha, gait.speed, self._controller.config.geometry))
+        self._loop = loop_on_gait(self._model, gait.alpha, gait.kd, gait.speed, gait.kp)
+        self._controller = self._loop.controller
         self._window = SpeedWindow(self.window_size)
         self._tick = 0
         self._touchdown_tick: int | None = None  # window stamps are ticks

@@ -19,20 +19,19 @@ from typing import Sequence
 
 import numpy as np
 
-from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
-from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_sim.model import load_model
-from rabbit_sim.simulation import ClosedLoop
 
 from .policies import Policy
 from .scenario import Push, validate_schedule
 from .speed_window import Observation, SpeedWindow
+from .walking import loop_on_gait
 
 
 @dataclass(frozen=True)
 class StepRecord:
-    """One completed step: touchdown time (s), mean hip speed over the step (m/s), the
-    commanded speed at the touchdown (m/s) and the Kd the policy chose for the next step."""
+    """One completed step: touchdown time (s), mean hip speed over the step (m/s; the
+    policy's observation: at most ``window`` ticks, a step is 390-730), the commanded
+    speed at the touchdown (m/s) and the Kd the policy chose for the next step."""
 
     time: float
     mean_speed: float
@@ -76,10 +75,8 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
     model = load_model(model_variant)
     speed = float(schedule[0][1])
     first = policy.act(Observation(speed, speed, 0.0))
-    controller = HZDController(first.alpha, first.kd, ControllerConfig(), Leg.LEFT)
-    loop = ClosedLoop(model, controller)
-    loop.reset(*state_on_gait(first.alpha, speed, controller.config.geometry))
-    data, limits = loop.data, loop.limits
+    loop = loop_on_gait(model, first.alpha, first.kd, speed)
+    controller, data, limits = loop.controller, loop.data, loop.limits
     speed_window = SpeedWindow(window)
 
     n = int(round(duration / model.opt.timestep))
@@ -89,7 +86,6 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
     steps: list[StepRecord] = []
     rejected = 0
     fell, fall_time = False, None
-    step_sum, step_ticks = 0.0, 0
     count = 0
     previous_touchdown: int | None = None
     for i in range(n):
@@ -104,20 +100,18 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
         times[i], speeds[i], desired[i] = t, v, speed
         count = i + 1
         speed_window.add(i, v, speed)
-        step_sum += v
-        step_ticks += 1
         if limits.fallen(data.qpos[1], data.qpos[2]):
             fell, fall_time = True, t
             if stop_on_fall:
                 break
         if controller.touchdown:
-            command = policy.act(speed_window.observation(speed, since_ns=previous_touchdown))
+            observation = speed_window.observation(speed, since_ns=previous_touchdown)  # this step's mean
+            command = policy.act(observation)
             previous_touchdown = i
             try:
                 controller.set_alpha(command.alpha)
                 controller.queue_kd(command.kd)
             except ValueError:
                 rejected += 1  # the controller keeps the gait in force, as the node does
-            steps.append(StepRecord(t, step_sum / step_ticks, speed, command.kd))
-            step_sum, step_ticks = 0.0, 0
+            steps.append(StepRecord(t, observation.mean_speed, speed, command.kd))
     return PolicyWalk(fell, fall_time, times[:count], speeds[:count], desired[:count], steps, rejected)

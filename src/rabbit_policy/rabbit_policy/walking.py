@@ -4,6 +4,9 @@ the closed loop. Shared by ``scripts/walk.py``, the tests and the benchmarks."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
+
+import mujoco
 
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
 from rabbit_hzd_controller.gait import Gait
@@ -21,14 +24,22 @@ class WalkSetup:
     controller: HZDController
 
 
+def loop_on_gait(model: mujoco.MjModel, alpha: Sequence[float], kd: float, speed: float,
+                 kp: float | None = None) -> ClosedLoop:
+    """A closed loop (HZD controller, left stance) placed at phase 0 of the gait ``alpha``
+    (rad) moving forward at ``speed`` (m/s); ``kd`` in N m s/rad, ``kp`` in N m/rad
+    (None: the controller's default)."""
+    config = ControllerConfig() if kp is None else ControllerConfig(kp=kp)
+    controller = HZDController(alpha, kd, config, Leg.LEFT)
+    loop = ClosedLoop(model, controller)
+    loop.reset(*state_on_gait(alpha, speed, config.geometry))
+    return loop
+
+
 def setup_walk(gait: Gait, model_variant: str = "paper") -> WalkSetup:
     """Build the model, controller and closed loop for ``gait``."""
-    model = load_model(model_variant)
-    controller = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp), Leg.LEFT)
-    loop = ClosedLoop(model, controller)
-    qpos, qvel = state_on_gait(gait.alpha, gait.speed, controller.config.geometry)
-    loop.reset(qpos, qvel)
-    return WalkSetup(gait=gait, loop=loop, controller=controller)
+    loop = loop_on_gait(load_model(model_variant), gait.alpha, gait.kd, gait.speed, gait.kp)
+    return WalkSetup(gait=gait, loop=loop, controller=loop.controller)
 
 
 def walk_gait(gait: Gait, duration: float, model_variant: str = "paper") -> WalkResult:
