@@ -67,11 +67,22 @@ def finite_difference_jacobian(step: ReturnMap, x: np.ndarray, delta: float | np
     return np.column_stack(columns)
 
 
-def regression_jacobian(step: ReturnMap, x: np.ndarray, scale: float | np.ndarray, samples: int | None = None,
-                        seed: int = 0) -> np.ndarray:
+@dataclass(frozen=True)
+class RegressionFit:
+    """A least-squares Jacobian and how many perturbation pairs went into it (``used``)
+    or were dropped because the map failed on them (``failed``)."""
+
+    jacobian: np.ndarray
+    used: int
+    failed: int
+
+
+def regression_fit(step: ReturnMap, x: np.ndarray, scale: float | np.ndarray, samples: int | None = None,
+                   seed: int = 0, skip: tuple[type[BaseException], ...] = ()) -> RegressionFit:
     """DP(x) by least squares over random symmetric perturbations d_k ~ N(0, diag(scale^2)):
     the J minimising sum_k |P(x + d_k) - P(x - d_k) - 2 J d_k|^2 (``samples`` pairs,
-    default 4 n).
+    default 4 n). A pair on which ``step`` raises one of ``skip`` (a walk that fell) is
+    dropped and counted.
 
     For a map that is only piecewise smooth at a fine grain — a simulation sampled at a
     fixed timestep, where a perturbation that moves an event (a touchdown switch) across
@@ -88,9 +99,23 @@ def regression_jacobian(step: ReturnMap, x: np.ndarray, scale: float | np.ndarra
     if count < n:
         raise ValueError(f"need at least {n} samples for a {n}-dimensional map")
     d = rng.standard_normal((count, n)) * scales
-    y = np.array([np.asarray(step(x + dk)) - np.asarray(step(x - dk)) for dk in d])
-    solution, *_ = np.linalg.lstsq(2.0 * d, y, rcond=None)  # (2 d) J^T = y
-    return solution.T
+    kept, y = [], []
+    for dk in d:
+        try:
+            y.append(np.asarray(step(x + dk)) - np.asarray(step(x - dk)))
+        except skip:
+            continue
+        kept.append(dk)
+    if len(kept) < n:
+        raise RuntimeError(f"only {len(kept)} of {count} perturbation pairs succeeded; need {n}")
+    solution, *_ = np.linalg.lstsq(2.0 * np.array(kept), np.array(y), rcond=None)  # (2 d) J^T = y
+    return RegressionFit(solution.T, len(kept), count - len(kept))
+
+
+def regression_jacobian(step: ReturnMap, x: np.ndarray, scale: float | np.ndarray, samples: int | None = None,
+                        seed: int = 0) -> np.ndarray:
+    """:func:`regression_fit`'s Jacobian, every pair required to succeed."""
+    return regression_fit(step, x, scale, samples, seed).jacobian
 
 
 def find_fixed_point(step: ReturnMap, x0: np.ndarray, iterations: int = 50, tol: float = 1e-10,

@@ -42,7 +42,10 @@ class StepRecord:
 @dataclass
 class PolicyWalk:
     """What happened: per-tick sim time (s) and hip speed (m/s, world x), per-step records,
-    whether and when it fell, how many policy decisions the controller rejected."""
+    whether and when it fell, how many policy decisions the controller rejected; with
+    ``record_state`` also the per-tick ``qpos``/``qvel`` (n x 7: hip x, z (m), torso
+    pitch, left hip, left knee, right hip, right knee (rad); rates in m/s, rad/s) and the
+    stance leg per tick (0 left, 1 right)."""
 
     fell: bool
     fall_time: float | None
@@ -51,6 +54,9 @@ class PolicyWalk:
     desired_speed: np.ndarray
     steps: list[StepRecord] = field(default_factory=list)
     rejected: int = 0
+    qpos: np.ndarray | None = None
+    qvel: np.ndarray | None = None
+    stance: np.ndarray | None = None
 
     @property
     def duration(self) -> float:
@@ -65,7 +71,7 @@ class PolicyWalk:
 
 def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duration: float,
                 pushes: Sequence[Push] = (), model_variant: str = "paper", window: int = 1000,
-                stop_on_fall: bool = True) -> PolicyWalk:
+                stop_on_fall: bool = True, record_state: bool = False) -> PolicyWalk:
     """Walk ``duration`` s of sim time with ``policy`` choosing every step's gait.
 
     ``schedule``: (start time s, commanded speed m/s), first at t = 0, times increasing."""
@@ -81,6 +87,9 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
 
     n = int(round(duration / model.opt.timestep))
     times, speeds, desired = np.empty(n), np.empty(n), np.empty(n)
+    qpos = np.empty((n, model.nq)) if record_state else None
+    qvel = np.empty((n, model.nv)) if record_state else None
+    stance = np.empty(n, dtype=np.int8) if record_state else None
     changes = list(schedule[1:])
     pending_pushes = sorted(pushes, key=lambda p: p.time)
     steps: list[StepRecord] = []
@@ -98,6 +107,8 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
             loop.push(push.force_x, push.duration)
         v = float(data.qvel[0])
         times[i], speeds[i], desired[i] = t, v, speed
+        if record_state:
+            qpos[i], qvel[i], stance[i] = data.qpos, data.qvel, int(controller.stance)
         count = i + 1
         speed_window.add(i, v, speed)
         if limits.fallen(data.qpos[1], data.qpos[2]):
@@ -114,4 +125,7 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
             except ValueError:
                 rejected += 1  # the controller keeps the gait in force, as the node does
             steps.append(StepRecord(t, observation.mean_speed, speed, command.kd))
-    return PolicyWalk(fell, fall_time, times[:count], speeds[:count], desired[:count], steps, rejected)
+    if record_state:
+        qpos, qvel, stance = qpos[:count], qvel[:count], stance[:count]
+    return PolicyWalk(fell, fall_time, times[:count], speeds[:count], desired[:count], steps, rejected,
+                      qpos, qvel, stance)

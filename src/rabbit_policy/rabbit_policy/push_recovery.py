@@ -1,0 +1,121 @@
+"""Push recovery on the ROS-free fast path: the paper's three scenarios and an impulse sweep.
+
+The paper pushes the torso at t = 2, 4 and 6 s with "small forward", "small backward"
+and "large backward" forces but gives no magnitudes; ours are in :data:`PUSH_SCENARIOS`
+(a horizontal force at the torso's centre of mass, world frame, for ``duration`` s; the
+impulse is force x duration in N s). Every walk starts on the controller's gait at the
+commanded speed, as :func:`~.policy_walk.walk_policy` places it.
+
+The sweep goes beyond the paper: one push of growing impulse (fixed duration), applied
+at several phases of a step, and the largest impulse each controller survives at every
+phase (a walk survives when it does not fall within ``horizon`` s after the push).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from .policies import Policy
+from .policy_walk import PolicyWalk, walk_policy
+from .scenario import Push
+
+
+@dataclass(frozen=True)
+class PushScenario:
+    """Pushes of ``force_x`` N (positive: forward) lasting ``duration`` s at ``times`` s."""
+
+    name: str
+    force_x: float
+    duration: float = 0.1
+    times: tuple[float, ...] = (2.0, 4.0, 6.0)
+
+    @property
+    def impulse(self) -> float:
+        """N s per push (signed)."""
+        return self.force_x * self.duration
+
+    @property
+    def pushes(self) -> tuple[Push, ...]:
+        return tuple(Push(t, self.force_x, self.duration) for t in self.times)
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "force_x_N": self.force_x, "duration_s": self.duration,
+                "impulse_Ns": self.impulse, "times_s": list(self.times)}
+
+
+PUSH_SCENARIOS = (
+    PushScenario("small_forward", 60.0),
+    PushScenario("small_backward", -60.0),
+    PushScenario("large_backward", -150.0),
+)
+
+
+def push_trial(policy: Policy, speed: float, scenario: PushScenario, duration: float = 10.0,
+               model_variant: str = "paper") -> PolicyWalk:
+    """Walk at ``speed`` m/s for ``duration`` s with the scenario's pushes (stops at a fall)."""
+    return walk_policy(policy, ((0.0, speed),), duration, pushes=scenario.pushes, model_variant=model_variant)
+
+
+def survives(policy: Policy, speed: float, impulse: float, push_time: float, duration: float = 0.1,
+             horizon: float = 5.0, model_variant: str = "paper") -> bool:
+    """One push of ``impulse`` N s (signed) over ``duration`` s at ``push_time`` s; True if
+    the robot is still up ``horizon`` s later."""
+    push = Push(push_time, impulse / duration, duration)
+    walk = walk_policy(policy, ((0.0, speed),), push_time + horizon, pushes=(push,), model_variant=model_variant)
+    return not walk.fell
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Impulse grid (N s, magnitudes), push duration (s), push times (s: spread over about
+    one step after a settling walk) and the survival horizon (s)."""
+
+    impulses: tuple[float, ...] = tuple(round(1.0 * k, 1) for k in range(1, 31))
+    duration: float = 0.1
+    push_times: tuple[float, ...] = (3.0, 3.1, 3.2, 3.3, 3.4)
+    horizon: float = 5.0
+
+
+def _survives_job(job: tuple) -> bool:
+    policy, speed, impulse, time, config, model_variant = job
+    return survives(policy, speed, impulse, time, config.duration, config.horizon, model_variant)
+
+
+def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepConfig = SweepConfig(),
+                  model_variant: str = "paper",
+                  map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict:
+    """Survival over the impulse grid in one ``direction`` (+1 forward, -1 backward).
+
+    Returns ``{"direction", "impulses", "survived_fraction"` (per impulse, over the push
+    times), ``"largest_survived"`` (the largest grid impulse such that it and every
+    smaller one are survived at every push time; 0 if the first already fails)}``."""
+    if direction not in (1, -1):
+        raise ValueError("direction must be +1 (forward) or -1 (backward)")
+    jobs = [(policy, speed, direction * impulse, t, config, model_variant)
+            for impulse in config.impulses for t in config.push_times]
+    outcomes = np.array(list(map_fn(_survives_job, jobs)), dtype=bool).reshape(
+        len(config.impulses), len(config.push_times))
+    fraction = outcomes.mean(axis=1)
+    largest = 0.0
+    for impulse, ok in zip(config.impulses, outcomes.all(axis=1)):
+        if not ok:
+            break
+        largest = impulse
+    return {"direction": "forward" if direction > 0 else "backward", "impulses": list(config.impulses),
+            "survived_fraction": fraction.tolist(), "largest_survived_Ns": largest}
+
+
+def scenario_table(trials: dict[str, dict[str, PolicyWalk]], scenarios: Sequence[PushScenario]) -> list[dict]:
+    """Rows ``{"scenario", controller: {"fell", "fall_time"}}`` from walks keyed by
+    controller, then scenario name."""
+    rows = []
+    for scenario in scenarios:
+        row: dict = {"scenario": scenario.name}
+        for controller, walks in trials.items():
+            walk = walks[scenario.name]
+            row[controller] = {"fell": walk.fell, "fall_time": walk.fall_time}
+        rows.append(row)
+    return rows
