@@ -12,9 +12,10 @@ Prints one JSON object:
 * with ``--train``: runs ``scripts/train.py --algo ALGO --stop-when-passed`` with the
   shipped configuration into a temporary directory and reports ``time_to_pass_s`` (wall
   time from the start, warm start and acceptance evaluations included, to the first
-  policy that passes the acceptance checks), iterations and env steps then; null if it
-  did not pass within ``--max-iterations``; and the best evaluation reached (failed
-  checks, iteration, wall time).
+  *trained* policy, iteration >= 1, that passes the acceptance checks), iterations and
+  env steps then; null if it did not pass within ``--max-iterations``; the best
+  evaluation reached (failed checks, iteration, wall time); and ``warm_start_passed``,
+  whether the warm-started network already passed before any training.
 """
 
 from __future__ import annotations
@@ -120,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
             "best_failed_checks": None if best is None else best["failures"],
             "best_iteration": None if best is None else best["iteration"],
             "best_wall_s": None if best is None else best["wall_s"],
+            "warm_start_passed": summary.get("warm_start", {}).get("passed"),
         })
     print(json.dumps(report))
     return 0

@@ -3,7 +3,7 @@
 
     scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--generations 100]
                               [--workers 2] [--out DIR] [--validate 60] [--resume]
-                              [--approach-from 0.9,1.2] [--refine]
+                              [--approach-from 0.9,1.2] [--approach-weight 5] [--refine]
 
 Speeds are solved by continuation outward from ``--start``: the first from a kinematic
 seed (:mod:`rabbit_policy.gait_seed`), each next one warm-started from the nearest speed
@@ -62,6 +62,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--resume", action="store_true",
                         help="keep gaits in --out that passed validation; solve only the other speeds")
+    parser.add_argument("--approach-weight", type=float, default=GaitProblem.approach_weight,
+                        help="cost per metre of approach shortfall (default %(default)s)")
     parser.add_argument("--approach-from", type=parse_speeds, default=[],
                         help="also minimise the time to reach each speed from these library speeds")
     parser.add_argument("--refine", action="store_true",
@@ -82,7 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     for speed in order:
         if speed in solved:
             continue
-        problem = GaitProblem(speed=speed, approach_from=tuple(args.approach_from))
+        problem = GaitProblem(speed=speed, approach_from=tuple(args.approach_from),
+                              approach_weight=args.approach_weight)
         existing = out / f"gait_{speed:.2f}.json"
         if args.refine and existing.is_file():
             x0 = gait_to_decision(Gait.load(existing))

@@ -18,7 +18,7 @@ Ctrl-C stops the nodes cleanly and prints what was measured so far.
 
 With ``--json``: one object with ``fell``, ``rtf``, ``segments`` (``command``,
 ``mean_speed``, ``start``, ``end``) and more; node logs go to stderr.
-Exit status: 0 walked the whole run, 1 fell, 2 bad arguments, 3 the run did not complete
+Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments, 3 the run did not complete
 (a node died, no progress, interrupted).
 """
 
@@ -63,6 +63,8 @@ def print_report(report, config) -> None:
     print(f"controller   {config.controller}, {config.mode} mode, {'ok' if report.completed else 'incomplete'}"
           + (f" ({report.error})" if report.error else ""))
     print(f"fell         {report.fell}" + (f" at t = {report.fall_time:.3f} s" if report.fell else ""))
+    if report.stalled:
+        print(f"stalled      at t = {report.stall_time:.3f} s (no touchdown for {config.stall_after} s)")
     print(f"steps        {report.steps}")
     print("segment         command   mean speed (2nd half)")
     for seg in report.segments:
@@ -114,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(report.summary()))
     else:
         print_report(report, config)
-    if report.fell:
+    if report.fell or report.stalled:
         return 1
     return 0 if report.completed else 3
 

@@ -4,7 +4,8 @@
     scripts/ship_policy.py runs/es0/best.pt [--compare runs/ppo0/best.pt ...] [--dry-run]
 
 Runs the acceptance checks (``rabbit_policy.acceptance``) on the policy file, and on each
-``--compare`` file and the classic HZD library for the card's evaluation table, then copies
+``--compare`` file, the network the run started from (its warm start, rebuilt: what
+training added) and the classic HZD library for the card's evaluation table, then copies
 the file to ``src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt`` and writes
 ``MODEL_CARD.md`` and ``evaluation.json`` (every figure of the table) beside it (algorithm, seed, workers, training time and steps from the
 checkpoint's ``info``, the evaluation table). Refuses a policy that fails the checks unless
@@ -102,6 +103,26 @@ def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
     return "\n".join(lines)
 
 
+def warm_start_policy(checkpoint):
+    """The network the run started from (its warm start, rebuilt from the checkpoint's
+    seed and bounds; deterministic), or None if it started from random weights."""
+    import torch
+
+    from rabbit_policy.gait_library import GaitLibrary
+    from rabbit_policy.network import HZDPolicyNet
+    from rabbit_policy.policies import NetworkPolicy
+    from rabbit_policy.warm_start import WARM_STARTS, warm_start
+
+    name = checkpoint.info.get("warm_start")
+    if name not in WARM_STARTS:
+        return None
+    torch.set_num_threads(1)
+    torch.manual_seed(int(checkpoint.info.get("seed", 0)))  # as scripts/train.py, before building the net
+    net = HZDPolicyNet(checkpoint.low, checkpoint.high)
+    warm_start(net, GaitLibrary.load(), seed=int(checkpoint.info.get("seed", 0)), config=WARM_STARTS[name])
+    return NetworkPolicy(net, f"warm start ({name})")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policy", type=Path)
@@ -123,6 +144,9 @@ def main(argv: list[str] | None = None) -> int:
     results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy))]
     for other in others:
         results.append((f"HZD-RL ({other.checkpoint.info.get('algorithm')})", acceptance(other)))
+    start = warm_start_policy(policy.checkpoint)
+    if start is not None:
+        results.append((f"warm start only ({info.get('warm_start')}, untrained)", acceptance(start)))
     for mode in ("nearest", "interpolate"):
         results.append((f"classic HZD ({mode})", acceptance(make_policy("library", mode=mode))))
     card = model_card(info, results)

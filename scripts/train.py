@@ -23,9 +23,10 @@ Outputs in OUT:
   acceptance checks so far (fewest failed checks, then smallest summed error);
   ``checkpoint.pt``: everything needed to ``--resume`` (written every
   ``--checkpoint-every`` iterations, at the end, on Ctrl-C and on SIGTERM — then the
-  worker processes are killed); ``summary.json``: when the acceptance first passed
-  (iteration, wall time, env steps) and the best result.
-``--stop-when-passed`` ends training at the first passing evaluation.
+  worker processes are killed); ``summary.json``: when a trained policy (iteration >= 1)
+  first passed the acceptance (iteration, wall time, env steps), the best result, and
+  whether the warm start alone passed.
+``--stop-when-passed`` ends training at the first passing evaluation of a trained policy.
 Deterministic for a given seed and worker count (ES: exactly, also across --resume; PPO:
 a resumed run starts fresh episodes).
 """
@@ -56,7 +57,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--checkpoint-every", type=int, default=5)
     parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
     parser.add_argument("--stop-when-passed", action="store_true")
-    parser.add_argument("--warm-start", choices=("scheduled", "interpolate", "none"), default="scheduled",
+    parser.add_argument("--warm-start", choices=("scheduled", "nearest", "interpolate", "none"), default="scheduled",
                         help="fit the network to the classic library first (rabbit_policy.warm_start)")
     parser.add_argument("--no-progress", action="store_true", help="plain lines instead of a progress bar")
     parser.add_argument("--resume", action="store_true")
@@ -158,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         trainer.load_state_dict(state["trainer"])
     elapsed_before = state.get("wall_s", 0.0)
     best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
+    warm_start_result: dict = state.get("warm_start", {})  # its acceptance at iteration 0, if evaluated
     first_pass = state.get("first_pass")
 
     def wall() -> float:
@@ -171,19 +173,22 @@ def main(argv: list[str] | None = None) -> int:
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
-                    "best": best, "first_pass": first_pass}, checkpoint_path)
+                    "best": best, "first_pass": first_pass, "warm_start": warm_start_result}, checkpoint_path)
         PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()).save(out / "policy.pt")
-        (out / "summary.json").write_text(json.dumps({"info": info(), "first_pass": first_pass, "best": best},
-                                                     indent=2) + "\n")
+        (out / "summary.json").write_text(json.dumps({"info": info(), "first_pass": first_pass, "best": best,
+                                                      "warm_start": warm_start_result}, indent=2) + "\n")
 
     def evaluate() -> None:
         nonlocal best, first_pass
         result = acceptance(NetworkPolicy(net), map_fn=eval_pool.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
-        if result["passed"] and first_pass is None:
-            first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
         baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
+        if baseline:
+            warm_start_result["passed"] = result["passed"]
+            warm_start_result["failures"] = result["failures"]
+        elif result["passed"] and first_pass is None:
+            first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
         if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
             best = {**row, "rank": list(acceptance_rank(result))}
             PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result})).save(

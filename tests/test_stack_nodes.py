@@ -228,14 +228,38 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
                 assert not sim.fallen and not sim._damping_active
 
 
-def test_pushes_reach_the_torso_with_their_own_duration():
+def test_scheduled_pushes_reach_the_torso_at_their_sim_time():
     from rabbit_policy.scenario import Push
 
     base = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
     pushed = StackConfig(duration=2.0, schedule=((0.0, 1.0),), pushes=(Push(0.5, -60.0, 0.3),))
     _, plain_nodes = run_in_process(base)
     _, pushed_nodes = run_in_process(pushed)
-    assert pushed_nodes["sim_node"].settings.push_duration == 0.3  # set through the parameter service
+    assert pushed_nodes["sim_node"].settings.push_schedule == "0.5:-60.0:0.3"  # sim_node applies it itself
+    assert pushed_nodes["sim_node"].pushes_applied == 1 and plain_nodes["sim_node"].pushes_applied == 0
     x_plain = float(plain_nodes["sim_node"].sim.data.qpos[0])
     x_pushed = float(pushed_nodes["sim_node"].sim.data.qpos[0])
     assert x_pushed < x_plain - 0.02  # pushed backwards: less distance covered
+
+
+def test_push_topic_applies_good_wrenches_and_rejects_bad_ones():
+    from geometry_msgs.msg import Wrench
+
+    with ros_context() as (context, executor):
+        import rclpy
+
+        nodes = _start_stack(context, executor)
+        sim = nodes["sim"]
+        assert spin_until(executor, lambda: sim.time >= 0.5)
+        pusher = rclpy.create_node("pusher", context=context)
+        executor.add_node(pusher)
+        publisher = pusher.create_publisher(Wrench, topics.PUSH, qos.COMMAND_QOS)
+        bad, good = Wrench(), Wrench()
+        bad.force.x = float("nan")
+        good.force.x = -40.0
+        publisher.publish(bad)
+        publisher.publish(good)
+        assert spin_until(executor, lambda: sim.pushes_applied == 1 and sim.pushes_rejected == 1)
+        t = sim.time
+        assert spin_until(executor, lambda: sim.time >= t + 1.0)
+        assert not sim.fallen  # a small push: the robot walks on

@@ -45,10 +45,11 @@ def constant_speed_check(policy: Policy, speed: float, criteria: Criteria = Crit
         "speed": speed,
         "fell": walk.fell,
         "fall_time": walk.fall_time,
-        "mean_speed_last": None if walk.fell else mean,
-        "error": None if walk.fell else error,
+        "stalled": walk.stalled,
+        "mean_speed_last": None if walk.failed else mean,
+        "error": None if walk.failed else error,
         "rejected": walk.rejected,
-        "passed": (not walk.fell) and abs(error) <= criteria.speed_tolerance,
+        "passed": (not walk.failed) and abs(error) <= criteria.speed_tolerance,
     }
 
 
@@ -98,8 +99,9 @@ def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] = A
         "schedule": [list(s) for s in schedule],
         "fell": walk.fell,
         "fall_time": walk.fall_time,
+        "stalled": walk.stalled,
         "segments": segments,
-        "passed": (not walk.fell) and all(s["passed"] for s in segments),
+        "passed": (not walk.failed) and all(s["passed"] for s in segments),
     }
 
 

@@ -257,7 +257,7 @@ def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
         walk = walk_policy(policy, schedule, switch + horizon, model_variant=problem.model_variant)
     except (ValueError, ZeroDivisionError, OverflowError):
         return Approach(problem.speed * horizon, None, True)
-    if walk.fell:
+    if walk.failed:  # fell or stalled
         return Approach(problem.speed * horizon, None, True)
     shortfall, previous = 0.0, 0.0
     for step in walk.steps:

@@ -42,7 +42,9 @@ class StepRecord:
 @dataclass
 class PolicyWalk:
     """What happened: per-tick sim time (s) and hip speed (m/s, world x), per-step records,
-    whether and when it fell, how many policy decisions the controller rejected; with
+    whether and when it fell, whether and when it stalled (no touchdown for
+    ``stall_after`` s: standing still with the robot upright, e.g. stopped by a push),
+    how many policy decisions the controller rejected; with
     ``record_state`` also the per-tick ``qpos``/``qvel`` (n x 7: hip x, z (m), torso
     pitch, left hip, left knee, right hip, right knee (rad); rates in m/s, rad/s) and the
     stance leg per tick (0 left, 1 right)."""
@@ -57,6 +59,13 @@ class PolicyWalk:
     qpos: np.ndarray | None = None
     qvel: np.ndarray | None = None
     stance: np.ndarray | None = None
+    stalled: bool = False
+    stall_time: float | None = None
+
+    @property
+    def failed(self) -> bool:
+        """Fell or stalled: the walk did not go on."""
+        return self.fell or self.stalled
 
     @property
     def duration(self) -> float:
@@ -71,10 +80,12 @@ class PolicyWalk:
 
 def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duration: float,
                 pushes: Sequence[Push] = (), model_variant: str = "paper", window: int = 1000,
-                stop_on_fall: bool = True, record_state: bool = False) -> PolicyWalk:
+                stop_on_fall: bool = True, record_state: bool = False, stall_after: float = 2.0) -> PolicyWalk:
     """Walk ``duration`` s of sim time with ``policy`` choosing every step's gait.
 
-    ``schedule``: (start time s, commanded speed m/s), first at t = 0, times increasing."""
+    ``schedule``: (start time s, commanded speed m/s), first at t = 0, times increasing.
+    A fall, or a stall (no touchdown for ``stall_after`` s; a step takes 0.4-0.7 s),
+    ends the walk unless ``stop_on_fall`` is False."""
     validate_schedule(schedule)
     if not duration > 0:
         raise ValueError("duration must be > 0")
@@ -95,6 +106,8 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
     steps: list[StepRecord] = []
     rejected = 0
     fell, fall_time = False, None
+    stalled, stall_time = False, None
+    last_touchdown_time = 0.0
     count = 0
     previous_touchdown: int | None = None
     for i in range(n):
@@ -115,7 +128,12 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
             fell, fall_time = True, t
             if stop_on_fall:
                 break
+        if not stalled and t - last_touchdown_time > stall_after:
+            stalled, stall_time = True, t
+            if stop_on_fall:
+                break
         if controller.touchdown:
+            last_touchdown_time = t
             observation = speed_window.observation(speed, since_ns=previous_touchdown)  # this step's mean
             command = policy.act(observation)
             previous_touchdown = i
@@ -128,4 +146,4 @@ def walk_policy(policy: Policy, schedule: Sequence[tuple[float, float]], duratio
     if record_state:
         qpos, qvel, stance = qpos[:count], qvel[:count], stance[:count]
     return PolicyWalk(fell, fall_time, times[:count], speeds[:count], desired[:count], steps, rejected,
-                      qpos, qvel, stance)
+                      qpos, qvel, stance, stalled, stall_time)

@@ -8,7 +8,8 @@ commanded speed, as :func:`~.policy_walk.walk_policy` places it.
 
 The sweep goes beyond the paper: one push of growing impulse (fixed duration), applied
 at several phases of a step, and the largest impulse each controller survives at every
-phase (a walk survives when it does not fall within ``horizon`` s after the push).
+phase (a walk survives when it neither falls nor stalls within ``horizon`` s after the
+push; a stall is no touchdown for 2 s, the robot stopped upright).
 """
 
 from __future__ import annotations
@@ -54,18 +55,19 @@ PUSH_SCENARIOS = (
 
 
 def push_trial(policy: Policy, speed: float, scenario: PushScenario, duration: float = 10.0,
-               model_variant: str = "paper") -> PolicyWalk:
+               model_variant: str = "paper", record_state: bool = False) -> PolicyWalk:
     """Walk at ``speed`` m/s for ``duration`` s with the scenario's pushes (stops at a fall)."""
-    return walk_policy(policy, ((0.0, speed),), duration, pushes=scenario.pushes, model_variant=model_variant)
+    return walk_policy(policy, ((0.0, speed),), duration, pushes=scenario.pushes, model_variant=model_variant,
+                       record_state=record_state)
 
 
 def survives(policy: Policy, speed: float, impulse: float, push_time: float, duration: float = 0.1,
              horizon: float = 5.0, model_variant: str = "paper") -> bool:
     """One push of ``impulse`` N s (signed) over ``duration`` s at ``push_time`` s; True if
-    the robot is still up ``horizon`` s later."""
+    the robot is still up and walking ``horizon`` s later (neither fell nor stalled)."""
     push = Push(push_time, impulse / duration, duration)
     walk = walk_policy(policy, ((0.0, speed),), push_time + horizon, pushes=(push,), model_variant=model_variant)
-    return not walk.fell
+    return not walk.failed
 
 
 @dataclass(frozen=True)
@@ -108,14 +110,21 @@ def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepCon
             "survived_fraction": fraction.tolist(), "largest_survived_Ns": largest}
 
 
+def outcome(walk: PolicyWalk) -> dict:
+    """``{"outcome": "fell" | "stalled" | "walked", "fell", "fall_time", "stalled",
+    "stall_time"}`` (times in s)."""
+    result = "fell" if walk.fell else "stalled" if walk.stalled else "walked"
+    return {"outcome": result, "fell": walk.fell, "fall_time": walk.fall_time, "stalled": walk.stalled,
+            "stall_time": walk.stall_time}
+
+
 def scenario_table(trials: dict[str, dict[str, PolicyWalk]], scenarios: Sequence[PushScenario]) -> list[dict]:
-    """Rows ``{"scenario", controller: {"fell", "fall_time"}}`` from walks keyed by
-    controller, then scenario name."""
+    """Rows ``{"scenario", controller: outcome(walk)}`` from walks keyed by controller,
+    then scenario name."""
     rows = []
     for scenario in scenarios:
         row: dict = {"scenario": scenario.name}
         for controller, walks in trials.items():
-            walk = walks[scenario.name]
-            row[controller] = {"fell": walk.fell, "fall_time": walk.fall_time}
+            row[controller] = outcome(walks[scenario.name])
         rows.append(row)
     return rows

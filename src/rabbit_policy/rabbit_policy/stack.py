@@ -3,14 +3,18 @@
 
 * :class:`StackConfig` says what to run; :mod:`.scenario` parses
   the script's ``--speed-schedule "0:0.8,10:1.2"`` and ``--push "t:fx:duration"``.
-* :class:`Supervisor` is the experiment node: it publishes ``/cmd_speed`` and ``/push`` at
-  the scheduled sim times (read from ``/joint_states`` stamps), counts steps, watches
-  ``/fallen`` and measures each segment's mean speed (hip x over the segment's second
-  half, so the transient after a speed change is left out). It samples the newest state
-  (best effort, depth 1) so it never slows the loop; events therefore fire at the first
-  state it sees at or after their time — within a few ms of sim time in lockstep, which
-  is why a run with speed changes repeats only to that precision, while a constant-speed
-  lockstep run repeats exactly.
+* :class:`Supervisor` is the experiment node: it publishes ``/cmd_speed`` at the
+  scheduled sim times (read from ``/joint_states`` stamps), counts steps (``/hzd/step``),
+  watches ``/fallen``, detects a stall (no touchdown for ``stall_after`` s of sim time)
+  and measures each segment's mean speed (hip x over the segment's second half, so the
+  transient after a speed change is left out). It samples the newest state (best effort,
+  depth 1) so it never slows the loop; speed changes therefore fire at the first state it
+  sees at or after their time — within a few ms of sim time in lockstep on an idle
+  machine, more under load, which is why a run with speed changes repeats only to that
+  precision, while a constant-speed lockstep run repeats exactly.
+* Pushes are not sent by the supervisor but given to ``sim_node`` as its
+  ``push_schedule`` parameter: the simulator applies them at their exact sim times, as
+  the fast path does, so a push experiment repeats exactly whatever the load.
 * :func:`run_in_process` spins policy, controller, simulator and supervisor on one
   executor; :func:`run_multi_process` starts the three nodes as separate processes
   (``python -m <module> --ros-args ...``, exactly what ``ros2 run`` executes) and runs the
@@ -31,10 +35,7 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()
 
-from geometry_msgs.msg import Wrench  # noqa: E402
 from rclpy.node import Node  # noqa: E402
-from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.parameter_client import AsyncParameterClient  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64, Header  # noqa: E402
@@ -44,7 +45,7 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
-from .scenario import Push, validate_schedule  # noqa: E402
+from .scenario import Push, format_pushes, validate_schedule  # noqa: E402
 
 CONTROLLERS = {"hzd": "library", "rl": "learned"}
 NODE_MODULES = {
@@ -74,10 +75,13 @@ class StackConfig:
     record_compression: str = "none"
     record_overwrite: bool = False
     record_stats_file: str = ""
+    stall_after: float = 2.0  # s of sim time without a touchdown that end the run as stalled
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
             raise ValueError("duration must be > 0 s")
+        if not self.stall_after > 0.0:
+            raise ValueError("stall_after must be > 0 s")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}")
         validate_schedule(self.schedule)
@@ -99,6 +103,7 @@ class StackConfig:
                 "initial_speed": self.schedule[0][1],
                 "stop_time": self.duration,
                 "push_duration": self.push_duration,
+                "push_schedule": format_pushes(self.pushes),
                 "start_paused": True,
                 "stats_file": self.stats_file,
             },
@@ -138,7 +143,9 @@ class Segment:
 
 @dataclass
 class RunReport:
-    """What a run did: the JSON printed by ``run_stack.py --json``."""
+    """What a run did: the JSON printed by ``run_stack.py --json``. ``stalled``: no
+    touchdown for ``StackConfig.stall_after`` s (the robot stopped upright), as the fast
+    path (:func:`~.policy_walk.walk_policy`) defines it; the run ends there."""
 
     fell: bool
     fall_time: float | None
@@ -148,6 +155,8 @@ class RunReport:
     segments: list[Segment] = field(default_factory=list)
     completed: bool = True
     error: str | None = None
+    stalled: bool = False
+    stall_time: float | None = None
 
     @property
     def rtf(self) -> float:
@@ -157,6 +166,8 @@ class RunReport:
         return {
             "fell": self.fell,
             "fall_time": self.fall_time,
+            "stalled": self.stalled,
+            "stall_time": self.stall_time,
             "completed": self.completed,
             "error": self.error,
             "sim_time": self.sim_time,
@@ -168,7 +179,7 @@ class RunReport:
 
 
 class Supervisor(Node):
-    """Runs the experiment: speed schedule, pushes, segment statistics, end of run."""
+    """Runs the experiment: speed schedule, segment statistics, falls and stalls, end of run."""
 
     def __init__(self, config: StackConfig, context=None) -> None:
         super().__init__("run_stack_supervisor", context=context)
@@ -178,20 +189,19 @@ class Supervisor(Node):
             Segment(v, t, end) for (t, v), end in zip(config.schedule, bounds) if t < config.duration
         ]
         self._next_segment = 1
-        self._pushes = list(config.pushes)
-        self._push_duration = config.push_duration
         self.steps = 0
         self.fell = False
         self.fall_time: float | None = None
+        self.stalled = False
+        self.stall_time: float | None = None
+        self._last_step_time = 0.0
         self.sim_time = 0.0
         self.first_state_wall: float | None = None
         self.last_state_wall: float | None = None
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
-        self._push_pub = self.create_publisher(Wrench, topics.PUSH, qos.COMMAND_QOS)
-        self._params = AsyncParameterClient(self, "sim_node")
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
-        self.create_subscription(Header, topics.STEP, lambda _msg: self._count_step(), qos.EVENT_QOS)
+        self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE)
 
     def connected(self) -> bool:
@@ -214,10 +224,11 @@ class Supervisor(Node):
 
     @property
     def done(self) -> bool:
-        return self.fell or self.sim_time >= self.config.duration - 1e-9
+        return self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9
 
-    def _count_step(self) -> None:
+    def _count_step(self, msg: Header) -> None:
         self.steps += 1
+        self._last_step_time = max(self._last_step_time, stamp_to_seconds(msg.stamp))  # the touchdown's sim time
 
     def _on_fallen(self, msg: Bool) -> None:
         if msg.data and not self.fell:
@@ -232,6 +243,9 @@ class Supervisor(Node):
         t = stamp_to_seconds(msg.header.stamp)
         x = msg.position[0]
         self.sim_time = t
+        if not self.stalled and t - self._last_step_time > self.config.stall_after:
+            self.stalled, self.stall_time = True, t
+            self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.stall_after} s, stalled")
         while self._next_segment < len(self.segments) and t >= self.segments[self._next_segment].start - 1e-9:
             segment = self.segments[self._next_segment]
             self._speed_pub.publish(Float64(data=segment.command))
@@ -243,19 +257,6 @@ class Supervisor(Node):
                 segment.x_mid, segment.t_mid = x, t
             if segment.start <= t <= segment.end + 1e-9 and segment.x_mid is not None:
                 segment.x_end, segment.t_end = x, t
-        while self._pushes and t >= self._pushes[0].time - 1e-9:
-            self._push(self._pushes.pop(0))
-
-    def _push(self, push: Push) -> None:
-        wrench = Wrench()
-        wrench.force.x = push.force_x
-        if push.duration == self._push_duration:
-            self._push_pub.publish(wrench)
-            return
-        # set the simulator's push duration first, publish once it is accepted
-        self._push_duration = push.duration
-        future = self._params.set_parameters([Parameter("push_duration", value=push.duration)])
-        future.add_done_callback(lambda _f: self._push_pub.publish(wrench))
 
     def report(self, error: str | None = None) -> RunReport:
         wall = (
@@ -272,6 +273,8 @@ class Supervisor(Node):
             segments=self.segments,
             completed=self.done and error is None,
             error=error,
+            stalled=self.stalled,
+            stall_time=self.stall_time,
         )
 
 

@@ -3,8 +3,12 @@
 The network is trained (supervised, Adam, mean squared error in action units scaled by
 the bounds) to output what a classic gait-library controller would choose, so training
 starts from classic HZD and ES/PPO learn what the library lacks (faster convergence after
-a speed change, steady-state corrections). Two targets (:data:`WARM_STARTS`):
+a speed change, steady-state corrections). Three targets (:data:`WARM_STARTS`):
 
+* ``nearest``: the library gait nearest to the commanded speed v_d, whatever the
+  measured speeds: classic HZD as ``LibraryPolicy("nearest")`` runs it. At the library's
+  speeds (0.7, 0.8, ..., 1.5 m/s) the fitted network sits mid-way along a flat stretch of
+  the staircase and reproduces the gait; between them it blends across the stair's edge.
 * ``interpolate``: the library gait blended at the commanded speed v_d, whatever the
   measured speeds (the network learns to ignore them).
 * ``scheduled``: the gait *nearest* to v_d, except that its design speed never drops
@@ -33,18 +37,28 @@ from .network import HZDPolicyNet
 @dataclass(frozen=True)
 class WarmStartConfig:
     """Target and fit: ``samples`` observations with v_d uniform over the library's speeds
-    and the measured speed v_d +- ``speed_spread`` (m/s); ``iterations`` Adam steps."""
+    and the measured speed v_d +- ``speed_spread`` (m/s); ``iterations`` Adam steps.
+
+    The third input, the mean speed error over the last step, equals v_d - measured only
+    while the command is steady; in the step after a change it still holds the old
+    command (error ~ 0 at 1.5 m/s just after 1.5 -> 0.7). A ``stale_error_fraction`` of
+    the samples therefore take the error from an independent earlier command, uniform
+    over the library's speeds, so the network also reproduces the target there (without
+    them it extrapolated: after 1.5 -> 0.7 m/s it chose the 0.9 m/s gait's Kd for a step
+    and the robot fell)."""
 
     target: str = "scheduled"
     iterations: int = 10000
     samples: int = 2048
     speed_spread: float = 0.9
+    stale_error_fraction: float = 0.5
     max_decel: float = 0.2
     lr: float = 3e-3
 
 
 WARM_STARTS = {
     "scheduled": WarmStartConfig(),
+    "nearest": WarmStartConfig(target="nearest"),
     "interpolate": WarmStartConfig(target="interpolate", iterations=3000, samples=512, speed_spread=0.3),
 }
 
@@ -66,6 +80,8 @@ def library_targets(library: GaitLibrary, desired: np.ndarray, measured: np.ndar
             gait = library.interpolate(float(v))
         elif target == "scheduled":
             gait = library.nearest(scheduled_speed(float(v), float(m), max_decel))
+        elif target == "nearest":
+            gait = library.nearest(float(v))
         else:
             raise ValueError(f"warm start target must be one of {sorted(WARM_STARTS)}, got {target!r}")
         rows.append(np.append(gait.free, gait.kd))
@@ -81,7 +97,9 @@ def warm_start(net: HZDPolicyNet, library: GaitLibrary, seed: int = 0,
     lo, hi = library.speeds[0], library.speeds[-1]
     desired = rng.uniform(lo, hi, config.samples)
     measured = desired + rng.uniform(-config.speed_spread, config.speed_spread, config.samples)
-    obs = torch.tensor(np.stack([desired, measured, desired - measured], axis=1), dtype=torch.float32)
+    earlier = np.where(rng.random(config.samples) < config.stale_error_fraction,
+                       rng.uniform(lo, hi, config.samples), desired)  # the command the error was measured against
+    obs = torch.tensor(np.stack([desired, measured, earlier - measured], axis=1), dtype=torch.float32)
     targets = torch.tensor(library_targets(library, desired, measured, config.target, config.max_decel),
                            dtype=torch.float32)
     span = net.high - net.low

@@ -55,6 +55,7 @@ from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import MessageError, alpha_from_msg, torques_from_msg  # noqa: E402
 from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
+from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .model import load_model  # noqa: E402
@@ -70,6 +71,9 @@ class SimSettings:
     model: ``paper`` or ``drives`` (see :func:`rabbit_sim.model.load_model`).
     mode: ``lockstep`` or ``realtime``. initial_speed: hip speed (m/s) at start and reset.
     push_duration: how long a ``/push`` wrench is held (s, sim time).
+    push_schedule: scripted pushes the simulator applies itself at exact sim times,
+        ``"T:FX:DUR,..."`` (s, N, s; :mod:`rabbit_msgs_py.pushes`), again after a reset;
+        ``/push`` messages act when they arrive, these do not depend on message timing.
     max_push_force: larger pushes (N, each component) are rejected.
     stop_time: pause the physics at this sim time (s); 0 = run until stopped.
     resend_timeout: lockstep, wall s without a torque before the state is re-sent.
@@ -85,6 +89,7 @@ class SimSettings:
     mode: str = "lockstep"
     initial_speed: float = 1.0
     push_duration: float = 0.1
+    push_schedule: str = ""
     max_push_force: float = 2000.0
     stop_time: float = 0.0
     resend_timeout: float = 0.2
@@ -101,6 +106,17 @@ class SimSettings:
                 raise NodeStartError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.stop_time < 0.0 or self.damping < 0.0:
             raise NodeStartError("stop_time and damping must be >= 0")
+        try:
+            pushes = parse_pushes(self.push_schedule)
+        except ValueError as exc:
+            raise NodeStartError(f"push_schedule: {exc}") from None
+        if any(abs(p.force_x) > self.max_push_force for p in pushes):
+            raise NodeStartError(f"push_schedule: forces must be within +-{self.max_push_force} N")
+
+    @property
+    def pushes(self) -> tuple[Push, ...]:
+        """``push_schedule`` parsed, by time."""
+        return parse_pushes(self.push_schedule)
 
 
 def stamp_of(seconds: float) -> Time:
@@ -136,6 +152,9 @@ class SimNode(Node):
         self._held_torques: list[float] | None = None
         self._reset_requested = False
         self._last_publish_wall = 0.0
+        self._scheduled_pushes = list(self.settings.pushes)
+        self.pushes_applied = 0  # scheduled and /push
+        self.pushes_rejected = 0
         # realtime bookkeeping
         self._latest_torques = [0.0] * N_ACTUATED
         self._latest_torque_wall = -1.0
@@ -275,11 +294,13 @@ class SimNode(Node):
             self.get_logger().error(
                 f"ignoring push {values}: components must be finite and within +-{self.settings.max_push_force} N"
             )
+            self.pushes_rejected += 1
             return
         if msg.force.y or msg.torque.x or msg.torque.z:
             self.get_logger().warning("push: the model is planar; force.y, torque.x and torque.z are ignored")
         with self._lock:
             self.sim.push(msg.force.x, self.settings.push_duration, msg.force.z, msg.torque.y)
+            self.pushes_applied += 1
             self.get_logger().info(
                 f"push at t = {self.sim.time:.3f} s: fx = {msg.force.x:.1f} N, fz = {msg.force.z:.1f} N, "
                 f"ty = {msg.torque.y:.1f} N m for {self.settings.push_duration:.3f} s"
@@ -323,6 +344,7 @@ class SimNode(Node):
         self.sim.reset(qpos, qvel)
         self._started = True
         self._halted = False
+        self._scheduled_pushes = list(self.settings.pushes)
         self._held_torques = None
         self._unanswered.clear()
         self._latest_torque_wall = -1.0
@@ -346,6 +368,12 @@ class SimNode(Node):
         sim = self.sim
         sim.step(torques)
         self.ticks += 1
+        while self._scheduled_pushes and sim.time >= self._scheduled_pushes[0].time - 1e-9:
+            push = self._scheduled_pushes.pop(0)  # acts from the next step on, as on the fast path
+            sim.push(push.force_x, push.duration)
+            self.pushes_applied += 1
+            self.get_logger().info(f"scheduled push at t = {sim.time:.3f} s: fx = {push.force_x:.1f} N "
+                                   f"for {push.duration:.3f} s")
         self._last_tick_wall = time.perf_counter()
         if self._first_tick_wall is None:
             self._first_tick_wall = self._last_tick_wall

@@ -1,0 +1,149 @@
+#!/usr/bin/env python3
+"""Reproduce the paper's section IV for classic HZD and HZD-RL, with figures and a report.
+
+    scripts/evaluate.py [--out DIR] [--quick] [--workers 2] [--policy-file P] [--no-video]
+
+Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
+
+* speed tracking through a schedule of commanded speeds (filtered speed, mean error and
+  settling time per segment);
+* limit cycles: phase portraits at several speeds after a perturbation, and the
+  Poincaré test (eigenvalues of the step-to-step return map's Jacobian);
+* push recovery: three push scenarios at 2, 4 and 6 s, who fell, speed plots, an
+  impulse sweep, and a GIF of each controller under the pushes;
+
+and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
+the PNG/GIF files. ``--quick`` is a short version (about a minute) for tests. The
+committed report in ``docs/results/`` was made with ``scripts/evaluate.py --out docs/results``.
+Exit status: 0 written, 2 bad arguments or no policy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+# MuJoCo picks its OpenGL backend when it is first imported: headless EGL unless the
+# user chose one (see rabbit_sim.rendering)
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from rabbit_msgs_py.environment import ensure_localhost_discovery  # noqa: E402
+
+CONTROLLERS = ("classic", "hzd_rl")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
+    parser.add_argument("--quick", action="store_true", help="short version for tests")
+    parser.add_argument("--workers", type=int, default=2, help="processes for the independent walks")
+    parser.add_argument("--model", choices=("paper", "drives"), default="paper")
+    parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
+    parser.add_argument("--policy-file", default=None, help="HZD-RL checkpoint (default: packaged)")
+    parser.add_argument("--no-video", action="store_true", help="skip the GIFs")
+    return parser
+
+
+def render_videos(walks: dict, scenario: str, out: Path, config, model_variant: str) -> dict:
+    """One GIF per controller of the ``scenario`` push trial; errors are reported, not raised."""
+    from rabbit_sim.model import load_model
+    from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
+
+    model = load_model(model_variant)
+    width, height = config.video_size
+    videos = {}
+    for name, by_scenario in walks.items():
+        walk = by_scenario[scenario]
+        try:
+            frames = render_frames(model, walk.qpos[frame_indices(walk.times, config.video_fps)], width, height)
+            file = f"{name}_{scenario}.gif"
+            save_gif(frames, out / file, config.video_fps, hold_last=1.5 if walk.failed else 0.0)
+            videos[name] = {"file": file, "scenario": scenario, "frames": len(frames), "failed": walk.failed}
+        except RenderingUnavailable as exc:
+            videos[name] = {"error": str(exc), "scenario": scenario}
+    return videos
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    args = build_parser().parse_args(argv)
+    if args.workers < 1:
+        build_parser().error("--workers must be >= 1")
+
+    from multiprocessing import get_context
+
+    from rabbit_policy import evaluation, figures
+    from rabbit_policy.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.report import render_report
+
+    try:
+        policies = {"classic": make_policy("library", args.gait_dir, "nearest"),
+                    "hzd_rl": make_policy("learned", policy_file=args.policy_file)}
+    except (PolicyUnavailable, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    config = evaluation.EvaluationConfig.quick() if args.quick else evaluation.EvaluationConfig()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    log = lambda message: print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr)  # noqa: E731
+
+    pool = get_context("fork").Pool(args.workers) if args.workers > 1 else None
+    map_fn = pool.map if pool else map
+    try:
+        log("speed tracking")
+        tracking = {name: evaluation.speed_tracking(policy, config, args.model)[0] for name, policy in policies.items()}
+        figures.tracking_figure(tracking, out / "tracking.png")
+
+        log("limit cycles")
+        cycles: dict = {}
+        for name, policy in policies.items():
+            walks = {}
+            cycles[name] = {}
+            for speed in config.portrait_speeds:
+                cycles[name][f"{speed:.2f}"], walks[speed] = evaluation.limit_cycle(policy, speed, config, args.model)
+            figures.limit_cycle_figure(walks, figures.LABELS[name], out / f"limit_cycle_{name}.png")
+        figures.convergence_figure(cycles, out / "convergence.png")
+
+        log("Poincaré test")
+        feedback = {"classic": False, "hzd_rl": True}
+        poincare = evaluation.poincare({n: (p, feedback[n]) for n, p in policies.items()}, config, args.model, map_fn)
+        figures.poincare_figure(poincare, out / "poincare.png")
+
+        log("push scenarios")
+        push, push_walks = evaluation.push_experiment(policies, config, args.model)
+        figures.push_figure(push, out / "push.png")
+        sweep = {}
+        if config.sweep is not None:
+            log("impulse sweep")
+            sweep = evaluation.push_sweep(policies, config, args.model, map_fn)
+            figures.sweep_figure(sweep, out / "sweep.png")
+    finally:
+        if pool:
+            pool.close()
+            pool.join()
+
+    videos = {}
+    if not args.no_video:
+        log("videos")
+        videos = render_videos(push_walks, config.scenarios[-1].name, out, config, args.model)
+
+    command = "scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
+    results = {"meta": {"command": command, "model": args.model, "workers": args.workers,
+                        "wall_time_s": time.perf_counter() - start,
+                        "controllers": {n: p.name for n, p in policies.items()}},
+               "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
+               "push": push, "push_sweep": sweep, "videos": videos}
+    (out / "results.json").write_text(json.dumps(results, indent=1))
+    (out / "report.md").write_text(render_report(results))
+    log(f"wrote {out / 'report.md'}")
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    sys.exit(main())

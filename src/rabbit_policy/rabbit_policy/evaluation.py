@@ -1,0 +1,247 @@
+"""The paper's section IV as data: speed tracking, limit cycles, Poincaré stability and
+push recovery of classic HZD and HZD-RL, on the ROS-free fast path (:mod:`.policy_walk`).
+
+Every experiment returns plain JSON-ready dicts (what ``results.json`` holds) and, where
+a figure needs more than that, the walks themselves; :mod:`.figures` draws them and
+``scripts/evaluate.py`` runs it all. The two controllers are policies
+(:mod:`.policies`): ``classic`` = the gait library (nearest gait to the commanded speed,
+no speed feedback), ``hzd_rl`` = the learned network.
+
+Definitions used in the tables:
+
+* filtered speed: the hip's forward speed (world x, m/s) averaged over the last
+  ``filter_window`` s (a causal moving average; one step takes 0.4-0.7 s);
+* mean error of a segment: mean |filtered - commanded| over the segment (m/s);
+* settling time: from the change of command to the moment after which the filtered
+  speed stays within ``tolerance`` of the command until the segment ends (s; None if it
+  never settles);
+* reach time: the acceptance definition (:mod:`.acceptance`): the first whole step whose
+  mean speed is within ``tolerance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
+
+from rabbit_hzd_controller.controller import Leg
+
+from .acceptance import reach_times
+from .gait_stability import STANCE_JOINTS, analyse_stability
+from .policies import Policy
+from .policy_walk import PolicyWalk, walk_policy
+from .push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep, outcome, push_trial,
+                            scenario_table)
+from .scenario import Push, Schedule
+
+MapFn = Callable[[Callable, Iterable], Iterable]
+
+
+@dataclass(frozen=True)
+class EvaluationConfig:
+    """What ``scripts/evaluate.py`` runs (speeds m/s, times s)."""
+
+    tracking_schedule: Schedule = ((0.0, 0.8), (6.0, 1.2), (12.0, 0.9), (18.0, 1.5), (24.0, 0.7))
+    tracking_duration: float = 30.0
+    filter_window: float = 0.4
+    tolerance: float = 0.05
+    portrait_speeds: tuple[float, ...] = (0.7, 1.0, 1.3)
+    portrait_duration: float = 15.0
+    portrait_push: Push = Push(1.0, -40.0, 0.1)
+    poincare_speeds: tuple[float, ...] = (0.7, 1.0, 1.3)
+    poincare_samples: int = 400
+    push_speed: float = 1.0
+    push_duration: float = 10.0
+    scenarios: tuple[PushScenario, ...] = PUSH_SCENARIOS
+    sweep: SweepConfig | None = field(default_factory=SweepConfig)
+    video_fps: float = 10.0
+    video_size: tuple[int, int] = (256, 192)
+    series_rate: float = 50.0  # Hz of the time series stored in results.json
+
+    @classmethod
+    def quick(cls) -> EvaluationConfig:
+        """A short version (about a minute on two cores) for tests and a first look."""
+        return cls(tracking_schedule=((0.0, 0.9), (4.0, 1.2)), tracking_duration=8.0,
+                   portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
+                   poincare_samples=30, push_duration=7.0,
+                   sweep=SweepConfig(impulses=(3.0, 12.0), push_times=(3.0,), horizon=2.0),
+                   video_fps=5.0, video_size=(160, 120))
+
+    def to_dict(self) -> dict:
+        return {"tracking_schedule": [list(s) for s in self.tracking_schedule],
+                "tracking_duration_s": self.tracking_duration, "filter_window_s": self.filter_window,
+                "tolerance_mps": self.tolerance, "portrait_speeds": list(self.portrait_speeds),
+                "portrait_duration_s": self.portrait_duration,
+                "portrait_push": {"time_s": self.portrait_push.time, "force_x_N": self.portrait_push.force_x,
+                                  "duration_s": self.portrait_push.duration},
+                "poincare_speeds": list(self.poincare_speeds), "poincare_samples": self.poincare_samples,
+                "push_speed": self.push_speed, "push_duration_s": self.push_duration,
+                "scenarios": [s.to_dict() for s in self.scenarios],
+                "sweep": None if self.sweep is None else {
+                    "impulses_Ns": list(self.sweep.impulses), "push_duration_s": self.sweep.duration,
+                    "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon}}
+
+
+# ------------------------------------------------------------------ signals
+def filtered_speed(times: np.ndarray, speed: np.ndarray, window: float) -> np.ndarray:
+    """Causal moving average of ``speed`` over the last ``window`` s (shorter at the start)."""
+    if not window > 0:
+        raise ValueError("window must be > 0")
+    times, speed = np.asarray(times, dtype=float), np.asarray(speed, dtype=float)
+    cumulative = np.concatenate(([0.0], np.cumsum(speed)))
+    first = np.searchsorted(times, times - window + 1e-12)
+    last = np.arange(1, len(times) + 1)
+    return (cumulative[last] - cumulative[first]) / (last - first)
+
+
+def settling_time(times: np.ndarray, value: np.ndarray, target: float, start: float, end: float,
+                  tolerance: float) -> float | None:
+    """Time from ``start`` until ``value`` stays within ``tolerance`` of ``target`` up to
+    ``end`` (s); None if it is outside at the end (or there are no samples)."""
+    mask = (times > start) & (times <= end + 1e-9)
+    if not mask.any():
+        return None
+    outside = np.abs(value[mask] - target) > tolerance
+    if outside[-1]:
+        return None
+    seg_times = times[mask]
+    if not outside.any():
+        return 0.0
+    last_outside = int(np.nonzero(outside)[0][-1])
+    return float(seg_times[last_outside + 1] - start)
+
+
+def downsample(times: np.ndarray, rate: float, *series: np.ndarray) -> list[list[float]]:
+    """``[times, *series]`` at about ``rate`` Hz, rounded for a compact JSON."""
+    dt = float(times[1] - times[0]) if len(times) > 1 else 1.0
+    stride = max(1, int(round(1.0 / (rate * dt))))
+    return [np.round(np.asarray(s)[::stride], 4).tolist() for s in (times, *series)]
+
+
+# ------------------------------------------------------------------ speed tracking
+def tracking_segments(walk: PolicyWalk, schedule: Schedule, duration: float, window: float,
+                      tolerance: float) -> list[dict]:
+    """Per commanded segment: mean |filtered error| (m/s), signed mean error over the
+    second half, settling time (s) and reach time (s)."""
+    filtered = filtered_speed(walk.times, walk.hip_speed, window)
+    ends = [t for t, _ in schedule[1:]] + [duration]
+    reaches = reach_times(walk, schedule, tolerance)
+    rows = []
+    for (start, speed), end, reach in zip(schedule, ends, reaches):
+        mask = (walk.times > start) & (walk.times <= end + 1e-9)
+        half = mask & (walk.times > 0.5 * (start + end))
+        complete = not walk.failed or walk.duration >= end
+        rows.append({
+            "start": start, "end": end, "speed": speed,
+            "mean_abs_error": float(np.mean(np.abs(filtered[mask] - speed))) if mask.any() else None,
+            "mean_error_second_half": float(np.mean(filtered[half] - speed)) if half.any() else None,
+            "settling_time": settling_time(walk.times, filtered, speed, start, end, tolerance) if complete else None,
+            "reach_time": reach,
+        })
+    return rows
+
+
+def speed_tracking(policy: Policy, config: EvaluationConfig, model_variant: str = "paper") -> tuple[dict, PolicyWalk]:
+    """Walk the tracking schedule; returns (results, walk)."""
+    walk = walk_policy(policy, config.tracking_schedule, config.tracking_duration, model_variant=model_variant)
+    filtered = filtered_speed(walk.times, walk.hip_speed, config.filter_window)
+    t, v, vd = downsample(walk.times, config.series_rate, filtered, walk.desired_speed)
+    return {"policy": policy.name, **outcome(walk),
+            "segments": tracking_segments(walk, config.tracking_schedule, config.tracking_duration,
+                                          config.filter_window, config.tolerance),
+            "series": {"time_s": t, "filtered_speed_mps": v, "desired_speed_mps": vd}}, walk
+
+
+# ------------------------------------------------------------------ limit cycles
+def touchdown_states(walk: PolicyWalk) -> np.ndarray:
+    """Stance-relative joint state just after every touchdown of a ``record_state`` walk:
+    rows (stance hip, stance knee, swing hip, swing knee (rad), their rates (rad/s))."""
+    if walk.qpos is None or walk.stance is None:
+        raise ValueError("the walk was not recorded with record_state=True")
+    switches = np.nonzero(np.diff(walk.stance.astype(int)))[0] + 1
+    rows = []
+    for i in switches:
+        joints = list(STANCE_JOINTS[Leg(int(walk.stance[i]))])
+        rows.append(np.concatenate((walk.qpos[i, joints], walk.qvel[i, joints])))
+    return np.array(rows).reshape(-1, 8)
+
+
+def convergence(states: np.ndarray, tail: int = 6, rate_scale: float = 10.0) -> dict:
+    """Distance of each touchdown state from the mean of the last ``tail`` ones (rates
+    divided by ``rate_scale`` s^-1 so that rad and rad/s weigh alike): a converging
+    limit cycle shows a shrinking sequence. Also the first step from which it stays
+    under 5 % of its largest value."""
+    if len(states) <= tail:
+        return {"distances": [], "settled_step": None}
+    reference = states[-tail:].mean(axis=0)
+    weights = np.array([1.0] * 4 + [1.0 / rate_scale] * 4)
+    distances = np.linalg.norm((states - reference) * weights, axis=1)
+    threshold = 0.05 * distances.max()
+    above = np.nonzero(distances > threshold)[0]
+    settled = int(above[-1] + 1) if above.size else 0
+    return {"distances": np.round(distances, 5).tolist(),
+            "settled_step": settled if settled < len(distances) - tail else None}
+
+
+def limit_cycle(policy: Policy, speed: float, config: EvaluationConfig, model_variant: str = "paper") -> tuple[dict, PolicyWalk]:
+    """A walk at ``speed`` perturbed once by ``config.portrait_push``: the phase
+    portraits' data and the touchdown-to-touchdown convergence."""
+    walk = walk_policy(policy, ((0.0, speed),), config.portrait_duration, pushes=(config.portrait_push,),
+                       model_variant=model_variant, record_state=True)
+    return {"policy": policy.name, "speed": speed, **outcome(walk),
+            "steps": len(walk.steps), **convergence(touchdown_states(walk))}, walk
+
+
+# ------------------------------------------------------------------ Poincaré
+def _stability_job(job: tuple) -> dict:
+    policy, speed, feedback, samples, model_variant = job
+    try:
+        return analyse_stability(policy, speed, feedback, samples=samples, model_variant=model_variant).to_dict()
+    except RuntimeError as exc:  # the cycle could not be found or too many perturbed runs failed
+        return {"error": str(exc), "stable": False}
+
+
+def poincare(controllers: dict[str, tuple[Policy, bool]], config: EvaluationConfig, model_variant: str = "paper",
+             map_fn: MapFn = map) -> dict:
+    """``{controller: {speed: analysis}}`` for ``controllers`` = name -> (policy, feedback)."""
+    keys = [(name, speed) for name in controllers for speed in config.poincare_speeds]
+    jobs = [(controllers[name][0], speed, controllers[name][1], config.poincare_samples, model_variant)
+            for name, speed in keys]
+    results: dict = {name: {} for name in controllers}
+    for (name, speed), result in zip(keys, map_fn(_stability_job, jobs)):
+        results[name][f"{speed:.2f}"] = result
+    return results
+
+
+# ------------------------------------------------------------------ pushes
+def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, model_variant: str = "paper"
+                    ) -> tuple[dict, dict[str, dict[str, PolicyWalk]]]:
+    """The push scenarios at ``config.push_speed`` for every controller: the who-fell
+    table, speed series, and the walks (recorded, for the videos)."""
+    walks = {name: {s.name: push_trial(policy, config.push_speed, s, config.push_duration, model_variant,
+                                       record_state=True)
+                    for s in config.scenarios}
+             for name, policy in controllers.items()}
+    series = {}
+    for name, by_scenario in walks.items():
+        series[name] = {}
+        for scenario, walk in by_scenario.items():
+            t, v = downsample(walk.times, config.series_rate,
+                              filtered_speed(walk.times, walk.hip_speed, config.filter_window))
+            series[name][scenario] = {"time_s": t, "filtered_speed_mps": v}
+    return {"speed": config.push_speed, "duration_s": config.push_duration,
+            "scenarios": [s.to_dict() for s in config.scenarios],
+            "table": scenario_table(walks, config.scenarios), "series": series}, walks
+
+
+def push_sweep(controllers: dict[str, Policy], config: EvaluationConfig, model_variant: str = "paper",
+               map_fn: MapFn = map) -> dict:
+    """Largest impulse survived, forward and backward, per controller."""
+    if config.sweep is None:
+        return {}
+    return {name: {direction: impulse_sweep(policy, config.push_speed, sign, config.sweep, model_variant, map_fn)
+                   for direction, sign in (("forward", 1), ("backward", -1))}
+            for name, policy in controllers.items()}
+

@@ -1,0 +1,145 @@
+"""``report.md`` from the evaluation's ``results.json`` dict: tables and links to the
+figures and videos (file names relative to the report)."""
+
+from __future__ import annotations
+
+from .figures import LABELS
+
+
+def _fmt(value, spec: str = ".3f", none: str = "—") -> str:
+    return none if value is None else format(value, spec)
+
+
+def _label(name: str) -> str:
+    return LABELS.get(name, name)
+
+
+def _outcome(result: dict) -> str:
+    """"fell at 4.21 s", "stalled at 6.00 s" (no touchdown for 2 s) or "walked on"."""
+    if result["fell"]:
+        return f"fell at {result['fall_time']:.2f} s"
+    if result["stalled"]:
+        return f"stalled at {result['stall_time']:.2f} s"
+    return "walked on"
+
+
+def tracking_section(tracking: dict, config: dict) -> list[str]:
+    lines = ["## Speed tracking", "",
+             f"Filtered hip speed (moving average over {config['filter_window_s']} s) while the commanded speed "
+             "steps through the schedule below (paper Fig. \"change_vel\"). Mean error: mean |filtered − "
+             "commanded| over the segment. Settling: time until the filtered speed stays within "
+             f"{config['tolerance_mps']} m/s for the rest of the segment. Reach: first whole step whose mean "
+             f"speed is within {config['tolerance_mps']} m/s (the acceptance definition).", "",
+             "![speed tracking](tracking.png)", ""]
+    for name, result in tracking.items():
+        fell = f", **{_outcome(result)}**" if result["outcome"] != "walked" else ", no fall"
+        lines += [f"**{_label(name)}** ({result['policy']}{fell})", "",
+                  "| segment (s) | command (m/s) | mean error (m/s) | 2nd-half mean error (m/s) | settling (s) | reach (s) |",
+                  "|---|---|---|---|---|---|"]
+        for seg in result["segments"]:
+            lines.append(f"| {seg['start']:.0f}–{seg['end']:.0f} | {seg['speed']:.2f} | {_fmt(seg['mean_abs_error'])} | "
+                         f"{_fmt(seg['mean_error_second_half'], '+.3f')} | {_fmt(seg['settling_time'], '.2f')} | "
+                         f"{_fmt(seg['reach_time'], '.2f')} |")
+        lines.append("")
+    return lines
+
+
+def limit_cycle_section(cycles: dict, config: dict) -> list[str]:
+    push = config["portrait_push"]
+    lines = ["## Limit cycles", "",
+             f"Phase portraits of the left hip and knee over {config['portrait_duration_s']:.0f} s of walking, "
+             f"perturbed once by a {push['force_x_N']:+.0f} N push of {push['duration_s']} s at "
+             f"{push['time_s']} s: the transient (grey) returns to the closed orbit (red, the last 5 s) "
+             "(paper Fig. \"limit_cycle\"). The convergence plot shows, per step, the distance of the "
+             "post-impact joint state from the mean of the last six steps (rates weighted 1/10 s).", ""]
+    for name in cycles:
+        lines += [f"![limit cycles, {_label(name)}](limit_cycle_{name}.png)", ""]
+    lines += ["![convergence](convergence.png)", "",
+              "| controller | speed (m/s) | outcome | steps | settled after step |", "|---|---|---|---|---|"]
+    for name, by_speed in cycles.items():
+        for speed, result in sorted(by_speed.items()):
+            lines.append(f"| {_label(name)} | {float(speed):.1f} | {_outcome(result)} | {result['steps']} | "
+                         f"{_fmt(result['settled_step'], 'd')} |")
+    return lines + [""]
+
+
+def poincare_section(poincare: dict) -> list[str]:
+    lines = ["## Poincaré test", "",
+             "The step-to-step return map at mid-stance (stance phase 0.5, interpolated between ticks), its "
+             "Jacobian at the cycle by least-squares central differences over random symmetric "
+             "perturbations (the full MuJoCo state and the controller restored for every perturbed "
+             "run; `rabbit_policy.gait_stability`). Classic HZD: 10 coordinates (torso pitch, four "
+             "stance-relative joints, their rates). HZD-RL has memory (the gait in force, the queued "
+             "gait and the running step mean all depend on measured speeds), so its map has three more "
+             "coordinates. Stable when every |λ| < 1; the largest |λ| is the factor by which a small "
+             "perturbation shrinks per step. `decay` is the same factor measured by walking a "
+             "perturbation along the slowest eigenvector (— when it vanished into the walk's own "
+             "step-to-step jitter within three steps).", "",
+             "![eigenvalue magnitudes](poincare.png)", "",
+             "| controller | speed (m/s) | dim | largest \\|λ\\| | all \\|λ\\| | stable | decay/step | pairs used (failed) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, by_speed in poincare.items():
+        for speed, result in sorted(by_speed.items()):
+            if "error" in result:
+                lines.append(f"| {_label(name)} | {float(speed):.1f} | — | — | error: {result['error']} | False | — | — |")
+                continue
+            mags = ", ".join(f"{m:.2f}" for m in result["magnitudes"])
+            lines.append(f"| {_label(name)} | {float(speed):.1f} | {result['dimension']} | {result['largest']:.3f} | "
+                         f"{mags} | {result['stable']} | {_fmt(result['decay_per_step'], '.2f')} | "
+                         f"{result['pairs_used']} ({result['pairs_failed']}) |")
+    return lines + [""]
+
+
+def push_section(push: dict, sweep: dict, videos: dict) -> list[str]:
+    lines = ["## Push recovery", "",
+             f"Walking at {push['speed']} m/s, a horizontal force on the torso's centre of mass at the times "
+             "below (paper Figs. 5–7; the paper gives no magnitudes, these are ours). Shaded: the pushes. "
+             "A walk fails when the robot falls (|torso pitch| ≥ 0.5 rad or hip height outside (0.6, 0.8) m) "
+             "or stalls (no touchdown for 2 s: stopped upright, legs apart).", "",
+             "| scenario | force (N) | duration (s) | impulse (N s) | at (s) |", "|---|---|---|---|---|"]
+    for s in push["scenarios"]:
+        lines.append(f"| {s['name']} | {s['force_x_N']:+.0f} | {s['duration_s']} | {s['impulse_Ns']:+.1f} | "
+                     f"{', '.join(f'{t:g}' for t in s['times_s'])} |")
+    names = [k for k in push["table"][0] if k != "scenario"] if push["table"] else []
+    lines += ["", "![push recovery](push.png)", "",
+              "| scenario | " + " | ".join(_label(n) for n in names) + " |", "|---|" + "---|" * len(names)]
+    for row in push["table"]:
+        cells = [_outcome(row[n]) for n in names]
+        lines.append(f"| {row['scenario']} | " + " | ".join(cells) + " |")
+    if sweep:
+        lines += ["", "### Impulse sweep (beyond the paper)", "",
+                  "One push of growing impulse (fixed duration) at several times spread over about one step; "
+                  "a walk survives when it has not fallen a few seconds later. \"Largest\" is the largest grid "
+                  "impulse such that it and every smaller one were survived at every push time.", "",
+                  "![impulse sweep](sweep.png)", "",
+                  "| controller | largest backward (N s) | largest forward (N s) |", "|---|---|---|"]
+        for name, result in sweep.items():
+            lines.append(f"| {_label(name)} | {result['backward']['largest_survived_Ns']:.1f} | "
+                         f"{result['forward']['largest_survived_Ns']:.1f} |")
+    if videos:
+        lines += ["", "### Videos", ""]
+        for name, entry in videos.items():
+            if "file" in entry:
+                lines.append(f"- {_label(name)}, {entry['scenario'].replace('_', ' ')} pushes: "
+                             f"[{entry['file']}]({entry['file']})")
+            else:
+                lines.append(f"- {_label(name)}: not rendered ({entry['error']})")
+    return lines + [""]
+
+
+def render_report(results: dict) -> str:
+    """The whole report as Markdown."""
+    meta = results["meta"]
+    lines = ["# rabbit-hzd evaluation: classic HZD vs HZD-RL", "",
+             f"Generated by `{meta['command']}` in {meta['wall_time_s']:.0f} s wall time "
+             f"({meta['workers']} worker processes), model variant `{meta['model']}`, on the ROS-free fast path "
+             "(the nodes' MuJoCo model and HZD controller, no ROS). Every number is in `results.json`.", "",
+             "| controller | policy |", "|---|---|"]
+    for name, policy in meta["controllers"].items():
+        lines.append(f"| {_label(name)} | {policy} |")
+    lines.append("")
+    lines += tracking_section(results["tracking"], results["config"])
+    lines += limit_cycle_section(results["limit_cycle"], results["config"])
+    lines += poincare_section(results["poincare"])
+    lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", {}))
+    return "\n".join(lines)

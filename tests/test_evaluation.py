@@ -1,0 +1,171 @@
+"""The section-IV evaluation: signal definitions, the walking return map, pushes (fast
+path and ROS stack agree), rendering, and ``scripts/evaluate.py --quick`` end to end."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rabbit_policy.evaluation import convergence, filtered_speed, settling_time
+from rabbit_policy.gait_stability import WalkReturnMap, analyse_stability
+from rabbit_policy.policies import make_policy
+from rabbit_policy.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
+from rabbit_policy.scenario import Push
+
+ROOT = Path(__file__).resolve().parents[1]
+CLASSIC = make_policy("library")
+SCENARIOS = {s.name: s for s in PUSH_SCENARIOS}
+
+
+def run_script(*args: str, timeout: float = 300, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, *args], capture_output=True, text=True, timeout=timeout, cwd=ROOT,
+                          env=env)
+
+
+# ------------------------------------------------------------------ signals
+def test_filtered_speed_is_a_causal_moving_average():
+    t = np.arange(1, 11) * 0.1
+    v = np.arange(1.0, 11.0)
+    f = filtered_speed(t, v, 0.3)  # the last three samples
+    assert f[0] == 1.0 and f[1] == 1.5 and f[2] == 2.0
+    np.testing.assert_allclose(f[3:], (v[1:-2] + v[2:-1] + v[3:]) / 3)
+    with pytest.raises(ValueError):
+        filtered_speed(t, v, 0.0)
+
+
+def test_settling_time_is_the_last_exit_from_the_band():
+    t = np.arange(0, 101) * 0.01  # 0 .. 1 s
+    v = np.where(t < 0.5, 0.0, 1.0)
+    v[70] = 0.9  # one more excursion at 0.70 s
+    assert settling_time(t, v, 1.0, 0.0, 1.0, 0.05) == pytest.approx(0.71)
+    assert settling_time(t, v, 1.0, 0.8, 1.0, 0.05) == 0.0  # inside the band all along
+    v[-1] = 0.5
+    assert settling_time(t, v, 1.0, 0.0, 1.0, 0.05) is None  # outside at the end: never settled
+
+
+def test_convergence_of_a_geometric_sequence():
+    states = np.outer(0.5 ** np.arange(20), np.ones(8))
+    result = convergence(states, tail=4)
+    assert result["distances"][0] > result["distances"][5] > result["distances"][10]
+    assert result["settled_step"] == 5  # 0.5^5 = 3 % < 5 % of the first
+
+
+# ------------------------------------------------------------------ return map on RABBIT
+def test_walk_return_map_fixed_point_and_classic_stability():
+    step = WalkReturnMap(CLASSIC, 1.0, feedback=False)
+    natural = step.natural_states(6)
+    assert natural.shape == (6, 10)
+    x_star = natural.mean(axis=0)
+    # the map is deterministic: the same state gives the same next state
+    np.testing.assert_allclose(step(x_star), step(x_star), atol=1e-12)
+    # and the cycle is (up to its tick-level jitter) a fixed point of it
+    assert np.abs(step(x_star) - x_star).max() < 5 * natural.std(axis=0).max() + 1e-6
+    result = analyse_stability(CLASSIC, 1.0, feedback=False, samples=40, decay_steps=0)
+    assert result.analysis.fixed_point.shape == (10,)
+    assert result.fit.used == 40 and result.fit.failed == 0
+    assert 0.2 < result.analysis.magnitudes.max() < 1.0  # stable, and not trivially so
+
+
+def test_the_learned_policy_map_has_memory_coordinates():
+    step = WalkReturnMap(make_policy("learned"), 1.0, feedback=True)
+    x = step.natural_states(3)[-1]
+    assert x.shape == (13,)
+    assert x[10:] == pytest.approx([1.0, 1.0, 1.0], abs=0.15)  # speeds (m/s) near the command
+    nudged = x.copy()
+    nudged[11] += 0.05  # a faster queued-gait observation changes the next step
+    assert np.abs(step(nudged) - step(x)).max() > 1e-4
+
+
+# ------------------------------------------------------------------ pushes
+def test_push_outcomes_and_stall_detection():
+    walk = push_trial(CLASSIC, 1.0, SCENARIOS["small_forward"], duration=5.0)
+    assert not walk.failed and walk.duration == pytest.approx(5.0)
+    hard = push_trial(CLASSIC, 1.0, SCENARIOS["large_backward"], duration=8.0)
+    assert hard.failed
+    if hard.stalled:  # stopped upright: no touchdown for 2 s, and the walk ends there
+        assert hard.stall_time == pytest.approx(hard.steps[-1].time + 2.0, abs=2e-3)
+        assert hard.duration == pytest.approx(hard.stall_time)
+    assert survives(CLASSIC, 1.0, 2.0, push_time=2.0, horizon=2.0)
+    assert not survives(CLASSIC, 1.0, -40.0, push_time=2.0, horizon=2.0)
+
+
+def test_impulse_sweep_largest_survived():
+    config = SweepConfig(impulses=(2.0, 40.0), push_times=(2.0,), horizon=2.0)
+    result = impulse_sweep(CLASSIC, 1.0, -1, config)
+    assert result["direction"] == "backward" and result["survived_fraction"] == [1.0, 0.0]
+    assert result["largest_survived_Ns"] == 2.0
+    with pytest.raises(ValueError):
+        impulse_sweep(CLASSIC, 1.0, 0, config)
+
+
+@pytest.mark.parametrize("scenario", ["small_backward", "large_backward"])
+def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
+    """``run_stack.py --push`` (three node processes, lockstep) and the fast path walk the
+    same scenario to the same outcome."""
+    s = SCENARIOS[scenario]
+    fast = push_trial(CLASSIC, 1.0, s, duration=7.0)
+    pushes = ",".join(f"{p.time}:{p.force_x}:{p.duration}" for p in s.pushes)
+    out = run_script("scripts/run_stack.py", "--controller", "hzd", "--speed", "1.0", "--duration", "7",
+                     "--push", pushes, "--json", timeout=120)
+    assert out.returncode == (1 if fast.failed else 0), out.stderr[-2000:]
+    stack = json.loads(out.stdout)
+    assert (stack["fell"], stack["stalled"]) == (fast.fell, fast.stalled)
+    assert stack["steps"] == len(fast.steps)
+    for stack_time, fast_time in ((stack["fall_time"], fast.fall_time), (stack["stall_time"], fast.stall_time)):
+        assert (stack_time is None) == (fast_time is None)
+        if fast_time is not None:
+            assert stack_time == pytest.approx(fast_time, abs=0.02)
+
+
+# ------------------------------------------------------------------ rendering
+def test_render_frames_and_gif(tmp_path):
+    code = """
+import sys
+import numpy as np
+from PIL import Image
+from rabbit_sim.model import load_model
+from rabbit_sim.rendering import frame_indices, render_frames, save_gif
+model = load_model("paper")
+idx = frame_indices(np.arange(0, 1001) * 1e-3, 5.0)
+assert list(idx) == [0, 200, 400, 600, 800, 1000], idx
+qpos = np.zeros((2, model.nq)); qpos[:, 1] = 0.75; qpos[1, 3] = 0.5  # second frame: left hip bent
+frames = render_frames(model, qpos, 64, 48)
+assert frames[0].shape == (48, 64, 3) and frames[0].dtype == np.uint8
+assert np.abs(frames[0].astype(int) - frames[1]).sum() > 0
+path = save_gif(frames, sys.argv[1], 5.0, hold_last=1.0)
+assert Image.open(path).n_frames == 2
+"""
+    env = {**os.environ, "MUJOCO_GL": "egl"}
+    out = run_script("-c", code, str(tmp_path / "a.gif"), env=env, timeout=60)
+    assert out.returncode == 0, out.stderr[-2000:]
+
+
+# ------------------------------------------------------------------ the script
+def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
+    out = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
+    results = json.loads((tmp_path / "results.json").read_text())
+    report = (tmp_path / "report.md").read_text()
+    for name, dimension in (("classic", 10), ("hzd_rl", 13)):
+        analysis = results["poincare"][name]["1.00"]
+        assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True
+        assert results["tracking"][name]["outcome"] == "walked"
+        assert len(results["tracking"][name]["segments"]) == 2
+    table = {row["scenario"]: row for row in results["push"]["table"]}
+    assert set(table) == {"small_forward", "small_backward", "large_backward"}
+    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in ("classic", "hzd_rl"))
+    assert set(results["push_sweep"]) == {"classic", "hzd_rl"}
+    for figure in ("tracking", "limit_cycle_classic", "limit_cycle_hzd_rl", "convergence", "poincare", "push",
+                   "sweep"):
+        assert (tmp_path / f"{figure}.png").stat().st_size > 5000
+        assert f"({figure}.png)" in report
+    for name, video in results["videos"].items():
+        assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
+    bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")
+    assert bad.returncode == 2 and "does not exist" in bad.stderr
