@@ -16,7 +16,6 @@ from rabbit_policy.evaluation import convergence, filtered_speed, settling_time
 from rabbit_policy.gait_stability import WalkReturnMap, analyse_stability
 from rabbit_policy.policies import make_policy
 from rabbit_policy.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
-from rabbit_policy.scenario import Push
 
 ROOT = Path(__file__).resolve().parents[1]
 CLASSIC = make_policy("library")
@@ -49,11 +48,15 @@ def test_settling_time_is_the_last_exit_from_the_band():
     assert settling_time(t, v, 1.0, 0.0, 1.0, 0.05) is None  # outside at the end: never settled
 
 
-def test_convergence_of_a_geometric_sequence():
-    states = np.outer(0.5 ** np.arange(20), np.ones(8))
+def test_convergence_of_a_geometric_sequence_down_to_a_jitter_floor():
+    values = np.concatenate((0.5 ** np.arange(12), 1e-3 * (-1.0) ** np.arange(8)))
+    states = np.outer(values, [1.0] * 4 + [0.0] * 4)  # angles only: distance = 2 |value|
     result = convergence(states, tail=4)
     assert result["distances"][0] > result["distances"][5] > result["distances"][10]
-    assert result["settled_step"] == 5  # 0.5^5 = 3 % < 5 % of the first
+    assert result["jitter"] == pytest.approx(2e-3)
+    assert result["settled_step"] == 8  # 2 x 0.5^8 = 0.0078 <= 5 x jitter = 0.01 < 2 x 0.5^7
+    flat = convergence(np.outer(np.r_[np.ones(10), 1e-3 * (-1.0) ** np.arange(4)], np.ones(8)), tail=4)
+    assert flat["settled_step"] is None  # within the band only in the tail itself
 
 
 # ------------------------------------------------------------------ return map on RABBIT

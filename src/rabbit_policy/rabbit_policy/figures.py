@@ -76,7 +76,7 @@ def limit_cycle_figure(walks: dict[float, PolicyWalk], title: str, path: Path, s
 
 
 def convergence_figure(cycles: dict[str, dict[str, dict]], path: Path) -> Path:
-    """Touchdown state distance from the final cycle per step (log scale)."""
+    """Per step, the post-touchdown state's distance from the final cycle (log scale)."""
     fig, ax = plt.subplots(figsize=(6, 3.4))
     styles = ["-", "--", ":", "-."]
     for name, by_speed in cycles.items():

@@ -9,7 +9,8 @@ the previous touchdown up to this touchdown's stamp, at most ``window``; see
 :mod:`.speed_window`); the decision takes effect at the
 next touchdown (the controller queues it). Parameters:
 
-* ``policy``: ``library`` (classic HZD gait library) or ``learned`` (HZD-RL network).
+* ``policy``: ``learned`` (the HZD-RL network, default: the shipped one) or ``library``
+  (classic HZD gait library, the paper's baseline).
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
 * ``policy_file``: learned policy checkpoint ('' = the packaged one).
@@ -54,7 +55,7 @@ class PolicyNode(Node):
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("policy_node", context=context)
         params = {
-            "policy": "library",
+            "policy": "learned",
             "library_mode": "nearest",
             "gait_dir": "",
             "policy_file": "",
