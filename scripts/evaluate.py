@@ -48,23 +48,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def render_videos(walks: dict, scenario: str, out: Path, config, model_variant: str) -> dict:
-    """One GIF per controller of the ``scenario`` push trial; errors are reported, not raised."""
+def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, model_variant: str) -> list[dict]:
+    """One GIF per controller and push scenario, from the recorded walks; a rendering
+    failure is reported in the entry, not raised."""
     from rabbit_sim.model import load_model
     from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
 
     model = load_model(model_variant)
     width, height = config.video_size
-    videos = {}
-    for name, by_scenario in walks.items():
-        walk = by_scenario[scenario]
-        try:
-            frames = render_frames(model, walk.qpos[frame_indices(walk.times, config.video_fps)], width, height)
-            file = f"{name}_{scenario}.gif"
-            save_gif(frames, out / file, config.video_fps, hold_last=1.5 if walk.failed else 0.0)
-            videos[name] = {"file": file, "scenario": scenario, "frames": len(frames), "failed": walk.failed}
-        except RenderingUnavailable as exc:
-            videos[name] = {"error": str(exc), "scenario": scenario}
+    videos = []
+    for scenario in scenarios:
+        for name, by_scenario in walks.items():
+            walk = by_scenario[scenario]
+            entry = {"controller": name, "scenario": scenario}
+            try:
+                frames = render_frames(model, walk.qpos[frame_indices(walk.times, config.video_fps)], width, height)
+                file = f"{name}_{scenario}.gif"
+                save_gif(frames, out / file, config.video_fps, hold_last=1.5 if walk.failed else 0.0)
+                videos.append({**entry, "file": file, "frames": len(frames), "failed": walk.failed})
+            except RenderingUnavailable as exc:
+                videos.append({**entry, "error": str(exc)})
     return videos
 
 
@@ -127,10 +130,10 @@ def main(argv: list[str] | None = None) -> int:
             pool.close()
             pool.join()
 
-    videos = {}
+    videos: list[dict] = []
     if not args.no_video:
         log("videos")
-        videos = render_videos(push_walks, config.scenarios[-1].name, out, config, args.model)
+        videos = render_videos(push_walks, config.video_scenarios, out, config, args.model)
 
     command = "scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
     results = {"meta": {"command": command, "model": args.model, "workers": args.workers,

@@ -168,7 +168,9 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
                    "sweep"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
-    for name, video in results["videos"].items():
+    assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {
+        ("classic", "large_backward"), ("hzd_rl", "large_backward")}
+    for video in results["videos"]:
         assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
     bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")
     assert bad.returncode == 2 and "does not exist" in bad.stderr

@@ -56,8 +56,9 @@ class EvaluationConfig:
     push_duration: float = 10.0
     scenarios: tuple[PushScenario, ...] = PUSH_SCENARIOS
     sweep: SweepConfig | None = field(default_factory=SweepConfig)
+    video_scenarios: tuple[str, ...] = ("small_backward", "large_backward")
     video_fps: float = 10.0
-    video_size: tuple[int, int] = (256, 192)
+    video_size: tuple[int, int] = (224, 168)
     series_rate: float = 50.0  # Hz of the time series stored in results.json
 
     @classmethod
@@ -67,7 +68,13 @@ class EvaluationConfig:
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
                    sweep=SweepConfig(impulses=(3.0, 12.0), push_times=(3.0,), horizon=2.0),
-                   video_fps=5.0, video_size=(160, 120))
+                   video_scenarios=("large_backward",), video_fps=5.0, video_size=(160, 120))
+
+    def __post_init__(self) -> None:
+        names = {s.name for s in self.scenarios}
+        unknown = [v for v in self.video_scenarios if v not in names]
+        if unknown:
+            raise ValueError(f"video_scenarios {unknown} are not among the push scenarios {sorted(names)}")
 
     def to_dict(self) -> dict:
         return {"tracking_schedule": [list(s) for s in self.tracking_schedule],

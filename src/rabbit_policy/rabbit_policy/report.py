@@ -92,7 +92,7 @@ def poincare_section(poincare: dict) -> list[str]:
     return lines + [""]
 
 
-def push_section(push: dict, sweep: dict, videos: dict) -> list[str]:
+def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
     lines = ["## Push recovery", "",
              f"Walking at {push['speed']} m/s, a horizontal force on the torso's centre of mass at the times "
              "below (paper Figs. 5–7; the paper gives no magnitudes, these are ours). Shaded: the pushes. "
@@ -120,12 +120,12 @@ def push_section(push: dict, sweep: dict, videos: dict) -> list[str]:
                          f"{result['forward']['largest_survived_Ns']:.1f} |")
     if videos:
         lines += ["", "### Videos", ""]
-        for name, entry in videos.items():
+        for entry in videos:
+            what = f"{_label(entry['controller'])}, {entry['scenario'].replace('_', ' ')} pushes"
             if "file" in entry:
-                lines.append(f"- {_label(name)}, {entry['scenario'].replace('_', ' ')} pushes: "
-                             f"[{entry['file']}]({entry['file']})")
+                lines.append(f"- {what}: [{entry['file']}]({entry['file']})")
             else:
-                lines.append(f"- {_label(name)}: not rendered ({entry['error']})")
+                lines.append(f"- {what}: not rendered ({entry['error']})")
     return lines + [""]
 
 
@@ -143,5 +143,5 @@ def render_report(results: dict) -> str:
     lines += tracking_section(results["tracking"], results["config"])
     lines += limit_cycle_section(results["limit_cycle"], results["config"])
     lines += poincare_section(results["poincare"])
-    lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", {}))
+    lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", []))
     return "\n".join(lines)

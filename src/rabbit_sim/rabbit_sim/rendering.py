@@ -76,7 +76,7 @@ def render_frames(model: mujoco.MjModel, qpos: np.ndarray, width: int = 320, hei
 
 
 def save_gif(frames: Sequence[np.ndarray], path: str | Path, fps: float, hold_last: float = 0.0,
-             colors: int = 64) -> Path:
+             colors: int = 48) -> Path:
     """Write ``frames`` as a looping GIF at ``fps`` with a ``colors`` palette per frame;
     ``hold_last`` s shows the last frame longer (e.g. a fall). Returns the path."""
     from PIL import Image
