@@ -27,11 +27,12 @@ import sys
 import time
 from pathlib import Path
 
-# MuJoCo picks its OpenGL backend when it is first imported: headless EGL unless the
-# user chose one (see rabbit_sim.rendering)
-os.environ.setdefault("MUJOCO_GL", "egl")
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_sim.gl_backend import choose_headless_gl
 
-from rabbit_msgs_py.environment import ensure_localhost_discovery  # noqa: E402
+# MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
+# unless the user chose one
+choose_headless_gl()
 
 CONTROLLERS = ("classic", "hzd_rl")
 

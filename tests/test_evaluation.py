@@ -149,6 +149,25 @@ assert Image.open(path).n_frames == 2
     assert out.returncode == 0, out.stderr[-2000:]
 
 
+def test_without_opengl_rendering_reports_itself_unavailable():
+    code = """
+import os
+from rabbit_sim.gl_backend import choose_headless_gl
+assert choose_headless_gl() == "disable"  # the user's choice is kept
+import numpy as np
+from rabbit_sim.model import load_model
+from rabbit_sim.rendering import RenderingUnavailable, render_frames
+try:
+    render_frames(load_model("paper"), np.zeros((1, 7)))
+except RenderingUnavailable as exc:
+    print("unavailable:", exc)
+"""
+    out = run_script("-c", code, env={**os.environ, "MUJOCO_GL": "disable"}, timeout=60)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "unavailable: MuJoCo was imported without an OpenGL backend" in out.stdout
+    assert "Traceback" not in out.stderr
+
+
 # ------------------------------------------------------------------ the script
 def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     out = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), timeout=300)

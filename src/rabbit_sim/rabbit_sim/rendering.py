@@ -7,8 +7,8 @@ The camera looks at the hip from the side (-y), following it along x.
 MuJoCo picks its OpenGL backend from ``MUJOCO_GL`` when ``mujoco`` is first imported:
 ``egl`` (Mesa's EGL with the llvmpipe software rasteriser works without a GPU or a
 display; Debian packages ``libegl1 libegl-mesa0 libgl1-mesa-dri``) or ``osmesa``
-(``libosmesa6``); scripts that render set ``MUJOCO_GL=egl`` (unless set) before anything
-imports mujoco. Rendering needs no GPU: about 70-100 ms a 320 x 240 frame on one core here.
+(``libosmesa6``); scripts that render call
+:func:`rabbit_sim.gl_backend.choose_headless_gl` before anything imports mujoco. Rendering needs no GPU: about 70-100 ms a 320 x 240 frame on one core here.
 """
 
 from __future__ import annotations
@@ -56,6 +56,10 @@ def render_frames(model: mujoco.MjModel, qpos: np.ndarray, width: int = 320, hei
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
         raise ValueError(f"qpos must be n x {model.nq}, got shape {qpos.shape}")
     data = mujoco.MjData(model)
+    if not hasattr(mujoco.gl_context, "GLContext"):  # MUJOCO_GL=disable, or no backend found
+        raise RenderingUnavailable(f"MuJoCo was imported without an OpenGL backend (MUJOCO_GL="
+                                   f"{os.environ.get('MUJOCO_GL', 'unset')}); install Mesa's EGL "
+                                   "(libegl1 libegl-mesa0 libgl1-mesa-dri) or OSMesa (libosmesa6)")
     try:
         renderer = mujoco.Renderer(model, height=height, width=width)
     except Exception as exc:  # mujoco raises plain Exceptions for GL failures
