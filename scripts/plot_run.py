@@ -4,8 +4,8 @@
     scripts/plot_run.py runs/walk1            # writes PNGs into runs/walk1/plots/
     scripts/plot_run.py runs/walk1 --out figs --show
 
-Figures (PNG): ``speed.png`` commanded speed vs hip speed filtered over 200 samples (about
-one step, the policy's window); ``joints.png`` the four joint angles (rad) and torques
+Figures (PNG): ``speed.png`` commanded speed vs hip speed filtered over 200 samples, with
+the pushes (``/push_applied``) shaded; ``joints.png`` the four joint angles (rad) and torques
 (N m); ``limit_cycle.png`` the stance-leg phase portrait — left hip angle vs rate over the
 run, closing on the walking limit cycle; ``pitch.png`` torso pitch (rad). Time axis: the
 messages' sim-time stamps (s). Reads the bag with ``rosbags`` (AnyReader), the library
@@ -24,15 +24,16 @@ import numpy as np
 
 def read_run(bag: Path) -> dict[str, np.ndarray]:
     """Arrays from the bag: t, q (n x 7), dq, effort from /joint_states; tv, v from
-    /hip_velocity; tau (n x 4) from /joint_torques; cmd (time by log order) from /cmd_speed."""
+    /hip_velocity; tau (n x 4) from /joint_torques; cmd (time by log order) from /cmd_speed;
+    push (n x 2: stamp s, force x N; a zero force ends a push) from /push_applied."""
     from rosbags.highlevel import AnyReader
 
     from rabbit_msgs_py.conversions import stamp_to_seconds
     from rosbags.typesys import Stores, get_typestore
 
-    t, q, dq, eff, tv, v, tau, cmd = [], [], [], [], [], [], [], []
+    t, q, dq, eff, tv, v, tau, cmd, push = [], [], [], [], [], [], [], [], []
     with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
-        wanted = {"/joint_states", "/hip_velocity", "/joint_torques", "/cmd_speed", "/hzd/alpha"}
+        wanted = {"/joint_states", "/hip_velocity", "/joint_torques", "/cmd_speed", "/hzd/alpha", "/push_applied"}
         connections = [c for c in reader.connections if c.topic in wanted]
         last_t = 0.0
         for conn, _log_time, raw in reader.messages(connections=connections):
@@ -50,13 +51,26 @@ def read_run(bag: Path) -> dict[str, np.ndarray]:
                 tau.append(msg.data)
             elif conn.topic == "/cmd_speed":
                 cmd.append((last_t, msg.data))
+            elif conn.topic == "/push_applied":
+                push.append((stamp_to_seconds(msg.header.stamp), msg.wrench.force.x))
     if not t:
         raise ValueError(f"{bag} holds no /joint_states messages")
     return {
         "t": np.array(t), "q": np.array(q), "dq": np.array(dq), "effort": np.array(eff),
         "tv": np.array(tv), "v": np.array(v), "tau": np.array(tau).reshape(-1, 4),
-        "cmd": np.array(cmd).reshape(-1, 2),
+        "cmd": np.array(cmd).reshape(-1, 2), "push": np.array(push).reshape(-1, 2),
     }
+
+
+def push_intervals(push: np.ndarray, end: float) -> list[tuple[float, float, float]]:
+    """(start s, end s, force x N) of each push from /push_applied rows (stamp, force x);
+    a push still acting at the end of the bag ends at ``end``."""
+    intervals = []
+    for i, (start, force) in enumerate(push):
+        if force != 0.0:
+            stop = push[i + 1, 0] if i + 1 < len(push) else end
+            intervals.append((float(start), float(stop), float(force)))
+    return intervals
 
 
 def moving_average(x: np.ndarray, n: int) -> np.ndarray:
@@ -89,6 +103,9 @@ def plot(run: dict[str, np.ndarray], out: Path, show: bool = False) -> list[Path
         times = np.concatenate([run["cmd"][:, 0], [t[-1]]])
         ax.step(times, np.concatenate([run["cmd"][:, 1], run["cmd"][-1:, 1]]), where="post", color="k",
                 label="commanded (/cmd_speed)")
+    for k, (start, stop, force) in enumerate(push_intervals(run.get("push", np.empty((0, 2))), float(t[-1]))):
+        ax.axvspan(start, stop, color="tab:red", alpha=0.25, label="push (/push_applied)" if k == 0 else None)
+        ax.annotate(f"{force:+.0f} N", (start, ax.get_ylim()[1]), fontsize=7, va="top")
     ax.set(xlabel="sim time (s)", ylabel="speed (m/s)", title="Commanded vs filtered hip speed")
     ax.legend(loc="best")
     written.append(_save(fig, out / "speed.png"))

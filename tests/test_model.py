@@ -143,3 +143,22 @@ def test_controller_kinematics_match_the_model(model):
             site = data.site(f"{leg}_foot").xpos
             assert site[0] == pytest.approx(q[0] + fx, abs=1e-12)
             assert site[2] == pytest.approx(q[1] + fz, abs=1e-12)
+
+
+@pytest.mark.parametrize("start_steps, duration", [(1000, 0.1), (2345, 0.3), (7, 0.05)])
+def test_a_push_lasts_its_duration_in_whole_steps(start_steps, duration):
+    """Sim time sums 1 ms steps and drifts below exact values; a 0.1 s push is still
+    exactly 100 steps of force, whenever it starts."""
+    from rabbit_sim.simulation import Simulator
+
+    sim = Simulator(load_model("paper"))
+    sim.reset([0.0, 0.75, 0.0, 0.3, 0.4, -0.2, 0.4], [0.0] * 7)
+    for _ in range(start_steps):
+        sim.step([0.0] * 4)
+    sim.push(40.0, duration)
+    pushed = 0
+    while any(sim.push_wrench):
+        sim.step([0.0] * 4)
+        pushed += 1
+    assert pushed == round(duration / sim.timestep)
+    assert sim.push_wrench == (0.0, 0.0, 0.0)

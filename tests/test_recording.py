@@ -18,6 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from rabbit_msgs_py.catalog import STACK_TOPICS
 from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_policy.scenario import Push
 from rabbit_policy.stack import StackConfig, run_in_process
 from rabbit_sim.bag import BagError, BagWriter, QosSpec
 
@@ -28,8 +29,9 @@ ROOT = Path(__file__).resolve().parents[1]
 def recorded(request, tmp_path_factory):
     bag = tmp_path_factory.mktemp("bags") / f"run_{request.param}"
     duration = 30.0 if request.param == "none" else 3.0  # the 30 s lockstep run, once
+    pushes = (Push(1.0, 40.0, 0.1),) if request.param == "zstd" else ()  # the short run is pushed once
     config = StackConfig(duration=duration, schedule=((0.0, 0.9), (duration / 2, 1.1)), record=str(bag),
-                         record_compression=request.param)
+                         record_compression=request.param, pushes=pushes)
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell
     return bag, nodes, request.param
@@ -58,6 +60,7 @@ def test_bag_holds_every_message_the_stack_published(recorded):
     assert counts["/joint_states"] == nodes["sim_node"].states_published
     assert counts["/joint_torques"] == nodes["hzd_controller_node"].torques_published
     assert counts["/hip_velocity"] == nodes["sim_node"].states_published
+    assert counts["/push_applied"] == (2 if compression == "zstd" else 0)  # start and end of the push
     assert counts["/hzd/alpha"] == nodes["policy_node"].decisions
     assert counts["/cmd_speed"] == 2 and counts["/fallen"] >= 1
     # types as documented, timestamps monotonic per topic
@@ -100,6 +103,14 @@ def test_plot_run_writes_the_figures(recorded, tmp_path):
     for name in ("speed.png", "joints.png", "limit_cycle.png", "pitch.png"):
         png = tmp_path / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("plot_run", ROOT / "scripts" / "plot_run.py")
+    plot_run = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(plot_run)
+    run = plot_run.read_run(bag)
+    intervals = plot_run.push_intervals(run["push"], float(run["t"][-1]))
+    assert intervals == ([(1.0, pytest.approx(1.1), 40.0)] if _compression == "zstd" else [])
 
 
 def test_existing_or_impossible_outputs_are_refused(tmp_path):

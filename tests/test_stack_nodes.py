@@ -231,10 +231,27 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
 def test_scheduled_pushes_reach_the_torso_at_their_sim_time():
     from rabbit_policy.scenario import Push
 
+    from geometry_msgs.msg import WrenchStamped
+
+    from rabbit_msgs_py.conversions import stamp_to_seconds
+
+    applied: list = []
+
+    def watcher(context):
+        import rclpy
+
+        node = rclpy.create_node("push_watcher", context=context)
+        node.create_subscription(WrenchStamped, topics.PUSH_APPLIED,
+                                 lambda m: applied.append((stamp_to_seconds(m.header.stamp), m.wrench.force.x)),
+                                 qos.EVENT_QOS)
+        return node
+
     base = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
     pushed = StackConfig(duration=2.0, schedule=((0.0, 1.0),), pushes=(Push(0.5, -60.0, 0.3),))
     _, plain_nodes = run_in_process(base)
-    _, pushed_nodes = run_in_process(pushed)
+    _, pushed_nodes = run_in_process(pushed, observers=[watcher])
+    # /push_applied: the push starting at its sim time and ending 0.3 s later
+    assert [(round(t, 3), f) for t, f in applied] == [(0.5, -60.0), (0.8, 0.0)]
     assert pushed_nodes["sim_node"].settings.push_schedule == "0.5:-60.0:0.3"  # sim_node applies it itself
     assert pushed_nodes["sim_node"].pushes_applied == 1 and plain_nodes["sim_node"].pushes_applied == 0
     x_plain = float(plain_nodes["sim_node"].sim.data.qpos[0])

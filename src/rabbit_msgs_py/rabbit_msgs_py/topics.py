@@ -20,6 +20,10 @@ CMD_SPEED = "/cmd_speed"
 """std_msgs/Float64, desired forward speed (m/s)."""
 PUSH = "/push"
 """geometry_msgs/Wrench on the torso (N, N m, world frame)."""
+PUSH_APPLIED = "/push_applied"
+"""geometry_msgs/WrenchStamped, published by sim_node whenever the push on the torso
+changes (a push starts, from ``/push`` or its ``push_schedule``, or ends: zeros);
+``stamp`` = sim time, frame ``world``. Recordings show the pushes from it."""
 FALLEN = "/fallen"
 """std_msgs/Bool, true once the paper's limits (torso pitch, hip height) are left."""
 STEP = "/hzd/step"

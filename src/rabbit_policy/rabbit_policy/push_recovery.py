@@ -5,7 +5,7 @@ and "large backward" forces but gives no magnitudes; ours are in :data:`PUSH_SCE
 (a horizontal force at the torso's centre of mass, world frame, for ``duration`` s; the
 impulse is force x duration in N s). They were set from the impulse sweep at 1.0 m/s
 (``docs/results``): both controllers survive every push phase up to 9 N s backward and
-17-21 N s forward, so "small" (±6 N s) is inside both margins and "large backward"
+17-22 N s forward, so "small" (±6 N s) is inside both margins and "large backward"
 (15 N s) beyond both — in the paper the large push is one classic HZD does not survive. Every walk starts on the controller's gait at the
 commanded speed, as :func:`~.policy_walk.walk_policy` places it.
 

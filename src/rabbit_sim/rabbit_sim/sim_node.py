@@ -42,7 +42,7 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 ensure_localhost_discovery()
 
 from builtin_interfaces.msg import Time  # noqa: E402
-from geometry_msgs.msg import TwistStamped, Wrench  # noqa: E402
+from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped  # noqa: E402
 from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
@@ -154,6 +154,7 @@ class SimNode(Node):
         self._last_publish_wall = 0.0
         self._scheduled_pushes = list(self.settings.pushes)
         self.pushes_applied = 0  # scheduled and /push
+        self._pushing = False
         self.pushes_rejected = 0
         # realtime bookkeeping
         self._latest_torques = [0.0] * N_ACTUATED
@@ -179,6 +180,7 @@ class SimNode(Node):
         self._hip_pub = self.create_publisher(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
         self._clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK_QOS)
         self._fallen_pub = self.create_publisher(Bool, topics.FALLEN, qos.STATUS_QOS)
+        self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
@@ -300,6 +302,8 @@ class SimNode(Node):
             self.get_logger().warning("push: the model is planar; force.y, torque.x and torque.z are ignored")
         with self._lock:
             self.sim.push(msg.force.x, self.settings.push_duration, msg.force.z, msg.torque.y)
+            self._pushing = True
+            self._publish_push_applied()
             self.pushes_applied += 1
             self.get_logger().info(
                 f"push at t = {self.sim.time:.3f} s: fx = {msg.force.x:.1f} N, fz = {msg.force.z:.1f} N, "
@@ -342,6 +346,9 @@ class SimNode(Node):
     def _place_on_gait(self) -> None:
         qpos, qvel = state_on_gait(self._alpha, self.settings.initial_speed)
         self.sim.reset(qpos, qvel)
+        if self._pushing:  # the reset removed it
+            self._pushing = False
+            self._publish_push_applied()
         self._started = True
         self._halted = False
         self._scheduled_pushes = list(self.settings.pushes)
@@ -364,13 +371,27 @@ class SimNode(Node):
             return
         self._awaiting_reply = True
 
+    def _publish_push_applied(self) -> None:
+        """``/push_applied``: the push acting from now on (zeros: none)."""
+        msg = WrenchStamped()
+        msg.header.stamp = stamp_of(self.sim.time)
+        msg.header.frame_id = "world"
+        msg.wrench.force.x, msg.wrench.force.z, msg.wrench.torque.y = self.sim.push_wrench
+        self._push_applied_pub.publish(msg)
+
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
+        was_pushing = self._pushing
         sim.step(torques)
         self.ticks += 1
+        self._pushing = any(sim.push_wrench)
+        if was_pushing and not self._pushing:
+            self._publish_push_applied()  # the push ended
         while self._scheduled_pushes and sim.time >= self._scheduled_pushes[0].time - 1e-9:
             push = self._scheduled_pushes.pop(0)  # acts from the next step on, as on the fast path
             sim.push(push.force_x, push.duration)
+            self._pushing = True
+            self._publish_push_applied()
             self.pushes_applied += 1
             self.get_logger().info(f"scheduled push at t = {sim.time:.3f} s: fx = {push.force_x:.1f} N "
                                    f"for {push.duration:.3f} s")

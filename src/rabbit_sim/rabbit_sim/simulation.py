@@ -113,9 +113,16 @@ class Simulator:
         self._push_until = -1.0
         mujoco.mj_forward(self.model, self.data)
 
+    @property
+    def push_wrench(self) -> tuple[float, float, float]:
+        """The push acting now: (force x N, force z N, torque y N m), world frame; zeros
+        when none."""
+        wrench = self.data.xfrc_applied[self._torso]
+        return float(wrench[0]), float(wrench[2]), float(wrench[4])
+
     def push(self, force_x: float, duration: float, force_z: float = 0.0, torque_y: float = 0.0) -> None:
         """Apply a wrench at the torso CoM, world frame (N, N, N m), for ``duration`` s
-        from now. Replaces a push still in progress."""
+        from now (``round(duration / timestep)`` steps). Replaces a push still in progress."""
         wrench = self.data.xfrc_applied[self._torso]
         wrench[:] = 0.0
         wrench[0] = force_x
@@ -128,7 +135,8 @@ class Simulator:
         data = self.data
         data.ctrl[:] = torques
         mujoco.mj_step(self.model, data)
-        if self._push_until >= 0.0 and data.time >= self._push_until:
+        # half a step of tolerance: sim time sums 1 ms steps and drifts below exact values
+        if self._push_until >= 0.0 and data.time >= self._push_until - 0.5 * self.model.opt.timestep:
             data.xfrc_applied[self._torso, :] = 0.0
             self._push_until = -1.0
 
