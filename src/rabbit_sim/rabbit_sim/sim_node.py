@@ -384,9 +384,10 @@ class SimNode(Node):
         was_pushing = self._pushing
         sim.step(torques)
         self.ticks += 1
-        self._pushing = any(sim.push_wrench)
-        if was_pushing and not self._pushing:
-            self._publish_push_applied()  # the push ended
+        if was_pushing:  # read the wrench only while a push acts (1 kHz hot path)
+            self._pushing = any(sim.push_wrench)
+            if not self._pushing:
+                self._publish_push_applied()  # the push ended
         while self._scheduled_pushes and sim.time >= self._scheduled_pushes[0].time - 1e-9:
             push = self._scheduled_pushes.pop(0)  # acts from the next step on, as on the fast path
             sim.push(push.force_x, push.duration)
