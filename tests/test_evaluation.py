@@ -174,6 +174,7 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert out.returncode == 0, out.stderr[-3000:]
     results = json.loads((tmp_path / "results.json").read_text())
     report = (tmp_path / "report.md").read_text()
+    assert "## Summary" in report and "walking cycle stable at every speed tested" in report
     for name, dimension in (("classic", 10), ("hzd_rl", 13)):
         analysis = results["poincare"][name]["1.00"]
         assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True

@@ -92,16 +92,32 @@ def poincare_section(poincare: dict) -> list[str]:
     return lines + [""]
 
 
+def _against_margins(impulse: float, sweep: dict) -> str:
+    """Where a signed impulse (N s) lies against each controller's largest survived
+    impulse in the same direction."""
+    direction = "forward" if impulse > 0 else "backward"
+    margins = [by_direction[direction]["largest_survived_Ns"] for by_direction in sweep.values()]
+    if not margins:
+        return "—"
+    if abs(impulse) <= min(margins):
+        return f"inside every controller's {direction} margin (≥ {min(margins):g} N s)"
+    if abs(impulse) > max(margins):
+        return f"beyond every controller's {direction} margin (≤ {max(margins):g} N s)"
+    return f"between the controllers' {direction} margins ({min(margins):g}–{max(margins):g} N s)"
+
+
 def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
     lines = ["## Push recovery", "",
              f"Walking at {push['speed']} m/s, a horizontal force on the torso's centre of mass at the times "
-             "below (paper Figs. 5–7; the paper gives no magnitudes, these are ours). Shaded: the pushes. "
+             "below (paper Figs. 5–7; the paper gives no magnitudes, these are ours; the last column "
+             "places each against the impulse sweep below). Shaded: the pushes. "
              "A walk fails when the robot falls (|torso pitch| ≥ 0.5 rad or hip height outside (0.6, 0.8) m) "
              "or stalls (no touchdown for 2 s: stopped upright, legs apart).", "",
-             "| scenario | force (N) | duration (s) | impulse (N s) | at (s) |", "|---|---|---|---|---|"]
+             "| scenario | force (N) | duration (s) | impulse (N s) | at (s) | vs the sweep's margins |",
+             "|---|---|---|---|---|---|"]
     for s in push["scenarios"]:
         lines.append(f"| {s['name']} | {s['force_x_N']:+.0f} | {s['duration_s']} | {s['impulse_Ns']:+.1f} | "
-                     f"{', '.join(f'{t:g}' for t in s['times_s'])} |")
+                     f"{', '.join(f'{t:g}' for t in s['times_s'])} | {_against_margins(s['impulse_Ns'], sweep)} |")
     names = [k for k in push["table"][0] if k != "scenario"] if push["table"] else []
     lines += ["", "![push recovery](push.png)", "",
               "| scenario | " + " | ".join(_label(n) for n in names) + " |", "|---|" + "---|" * len(names)]
@@ -129,6 +145,35 @@ def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def summary_section(results: dict) -> list[str]:
+    """Headline facts computed from the results (no hand-written numbers)."""
+    lines = ["## Summary", ""]
+    for name, tracking in results["tracking"].items():
+        errors = [abs(seg["mean_error_second_half"]) for seg in tracking["segments"]
+                  if seg["mean_error_second_half"] is not None]
+        settle = [seg["settling_time"] for seg in tracking["segments"]]
+        known = [t for t in settle if t is not None]
+        walked = "without a fall" if tracking["outcome"] == "walked" else _outcome(tracking)
+        lines.append(f"- {_label(name)}: speed tracking {walked}, second-half errors within "
+                     f"{max(errors):.3f} m/s, settling {min(known):.1f}–{max(known):.1f} s"
+                     + (f" ({settle.count(None)} segment(s) never settled)" if None in settle else "")
+                     if errors and known else f"- {_label(name)}: speed tracking {walked}")
+    for name, by_speed in results["poincare"].items():
+        largest = {speed: r.get("largest") for speed, r in sorted(by_speed.items())}
+        stable = all(r.get("stable") for r in by_speed.values())
+        lines.append(f"- {_label(name)}: walking cycle {'stable' if stable else 'NOT stable'} at every speed tested; "
+                     "largest |λ| " + ", ".join(f"{_fmt(v, '.2f')} at {float(k):.1f} m/s" for k, v in largest.items()))
+    table = results["push"]["table"]
+    for name in [k for k in (table[0] if table else {}) if k != "scenario"]:
+        survived = [row["scenario"] for row in table if row[name]["outcome"] == "walked"]
+        lines.append(f"- {_label(name)}: walked on through {len(survived)} of {len(table)} push scenarios"
+                     + (f" ({', '.join(survived)})" if survived else ""))
+    for name, sweep in results.get("push_sweep", {}).items():
+        lines.append(f"- {_label(name)}: survives every push phase up to {sweep['backward']['largest_survived_Ns']:.0f} "
+                     f"N s backward and {sweep['forward']['largest_survived_Ns']:.0f} N s forward")
+    return lines + [""]
+
+
 def render_report(results: dict) -> str:
     """The whole report as Markdown."""
     meta = results["meta"]
@@ -140,6 +185,7 @@ def render_report(results: dict) -> str:
     for name, policy in meta["controllers"].items():
         lines.append(f"| {_label(name)} | {policy} |")
     lines.append("")
+    lines += summary_section(results)
     lines += tracking_section(results["tracking"], results["config"])
     lines += limit_cycle_section(results["limit_cycle"], results["config"])
     lines += poincare_section(results["poincare"])
