@@ -34,9 +34,10 @@ the initial state has died out):
   from the library gait of a slower speed: the robot walks that gait, the candidate
   takes over at a touchdown, and the cost grows by ``approach_weight`` per metre of
   shortfall: the time integral of how far each step's mean speed is from the design
-  speed beyond ``approach_tolerance`` (the learning issue's "new speed reached" band). A gait can be a fine periodic orbit yet converge to it slowly; this
-  term makes convergence part of the design (measured: the 1.5 m/s gait designed without
-  it needed more than 4 s from 0.9 m/s),
+  speed beyond ``approach_tolerance`` (the learning issue's "new speed reached" band).
+  A gait can be a fine periodic orbit yet converge to it slowly; this term makes
+  convergence part of the design (measured: the 1.5 m/s gait designed without it never
+  came within 0.05 m/s in 8 s from 0.9 m/s; refined with it, 2.4 s),
 * and a fall penalty that makes any fall worse than any walk, graded by how long it
   walked so the optimiser can climb out of falling regions.
 """
