@@ -63,7 +63,7 @@ class EvaluationConfig:
 
     @classmethod
     def quick(cls) -> EvaluationConfig:
-        """A short version (about a minute on two cores) for tests and a first look."""
+        """A short version (about 15 s on two cores) for tests and a first look."""
         return cls(tracking_schedule=((0.0, 0.9), (4.0, 1.2)), tracking_duration=8.0,
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
@@ -88,7 +88,9 @@ class EvaluationConfig:
                 "scenarios": [s.to_dict() for s in self.scenarios],
                 "sweep": None if self.sweep is None else {
                     "impulses_Ns": list(self.sweep.impulses), "push_duration_s": self.sweep.duration,
-                    "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon}}
+                    "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon},
+                "video_scenarios": list(self.video_scenarios), "video_fps": self.video_fps,
+                "video_size": list(self.video_size)}
 
 
 # ------------------------------------------------------------------ signals
