@@ -49,7 +49,8 @@ def limit_cycle_section(cycles: dict, config: dict) -> list[str]:
     lines = ["## Limit cycles", "",
              f"Phase portraits of the left hip and knee over {config['portrait_duration_s']:.0f} s of walking, "
              f"perturbed once by a {push['force_x_N']:+.0f} N push of {push['duration_s']} s at "
-             f"{push['time_s']} s: the transient (grey) returns to the closed orbit (red, the last 5 s) "
+             f"{push['time_s']} s: the transient (grey) returns to the closed orbit (red, the last 5 s; the "
+             "right leg runs the same orbit one step later) "
              "(paper Fig. \"limit_cycle\"). The convergence plot shows, per step, the distance of the "
              "joint state 20 ms after touchdown (stance-relative, rates weighted 1/10 s) from the mean of "
              "the last six steps; it shrinks to the walk's own step-to-step jitter. Settled: the first "
