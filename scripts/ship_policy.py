@@ -109,17 +109,15 @@ def warm_start_policy(checkpoint):
     import torch
 
     from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.network import HZDPolicyNet
     from rabbit_policy.policies import NetworkPolicy
-    from rabbit_policy.warm_start import WARM_STARTS, warm_start
+    from rabbit_policy.warm_start import WARM_STARTS, initial_network
 
     name = checkpoint.info.get("warm_start")
     if name not in WARM_STARTS:
         return None
-    torch.set_num_threads(1)
-    torch.manual_seed(int(checkpoint.info.get("seed", 0)))  # as scripts/train.py, before building the net
-    net = HZDPolicyNet(checkpoint.low, checkpoint.high)
-    warm_start(net, GaitLibrary.load(), seed=int(checkpoint.info.get("seed", 0)), config=WARM_STARTS[name])
+    torch.set_num_threads(1)  # as scripts/train.py
+    net, _ = initial_network(checkpoint.low, checkpoint.high, GaitLibrary.load(),
+                             int(checkpoint.info.get("seed", 0)), name)
     return NetworkPolicy(net, f"warm start ({name})")
 
 

@@ -131,9 +131,9 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.env import ActionBounds
     from rabbit_policy.es import ignore_interrupts
     from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
+    from rabbit_policy.network import PolicyCheckpoint, parameter_count
     from rabbit_policy.policies import NetworkPolicy
-    from rabbit_policy.warm_start import WARM_STARTS, warm_start
+    from rabbit_policy.warm_start import initial_network
 
     start = time.perf_counter()  # wall time includes the warm start and the evaluations
     torch.set_num_threads(1)
@@ -141,7 +141,8 @@ def main(argv: list[str] | None = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     library = GaitLibrary.load()
     bounds = ActionBounds.from_library(library)
-    net = HZDPolicyNet(bounds.low, bounds.high)
+    net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
+                               "none" if args.resume else args.warm_start)
     state: dict = {}
     if args.resume:
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
@@ -149,8 +150,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
             return 2
         net.load_state_dict(state["net"])
-    elif args.warm_start != "none":
-        mse = warm_start(net, library, seed=args.seed, config=WARM_STARTS[args.warm_start])
+    elif mse is not None:
         print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
               "(normalised action units)", flush=True)
     eval_pool = get_context("fork").Pool(args.workers, initializer=ignore_interrupts) if args.eval_every else None

@@ -111,3 +111,18 @@ def warm_start(net: HZDPolicyNet, library: GaitLibrary, seed: int = 0,
         loss.backward()
         optimiser.step()
     return float(loss.detach())
+
+
+def initial_network(low: np.ndarray, high: np.ndarray, library: GaitLibrary, seed: int,
+                    start: str = "scheduled") -> tuple[HZDPolicyNet, float | None]:
+    """The network a training run starts from: built after ``torch.manual_seed(seed)``,
+    then warm-started with ``WARM_STARTS[start]`` (``"none"``: the random weights).
+    Returns it and the warm start's final error (None without one). ``scripts/train.py``
+    builds its network with it and ``scripts/ship_policy.py`` rebuilds the same one."""
+    if start != "none" and start not in WARM_STARTS:
+        raise ValueError(f"warm start must be one of {sorted(WARM_STARTS)} or 'none', got {start!r}")
+    torch.manual_seed(seed)
+    net = HZDPolicyNet(low, high)
+    if start == "none":
+        return net, None
+    return net, warm_start(net, library, seed=seed, config=WARM_STARTS[start])
