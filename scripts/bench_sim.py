@@ -36,8 +36,8 @@ def main() -> None:
     args = parser.parse_args()
 
     from rabbit_hzd_controller.gait_state import state_on_gait
-    from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.walking import setup_walk
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.experiment.setup import setup_walk
 
     gait = GaitLibrary.load().nearest(args.speed)
     qpos, qvel = state_on_gait(gait.alpha, gait.speed)

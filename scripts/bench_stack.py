@@ -39,7 +39,7 @@ SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_pr
 
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
-    from rabbit_policy.stack import StackConfig, run_in_process, run_multi_process
+    from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 
     schedule = ((0.0, speed),)
     if name == "lockstep_in_process":

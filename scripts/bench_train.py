@@ -45,9 +45,9 @@ def env_throughput(steps: int, seed: int = 0) -> tuple[float, float]:
     """(walking steps per s, simulated s per s) in this process."""
     import torch
 
-    from rabbit_policy.env import RabbitHZDEnv
-    from rabbit_policy.network import HZDPolicyNet
-    from rabbit_policy.warm_start import WARM_STARTS, warm_start
+    from rabbit_policy.learning.env import RabbitHZDEnv
+    from rabbit_policy.runtime.network import HZDPolicyNet
+    from rabbit_policy.learning.warm_start import WARM_STARTS, warm_start
 
     torch.set_num_threads(1)
     torch.manual_seed(seed)

@@ -81,8 +81,8 @@ def main(argv: list[str] | None = None) -> int:
     from multiprocessing import get_context
 
     from rabbit_policy import evaluation, figures
-    from rabbit_policy.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.report import render_report
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.evaluation.report import render_report
 
     try:
         policies = {"classic": make_policy("library", args.gait_dir, "nearest"),

@@ -15,7 +15,7 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 def main() -> None:
     ensure_localhost_discovery()
     from rabbit_hzd_controller.gait import Gait
-    from rabbit_policy.gait_library import packaged_gait_dir
+    from rabbit_policy.runtime.gait_library import packaged_gait_dir
 
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--gait-dir", type=Path, default=None)

@@ -6,7 +6,7 @@
                               [--approach-from 0.9,1.2] [--approach-weight 5] [--refine]
 
 Speeds are solved by continuation outward from ``--start``: the first from a kinematic
-seed (:mod:`rabbit_policy.gait_seed`), each next one warm-started from the nearest speed
+seed (:mod:`rabbit_policy.gait_design.seed`), each next one warm-started from the nearest speed
 already solved. Each result is then walked for ``--validate`` seconds; a gait that falls
 or misses its speed by more than 5 % is re-optimised once with twice the generations,
 and if it still fails it goes to ``--out/rejected/`` (not shipped) instead. One JSON
@@ -14,7 +14,7 @@ file per gait goes to ``--out`` (default: the packaged library, ``rabbit_policy/
 
 ``--approach-from`` adds convergence to the objective: how fast the gait pulls the robot
 to its speed from the library gaits of the given speeds (see
-:mod:`rabbit_policy.gait_optimization`). ``--refine`` starts each listed speed from the
+:mod:`rabbit_policy.gait_design.optimization`). ``--refine`` starts each listed speed from the
 gait already in ``--out`` instead of from its neighbour. The shipped 1.4 and 1.5 m/s
 gaits were refined this way (the README's "gait library" section has the commands).
 """
@@ -42,15 +42,15 @@ def parse_speeds(text: str) -> list[float]:
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     from rabbit_hzd_controller.gait import Gait
-    from rabbit_policy.gait_library import packaged_gait_dir
-    from rabbit_policy.gait_optimization import (
+    from rabbit_policy.runtime.gait_library import packaged_gait_dir
+    from rabbit_policy.gait_design.optimization import (
         KD_SCALE,
         GaitProblem,
         gait_to_decision,
         optimize_gait,
     )
-    from rabbit_policy.gait_seed import SeedPattern, seed_free_alpha
-    from rabbit_policy.walking import walk_gait
+    from rabbit_policy.gait_design.seed import SeedPattern, seed_free_alpha
+    from rabbit_policy.experiment.setup import walk_gait
 
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speeds", type=parse_speeds, default=parse_speeds("0.7,0.8,0.9,1.0,1.1,1.2,1.3,1.4,1.5"))

@@ -78,9 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
 
-    from rabbit_policy.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.scenario import parse_pushes, parse_schedule
-    from rabbit_policy.stack import StackConfig, run_in_process, run_multi_process
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.experiment.scenario import parse_pushes, parse_schedule
+    from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 
     try:
         schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)

@@ -3,7 +3,7 @@
 
     scripts/ship_policy.py runs/es0/best.pt [--compare runs/ppo0/best.pt ...] [--dry-run]
 
-Runs the acceptance checks (``rabbit_policy.acceptance``) on the policy file, and on each
+Runs the acceptance checks (``rabbit_policy.evaluation.acceptance``) on the policy file, and on each
 ``--compare`` file, the network the run started from (its warm start, rebuilt: what
 training added) and the classic HZD library for the card's evaluation table, then copies
 the file to ``src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt`` and writes
@@ -95,7 +95,7 @@ def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
         f"- regenerate: `{train_command(info)}`, then `scripts/ship_policy.py runs/X/best.pt` "
         "(this file is that run's `best.pt`: the evaluated iteration with the fewest failed "
         "acceptance checks)",
-        "", "## Evaluation (ROS-free fast path, `rabbit_policy.acceptance`)", "",
+        "", "## Evaluation (ROS-free fast path, `rabbit_policy.evaluation.acceptance`)", "",
         *evaluation_table(results), "",
         "Limits: trained and evaluated on the `paper` model only (not `drives`), flat ground, "
         "no sensor noise or delay beyond the one-step decision latency.", "",
@@ -108,9 +108,9 @@ def warm_start_policy(checkpoint):
     seed and bounds; deterministic), or None if it started from random weights."""
     import torch
 
-    from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.policies import NetworkPolicy
-    from rabbit_policy.warm_start import WARM_STARTS, initial_network
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.learning.warm_start import WARM_STARTS, initial_network
 
     name = checkpoint.info.get("warm_start")
     if name not in WARM_STARTS:
@@ -129,8 +129,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     args = parser.parse_args(argv)
 
-    from rabbit_policy.acceptance import acceptance
-    from rabbit_policy.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.evaluation.acceptance import acceptance
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     try:
         policy = make_policy("learned", policy_file=args.policy)

@@ -6,17 +6,17 @@
     scripts/train.py ... --resume          # continue from OUT/checkpoint.pt
 
 Both start from the same network warm-started on the classic gait library
-(``rabbit_policy.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
-``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.es`` (antithetic pairs, centred ranks, Adam; one iteration =
+(``rabbit_policy.learning.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
+``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.learning.es`` (antithetic pairs, centred ranks, Adam; one iteration =
 one generation; ``--workers`` processes evaluate the population). PPO:
-``rabbit_policy.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
+``rabbit_policy.learning.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
 of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
 
 Outputs in OUT:
 * ``log.csv``: one row per iteration (wall time, env steps, returns, fall fraction, mean
   |v̄ - v_d| per step, algorithm statistics); a progress bar on the terminal.
 * ``eval.csv``: every ``--eval-every`` iterations the current deterministic policy runs
-  the acceptance checks (``rabbit_policy.acceptance``: 9 constant speeds x 30 s and the
+  the acceptance checks (``rabbit_policy.evaluation.acceptance``: 9 constant speeds x 30 s and the
   0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
 * ``policy.pt``: the latest policy; ``best.pt``: the trained policy (iteration >= 1; the
   warm start is evaluated at iteration 0 as a baseline only) that did best on the
@@ -58,7 +58,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
     parser.add_argument("--stop-when-passed", action="store_true")
     parser.add_argument("--warm-start", choices=("scheduled", "nearest", "interpolate", "none"), default="scheduled",
-                        help="fit the network to the classic library first (rabbit_policy.warm_start)")
+                        help="fit the network to the classic library first (rabbit_policy.learning.warm_start)")
     parser.add_argument("--no-progress", action="store_true", help="plain lines instead of a progress bar")
     parser.add_argument("--resume", action="store_true")
     es = parser.add_argument_group("ES")
@@ -87,12 +87,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def make_trainer(args: argparse.Namespace, net):
     """The ES or PPO trainer and its configuration."""
     if args.algo == "es":
-        from rabbit_policy.es import ESConfig, EvolutionStrategy
+        from rabbit_policy.learning.es import ESConfig, EvolutionStrategy
 
         config = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
                           max_steps=args.max_steps, seed=args.seed, workers=args.workers)
         return EvolutionStrategy(net, config), config
-    from rabbit_policy.ppo import PPOConfig, PPOTrainer
+    from rabbit_policy.learning.ppo import PPOConfig, PPOTrainer
 
     config = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
                        lr=args.ppo_lr, init_log_std=args.init_log_std,
@@ -127,13 +127,13 @@ def main(argv: list[str] | None = None) -> int:
     import torch
     from tqdm import tqdm
 
-    from rabbit_policy.acceptance import acceptance, acceptance_rank
-    from rabbit_policy.env import ActionBounds
-    from rabbit_policy.es import ignore_interrupts
-    from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.network import PolicyCheckpoint, parameter_count
-    from rabbit_policy.policies import NetworkPolicy
-    from rabbit_policy.warm_start import initial_network
+    from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
+    from rabbit_policy.learning.env import ActionBounds
+    from rabbit_policy.learning.es import ignore_interrupts
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
+    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.learning.warm_start import initial_network
 
     start = time.perf_counter()  # wall time includes the warm start and the evaluations
     torch.set_num_threads(1)

@@ -46,12 +46,12 @@ def main(argv: list[str] | None = None) -> int:
     if not args.duration > 0:
         parser.error("--duration must be > 0")
 
-    from rabbit_policy.acceptance import segment_summaries
-    from rabbit_policy.gait_library import GaitLibrary
-    from rabbit_policy.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.policy_walk import walk_policy
-    from rabbit_policy.scenario import parse_schedule
-    from rabbit_policy.walking import walk_gait
+    from rabbit_policy.evaluation.acceptance import segment_summaries
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.experiment.walk import walk_policy
+    from rabbit_policy.experiment.scenario import parse_schedule
+    from rabbit_policy.experiment.setup import walk_gait
 
     try:
         schedule = parse_schedule(args.schedule) if args.schedule else ((0.0, args.speed),)

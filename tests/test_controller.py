@@ -11,7 +11,7 @@ from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Le
 from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip, foot_velocity_from_hip
 from rabbit_hzd_controller.pd import pd_torque
 from rabbit_hzd_controller.phase import phase, phase_bounds_from_alpha, phase_rate, stance_hip_position
-from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.runtime.gait_library import GaitLibrary
 
 
 @pytest.fixture(scope="module")

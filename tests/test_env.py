@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import rabbit_policy  # noqa: F401  (registers RabbitHZD-v0)
-from rabbit_policy.env import RabbitHZDEnv
-from rabbit_policy.gait_library import GaitLibrary
+import rabbit_policy.learning.env  # noqa: F401  (registers RabbitHZD-v0)
+from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.runtime.gait_library import GaitLibrary
 
 
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # physical units by design
@@ -67,11 +67,11 @@ def test_determinism_for_a_seed():
 
 
 def test_warm_started_network_reproduces_the_library_and_walks():
-    from rabbit_policy.network import HZDPolicyNet, act
-    from rabbit_policy.speed_window import Observation
+    from rabbit_policy.runtime.network import HZDPolicyNet, act
+    from rabbit_policy.runtime.speed_window import Observation
     from dataclasses import replace
 
-    from rabbit_policy.warm_start import WARM_STARTS, library_targets, warm_start
+    from rabbit_policy.learning.warm_start import WARM_STARTS, library_targets, warm_start
 
     env = RabbitHZDEnv(max_steps=20)
     net = HZDPolicyNet(env.bounds.low, env.bounds.high)
@@ -91,8 +91,8 @@ def test_warm_started_network_reproduces_the_library_and_walks():
 
 
 def test_es_generation_is_deterministic_for_a_seed_and_worker_count():
-    from rabbit_policy.es import ESConfig, EvolutionStrategy, centred_ranks
-    from rabbit_policy.network import HZDPolicyNet
+    from rabbit_policy.learning.es import ESConfig, EvolutionStrategy, centred_ranks
+    from rabbit_policy.runtime.network import HZDPolicyNet
 
     assert np.allclose(centred_ranks(np.array([3.0, -1.0, 2.0])), [0.5, -0.5, 0.0])
     bounds = RabbitHZDEnv().bounds

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rabbit_policy.evaluation import convergence, filtered_speed, settling_time
-from rabbit_policy.gait_stability import WalkReturnMap, analyse_stability
-from rabbit_policy.policies import make_policy
-from rabbit_policy.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
+from rabbit_policy.evaluation.experiments import convergence, filtered_speed, settling_time
+from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
+from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.evaluation.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
 
 ROOT = Path(__file__).resolve().parents[1]
 CLASSIC = make_policy("library")

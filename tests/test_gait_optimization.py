@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from rabbit_hzd_controller.gait import Gait
-from rabbit_policy.gait_library import GaitLibrary
-from rabbit_policy.gait_optimization import (
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.gait_design.optimization import (
     KD_SCALE,
     GaitProblem,
     decision_to_gait_params,
@@ -14,7 +14,7 @@ from rabbit_policy.gait_optimization import (
     gait_to_decision,
     optimize_gait,
 )
-from rabbit_policy.gait_seed import SeedPattern, seed_free_alpha
+from rabbit_policy.gait_design.seed import SeedPattern, seed_free_alpha
 
 
 @pytest.fixture(scope="module")
@@ -60,7 +60,7 @@ def test_cma_improves_on_the_kinematic_seed():
 def test_approach_term_measures_convergence_as_stored_in_the_shipped_gait():
     """The shipped 1.5 m/s gait was refined with approach_from=(0.9, 1.2): the term
     re-measures what its file records, and a candidate that never gets there scores worse."""
-    from rabbit_policy.gait_optimization import approach, approach_cost, total_cost
+    from rabbit_policy.gait_design.optimization import approach, approach_cost, total_cost
 
     fast = GaitLibrary.load().nearest(1.5)
     stored = fast.info["approach"]

@@ -16,7 +16,7 @@ from rabbit_msgs_py.conversions import (
     torques_to_msg,
 )
 from rabbit_msgs_py.joints import JOINT_NAMES
-from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.runtime.gait_library import GaitLibrary
 
 
 def test_alpha_round_trip_and_layout():

@@ -20,7 +20,7 @@ from rabbit_hzd_controller.phase import (
     phase_rate,
     stance_hip_position,
 )
-from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.runtime.gait_library import GaitLibrary
 
 GEOM = LegGeometry()
 

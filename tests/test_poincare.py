@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from rabbit_policy.poincare import (
+from rabbit_policy.evaluation.poincare import (
     analyse_return_map,
     finite_difference_jacobian,
     regression_jacobian,

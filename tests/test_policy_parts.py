@@ -9,12 +9,12 @@ import pytest
 
 from rabbit_hzd_controller.controller import HZDController, Leg, infer_stance
 from rabbit_hzd_controller.gait_state import state_on_gait
-from rabbit_policy.gait_library import GaitLibrary
-from rabbit_policy.policies import LibraryPolicy, PolicyUnavailable, make_policy
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.policies import LibraryPolicy, PolicyUnavailable, make_policy
 from rabbit_policy.policy_node import clamp_speed
-from rabbit_policy.speed_window import SpeedWindow
-from rabbit_policy.scenario import Push, parse_pushes, parse_schedule
-from rabbit_policy.stack import StackConfig, ros_arguments
+from rabbit_policy.runtime.speed_window import SpeedWindow
+from rabbit_policy.experiment.scenario import Push, parse_pushes, parse_schedule
+from rabbit_policy.bringup.stack import StackConfig, ros_arguments
 
 MS = 1_000_000
 
@@ -96,7 +96,7 @@ def test_policies():
     library = GaitLibrary.load()
     policy = make_policy("library", mode="interpolate")
     assert isinstance(policy, LibraryPolicy)
-    from rabbit_policy.speed_window import Observation
+    from rabbit_policy.runtime.speed_window import Observation
 
     command = policy.act(Observation(1.05, 0.9, 0.15))
     expected = library.interpolate(1.05)
@@ -111,9 +111,9 @@ def test_learned_policy_checkpoint_round_trip(tmp_path):
     import torch
 
     from rabbit_hzd_controller.controller import ControllerConfig, validate_alpha
-    from rabbit_policy.env import RabbitHZDEnv
-    from rabbit_policy.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
-    from rabbit_policy.speed_window import Observation
+    from rabbit_policy.learning.env import RabbitHZDEnv
+    from rabbit_policy.runtime.network import HZDPolicyNet, PolicyCheckpoint, parameter_count
+    from rabbit_policy.runtime.speed_window import Observation
 
     bounds = RabbitHZDEnv().bounds
     torch.manual_seed(0)

@@ -18,8 +18,8 @@ from mcap_ros2.decoder import DecoderFactory
 
 from rabbit_msgs_py.catalog import STACK_TOPICS
 from rabbit_msgs_py.runtime import NodeStartError
-from rabbit_policy.scenario import Push
-from rabbit_policy.stack import StackConfig, run_in_process
+from rabbit_policy.experiment.scenario import Push
+from rabbit_policy.bringup.stack import StackConfig, run_in_process
 from rabbit_sim.bag import BagError, BagWriter, QosSpec
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -16,10 +16,10 @@ from std_srvs.srv import Trigger
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import alpha_to_msg
-from rabbit_policy.gait_library import GaitLibrary
+from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
-from rabbit_policy.stack import StackConfig, run_in_process
-from rabbit_policy.walking import setup_walk
+from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.experiment.setup import setup_walk
 from rabbit_sim.sim_node import SimNode
 
 from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
@@ -229,7 +229,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
 
 
 def test_scheduled_pushes_reach_the_torso_at_their_sim_time():
-    from rabbit_policy.scenario import Push
+    from rabbit_policy.experiment.scenario import Push
 
     from geometry_msgs.msg import WrenchStamped
 

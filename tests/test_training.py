@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 import torch
 
-from rabbit_policy.acceptance import ACCEPTANCE_SPEEDS, acceptance, reach_times
-from rabbit_policy.env import RabbitHZDEnv
-from rabbit_policy.gait_library import GaitLibrary
-from rabbit_policy.network import PolicyCheckpoint
-from rabbit_policy.policies import LearnedPolicy, LibraryPolicy, make_policy, packaged_policy_file
-from rabbit_policy.policy_walk import PolicyWalk, StepRecord, walk_policy
-from rabbit_policy.walking import walk_gait
+from rabbit_policy.evaluation.acceptance import ACCEPTANCE_SPEEDS, acceptance, reach_times
+from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.network import PolicyCheckpoint
+from rabbit_policy.runtime.policies import LearnedPolicy, LibraryPolicy, make_policy, packaged_policy_file
+from rabbit_policy.experiment.walk import PolicyWalk, StepRecord, walk_policy
+from rabbit_policy.experiment.setup import walk_gait
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = GaitLibrary.load()
@@ -46,7 +46,7 @@ def test_speed_schedule_and_a_fatal_push_are_applied():
     walk = walk_policy(policy, ((0.0, 0.8), (4.0, 1.2)), 8.0)
     assert set(np.unique(walk.desired_speed)) == {0.8, 1.2}
     assert walk.desired_speed[walk.times < 4.0 - 1e-6].max() == 0.8
-    from rabbit_policy.scenario import Push
+    from rabbit_policy.experiment.scenario import Push
 
     pushed = walk_policy(policy, ((0.0, 1.0),), 6.0, pushes=(Push(2.0, -400.0, 0.2),))
     assert pushed.fell and 2.0 < pushed.fall_time < 6.0

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from rabbit_policy.gait_library import GaitLibrary
-from rabbit_policy.walking import setup_walk, walk_gait
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.experiment.setup import setup_walk, walk_gait
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = GaitLibrary.load()

@@ -27,7 +27,7 @@ class Gait:
     kd: derivative gain (N m s/rad). kp: proportional gain (N m/rad).
     speed: design average forward speed (m/s).
     step_length (m), step_period (s), cost (the optimizer's objective, see
-    ``rabbit_policy.gait_optimization``) and ``info`` (anything else worth keeping:
+    ``rabbit_policy.gait_design.optimization``) and ``info`` (anything else worth keeping:
     measured figures, solver statistics) describe how it walked when it was made.
     """
 

@@ -1,6 +1,14 @@
-"""Gait policies for RABBIT: the classic HZD gait library and its optimizer, and the
-learned HZD-RL policy."""
+"""Gait policies for RABBIT, by concern (importing this package imports nothing heavy):
 
-from .env import register as _register_env
-
-_register_env()
+* :mod:`.runtime`: what ``policy_node`` runs: policies, the speed window, the network, the
+  classic gait library.
+* :mod:`.experiment`: the one ROS-free closed loop every experiment runs (simulator +
+  HZD controller + gait policy), its scenarios (speed and push schedules, model options)
+  and its result.
+* :mod:`.gait_design`: the classic HZD gait library's optimizer and seed.
+* :mod:`.learning`: the ``RabbitHZD-v0`` Gymnasium env, ES, PPO, the warm start and the
+  training loop.
+* :mod:`.evaluation`: the paper's section IV and beyond: experiments, acceptance, Poincaré
+  stability, push recovery, figures, report.
+* :mod:`.bringup`: starting the ROS 2 stack in place of a launch file.
+"""

@@ -38,8 +38,8 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
-from .policies import GaitCommand, PolicyUnavailable, make_policy  # noqa: E402
-from .speed_window import Observation, SpeedWindow  # noqa: E402
+from rabbit_policy.runtime.policies import GaitCommand, PolicyUnavailable, make_policy  # noqa: E402
+from rabbit_policy.runtime.speed_window import Observation, SpeedWindow  # noqa: E402
 
 
 def clamp_speed(value: float, low: float, high: float) -> float:

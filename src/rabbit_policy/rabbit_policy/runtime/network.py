@@ -19,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .speed_window import Observation
+from rabbit_policy.runtime.speed_window import Observation
 
 HIDDEN = 12
 N_INPUTS = 3

@@ -34,10 +34,10 @@ import numpy as np
 from rabbit_hzd_controller.controller import HZDController, Leg
 from rabbit_sim.model import load_model
 
-from .poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
-from .policies import Policy
-from .speed_window import Observation
-from .walking import loop_on_gait
+from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
+from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.runtime.speed_window import Observation
+from rabbit_policy.experiment.setup import loop_on_gait
 
 STANCE_JOINTS = {Leg.LEFT: (3, 4, 5, 6), Leg.RIGHT: (5, 6, 3, 4)}  # stance hip, knee, swing hip, knee
 ROBOT_DIMENSION = 10

@@ -3,7 +3,7 @@ figures and videos (file names relative to the report)."""
 
 from __future__ import annotations
 
-from .figures import LABELS
+from rabbit_policy.evaluation.figures import LABELS
 
 
 def _fmt(value, spec: str = ".3f", none: str = "—") -> str:
@@ -71,7 +71,7 @@ def poincare_section(poincare: dict) -> list[str]:
              "The step-to-step return map at mid-stance (stance phase 0.5, interpolated between ticks), its "
              "Jacobian at the cycle by least-squares central differences over random symmetric "
              "perturbations (the full MuJoCo state and the controller restored for every perturbed "
-             "run; `rabbit_policy.gait_stability`). Classic HZD: 10 coordinates (torso pitch, four "
+             "run; `rabbit_policy.evaluation.stability`). Classic HZD: 10 coordinates (torso pitch, four "
              "stance-relative joints, their rates). HZD-RL has memory (the gait in force, the queued "
              "gait and the running step mean all depend on measured speeds), so its map has three more "
              "coordinates. Stable when every |λ| < 1; the largest |λ| is the factor by which a small "

@@ -39,9 +39,9 @@ from rabbit_hzd_controller.controller import ControllerConfig, HZDController
 from rabbit_sim.model import load_model
 from rabbit_sim.simulation import ClosedLoop
 
-from .gait_library import GaitLibrary
-from .speed_window import SpeedWindow
-from .walking import loop_on_gait
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.speed_window import SpeedWindow
+from rabbit_policy.experiment.setup import loop_on_gait
 
 
 @dataclass(frozen=True)
@@ -170,6 +170,8 @@ class RabbitHZDEnv(gym.Env):
 
 
 def register() -> None:
-    """Register ``RabbitHZD-v0`` with Gymnasium (done on ``import rabbit_policy``)."""
+    """Register ``RabbitHZD-v0`` with Gymnasium (done when this module is imported)."""
     if "RabbitHZD-v0" not in gym.registry:
-        gym.register(id="RabbitHZD-v0", entry_point="rabbit_policy.env:RabbitHZDEnv")
+        gym.register(id="RabbitHZD-v0", entry_point="rabbit_policy.learning.env:RabbitHZDEnv")
+
+register()

@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .gait_library import GaitLibrary
-from .network import HZDPolicyNet
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.network import HZDPolicyNet
 
 
 @dataclass(frozen=True)

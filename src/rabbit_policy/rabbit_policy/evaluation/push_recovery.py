@@ -22,9 +22,9 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from .policies import Policy
-from .policy_walk import PolicyWalk, walk_policy
-from .scenario import Push
+from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
+from rabbit_policy.experiment.scenario import Push
 
 
 @dataclass(frozen=True)

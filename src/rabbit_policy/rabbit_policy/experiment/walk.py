@@ -21,10 +21,10 @@ import numpy as np
 
 from rabbit_sim.model import load_model
 
-from .policies import Policy
-from .scenario import Push, validate_schedule
-from .speed_window import Observation, SpeedWindow
-from .walking import loop_on_gait
+from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.experiment.scenario import Push, validate_schedule
+from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
+from rabbit_policy.experiment.setup import loop_on_gait
 
 
 @dataclass(frozen=True)

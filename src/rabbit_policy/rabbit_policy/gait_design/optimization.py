@@ -243,10 +243,10 @@ class Approach:
 def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
     """Walk ``approach_settle`` s on the ``start`` gait at its speed, then the candidate
     ``x`` from the next touchdown on, for ``approach_horizon`` s."""
-    from .acceptance import reach_times  # imported here: they import this package's policies
-    from .gait_library import GaitLibrary
-    from .policies import LibraryPolicy
-    from .policy_walk import walk_policy
+    from rabbit_policy.evaluation.acceptance import reach_times  # imported here: they import this package's policies
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.policies import LibraryPolicy
+    from rabbit_policy.experiment.walk import walk_policy
 
     alpha, kd = decision_to_gait_params(np.asarray(x, dtype=float), problem)
     candidate = Gait(alpha=tuple(alpha), kd=kd, kp=problem.kp, speed=problem.speed)
@@ -277,7 +277,7 @@ _START_GAITS: dict[float, Gait] = {}
 def _start_gait(speed: float) -> Gait:
     """The packaged library's gait nearest to ``speed`` (cached per process)."""
     if speed not in _START_GAITS:
-        from .gait_library import GaitLibrary
+        from rabbit_policy.runtime.gait_library import GaitLibrary
 
         _START_GAITS[speed] = GaitLibrary.load().nearest(speed)
     return _START_GAITS[speed]

@@ -1,7 +1,7 @@
 """The classic HZD gait library shipped as package data (``rabbit_policy/gaits/*.json``).
 
 Each file is a :class:`rabbit_hzd_controller.gait.Gait` designed by
-:mod:`rabbit_policy.gait_optimization` for one average speed; ``scripts/optimize_gaits.py``
+:mod:`rabbit_policy.gait_design.optimization` for one average speed; ``scripts/optimize_gaits.py``
 regenerates them. A policy picks the gait nearest to the commanded speed, or blends
 the two neighbouring gaits linearly (alpha and Kd both: the coefficients are joint
 waypoints, so a blend of two nearby gaits is a gait in between).

@@ -17,8 +17,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .policies import Policy
-from .policy_walk import PolicyWalk, walk_policy
+from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
 ACCEPTANCE_SCHEDULE = ((0.0, 0.8), (10.0, 1.2), (20.0, 0.9), (30.0, 1.5), (40.0, 0.7))

@@ -23,8 +23,8 @@ from multiprocessing import get_context
 import numpy as np
 import torch
 
-from .env import RabbitHZDEnv
-from .network import HZDPolicyNet
+from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.runtime.network import HZDPolicyNet
 
 
 @dataclass(frozen=True)

@@ -45,7 +45,7 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
-from .scenario import Push, format_pushes, validate_schedule  # noqa: E402
+from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule  # noqa: E402
 
 CONTROLLERS = {"hzd": "library", "rl": "learned"}
 NODE_MODULES = {
@@ -329,7 +329,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     from rabbit_msgs_py.runtime import make_executor
     from rabbit_sim.sim_node import SimNode
 
-    from .policy_node import PolicyNode
+    from rabbit_policy.policy_node import PolicyNode
 
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)

@@ -30,9 +30,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from .env import RabbitHZDEnv
-from .es import ignore_interrupts
-from .network import HZDPolicyNet
+from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.learning.es import ignore_interrupts
+from rabbit_policy.runtime.network import HZDPolicyNet
 
 
 @dataclass(frozen=True)

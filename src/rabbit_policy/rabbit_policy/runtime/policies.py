@@ -16,8 +16,8 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Protocol
 
-from .gait_library import GaitLibrary
-from .speed_window import Observation
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.speed_window import Observation
 
 POLICY_KINDS = ("library", "learned")
 LIBRARY_MODES = ("nearest", "interpolate")
@@ -77,7 +77,7 @@ class NetworkPolicy:
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 
-        from .network import act
+        from rabbit_policy.runtime.network import act
 
         action = act(self.net, observation)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
@@ -87,7 +87,7 @@ class LearnedPolicy(NetworkPolicy):
     """The HZD-RL network loaded from a checkpoint file (``info`` says how it was trained)."""
 
     def __init__(self, path: str | Path) -> None:
-        from .network import PolicyCheckpoint  # torch is imported only when needed
+        from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
 
         self.checkpoint = PolicyCheckpoint.load(path)
         super().__init__(self.checkpoint.network(), f"learned/{Path(path).name}")

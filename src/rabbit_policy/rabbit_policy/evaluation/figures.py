@@ -14,7 +14,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .policy_walk import PolicyWalk  # noqa: E402
+from rabbit_policy.experiment.walk import PolicyWalk  # noqa: E402
 
 COLORS = {"classic": "tab:blue", "hzd_rl": "tab:orange"}
 LABELS = {"classic": "classic HZD", "hzd_rl": "HZD-RL"}

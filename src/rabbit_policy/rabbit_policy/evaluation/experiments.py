@@ -28,13 +28,13 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
 
-from .acceptance import reach_times
-from .gait_stability import STANCE_JOINTS, analyse_stability
-from .policies import Policy
-from .policy_walk import PolicyWalk, walk_policy
-from .push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep, outcome, push_trial,
+from rabbit_policy.evaluation.acceptance import reach_times
+from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
+from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
+from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep, outcome, push_trial,
                             scenario_table)
-from .scenario import Push, Schedule
+from rabbit_policy.experiment.scenario import Push, Schedule
 
 MapFn = Callable[[Callable, Iterable], Iterable]
 
