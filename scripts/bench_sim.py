@@ -23,12 +23,13 @@ import time
 
 import mujoco
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def main() -> None:
     ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--speed", type=float, default=1.0)
@@ -36,15 +37,20 @@ def main() -> None:
     args = parser.parse_args()
 
     from rabbit_hzd_controller.gait_state import state_on_gait
+    from rabbit_policy.experiment.loop import ClosedLoop
+    from rabbit_policy.experiment.scenario import Scenario
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.experiment.setup import setup_walk
+    from rabbit_policy.runtime.policies import LibraryPolicy
+    from rabbit_sim.model import ModelOptions
 
-    gait = GaitLibrary.load().nearest(args.speed)
+    library = GaitLibrary.load()
+    gait = library.nearest(args.speed)
+    scenario = Scenario.constant(gait.speed, model=ModelOptions(args.model))
     qpos, qvel = state_on_gait(gait.alpha, gait.speed)
 
     def raw_rate() -> float:
-        setup = setup_walk(gait, args.model)
-        model, data = setup.loop.model, setup.loop.data
+        loop = ClosedLoop(scenario, LibraryPolicy(library))
+        model, data = loop.model, loop.data
         step = mujoco.mj_step
         start = time.perf_counter()
         for _ in range(args.steps):
@@ -52,19 +58,15 @@ def main() -> None:
         return args.steps / (time.perf_counter() - start)
 
     def closed_rate() -> tuple[float, bool]:
-        setup = setup_walk(gait, args.model)
-        loop = setup.loop
-        step = loop.step
+        loop = ClosedLoop(scenario, LibraryPolicy(library))
         start = time.perf_counter()
-        for _ in range(args.steps):
-            step()
+        loop.run(max_ticks=args.steps)
         elapsed = time.perf_counter() - start
-        fell = loop.limits.fallen(loop.data.qpos[1], loop.data.qpos[2])
-        return args.steps / elapsed, fell
+        return args.steps / elapsed, loop.failed
 
     def controller_rate() -> float:
-        setup = setup_walk(gait, args.model)
-        compute = setup.controller.compute
+        loop = ClosedLoop(scenario, LibraryPolicy(library))
+        compute = loop.controller.compute
         q, dq = list(qpos), list(qvel)
         start = time.perf_counter()
         for _ in range(args.steps):

@@ -30,6 +30,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
@@ -92,7 +93,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
     parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime runs, s")
     parser.add_argument("--speed", type=float, default=1.0)

@@ -21,6 +21,8 @@ Prints one JSON object:
 from __future__ import annotations
 
 import argparse
+
+from rabbit_msgs_py.cli import ArgumentParser
 import json
 import subprocess
 import sys
@@ -76,7 +78,7 @@ def _worker(args: tuple[int, int]) -> tuple[float, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=600, help="env steps per throughput measurement")
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--train", action="store_true", help="also measure the wall time to a passing policy")

@@ -27,6 +27,7 @@ import sys
 import time
 from pathlib import Path
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_sim.gl_backend import choose_headless_gl
 
@@ -34,11 +35,11 @@ from rabbit_sim.gl_backend import choose_headless_gl
 # unless the user chose one
 choose_headless_gl()
 
-CONTROLLERS = ("classic", "hzd_rl")
+CONTROLLERS = ("classic", "learned")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
     parser.add_argument("--quick", action="store_true", help="short version for tests")
     parser.add_argument("--workers", type=int, default=2, help="processes for the independent walks")
@@ -49,13 +50,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, model_variant: str) -> list[dict]:
+def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, model) -> list[dict]:
     """One GIF per controller and push scenario, from the recorded walks; a rendering
     failure is reported in the entry, not raised."""
     from rabbit_sim.model import load_model
     from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
 
-    model = load_model(model_variant)
+    model = load_model(model)
     width, height = config.video_size
     videos = []
     for scenario in scenarios:
@@ -80,16 +81,19 @@ def main(argv: list[str] | None = None) -> int:
 
     from multiprocessing import get_context
 
-    from rabbit_policy import evaluation, figures
+    from rabbit_policy.evaluation import experiments as evaluation
+    from rabbit_policy.evaluation import figures
+    from rabbit_sim.model import ModelOptions
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_policy.evaluation.report import render_report
 
     try:
-        policies = {"classic": make_policy("library", args.gait_dir, "nearest"),
-                    "hzd_rl": make_policy("learned", policy_file=args.policy_file)}
+        policies = {"classic": make_policy("classic", args.gait_dir, "nearest"),
+                    "learned": make_policy("learned", policy_file=args.policy_file)}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    model = ModelOptions(args.model)
     config = evaluation.EvaluationConfig.quick() if args.quick else evaluation.EvaluationConfig()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -100,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     map_fn = pool.map if pool else map
     try:
         log("speed tracking")
-        tracking = {name: evaluation.speed_tracking(policy, config, args.model)[0] for name, policy in policies.items()}
+        tracking = {name: evaluation.speed_tracking(policy, config, model)[0] for name, policy in policies.items()}
         figures.tracking_figure(tracking, out / "tracking.png")
 
         log("limit cycles")
@@ -109,22 +113,22 @@ def main(argv: list[str] | None = None) -> int:
             walks = {}
             cycles[name] = {}
             for speed in config.portrait_speeds:
-                cycles[name][f"{speed:.2f}"], walks[speed] = evaluation.limit_cycle(policy, speed, config, args.model)
+                cycles[name][f"{speed:.2f}"], walks[speed] = evaluation.limit_cycle(policy, speed, config, model)
             figures.limit_cycle_figure(walks, figures.LABELS[name], out / f"limit_cycle_{name}.png")
         figures.convergence_figure(cycles, out / "convergence.png")
 
         log("Poincaré test")
-        feedback = {"classic": False, "hzd_rl": True}
-        poincare = evaluation.poincare({n: (p, feedback[n]) for n, p in policies.items()}, config, args.model, map_fn)
+        feedback = {"classic": False, "learned": True}
+        poincare = evaluation.poincare({n: (p, feedback[n]) for n, p in policies.items()}, config, model, map_fn)
         figures.poincare_figure(poincare, out / "poincare.png")
 
         log("push scenarios")
-        push, push_walks = evaluation.push_experiment(policies, config, args.model)
+        push, push_walks = evaluation.push_experiment(policies, config, model)
         figures.push_figure(push, out / "push.png")
         sweep = {}
         if config.sweep is not None:
             log("impulse sweep")
-            sweep = evaluation.push_sweep(policies, config, args.model, map_fn)
+            sweep = evaluation.push_sweep(policies, config, model, map_fn)
             figures.sweep_figure(sweep, out / "sweep.png")
     finally:
         if pool:
@@ -134,10 +138,10 @@ def main(argv: list[str] | None = None) -> int:
     videos: list[dict] = []
     if not args.no_video:
         log("videos")
-        videos = render_videos(push_walks, config.video_scenarios, out, config, args.model)
+        videos = render_videos(push_walks, config.video_scenarios, out, config, model)
 
     command = "scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
-    results = {"meta": {"command": command, "model": args.model, "workers": args.workers,
+    results = {"meta": {"command": command, "model": model.to_dict(), "workers": args.workers,
                         "wall_time_s": time.perf_counter() - start,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
@@ -17,7 +18,7 @@ def main() -> None:
     from rabbit_hzd_controller.gait import Gait
     from rabbit_policy.runtime.gait_library import packaged_gait_dir
 
-    parser = argparse.ArgumentParser(description=__doc__)
+    parser = ArgumentParser(description=__doc__)
     parser.add_argument("--gait-dir", type=Path, default=None)
     args = parser.parse_args()
     directory = args.gait_dir or packaged_gait_dir()

@@ -16,6 +16,8 @@ Exit status: 0 written, 1 the bag cannot be read or holds no /joint_states.
 from __future__ import annotations
 
 import argparse
+
+from rabbit_msgs_py.cli import ArgumentParser
 import sys
 from pathlib import Path
 
@@ -148,7 +150,7 @@ def _save(fig, path: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag", type=Path, help="bag directory")
     parser.add_argument("--out", type=Path, default=None, help="figure directory (default: BAG/plots)")
     parser.add_argument("--show", action="store_true", help="also open the figures")

@@ -15,12 +15,13 @@ from __future__ import annotations
 import argparse
 import sys
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("output", help="bag directory to create")
     parser.add_argument("--topics", nargs="+", default=[], help="topics to record (default: all stack topics)")
     parser.add_argument("--compression", choices=("none", "zstd"), default="none")

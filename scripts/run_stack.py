@@ -31,11 +31,12 @@ import os
 import signal
 import sys
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
     parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
     parser.add_argument("--controller", choices=("hzd", "rl"), default="hzd",

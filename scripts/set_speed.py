@@ -17,12 +17,13 @@ import math
 import sys
 import time
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("speed", type=float, help="desired forward speed (m/s)")
     parser.add_argument("--wait", type=float, default=5.0, help="seconds to wait for a subscriber")
     args = parser.parse_args(argv)

@@ -15,6 +15,8 @@ checkpoint's ``info``, the evaluation table). Refuses a policy that fails the ch
 from __future__ import annotations
 
 import argparse
+
+from rabbit_msgs_py.cli import ArgumentParser
 import json
 import shutil
 import sys
@@ -122,7 +124,7 @@ def warm_start_policy(checkpoint):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policy", type=Path)
     parser.add_argument("--compare", type=Path, nargs="*", default=[], help="more policy files for the table")
     parser.add_argument("--allow-failing", action="store_true")

@@ -34,6 +34,8 @@ a resumed run starts fresh episodes).
 from __future__ import annotations
 
 import argparse
+
+from rabbit_msgs_py.cli import ArgumentParser
 import csv
 import json
 import os
@@ -46,7 +48,7 @@ from pathlib import Path
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--algo", choices=("es", "ppo"), required=True)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=2, help="processes for rollouts and evaluation")

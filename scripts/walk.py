@@ -1,107 +1,130 @@
 #!/usr/bin/env python3
-"""Walk RABBIT in MuJoCo without ROS and print a summary.
+"""Walk RABBIT in MuJoCo without ROS: the one experiment command.
 
-    scripts/walk.py --controller hzd --speed 1.0 --duration 60 [--json]
-    scripts/walk.py --controller rl  --speed 1.2 --duration 30 --json
-    scripts/walk.py --controller rl  --schedule "0:0.8,10:1.2,20:0.9,30:1.5,40:0.7" --duration 50
+    scripts/walk.py --controller classic --speed 1.0 --duration 60
+    scripts/walk.py --controller learned --schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
+    scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
+    scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
 
-``--controller hzd`` is classic HZD: at a constant speed the packaged library gait whose
-design speed is nearest to ``--speed``, started on that gait; with a ``--schedule`` the
-library gait for the commanded speed is chosen at every step (``--library-mode``).
-``--controller rl`` is HZD-RL: the learned policy (default: the one shipped with
-``rabbit_policy``, or ``--policy-file``) picks alpha and Kd at every touchdown from the
-commanded speed and the last step's mean hip speed and error, exactly as ``policy_node``.
+``--controller classic`` is classic HZD (the packaged gait library: the gait nearest the
+command, or ``--library-mode interpolate``); ``--controller learned`` is HZD-RL (the
+shipped policy or ``--policy-file``). Either picks alpha and Kd at every touchdown exactly
+as ``policy_node`` does, on the closed loop every experiment runs
+(``rabbit_policy.experiment.loop``). ``hzd`` and ``rl`` are accepted as aliases.
 
-Prints whether it fell, steps, mean forward speed over the last half, and for a schedule
-each segment's time to reach its speed (first step average within ``--tolerance``) and
-its mean speed over the segment's second half.
-Exit status: 0 walked, 1 fell, 2 bad arguments or no policy.
+The robot starts on the gait for the first commanded speed, moving at it. Pushes are
+``T:FX:DUR`` (sim time s, force N along world x on the torso, duration s). Model errors:
+``--model drives`` (the real robot's gears and joint friction), ``--friction`` (foot
+friction coefficient, 0.8 by default), ``--torso-mass-scale``, ``--torque-delay`` (s).
+
+``--json`` prints one object, always with the same keys: ``fell``, ``stalled``,
+``fall_time``, ``stall_time``, ``duration``, ``steps``, ``mean_speed`` (m/s, last half;
+null after a fall or stall), ``peak_torque`` (N m), ``rejected``, ``touchdowns`` (sim
+times, s), ``segments`` (``command``, ``start``, ``end``, ``mean_speed`` over the
+segment's second half, ``reach_time``: s from the change to the end of the first whole
+step within ``--tolerance`` of the command, or null), plus ``controller``, ``policy``,
+``scenario`` and ``real_time_factor``. No NaN: null instead.
+Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+
+def positive(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    value = float(text)
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--controller", choices=("classic", "learned", "hzd", "rl"), default="classic",
+                        help="classic HZD or the learned HZD-RL policy (hzd, rl: aliases)")
+    command = parser.add_mutually_exclusive_group()
+    command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
+    command.add_argument("--schedule", default=None, metavar="T:V,...", help='speed schedule "0:0.8,8:1.2" (s:m/s)')
+    parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
+    parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
+    parser.add_argument("--model", choices=("paper", "drives"), default="paper", help="model variant")
+    parser.add_argument("--friction", type=positive, default=None, help="foot friction coefficient (default 0.8)")
+    parser.add_argument("--torso-mass-scale", type=positive, default=1.0, help="factor on the torso mass and inertia")
+    parser.add_argument("--torque-delay", type=non_negative, default=0.0, help="torque delay (s, whole ms)")
+    parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
+                        help="classic: nearest gait or blend of the two around the command")
+    parser.add_argument("--policy-file", default=None, help="learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    return parser
+
+
+def print_summary(summary: dict) -> None:
+    print(f"controller      {summary['controller']} ({summary['policy']})")
+    ended = "fell" if summary["fell"] else "stalled" if summary["stalled"] else None
+    when = summary["fall_time"] if summary["fell"] else summary["stall_time"]
+    print(f"outcome         {ended} at t = {when:.3f} s" if ended else "outcome         walked")
+    print(f"steps           {summary['steps']}")
+    if summary["mean_speed"] is not None:
+        print(f"mean speed      {summary['mean_speed']:.3f} m/s (last half)")
+    print(f"peak torque     {summary['peak_torque']:.1f} N m")
+    for seg in summary["segments"]:
+        reach = "not reached" if seg["reach_time"] is None else f"reached in {seg['reach_time']:.2f} s"
+        mean = "—" if seg["mean_speed"] is None else f"{seg['mean_speed']:.3f} m/s"
+        print(f"  {seg['start']:6.1f}-{seg['end']:6.1f} s  {seg['command']:.2f} m/s  {reach}, second-half mean {mean}")
+    rtf = summary["real_time_factor"]
+    print(f"simulated       {summary['duration']:.1f} s" + (f" ({rtf:.0f}x real time)" if rtf else ""))
 
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--controller", choices=("hzd", "rl"), default="hzd")
-    parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s)")
-    parser.add_argument("--schedule", default=None, help='speed schedule "t:v,t:v,..." (s:m/s), first at 0')
-    parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
-    parser.add_argument("--model", choices=("paper", "drives"), default="paper", help="model variant")
-    parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
-                        help="classic HZD with a schedule: nearest gait or blend")
-    parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
-    parser.add_argument("--tolerance", type=float, default=0.05, help="reached = within this (m/s)")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser = build_parser()
     args = parser.parse_args(argv)
-    if not args.duration > 0:
-        parser.error("--duration must be > 0")
 
-    from rabbit_policy.evaluation.acceptance import segment_summaries
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.experiment.walk import walk_policy
-    from rabbit_policy.experiment.scenario import parse_schedule
-    from rabbit_policy.experiment.setup import walk_gait
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.scenario import Scenario, parse_pushes, parse_schedule
+    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
+    from rabbit_sim.model import ModelOptions
 
     try:
         schedule = parse_schedule(args.schedule) if args.schedule else ((0.0, args.speed),)
+        scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
+                            model=ModelOptions(args.model, args.friction, args.torso_mass_scale))
     except ValueError as exc:
         parser.error(str(exc))
-    start = time.perf_counter()
-    if args.controller == "hzd" and args.schedule is None:
-        gait = GaitLibrary.load(args.gait_dir).nearest(args.speed)
-        result = walk_gait(gait, args.duration, args.model)
-        summary = {"controller": "hzd", "policy": f"library gait {gait.speed:.2f} m/s", "gait_speed": gait.speed,
-                   **result.summary()}
-        fell = result.fell
-    else:
-        try:
-            policy = make_policy("learned" if args.controller == "rl" else "library", args.gait_dir,
-                                 args.library_mode, args.policy_file)
-        except (PolicyUnavailable, ValueError) as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        start = time.perf_counter()  # the walk, not loading torch and the policy
-        walk = walk_policy(policy, schedule, args.duration, model_variant=args.model)
-        fell = walk.fell
-        half = 0.5 * args.duration
-        summary = {"controller": args.controller, "policy": policy.name, "fell": walk.fell,
-                   "fall_time": walk.fall_time, "duration": walk.duration, "steps": len(walk.steps),
-                   "mean_speed": None if walk.fell else walk.mean_speed(half), "rejected": walk.rejected}
-        if args.schedule:
-            summary["segments"] = segment_summaries(walk, schedule, args.duration, args.tolerance)
+    controller = controller_name(args.controller)
+    try:
+        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file)
+    except (PolicyUnavailable, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    start = time.perf_counter()  # the walk, not loading torch and the policy
+    result = walk(policy, scenario, args.duration)
     wall = time.perf_counter() - start
-    summary = {"model": args.model, "commanded_speed": None if args.schedule else args.speed,
-               **summary, "real_time_factor": summary["duration"] / wall if wall > 0 else None}
+    summary = {"controller": controller, "policy": policy.name, "scenario": scenario.to_dict(),
+               **result.summary(args.tolerance),
+               "real_time_factor": round(result.duration / wall, 1) if wall > 0 else None}
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary, allow_nan=False))
     else:
-        print(f"controller      {summary['controller']} ({summary['policy']})")
-        print(f"fell            {fell}" + (f" at t = {summary['fall_time']:.3f} s" if fell else ""))
-        print(f"steps           {summary['steps']}")
-        if summary["mean_speed"] is not None:
-            print(f"mean speed      {summary['mean_speed']:.3f} m/s (last half)")
-        for key in ("step_length", "step_period", "peak_torque"):
-            if key in summary:
-                print(f"{key.replace('_', ' '):15s} {summary[key]:.3f}")
-        for seg in summary.get("segments", []):
-            reach = "not reached" if seg["reach_time"] is None else f"reached in {seg['reach_time']:.2f} s"
-            mean = seg["mean_speed_second_half"]
-            print(f"  from {seg['start']:5.1f} s  {seg['speed']:.2f} m/s  {reach}, second-half mean "
-                  + ("—" if mean is None else f"{mean:.3f} m/s"))
-        print(f"simulated       {summary['duration']:.1f} s in {wall:.1f} s wall "
-              f"({summary['real_time_factor']:.0f}x real time)")
-    return 1 if fell else 0
+        print_summary(summary)
+    return 1 if result.failed else 0
 
 
 if __name__ == "__main__":

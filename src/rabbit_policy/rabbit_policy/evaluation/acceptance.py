@@ -17,8 +17,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import Policy
-from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
+from rabbit_sim.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
 ACCEPTANCE_SCHEDULE = ((0.0, 0.8), (10.0, 1.2), (20.0, 0.9), (30.0, 1.5), (40.0, 0.7))
@@ -36,91 +38,58 @@ class Criteria:
 
 
 def constant_speed_check(policy: Policy, speed: float, criteria: Criteria = Criteria(),
-                         model_variant: str = "paper") -> dict:
+                         model: ModelOptions = ModelOptions()) -> dict:
     """Walk at one commanded speed; mean over the last ``average_over`` s."""
-    walk = walk_policy(policy, ((0.0, speed),), criteria.constant_duration, model_variant=model_variant)
-    mean = walk.mean_speed(criteria.constant_duration - criteria.average_over)
+    result = walk(policy, Scenario.constant(speed, model=model), criteria.constant_duration)
+    mean = result.mean_speed(criteria.constant_duration - criteria.average_over)
     error = mean - speed
     return {
         "speed": speed,
-        "fell": walk.fell,
-        "fall_time": walk.fall_time,
-        "stalled": walk.stalled,
-        "mean_speed_last": None if walk.failed else mean,
-        "error": None if walk.failed else error,
-        "rejected": walk.rejected,
-        "passed": (not walk.failed) and abs(error) <= criteria.speed_tolerance,
+        "fell": result.fell,
+        "fall_time": result.fall_time,
+        "stalled": result.stalled,
+        "mean_speed_last": None if result.failed else mean,
+        "error": None if result.failed else error,
+        "rejected": result.rejected,
+        "passed": (not result.failed) and abs(error) <= criteria.speed_tolerance,
     }
 
 
-def reach_times(walk: PolicyWalk, schedule: tuple[tuple[float, float], ...], tolerance: float) -> list[float | None]:
-    """For each schedule segment, seconds from its start to the first step (starting after
-    the change) whose mean speed is within ``tolerance`` of the segment's speed; None if
-    never within the segment."""
-    bounds = [t for t, _ in schedule[1:]] + [float("inf")]
-    previous_end = [0.0] + [s.time for s in walk.steps]
-    result: list[float | None] = []
-    for (start, speed), end in zip(schedule, bounds):
-        reached = None
-        for step, step_start in zip(walk.steps, previous_end):
-            if step_start >= start - 1e-9 and step.time <= end and abs(step.mean_speed - speed) <= tolerance:
-                reached = step.time - start
-                break
-        result.append(reached)
-    return result
-
-
-def segment_summaries(walk: PolicyWalk, schedule: tuple[tuple[float, float], ...], duration: float,
-                      tolerance: float) -> list[dict]:
-    """Per schedule segment (starting before ``duration``): start (s), speed (m/s), time to
-    reach it (s, None if never, see :func:`reach_times`) and the mean hip speed over the
-    segment's second half (m/s, None if the walk ended before)."""
-    bounds = [t for t, _ in schedule[1:]] + [duration]
-    segments = []
-    for (start, speed), end, reach in zip(schedule, bounds, reach_times(walk, schedule, tolerance)):
-        if start >= duration:
-            break
-        mean = walk.mean_speed(0.5 * (start + end), end)
-        segments.append({"start": start, "speed": speed, "reach_time": reach,
-                         "mean_speed_second_half": None if np.isnan(mean) else mean})
-    return segments
-
-
 def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] = ACCEPTANCE_SCHEDULE,
-                   criteria: Criteria = Criteria(), model_variant: str = "paper") -> dict:
+                   criteria: Criteria = Criteria(), model: ModelOptions = ModelOptions()) -> dict:
     """Walk the speed schedule; per segment: time to reach, mean over its second half."""
     duration = schedule[-1][0] + criteria.segment_duration
-    walk = walk_policy(policy, schedule, duration, model_variant=model_variant)
-    segments = segment_summaries(walk, schedule, duration, criteria.speed_tolerance)
+    result = walk(policy, Scenario(schedule=schedule, model=model), duration)
+    segments = result.segments(criteria.speed_tolerance)
     for segment in segments:
         reach = segment["reach_time"]
         segment["passed"] = reach is not None and reach <= criteria.reach_within
     return {
         "schedule": [list(s) for s in schedule],
-        "fell": walk.fell,
-        "fall_time": walk.fall_time,
-        "stalled": walk.stalled,
+        "fell": result.fell,
+        "fall_time": result.fall_time,
+        "stalled": result.stalled,
         "segments": segments,
-        "passed": (not walk.failed) and all(s["passed"] for s in segments),
+        "passed": (not result.failed) and all(s["passed"] for s in segments),
     }
 
 
 def _check(job: tuple) -> dict:
     """One acceptance walk (a module-level function so a process pool can run it)."""
-    kind, policy, value, criteria, model_variant = job
+    kind, policy, value, criteria, model = job
     if kind == "constant":
-        return constant_speed_check(policy, value, criteria, model_variant)
-    return schedule_check(policy, value, criteria, model_variant)
+        return constant_speed_check(policy, value, criteria, model)
+    return schedule_check(policy, value, criteria, model)
 
 
-def acceptance(policy: Policy, criteria: Criteria = Criteria(), model_variant: str = "paper",
+def acceptance(policy: Policy, criteria: Criteria = Criteria(), model: ModelOptions = ModelOptions(),
                speeds: tuple[float, ...] = ACCEPTANCE_SPEEDS,
                map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict:
     """All checks: ``{"constant": [...], "schedule": {...}, "passed", "failures",
     "total_error"}``. ``map_fn`` runs the independent walks (e.g. a process pool's
     ``map``; the policy must then pickle)."""
-    jobs = [("constant", policy, v, criteria, model_variant) for v in speeds]
-    jobs.append(("schedule", policy, ACCEPTANCE_SCHEDULE, criteria, model_variant))
+    jobs = [("constant", policy, v, criteria, model) for v in speeds]
+    jobs.append(("schedule", policy, ACCEPTANCE_SCHEDULE, criteria, model))
     *constant, schedule = list(map_fn(_check, jobs))
     checks = [c["passed"] for c in constant] + [s["passed"] for s in schedule["segments"]]
     failures = sum(not ok for ok in checks) + int(schedule["fell"])

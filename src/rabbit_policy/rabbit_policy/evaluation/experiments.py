@@ -5,7 +5,7 @@ Every experiment returns plain JSON-ready dicts (what ``results.json`` holds) an
 a figure needs more than that, the walks themselves; :mod:`.figures` draws them and
 ``scripts/evaluate.py`` runs it all. The two controllers are policies
 (:mod:`.policies`): ``classic`` = the gait library (nearest gait to the commanded speed,
-no speed feedback), ``hzd_rl`` = the learned network.
+no speed feedback), ``learned`` = the HZD-RL network.
 
 Definitions used in the tables:
 
@@ -28,13 +28,14 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
 
-from rabbit_policy.evaluation.acceptance import reach_times
 from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
 from rabbit_policy.runtime.policies import Policy
-from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
-from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep, outcome, push_trial,
-                            scenario_table)
-from rabbit_policy.experiment.scenario import Push, Schedule
+from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep,
+                                                    push_trial, scenario_table)
+from rabbit_policy.experiment.loop import walk as run_walk
+from rabbit_policy.experiment.result import WalkResult
+from rabbit_policy.experiment.scenario import Push, Scenario, Schedule
+from rabbit_sim.model import ModelOptions
 
 MapFn = Callable[[Callable, Iterable], Iterable]
 
@@ -130,15 +131,14 @@ def downsample(times: np.ndarray, rate: float, *series: np.ndarray) -> list[list
 
 
 # ------------------------------------------------------------------ speed tracking
-def tracking_segments(walk: PolicyWalk, schedule: Schedule, duration: float, window: float,
+def tracking_segments(walk: WalkResult, schedule: Schedule, duration: float, window: float,
                       tolerance: float) -> list[dict]:
     """Per commanded segment: mean |filtered error| (m/s), signed mean error over the
     second half, settling time (s) and reach time (s)."""
     filtered = filtered_speed(walk.times, walk.hip_speed, window)
     ends = [t for t, _ in schedule[1:]] + [duration]
-    reaches = reach_times(walk, schedule, tolerance)
     rows = []
-    for (start, speed), end, reach in zip(schedule, ends, reaches):
+    for (start, speed), end in zip(schedule, ends):
         mask = (walk.times > start) & (walk.times <= end + 1e-9)
         half = mask & (walk.times > 0.5 * (start + end))
         complete = not walk.failed or walk.duration >= end
@@ -147,24 +147,24 @@ def tracking_segments(walk: PolicyWalk, schedule: Schedule, duration: float, win
             "mean_abs_error": float(np.mean(np.abs(filtered[mask] - speed))) if mask.any() else None,
             "mean_error_second_half": float(np.mean(filtered[half] - speed)) if half.any() else None,
             "settling_time": settling_time(walk.times, filtered, speed, start, end, tolerance) if complete else None,
-            "reach_time": reach,
+            "reach_time": walk.reach_time(start, end, speed, tolerance),
         })
     return rows
 
 
-def speed_tracking(policy: Policy, config: EvaluationConfig, model_variant: str = "paper") -> tuple[dict, PolicyWalk]:
+def speed_tracking(policy: Policy, config: EvaluationConfig, model: ModelOptions = ModelOptions()) -> tuple[dict, WalkResult]:
     """Walk the tracking schedule; returns (results, walk)."""
-    walk = walk_policy(policy, config.tracking_schedule, config.tracking_duration, model_variant=model_variant)
+    walk = run_walk(policy, Scenario(schedule=config.tracking_schedule, model=model), config.tracking_duration)
     filtered = filtered_speed(walk.times, walk.hip_speed, config.filter_window)
     t, v, vd = downsample(walk.times, config.series_rate, filtered, walk.desired_speed)
-    return {"policy": policy.name, **outcome(walk),
+    return {"policy": policy.name, **walk.outcome(),
             "segments": tracking_segments(walk, config.tracking_schedule, config.tracking_duration,
                                           config.filter_window, config.tolerance),
             "series": {"time_s": t, "filtered_speed_mps": v, "desired_speed_mps": vd}}, walk
 
 
 # ------------------------------------------------------------------ limit cycles
-def post_touchdown_states(walk: PolicyWalk, delay: float = 0.02) -> np.ndarray:
+def post_touchdown_states(walk: WalkResult, delay: float = 0.02) -> np.ndarray:
     """Stance-relative joint state ``delay`` s after every touchdown of a ``record_state``
     walk: rows (stance hip, stance knee, swing hip, swing knee (rad), their rates
     (rad/s)). Not at the touchdown tick itself: whether that sample is before or after
@@ -200,29 +200,29 @@ def convergence(states: np.ndarray, tail: int = 6, rate_scale: float = 10.0, ban
             "settled_step": settled if settled < len(distances) - tail else None}
 
 
-def limit_cycle(policy: Policy, speed: float, config: EvaluationConfig, model_variant: str = "paper") -> tuple[dict, PolicyWalk]:
+def limit_cycle(policy: Policy, speed: float, config: EvaluationConfig, model: ModelOptions = ModelOptions()) -> tuple[dict, WalkResult]:
     """A walk at ``speed`` perturbed once by ``config.portrait_push``: the phase
     portraits' data and the touchdown-to-touchdown convergence."""
-    walk = walk_policy(policy, ((0.0, speed),), config.portrait_duration, pushes=(config.portrait_push,),
-                       model_variant=model_variant, record_state=True)
-    return {"policy": policy.name, "speed": speed, **outcome(walk),
-            "steps": len(walk.steps), **convergence(post_touchdown_states(walk))}, walk
+    walk = run_walk(policy, Scenario.constant(speed, pushes=(config.portrait_push,), model=model),
+                    config.portrait_duration, record_state=True)
+    return {"policy": policy.name, "speed": speed, **walk.outcome(),
+            "steps": walk.steps, **convergence(post_touchdown_states(walk))}, walk
 
 
 # ------------------------------------------------------------------ Poincaré
 def _stability_job(job: tuple) -> dict:
-    policy, speed, feedback, samples, model_variant = job
+    policy, speed, feedback, samples, model = job
     try:
-        return analyse_stability(policy, speed, feedback, samples=samples, model_variant=model_variant).to_dict()
+        return analyse_stability(policy, speed, feedback, samples=samples, model=model).to_dict()
     except RuntimeError as exc:  # the cycle could not be found or too many perturbed runs failed
         return {"error": str(exc), "stable": False}
 
 
-def poincare(controllers: dict[str, tuple[Policy, bool]], config: EvaluationConfig, model_variant: str = "paper",
+def poincare(controllers: dict[str, tuple[Policy, bool]], config: EvaluationConfig, model: ModelOptions = ModelOptions(),
              map_fn: MapFn = map) -> dict:
     """``{controller: {speed: analysis}}`` for ``controllers`` = name -> (policy, feedback)."""
     keys = [(name, speed) for name in controllers for speed in config.poincare_speeds]
-    jobs = [(controllers[name][0], speed, controllers[name][1], config.poincare_samples, model_variant)
+    jobs = [(controllers[name][0], speed, controllers[name][1], config.poincare_samples, model)
             for name, speed in keys]
     results: dict = {name: {} for name in controllers}
     for (name, speed), result in zip(keys, map_fn(_stability_job, jobs)):
@@ -231,11 +231,11 @@ def poincare(controllers: dict[str, tuple[Policy, bool]], config: EvaluationConf
 
 
 # ------------------------------------------------------------------ pushes
-def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, model_variant: str = "paper"
-                    ) -> tuple[dict, dict[str, dict[str, PolicyWalk]]]:
+def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions()
+                    ) -> tuple[dict, dict[str, dict[str, WalkResult]]]:
     """The push scenarios at ``config.push_speed`` for every controller: the who-fell
     table, speed series, and the walks (recorded, for the videos)."""
-    walks = {name: {s.name: push_trial(policy, config.push_speed, s, config.push_duration, model_variant,
+    walks = {name: {s.name: push_trial(policy, config.push_speed, s, config.push_duration, model,
                                        record_state=True)
                     for s in config.scenarios}
              for name, policy in controllers.items()}
@@ -251,12 +251,12 @@ def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, mo
             "table": scenario_table(walks, config.scenarios), "series": series}, walks
 
 
-def push_sweep(controllers: dict[str, Policy], config: EvaluationConfig, model_variant: str = "paper",
+def push_sweep(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions(),
                map_fn: MapFn = map) -> dict:
     """Largest impulse survived, forward and backward, per controller."""
     if config.sweep is None:
         return {}
-    return {name: {direction: impulse_sweep(policy, config.push_speed, sign, config.sweep, model_variant, map_fn)
+    return {name: {direction: impulse_sweep(policy, config.push_speed, sign, config.sweep, model, map_fn)
                    for direction, sign in (("forward", 1), ("backward", -1))}
             for name, policy in controllers.items()}
 

@@ -14,10 +14,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from rabbit_policy.experiment.walk import PolicyWalk  # noqa: E402
+from rabbit_policy.experiment.result import WalkResult  # noqa: E402
 
-COLORS = {"classic": "tab:blue", "hzd_rl": "tab:orange"}
-LABELS = {"classic": "classic HZD", "hzd_rl": "HZD-RL"}
+COLORS = {"classic": "tab:blue", "learned": "tab:orange"}
+LABELS = {"classic": "classic HZD", "learned": "HZD-RL (learned)"}
 JOINTS = {3: "left hip", 4: "left knee"}
 
 
@@ -52,7 +52,7 @@ def tracking_figure(tracking: dict, path: Path) -> Path:
     return _save(fig, path)
 
 
-def limit_cycle_figure(walks: dict[float, PolicyWalk], title: str, path: Path, settle_after: float = 5.0) -> Path:
+def limit_cycle_figure(walks: dict[float, WalkResult], title: str, path: Path, settle_after: float = 5.0) -> Path:
     """Phase portraits (angle vs rate) of the left hip and knee at each speed: the
     transient after the perturbation in grey, the last ``settle_after`` s in colour
     (paper: limit_cycle)."""

@@ -7,7 +7,7 @@ impulse is force x duration in N s). They were set from the impulse sweep at 1.0
 (``docs/results``): both controllers survive every push phase up to 9 N s backward and
 17-22 N s forward, so "small" (±6 N s) is inside both margins and "large backward"
 (15 N s) beyond both — in the paper the large push is one classic HZD does not survive. Every walk starts on the controller's gait at the
-commanded speed, as :func:`~.policy_walk.walk_policy` places it.
+commanded speed, as :class:`~rabbit_policy.experiment.loop.ClosedLoop` places it.
 
 The sweep goes beyond the paper: one push of growing impulse (fixed duration), applied
 at several phases of a step, and the largest impulse each controller survives at every
@@ -23,8 +23,10 @@ from typing import Callable, Iterable, Sequence
 import numpy as np
 
 from rabbit_policy.runtime.policies import Policy
-from rabbit_policy.experiment.walk import PolicyWalk, walk_policy
-from rabbit_policy.experiment.scenario import Push
+from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.result import WalkResult
+from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_sim.model import ModelOptions
 
 
 @dataclass(frozen=True)
@@ -58,19 +60,18 @@ PUSH_SCENARIOS = (
 
 
 def push_trial(policy: Policy, speed: float, scenario: PushScenario, duration: float = 10.0,
-               model_variant: str = "paper", record_state: bool = False) -> PolicyWalk:
+               model: ModelOptions = ModelOptions(), record_state: bool = False) -> WalkResult:
     """Walk at ``speed`` m/s for ``duration`` s with the scenario's pushes (stops at a fall)."""
-    return walk_policy(policy, ((0.0, speed),), duration, pushes=scenario.pushes, model_variant=model_variant,
-                       record_state=record_state)
+    return walk(policy, Scenario.constant(speed, pushes=scenario.pushes, model=model), duration,
+                record_state=record_state)
 
 
 def survives(policy: Policy, speed: float, impulse: float, push_time: float, duration: float = 0.1,
-             horizon: float = 5.0, model_variant: str = "paper") -> bool:
+             horizon: float = 5.0, model: ModelOptions = ModelOptions()) -> bool:
     """One push of ``impulse`` N s (signed) over ``duration`` s at ``push_time`` s; True if
     the robot is still up and walking ``horizon`` s later (neither fell nor stalled)."""
     push = Push(push_time, impulse / duration, duration)
-    walk = walk_policy(policy, ((0.0, speed),), push_time + horizon, pushes=(push,), model_variant=model_variant)
-    return not walk.failed
+    return not walk(policy, Scenario.constant(speed, pushes=(push,), model=model), push_time + horizon).failed
 
 
 @dataclass(frozen=True)
@@ -85,12 +86,12 @@ class SweepConfig:
 
 
 def _survives_job(job: tuple) -> bool:
-    policy, speed, impulse, time, config, model_variant = job
-    return survives(policy, speed, impulse, time, config.duration, config.horizon, model_variant)
+    policy, speed, impulse, time, config, model = job
+    return survives(policy, speed, impulse, time, config.duration, config.horizon, model)
 
 
 def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepConfig = SweepConfig(),
-                  model_variant: str = "paper",
+                  model: ModelOptions = ModelOptions(),
                   map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict:
     """Survival over the impulse grid in one ``direction`` (+1 forward, -1 backward).
 
@@ -99,7 +100,7 @@ def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepCon
     smaller one are survived at every push time; 0 if the first already fails)}``."""
     if direction not in (1, -1):
         raise ValueError("direction must be +1 (forward) or -1 (backward)")
-    jobs = [(policy, speed, direction * impulse, t, config, model_variant)
+    jobs = [(policy, speed, direction * impulse, t, config, model)
             for impulse in config.impulses for t in config.push_times]
     outcomes = np.array(list(map_fn(_survives_job, jobs)), dtype=bool).reshape(
         len(config.impulses), len(config.push_times))
@@ -113,21 +114,13 @@ def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepCon
             "survived_fraction": fraction.tolist(), "largest_survived_Ns": largest}
 
 
-def outcome(walk: PolicyWalk) -> dict:
-    """``{"outcome": "fell" | "stalled" | "walked", "fell", "fall_time", "stalled",
-    "stall_time"}`` (times in s)."""
-    result = "fell" if walk.fell else "stalled" if walk.stalled else "walked"
-    return {"outcome": result, "fell": walk.fell, "fall_time": walk.fall_time, "stalled": walk.stalled,
-            "stall_time": walk.stall_time}
-
-
-def scenario_table(trials: dict[str, dict[str, PolicyWalk]], scenarios: Sequence[PushScenario]) -> list[dict]:
-    """Rows ``{"scenario", controller: outcome(walk)}`` from walks keyed by controller,
+def scenario_table(trials: dict[str, dict[str, WalkResult]], scenarios: Sequence[PushScenario]) -> list[dict]:
+    """Rows ``{"scenario", controller: walk.outcome()}`` from walks keyed by controller,
     then scenario name."""
     rows = []
     for scenario in scenarios:
         row: dict = {"scenario": scenario.name}
         for controller, walks in trials.items():
-            row[controller] = outcome(walks[scenario.name])
+            row[controller] = walks[scenario.name].outcome()
         rows.append(row)
     return rows

@@ -32,12 +32,13 @@ import mujoco
 import numpy as np
 
 from rabbit_hzd_controller.controller import HZDController, Leg
-from rabbit_sim.model import load_model
+from rabbit_sim.model import ModelOptions
 
 from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
 from rabbit_policy.runtime.policies import Policy
 from rabbit_policy.runtime.speed_window import Observation
-from rabbit_policy.experiment.setup import loop_on_gait
+from rabbit_policy.experiment.loop import ClosedLoop, first_command
+from rabbit_policy.experiment.scenario import Scenario
 
 STANCE_JOINTS = {Leg.LEFT: (3, 4, 5, 6), Leg.RIGHT: (5, 6, 3, 4)}  # stance hip, knee, swing hip, knee
 ROBOT_DIMENSION = 10
@@ -78,14 +79,15 @@ class WalkReturnMap:
     ``desired_speed`` (m/s). Starts on the policy's first gait and walks ``settle_steps``
     steps onto the cycle before capturing it."""
 
-    def __init__(self, policy: Policy, desired_speed: float, feedback: bool, model_variant: str = "paper",
+    def __init__(self, policy: Policy, desired_speed: float, feedback: bool, model: ModelOptions = ModelOptions(),
                  section_phase: float = 0.5, settle_steps: int = 40, max_step_time: float = 2.0) -> None:
         self.policy = policy
         self.desired_speed = float(desired_speed)
         self.feedback = feedback
-        self.model = load_model(model_variant)
-        first = policy.act(Observation(desired_speed, desired_speed, 0.0))
-        self.loop = loop_on_gait(self.model, first.alpha, first.kd, desired_speed)
+        # the closed loop without a policy: the map decides the gaits itself (below), because
+        # the policy's memory is part of the map's state and must be set by its coordinates
+        self.loop = ClosedLoop(Scenario.constant(desired_speed, model=model), start=first_command(policy, desired_speed))
+        self.model = self.loop.model
         self.controller = self.loop.controller
         self.data = self.loop.data
         self.section_phase = section_phase
@@ -162,9 +164,10 @@ class WalkReturnMap:
         data.qvel[1] = cap.foot_velocity[2] - relative[2]
         mujoco.mj_forward(model, data)
 
-    def _tick(self) -> None:
-        """One closed-loop tick; at a touchdown the policy decides the gait after next."""
-        self.loop.step()
+    def _tick(self) -> bool:
+        """One closed-loop tick; at a touchdown the policy decides the gait after next.
+        Returns True when the robot fell."""
+        fell = self.loop.tick() and self.loop.sim.fallen()
         self.step_sum += float(self.data.qvel[0])
         self.step_count += 1
         if self.controller.touchdown:
@@ -174,6 +177,7 @@ class WalkReturnMap:
             self.controller.queue_kd(command.kd)
             self.active_speed, self.pending_speed = self.pending_speed, mean
             self.step_sum, self.step_count = 0.0, 0
+        return fell
 
     def run_to_section(self) -> None:
         """Simulate to the next mid-stance crossing after a touchdown and leave the
@@ -185,9 +189,9 @@ class WalkReturnMap:
             g_before = controller.tau - self.section_phase
             mujoco.mj_getState(model, data, before, self._spec)
             stance_before, sum_before = controller.stance, self.step_sum
-            self._tick()
+            fell = self._tick()
             touched = touched or controller.touchdown
-            if self.loop.limits.fallen(data.qpos[1], data.qpos[2]):
+            if fell:
                 raise StepFailed("the robot fell before the next section")
             g_after = controller.tau - self.section_phase
             if touched and controller.stance == stance_before and g_before < 0.0 <= g_after:
@@ -250,7 +254,7 @@ def default_scales(feedback: bool, angle: float = 3e-3, rate: float = 3e-2, spee
 
 
 def analyse_stability(policy: Policy, desired_speed: float, feedback: bool, samples: int = 400,
-                      natural_steps: int = 12, seed: int = 0, model_variant: str = "paper",
+                      natural_steps: int = 12, seed: int = 0, model: ModelOptions = ModelOptions(),
                       decay_steps: int = 30) -> StabilityResult:
     """Poincaré test at one commanded speed: the fixed point is the mean of
     ``natural_steps`` section states of the settled walk (the sampled cycle jitters at
@@ -259,7 +263,7 @@ def analyse_stability(policy: Policy, desired_speed: float, feedback: bool, samp
     (:func:`.poincare.regression_fit`; runs that fall or stall are dropped and counted),
     and, as a cross-check, the measured decay of a perturbation ten times the scales
     along the Jacobian's slowest eigenvector."""
-    step = WalkReturnMap(policy, desired_speed, feedback, model_variant)
+    step = WalkReturnMap(policy, desired_speed, feedback, model)
     natural = step.natural_states(natural_steps)
     x_star = natural.mean(axis=0)
     scales = default_scales(feedback)

@@ -1,24 +1,31 @@
-"""What an experiment commands, ROS-free: a speed schedule and pushes on the torso, and
-their text forms (``"0:0.8,10:1.2"``, ``"2:60:0.1,4:-80:0.2"``) used by the scripts.
-Shared by the node stack (:mod:`.stack`) and the fast path (:mod:`.policy_walk`); pushes
-live in :mod:`rabbit_msgs_py.pushes` because the simulator node reads them too."""
+"""What an experiment commands, ROS-free: a speed schedule, pushes on the torso, the model
+(with its errors), a torque delay and the stop rules; and the text forms the scripts use
+(``"0:0.8,10:1.2"``, ``"2:60:0.1,4:-80:0.2"``). The node stack (:mod:`..bringup.stack`)
+and the fast path (:mod:`.loop`) read the same schedules; pushes live in
+:mod:`rabbit_msgs_py.pushes` because the simulator node parses them too."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Sequence
 
 from rabbit_msgs_py.pushes import Push, format_pushes, parse_pushes
+from rabbit_sim.model import ModelOptions
+from rabbit_sim.simulation import StopRules
 
-__all__ = ["Push", "Schedule", "format_pushes", "parse_pushes", "parse_schedule", "validate_schedule"]
+__all__ = ["Push", "Scenario", "Schedule", "format_pushes", "parse_pushes", "parse_schedule", "validate_schedule"]
 
 Schedule = tuple[tuple[float, float], ...]  # (start time s, commanded speed m/s)
 
 
 def validate_schedule(schedule: Sequence[tuple[float, float]]) -> None:
-    """Raise ``ValueError`` unless the schedule starts at t = 0 and its times increase."""
+    """Raise ``ValueError`` unless the schedule starts at t = 0, its times increase and
+    every entry is finite."""
     if not schedule or schedule[0][0] != 0.0:
         raise ValueError("the speed schedule must start at t = 0")
+    if not all(math.isfinite(t) and math.isfinite(v) for t, v in schedule):
+        raise ValueError("speed schedule entries must be finite")
     times = [t for t, _ in schedule]
     if any(b <= a for a, b in zip(times, times[1:])):
         raise ValueError("speed schedule times must increase")
@@ -36,3 +43,49 @@ def parse_schedule(text: str) -> Schedule:
             raise ValueError(f"bad speed schedule entry {item!r}")
         pairs.append((t, v))
     return tuple(pairs)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One experiment's conditions (times s, speeds m/s).
+
+    schedule: commanded speed from each start time on (first at t = 0).
+    pushes: pushes on the torso at sim times (:class:`~rabbit_msgs_py.pushes.Push`).
+    model: the model and its errors (:class:`~rabbit_sim.model.ModelOptions`).
+    torque_delay: the torques computed at a tick are applied this many seconds later
+        (a multiple of the 1 ms timestep; until then the first torques are held).
+    rules: fall and stall (:class:`~rabbit_sim.simulation.StopRules`).
+    window: longest speed window of the policy's observation (ticks), as ``policy_node``.
+    """
+
+    schedule: Schedule = ((0.0, 1.0),)
+    pushes: tuple[Push, ...] = ()
+    model: ModelOptions = field(default_factory=ModelOptions)
+    torque_delay: float = 0.0
+    rules: StopRules = field(default_factory=StopRules)
+    window: int = 1000
+
+    def __post_init__(self) -> None:
+        validate_schedule(self.schedule)
+        object.__setattr__(self, "schedule", tuple((float(t), float(v)) for t, v in self.schedule))
+        object.__setattr__(self, "pushes", tuple(sorted(self.pushes, key=lambda p: p.time)))
+        if not (math.isfinite(self.torque_delay) and self.torque_delay >= 0.0):
+            raise ValueError(f"torque_delay must be a finite number >= 0 s, got {self.torque_delay}")
+        if self.window < 1:
+            raise ValueError(f"window must be >= 1 tick, got {self.window}")
+
+    @classmethod
+    def constant(cls, speed: float, **kwargs) -> "Scenario":
+        """A scenario commanding ``speed`` m/s throughout."""
+        return cls(schedule=((0.0, float(speed)),), **kwargs)
+
+    @property
+    def initial_speed(self) -> float:
+        """The first commanded speed (m/s): the robot starts on the gait for it, moving at it."""
+        return self.schedule[0][1]
+
+    def to_dict(self) -> dict:
+        """JSON-ready."""
+        return {"schedule": [list(s) for s in self.schedule], "pushes": format_pushes(self.pushes),
+                "model": self.model.to_dict(), "torque_delay_s": self.torque_delay,
+                "stall_after_s": self.rules.stall_after}

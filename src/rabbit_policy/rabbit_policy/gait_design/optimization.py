@@ -53,11 +53,13 @@ import mujoco
 import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
-from rabbit_hzd_controller.controller import ControllerConfig, HZDController
+from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_hzd_controller.gait import Gait
-from rabbit_hzd_controller.gait_state import state_on_gait
-from rabbit_sim.model import load_model
-from rabbit_sim.simulation import ClosedLoop
+from rabbit_policy.experiment.loop import ClosedLoop, walk
+from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.policies import GaitCommand, LibraryPolicy
+from rabbit_sim.model import ModelOptions, load_model
 
 KD_SCALE = 100.0
 """Kd enters the decision vector divided by this, so all variables are O(0.1..1)."""
@@ -112,74 +114,75 @@ def decision_to_gait_params(x: np.ndarray, problem: GaitProblem) -> tuple[np.nda
     return alpha, kd
 
 
-def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None = None) -> GaitEvaluation:
-    """Roll out the candidate ``x`` from a state on its own gait and score it."""
-    model = model or load_model(problem.model_variant)
-    alpha, kd = decision_to_gait_params(np.asarray(x, dtype=float), problem)
-    config = ControllerConfig(kp=problem.kp, torque_limit=problem.torque_limit)
-    try:
-        controller = HZDController(alpha, kd, config)
-        qpos, qvel = state_on_gait(alpha, problem.speed, config.geometry)
-    except (ValueError, ZeroDivisionError, OverflowError):
-        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
-    if not all(math.isfinite(v) for v in qpos + qvel) or abs(qpos[2]) > 0.5:
-        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
+class _Metrics:
+    """Per-tick figures of a candidate's walk over the second half of the horizon (an
+    observer of the closed loop): effort, peak torque, saturation, friction-cone excess,
+    stance-foot lift-off and mid-swing clearance."""
 
-    loop = ClosedLoop(model, controller)
-    loop.reset(qpos, qvel)
-    data = loop.data
-    feet = (model.site("left_foot").id, model.site("right_foot").id)
-    foot_geoms = (model.geom("left_foot").id, model.geom("right_foot").id)
-    n = int(round(problem.horizon / model.opt.timestep))
-    half = n // 2
-    dt = model.opt.timestep
-    limit = problem.torque_limit
-    effort = 0.0
-    peak = 0.0
-    saturated = 0
-    max_ratio = 0.0
-    slip = 0.0
-    min_clear = float("inf")
-    liftoff = 0.0
-    td_times: list[float] = []
-    td_x: list[float] = []
-    x_half = 0.0
-    force = np.zeros(6)
-    fell = False
-    for i in range(n):
-        torques = loop.step()
-        if controller.touchdown:
-            td_times.append(float(data.time))
-            td_x.append(float(data.site_xpos[feet[int(controller.stance)]][0]))
-        if i == half:
-            x_half = float(data.qpos[0])
-        if loop.limits.fallen(data.qpos[1], data.qpos[2]):
-            fell = True
-            break
-        if i < half:
-            continue
+    def __init__(self, model: mujoco.MjModel, problem: GaitProblem, half: int) -> None:
+        self.model, self.problem, self.half = model, problem, half
+        self.feet = (model.site("left_foot").id, model.site("right_foot").id)
+        self.foot_geoms = (model.geom("left_foot").id, model.geom("right_foot").id)
+        self.dt = model.opt.timestep
+        self.effort = self.peak = self.max_ratio = self.slip = self.liftoff = 0.0
+        self.saturated = 0
+        self.min_clear = float("inf")
+        self.force = np.zeros(6)
+
+    def observe(self, loop: ClosedLoop, torques) -> None:
+        i = loop.ticks - 1
+        if i < self.half:
+            return
+        limit, dt, problem = self.problem.torque_limit, self.dt, self.problem
         for tq in torques:
-            effort += (tq / limit) ** 2 * dt
-            peak = max(peak, abs(tq))
+            self.effort += (tq / limit) ** 2 * dt
+            self.peak = max(self.peak, abs(tq))
             if abs(tq) >= limit:
-                saturated += 1
+                self.saturated += 1
+        data, controller = loop.data, loop.controller
         stance = int(controller.stance)
-        stance_z = data.site_xpos[feet[stance]][2]
-        swing_z = data.site_xpos[feet[1 - stance]][2]
+        stance_z = data.site_xpos[self.feet[stance]][2]
+        swing_z = data.site_xpos[self.feet[1 - stance]][2]
         if stance_z > 0.005:
-            liftoff += stance_z * dt
-        if 0.25 <= controller.tau <= 0.75 and swing_z < min_clear:
-            min_clear = float(swing_z)
+            self.liftoff += stance_z * dt
+        if 0.25 <= controller.tau <= 0.75 and swing_z < self.min_clear:
+            self.min_clear = float(swing_z)
         if i % 4 == 0:
             for c in range(data.ncon):
                 con = data.contact[c]
-                if con.geom1 == foot_geoms[stance] or con.geom2 == foot_geoms[stance]:
-                    mujoco.mj_contactForce(model, data, c, force)
-                    if force[0] > 1.0:
-                        ratio = math.hypot(force[1], force[2]) / force[0]
-                        max_ratio = max(max_ratio, ratio)
-                        slip += max(0.0, ratio - problem.friction_limit) * 4 * dt
+                if con.geom1 == self.foot_geoms[stance] or con.geom2 == self.foot_geoms[stance]:
+                    mujoco.mj_contactForce(self.model, data, c, self.force)
+                    if self.force[0] > 1.0:
+                        ratio = math.hypot(self.force[1], self.force[2]) / self.force[0]
+                        self.max_ratio = max(self.max_ratio, ratio)
+                        self.slip += max(0.0, ratio - problem.friction_limit) * 4 * dt
 
+
+def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None = None) -> GaitEvaluation:
+    """Roll out the candidate ``x`` from a state on its own gait and score it."""
+    model = model or load_model(ModelOptions(problem.model_variant))
+    alpha, kd = decision_to_gait_params(np.asarray(x, dtype=float), problem)
+    try:
+        loop = ClosedLoop(Scenario.constant(problem.speed, model=ModelOptions(problem.model_variant)),
+                          start=GaitCommand(tuple(alpha), kd), kp=problem.kp, model=model)
+    except (ValueError, ZeroDivisionError, OverflowError):
+        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
+    data = loop.data
+    qpos = data.qpos.tolist()
+    if not all(math.isfinite(v) for v in qpos + data.qvel.tolist()) or abs(qpos[2]) > 0.5:
+        return GaitEvaluation(cost=1e4, fell=True, walked_time=0.0)
+
+    n = int(round(problem.horizon / model.opt.timestep))
+    half = n // 2
+    metrics = _Metrics(model, problem, half)
+    loop.observer = metrics.observe
+    fell = loop.run(max_ticks=n)
+    td_times = [td.time for td in loop.touchdowns]
+    td_x = [td.foot_x for td in loop.touchdowns]
+    x_half = float(loop.result().hip_x[half]) if loop.ticks > half else 0.0
+    effort, peak, saturated = metrics.effort, metrics.peak, metrics.saturated
+    max_ratio, slip, min_clear, liftoff = metrics.max_ratio, metrics.slip, metrics.min_clear, metrics.liftoff
+    dt = model.opt.timestep
     walked = float(data.time)
     if fell or len([t for t in td_times if t >= half * dt]) < 3:
         # Any fall, or a stall (no steady stepping), costs more than any walk; walking
@@ -243,11 +246,6 @@ class Approach:
 def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
     """Walk ``approach_settle`` s on the ``start`` gait at its speed, then the candidate
     ``x`` from the next touchdown on, for ``approach_horizon`` s."""
-    from rabbit_policy.evaluation.acceptance import reach_times  # imported here: they import this package's policies
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.policies import LibraryPolicy
-    from rabbit_policy.experiment.walk import walk_policy
-
     alpha, kd = decision_to_gait_params(np.asarray(x, dtype=float), problem)
     candidate = Gait(alpha=tuple(alpha), kd=kd, kp=problem.kp, speed=problem.speed)
     policy = LibraryPolicy(GaitLibrary.from_gaits([start, candidate]), "nearest")
@@ -255,20 +253,21 @@ def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
     schedule = ((0.0, start.speed), (switch, problem.speed))
     horizon = problem.approach_horizon
     try:
-        walk = walk_policy(policy, schedule, switch + horizon, model_variant=problem.model_variant)
+        result = walk(policy, Scenario(schedule=schedule, model=ModelOptions(problem.model_variant)), switch + horizon)
     except (ValueError, ZeroDivisionError, OverflowError):
         return Approach(problem.speed * horizon, None, True)
-    if walk.failed:  # fell or stalled
+    if result.failed:  # fell or stalled
         return Approach(problem.speed * horizon, None, True)
     shortfall, previous = 0.0, 0.0
-    for step in walk.steps:
-        if previous >= switch - 1e-9:
-            error = abs(step.mean_speed - problem.speed) - problem.approach_tolerance
-            shortfall += max(0.0, error) * (step.time - previous)
-        previous = step.time
-    shortfall += max(0.0, problem.speed - problem.approach_tolerance - walk.mean_speed(previous)) * (
-        walk.duration - previous)  # the unfinished last step, if still short
-    return Approach(shortfall, reach_times(walk, schedule, problem.approach_tolerance)[1], False)
+    for start, end, speed in result.step_speeds():
+        if start >= switch - 1e-9:
+            error = abs(speed - problem.speed) - problem.approach_tolerance
+            shortfall += max(0.0, error) * (end - start)
+        previous = end
+    shortfall += max(0.0, problem.speed - problem.approach_tolerance - result.mean_speed(previous)) * (
+        result.end_time - previous)  # the unfinished last step, if still short
+    reach = result.reach_time(switch, result.end_time, problem.speed, problem.approach_tolerance)
+    return Approach(shortfall, reach, False)
 
 
 _START_GAITS: dict[float, Gait] = {}
@@ -277,8 +276,6 @@ _START_GAITS: dict[float, Gait] = {}
 def _start_gait(speed: float) -> Gait:
     """The packaged library's gait nearest to ``speed`` (cached per process)."""
     if speed not in _START_GAITS:
-        from rabbit_policy.runtime.gait_library import GaitLibrary
-
         _START_GAITS[speed] = GaitLibrary.load().nearest(speed)
     return _START_GAITS[speed]
 

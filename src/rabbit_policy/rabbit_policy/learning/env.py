@@ -17,8 +17,8 @@ queued and takes effect at the next touchdown.
   previous gait in force, as the controller node does; ``info["rejected"]`` says so.
 * Reward per step: ``-(mean hip speed - v_d)^2`` (the paper), plus ``fall_penalty`` once
   when the episode ends by a fall: with only negative rewards an early end would
-  otherwise pay. Terminated when |torso pitch| >= 0.5 rad or the hip height leaves
-  (0.6, 0.8] m, or when no touchdown comes within ``max_step_time`` (stalled).
+  otherwise pay. Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5
+  rad or the hip height leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s).
   Truncated after ``max_steps`` steps.
 * v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
   uniformly from the middle half of the episode.
@@ -35,13 +35,13 @@ import gymnasium as gym
 import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
-from rabbit_hzd_controller.controller import ControllerConfig, HZDController
-from rabbit_sim.model import load_model
-from rabbit_sim.simulation import ClosedLoop
-
+from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_policy.experiment.loop import ClosedLoop
+from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.speed_window import SpeedWindow
-from rabbit_policy.experiment.setup import loop_on_gait
+from rabbit_policy.runtime.policies import GaitCommand
+from rabbit_sim.model import ModelOptions, load_model
+from rabbit_sim.simulation import StopRules
 
 
 @dataclass(frozen=True)
@@ -69,9 +69,9 @@ class RabbitHZDEnv(gym.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, model: str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
+    def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = 60, window: int = 1000, fall_penalty: float = -10.0,
-                 max_step_time: float = 1.5, margin: float = 0.15) -> None:
+                 rules: StopRules = StopRules(), margin: float = 0.15) -> None:
         self.library = GaitLibrary.load()
         self.bounds = ActionBounds.from_library(self.library, margin)
         self.action_space = gym.spaces.Box(self.bounds.low.astype(np.float32), self.bounds.high.astype(np.float32),
@@ -84,32 +84,22 @@ class RabbitHZDEnv(gym.Env):
         self.max_steps = max_steps
         self.window_size = window
         self.fall_penalty = fall_penalty
-        self.max_ticks = int(round(max_step_time / 0.001))
-        self._model = load_model(model)
+        self.rules = rules
+        self.model_options = ModelOptions(model) if isinstance(model, str) else model
+        self._model = load_model(self.model_options)
         self._loop: ClosedLoop | None = None
-        self._controller: HZDController | None = None
 
     # ------------------------------------------------------------------ helpers
     def _observation(self) -> np.ndarray:
-        obs = self._window.observation(self.desired_speed, since_ns=self._previous_touchdown)
+        obs = self._loop.observation()
         clipped = np.clip(obs.as_tuple(), self.observation_space.low, self.observation_space.high)
         return clipped.astype(np.float32)
 
     def _run_to_touchdown(self) -> tuple[bool, bool]:
-        """Simulate until the next touchdown; returns (fell, stalled)."""
-        loop, controller, window = self._loop, self._controller, self._window
-        data = loop.data
-        self._previous_touchdown = self._touchdown_tick
-        for _ in range(self.max_ticks):
-            loop.step()
-            self._tick += 1
-            window.add(self._tick, float(data.qvel[0]), self.desired_speed)
-            if loop.limits.fallen(data.qpos[1], data.qpos[2]):
-                return True, False
-            if controller.touchdown:
-                self._touchdown_tick = self._tick
-                return False, False
-        return False, True
+        """Simulate until the next touchdown (or a stop rule); returns (fell, stalled)."""
+        loop = self._loop
+        loop.run(max_ticks=self._max_ticks, until_touchdown=True)
+        return loop.fell, loop.stalled
 
     def _speed_option(self, options: dict, key: str, drawn: float) -> float:
         """``options[key]`` (m/s) if given and inside the speed range, else ``drawn``."""
@@ -130,12 +120,11 @@ class RabbitHZDEnv(gym.Env):
         self.desired_speed = self._speed_option(options, "desired_speed", first)
         self._next_speed = self._speed_option(options, "next_speed", second)
         gait = self.library.nearest(self.desired_speed)
-        self._loop = loop_on_gait(self._model, gait.alpha, gait.kd, gait.speed, gait.kp)
-        self._controller = self._loop.controller
-        self._window = SpeedWindow(self.window_size)
-        self._tick = 0
-        self._touchdown_tick: int | None = None  # window stamps are ticks
-        self._previous_touchdown: int | None = None
+        scenario = Scenario.constant(self.desired_speed, model=self.model_options, rules=self.rules,
+                                     window=self.window_size)
+        self._loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd), start_speed=gait.speed,
+                                kp=gait.kp, model=self._model, observe_speed=True)
+        self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
         self._steps = 0
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
@@ -146,11 +135,9 @@ class RabbitHZDEnv(gym.Env):
         if self._loop is None:
             raise RuntimeError("call reset() before step()")
         action = np.clip(np.asarray(action, dtype=float), self.bounds.low, self.bounds.high)
-        rejected = False
         try:
-            alpha = expand_alpha(action[:N_FREE])
-            self._controller.set_alpha(alpha)
-            self._controller.queue_kd(float(action[N_FREE]))
+            command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))
+            rejected = not self._loop.set_gait(command)
         except ValueError:
             rejected = True
         fell, stalled = self._run_to_touchdown()
@@ -166,6 +153,7 @@ class RabbitHZDEnv(gym.Env):
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time}
         if self._steps == self._switch_step:  # the mid-episode change of command
             self.desired_speed = self._next_speed
+            self._loop.set_command(self._next_speed)
         return obs, float(reward), terminated, truncated, info
 
 

@@ -1,11 +1,15 @@
 """Gait policies: observation (:class:`~.speed_window.Observation`) -> gait for the next
 step (24 Bezier coefficients alpha, derivative gain Kd). ROS-free; ``policy_node`` and the
-scripts pick one with :func:`make_policy`.
+scripts pick one with :func:`make_policy`. The two controllers have one name each,
+everywhere (CLI, parameters, results):
 
-* ``library``: the classic HZD gait library (``rabbit_policy/gaits``), the gait nearest
+* ``classic``: classic HZD, the gait library (``rabbit_policy/gaits``), the gait nearest
   to the commanded speed or a linear blend of the two around it. Uses only v_d.
-* ``learned``: the HZD-RL network (:mod:`.network`) from a checkpoint file (default: the
-  packaged ``rabbit_policy/trained/hzd_rl_policy.pt``, shipped once trained).
+* ``learned``: HZD-RL, the network (:mod:`.network`) from a checkpoint file (default: the
+  packaged ``rabbit_policy/trained/hzd_rl_policy.pt``).
+
+Older names are accepted as aliases (:data:`CONTROLLER_ALIASES`): ``hzd`` and ``library``
+for classic, ``rl`` for learned.
 """
 
 from __future__ import annotations
@@ -19,7 +23,9 @@ from typing import Protocol
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_window import Observation
 
-POLICY_KINDS = ("library", "learned")
+CONTROLLERS = ("classic", "learned")
+CONTROLLER_ALIASES = {"hzd": "classic", "library": "classic", "rl": "learned"}
+POLICY_KINDS = CONTROLLERS
 LIBRARY_MODES = ("nearest", "interpolate")
 
 
@@ -53,7 +59,7 @@ class LibraryPolicy:
             raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
         self.library = library
         self.mode = mode
-        self.name = f"library/{mode}"
+        self.name = f"classic/{mode}"
 
     def act(self, observation: Observation) -> GaitCommand:
         speed = observation.desired_speed
@@ -93,11 +99,21 @@ class LearnedPolicy(NetworkPolicy):
         super().__init__(self.checkpoint.network(), f"learned/{Path(path).name}")
 
 
-def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode: str = "nearest",
+def controller_name(name: str) -> str:
+    """The controller's one name (``classic`` or ``learned``) for a name or an alias;
+    raises ``ValueError`` naming the choices."""
+    canonical = CONTROLLER_ALIASES.get(name, name)
+    if canonical not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {CONTROLLERS} (aliases {sorted(CONTROLLER_ALIASES)}), got {name!r}")
+    return canonical
+
+
+def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "nearest",
                 policy_file: str | Path | None = None) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on."""
-    if kind == "library":
+    kind = controller_name(kind)
+    if kind == "classic":
         try:
             library = GaitLibrary.load(gait_dir or None)
         except (FileNotFoundError, ValueError) as exc:
@@ -108,10 +124,10 @@ def make_policy(kind: str = "library", gait_dir: str | Path | None = None, mode:
         if not path.is_file():
             if policy_file:
                 raise PolicyUnavailable(f"policy file {path} does not exist")
-            raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=library "
+            raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=classic "
                                     "or give policy_file")
         try:
             return LearnedPolicy(path)
         except (OSError, RuntimeError, KeyError, ValueError, EOFError, pickle.UnpicklingError) as exc:
             raise PolicyUnavailable(f"cannot load policy file {path}: {exc}") from exc
-    raise ValueError(f"policy must be one of {POLICY_KINDS}, got {kind!r}")
+    raise AssertionError(kind)  # controller_name() admits only CONTROLLERS

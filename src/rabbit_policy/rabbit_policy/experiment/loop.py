@@ -1,0 +1,262 @@
+"""The one ROS-free closed loop: the RABBIT simulator, the HZD controller and (optionally) a
+gait policy, stepped together at 1 kHz. Every experiment runs it: ``scripts/walk.py``,
+the Gymnasium environment and training, the gait optimizer, the Poincaré analysis, the
+acceptance checks and the evaluation. The node stack runs the same pieces over topics
+(``sim_node`` steps the same :class:`~rabbit_sim.simulation.Simulator`, which applies the
+same push schedule; ``hzd_controller_node`` runs the same :class:`HZDController`;
+``policy_node`` the same policy on the same :class:`SpeedWindow` observation), which is
+why a lockstep run reproduces this loop bit for bit.
+
+One tick (:meth:`ClosedLoop.tick`):
+
+1. the controller turns the state into four torques (delayed by the scenario's
+   ``torque_delay`` if any) and the simulator steps once, starting and ending pushes;
+2. the commanded speed follows the schedule; the hip speed joins the policy's speed window;
+3. the stop rules: a fall, or no touchdown for ``stall_after`` s (a stall);
+4. at a touchdown the policy sees the window's observation over the step just ended and
+   its gait (alpha, Kd) is queued for the next touchdown — as ``policy_node`` answers
+   ``/hzd/step``. Without a policy the gait in force stays (a fixed gait; the learning
+   environment sets the gait itself between touchdowns).
+
+The robot starts at phase 0 of the starting gait, left stance, its hip moving at the
+scenario's first commanded speed (or ``start_speed``), as ``sim_node`` places it.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from typing import Callable, Sequence
+
+import mujoco
+import numpy as np
+
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
+from rabbit_hzd_controller.gait import Gait
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
+from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.runtime.policies import GaitCommand, Policy
+from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
+from rabbit_sim.model import ModelOptions, load_model
+from rabbit_sim.simulation import Simulator
+
+Observer = Callable[["ClosedLoop", Sequence[float]], None]
+"""Called after every tick with the loop and the torques applied (N m)."""
+
+
+def first_command(policy: Policy, speed: float) -> GaitCommand:
+    """The gait a policy starts on at ``speed`` m/s: its answer to (v, v, 0)."""
+    return policy.act(Observation(speed, speed, 0.0))
+
+
+class ClosedLoop:
+    """Simulator + HZD controller (+ gait policy) for one scenario; see the module docstring.
+
+    ``start``: the gait in force at t = 0 (default: the policy's :func:`first_command`).
+    ``kp``: the controller's proportional gain (None: ``ControllerConfig``'s). ``model``:
+    a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
+    tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
+    keep the speed window without a policy (the learning environment).
+    """
+
+    def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
+                 *, start_speed: float | None = None, kp: float | None = None,
+                 model: mujoco.MjModel | None = None, observer: Observer | None = None,
+                 record_state: bool = False, observe_speed: bool = False) -> None:
+        if start is None:
+            if policy is None:
+                raise ValueError("a closed loop needs a policy or a starting gait")
+            start = first_command(policy, scenario.initial_speed)
+        self.scenario = scenario
+        self.policy = policy
+        self.model = model if model is not None else load_model(scenario.model)
+        self.sim = Simulator(self.model, scenario.rules.fall)
+        self.data = self.sim.data
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel  # views, kept (MjData makes one per access)
+        config = ControllerConfig() if kp is None else ControllerConfig(kp=kp)
+        self.controller = HZDController(start.alpha, start.kd, config, Leg.LEFT)
+        speed = scenario.initial_speed if start_speed is None else start_speed
+        self.sim.reset(*state_on_gait(start.alpha, speed, config.geometry))
+        self.sim.schedule_pushes(scenario.pushes)
+        self.observer = observer
+        self.record_state = record_state
+        self.window = SpeedWindow(scenario.window) if (policy is not None or observe_speed) else None
+        self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
+        self._stall_after = scenario.rules.stall_after
+        fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
+        self._min_height, self._max_height, self._max_pitch = fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch
+        self._changes = list(scenario.schedule[1:])
+        self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
+        self.desired_speed = scenario.initial_speed
+        dt = self.model.opt.timestep
+        delay = int(round(scenario.torque_delay / dt))
+        self._delay: deque | None = None
+        if delay:
+            first = self.controller.compute(self.data.qpos.tolist(), self.data.qvel.tolist())
+            self.controller.reset(start.alpha, start.kd, Leg.LEFT)  # that look ahead must not count
+            self._delay = deque([first] * delay)
+        # what happened
+        self.ticks = 0
+        self.start_time = float(self.data.time)
+        self.start_x = float(self.data.qpos[0])
+        self._times: list[float] = []
+        self._xs: list[float] = []
+        self._qpos_rows: list[np.ndarray] = []
+        self._qvel_rows: list[np.ndarray] = []
+        self._stance: list[int] = []
+        self.touchdowns: list[Touchdown] = []
+        self.decisions: list[Decision] = []
+        self.peak_torque = 0.0
+        self.fell = self.stalled = False
+        self.fall_time: float | None = None
+        self.stall_time: float | None = None
+        self._last_touchdown_time = self.start_time
+        self._last_touchdown_tick: int | None = None
+        self._previous_touchdown_tick: int | None = None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        """Simulation time (s)."""
+        return float(self.data.time)
+
+    @property
+    def failed(self) -> bool:
+        return self.fell or self.stalled
+
+    def set_command(self, speed: float) -> None:
+        """Command ``speed`` m/s from now on (the schedule's later changes still apply)."""
+        self.desired_speed = float(speed)
+
+    def observation(self) -> Observation:
+        """The policy's observation over the last whole step (touchdown to touchdown; since
+        the start before the first)."""
+        if self.window is None:
+            raise RuntimeError("this loop keeps no speed window (no policy, observe_speed=False)")
+        return self.window.observation(self.desired_speed, since_ns=self._previous_touchdown_tick)
+
+    def set_gait(self, command: GaitCommand) -> bool:
+        """Queue a gait for the next touchdown; False (and the gait in force stays) if the
+        controller rejects it."""
+        try:
+            self.controller.set_alpha(command.alpha)
+            self.controller.queue_kd(command.kd)
+        except ValueError:
+            return False
+        return True
+
+    # ------------------------------------------------------------------- tick
+    def tick(self) -> bool:
+        """One control tick and physics step (see the module docstring); returns True when
+        a stop rule fired this tick (fell or stalled)."""
+        controller = self.controller
+        qpos, qvel = self._qpos, self._qvel
+        torques = controller.compute(qpos.tolist(), qvel.tolist())
+        if self._delay is not None:
+            self._delay.append(torques)
+            torques = self._delay.popleft()
+        t = self.sim.step(torques)
+        i = self.ticks
+        self.ticks = i + 1
+        peak = self.peak_torque
+        for tq in torques:
+            if tq > peak:
+                peak = tq
+            elif -tq > peak:
+                peak = -tq
+        self.peak_torque = peak
+        if t >= self._next_change:
+            while self._changes and t >= self._changes[0][0] - 1e-9:
+                self.desired_speed = self._changes.pop(0)[1]
+            self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
+        x, height, pitch = qpos[:3].tolist()
+        self._times.append(t)
+        self._xs.append(x)
+        if self.record_state:
+            self._qpos_rows.append(qpos.copy())
+            self._qvel_rows.append(qvel.copy())
+            self._stance.append(int(controller.stance))
+        window = self.window
+        if window is not None:
+            window.add(i, qvel[0], self.desired_speed)
+        if self.observer is not None:
+            self.observer(self, torques)
+        stop = False
+        if not (self._min_height < height < self._max_height and -self._max_pitch < pitch < self._max_pitch):
+            if not self.fell:
+                self.fell, self.fall_time = True, t
+            stop = True
+        if t - self._last_touchdown_time > self._stall_after:
+            if not self.stalled:
+                self.stalled, self.stall_time = True, t
+            stop = True
+        if controller.touchdown:
+            self._touchdown(i, t)
+        return stop
+
+    def _touchdown(self, i: int, t: float) -> None:
+        data = self.data
+        foot = data.site_xpos[self._feet[int(self.controller.stance)]]
+        self.touchdowns.append(Touchdown(t, float(foot[0]), float(data.qpos[0])))
+        self._last_touchdown_time = t
+        self._previous_touchdown_tick, self._last_touchdown_tick = self._last_touchdown_tick, i
+        if self.policy is not None:
+            observation = self.observation()
+            command = self.policy.act(observation)
+            accepted = self.set_gait(command)
+            self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))
+
+    # -------------------------------------------------------------------- run
+    def run(self, duration: float | None = None, stop_on_fall: bool = True, until_touchdown: bool = False,
+            max_ticks: int | None = None) -> bool:
+        """Tick for ``duration`` s of sim time (or ``max_ticks`` ticks); with
+        ``until_touchdown`` stop after the next touchdown. Returns True if a stop rule
+        ended it (fell or stalled; with ``stop_on_fall`` False the walk goes on)."""
+        if duration is not None:
+            if not duration > 0:
+                raise ValueError(f"duration must be > 0 s, got {duration}")
+            n = int(round(duration / self.model.opt.timestep))
+        elif max_ticks is not None:
+            n = max_ticks
+        else:
+            raise ValueError("give a duration or max_ticks")
+        tick, controller = self.tick, self.controller
+        for _ in range(n):
+            if tick() and stop_on_fall:
+                return True
+            if until_touchdown and controller.touchdown:
+                return False
+        return False
+
+    def result(self) -> WalkResult:
+        """What happened so far."""
+        record = self.record_state
+        return WalkResult(
+            scenario=self.scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
+            stall_time=self.stall_time, start_time=self.start_time, start_x=self.start_x,
+            times=np.array(self._times), hip_x=np.array(self._xs), touchdowns=list(self.touchdowns),
+            decisions=list(self.decisions), peak_torque=self.peak_torque,
+            qpos=np.array(self._qpos_rows).reshape(-1, self.model.nq) if record else None,
+            qvel=np.array(self._qvel_rows).reshape(-1, self.model.nv) if record else None,
+            stance=np.array(self._stance, dtype=np.int8) if record else None,
+        )
+
+
+def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: GaitCommand | None = None,
+         stop_on_fall: bool = True, record_state: bool = False, observer: Observer | None = None,
+         kp: float | None = None, start_speed: float | None = None,
+         model: mujoco.MjModel | None = None) -> WalkResult:
+    """Walk ``duration`` s of sim time under ``scenario`` with ``policy`` choosing every
+    step's gait (or the fixed gait ``start`` when ``policy`` is None); a fall or a stall
+    ends the walk unless ``stop_on_fall`` is False."""
+    loop = ClosedLoop(scenario, policy, start, start_speed=start_speed, kp=kp, model=model, observer=observer,
+                      record_state=record_state)
+    loop.run(duration, stop_on_fall=stop_on_fall)
+    return loop.result()
+
+
+def walk_gait(gait: Gait, duration: float, model: ModelOptions = ModelOptions()) -> WalkResult:
+    """Walk one fixed gait (its own Kp) at its design speed for ``duration`` s (the gait
+    tools' check of a designed gait)."""
+    return walk(None, Scenario.constant(gait.speed, model=model), duration, start=GaitCommand(gait.alpha, gait.kd),
+                kp=gait.kp)

@@ -1,0 +1,194 @@
+"""What a walk returns: one result type for every experiment, with one definition of
+mean speed.
+
+**Mean speed** over (t0, t1] is the hip's forward displacement over the elapsed sim time,
+``(x(t1) - x(t0)) / (t1 - t0)`` (m/s, world x), read from the per-tick samples. MuJoCo's
+Euler step advances ``x`` by ``dt * v`` with the new velocity, so this equals the mean of
+the per-tick hip speeds over the same ticks (to rounding): the policy's observation (the
+mean over the last step) and a step's mean speed here are the same number.
+
+* last-half mean speed: over the second half of the walk;
+* a segment's mean speed: over the second half of the segment (the transient after the
+  change is left out); None when the walk ended before the segment did;
+* reach time of a segment: from its start to the touchdown ending the first whole step
+  that began at or after the change and whose mean speed is within ``tolerance`` of the
+  command (None: never within the segment).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rabbit_policy.experiment.scenario import Scenario
+
+REACH_TOLERANCE = 0.05
+"""m/s: a speed is "reached" when a whole step's mean is this close to the command."""
+
+
+@dataclass(frozen=True)
+class Touchdown:
+    """One stance switch: sim time (s), new stance foot x (m), hip x (m), world frame."""
+
+    time: float
+    foot_x: float
+    hip_x: float
+
+
+@dataclass(frozen=True)
+class Decision:
+    """A policy decision at a touchdown: sim time (s), the observation's mean hip speed
+    over the step just ended (m/s), the commanded speed then (m/s), the Kd chosen for the
+    next step (N m s/rad) and whether the controller rejected the gait."""
+
+    time: float
+    mean_speed: float
+    desired_speed: float
+    kd: float
+    rejected: bool = False
+
+
+def json_number(value: float | None) -> float | None:
+    """``value`` for JSON: None for None, NaN or infinity (strict JSON has no NaN)."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+@dataclass
+class WalkResult:
+    """A walk on the closed loop (:mod:`.loop`). Times in s, positions in m, speeds in
+    m/s, torques in N m.
+
+    ``times``/``hip_x``: every tick's sim time and hip x after the step (the start state
+    is ``start_time``/``start_x``). With ``record_state``: per-tick ``qpos``/``qvel``
+    (n x 7, ``JOINT_NAMES`` order) and the stance leg (0 left, 1 right)."""
+
+    scenario: Scenario
+    fell: bool
+    fall_time: float | None
+    stalled: bool
+    stall_time: float | None
+    start_time: float
+    start_x: float
+    times: np.ndarray
+    hip_x: np.ndarray
+    touchdowns: list[Touchdown] = field(default_factory=list)
+    decisions: list[Decision] = field(default_factory=list)
+    peak_torque: float = 0.0
+    qpos: np.ndarray | None = None
+    qvel: np.ndarray | None = None
+    stance: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ basics
+    @property
+    def failed(self) -> bool:
+        """Fell or stalled: the walk did not go on."""
+        return self.fell or self.stalled
+
+    @property
+    def end_time(self) -> float:
+        return float(self.times[-1]) if len(self.times) else self.start_time
+
+    @property
+    def duration(self) -> float:
+        """Simulated time (s)."""
+        return self.end_time - self.start_time
+
+    @property
+    def steps(self) -> int:
+        return len(self.touchdowns)
+
+    @property
+    def rejected(self) -> int:
+        """Policy decisions the controller rejected (the gait in force stayed)."""
+        return sum(d.rejected for d in self.decisions)
+
+    @property
+    def hip_speed(self) -> np.ndarray:
+        """Per-tick hip speed (m/s): displacement over each tick."""
+        x = np.concatenate(([self.start_x], self.hip_x))
+        t = np.concatenate(([self.start_time], self.times))
+        return np.diff(x) / np.diff(t)
+
+    @property
+    def desired_speed(self) -> np.ndarray:
+        """Per-tick commanded speed (m/s)."""
+        starts = np.array([t for t, _ in self.scenario.schedule])
+        speeds = np.array([v for _, v in self.scenario.schedule])
+        return speeds[np.searchsorted(starts, self.times + 1e-9, side="right") - 1]
+
+    # -------------------------------------------------------------- mean speed
+    def _sample(self, t: float) -> tuple[float, float]:
+        """(time, hip x) of the last sample at or before ``t``."""
+        i = int(np.searchsorted(self.times, t + 1e-9, side="right")) - 1
+        return (self.start_time, self.start_x) if i < 0 else (float(self.times[i]), float(self.hip_x[i]))
+
+    def mean_speed(self, start: float, end: float | None = None) -> float:
+        """Mean speed over (start, end] (m/s, see the module docstring); NaN when no tick
+        lies in between."""
+        t0, x0 = self._sample(start)
+        t1, x1 = self._sample(self.end_time if end is None else end)
+        return (x1 - x0) / (t1 - t0) if t1 > t0 else float("nan")
+
+    def step_speeds(self) -> list[tuple[float, float, float]]:
+        """Every whole step as (start s, end s, mean speed m/s), touchdown to touchdown
+        (the first from the start of the walk)."""
+        steps, t0, x0 = [], self.start_time, self.start_x
+        for td in self.touchdowns:
+            steps.append((t0, td.time, (td.hip_x - x0) / (td.time - t0)))
+            t0, x0 = td.time, td.hip_x
+        return steps
+
+    # ---------------------------------------------------------------- segments
+    def segment_bounds(self) -> list[tuple[float, float, float]]:
+        """(start s, end s, command m/s) of every schedule segment that began during the walk."""
+        schedule = self.scenario.schedule
+        ends = [t for t, _ in schedule[1:]] + [max(self.end_time, schedule[-1][0])]
+        return [(t, end, v) for (t, v), end in zip(schedule, ends) if t <= self.end_time + 1e-9]
+
+    def reach_time(self, start: float, end: float, command: float, tolerance: float = REACH_TOLERANCE) -> float | None:
+        """Seconds from ``start`` to the end of the first whole step starting at or after it
+        (and ending by ``end``) whose mean speed is within ``tolerance`` of ``command``."""
+        for step_start, step_end, speed in self.step_speeds():
+            if step_start >= start - 1e-9 and step_end <= end + 1e-9 and abs(speed - command) <= tolerance:
+                return step_end - start
+        return None
+
+    def segments(self, tolerance: float = REACH_TOLERANCE) -> list[dict]:
+        """Per schedule segment: ``command``, ``start``, ``end``, ``mean_speed`` (its second
+        half; None if the walk ended first) and ``reach_time`` (None if never)."""
+        rows = []
+        for start, end, command in self.segment_bounds():
+            complete = self.end_time >= end - 1e-9
+            mean = self.mean_speed(0.5 * (start + end), end) if complete else float("nan")
+            rows.append({"command": command, "start": start, "end": end, "mean_speed": json_number(mean),
+                         "reach_time": self.reach_time(start, end, command, tolerance)})
+        return rows
+
+    def summary(self, tolerance: float = REACH_TOLERANCE) -> dict:
+        """JSON-ready, always the same keys (no NaN: None instead)."""
+        half = self.start_time + 0.5 * self.duration
+        return {
+            "fell": self.fell,
+            "stalled": self.stalled,
+            "fall_time": self.fall_time,
+            "stall_time": self.stall_time,
+            "duration": self.duration,
+            "steps": self.steps,
+            "mean_speed": None if self.failed else json_number(self.mean_speed(half)),
+            "peak_torque": self.peak_torque,
+            "rejected": self.rejected,
+            "touchdowns": [round(td.time, 6) for td in self.touchdowns],
+            "segments": self.segments(tolerance),
+        }
+
+    def outcome(self) -> dict:
+        """``{"outcome": "fell" | "stalled" | "walked", "fell", "fall_time", "stalled",
+        "stall_time"}`` (times in s)."""
+        result = "fell" if self.fell else "stalled" if self.stalled else "walked"
+        return {"outcome": result, "fell": self.fell, "fall_time": self.fall_time, "stalled": self.stalled,
+                "stall_time": self.stall_time}
