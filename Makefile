@@ -1,6 +1,7 @@
 # rabbit-hzd: two commands for a fresh machine (see README).
 #   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks, changing speed
-#   make test   set up .venv if needed, then run the whole test suite
+#   make test   set up .venv if needed, then run the whole test suite (CI's command)
+#   make test-fast  the edit-loop tier: every test not marked slow
 #   make bench  the benchmarks (simulation, ROS stack, training throughput), JSON lines
 PYTHON ?= python3
 VENV := .venv
@@ -10,7 +11,7 @@ PACKAGES := src/rabbit_msgs_py src/rabbit_sim src/rabbit_hzd_controller src/rabb
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test test-fast bench clean
 
 setup: $(STAMP)
 
@@ -26,6 +27,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -m "not slow" -q
 
 bench: $(STAMP)
 	$(PY) scripts/bench_sim.py

@@ -39,8 +39,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
     parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
-    parser.add_argument("--controller", choices=("hzd", "rl"), default="hzd",
-                        help="hzd: classic gait library; rl: the learned HZD-RL policy")
+    parser.add_argument("--controller", choices=("classic", "learned", "hzd", "rl"), default="classic",
+                        help="classic: the classic HZD gait library; learned: the HZD-RL policy (hzd, rl: aliases)")
     parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
     parser.add_argument("--speed-schedule", default=None, metavar="T:V,...",
                         help='speed changes at sim times, e.g. "0:0.8,10:1.2,20:1.0"')
@@ -65,7 +65,7 @@ def print_report(report, config) -> None:
           + (f" ({report.error})" if report.error else ""))
     print(f"fell         {report.fell}" + (f" at t = {report.fall_time:.3f} s" if report.fell else ""))
     if report.stalled:
-        print(f"stalled      at t = {report.stall_time:.3f} s (no touchdown for {config.stall_after} s)")
+        print(f"stalled      at t = {report.stall_time:.3f} s (no touchdown for {config.rules.stall_after} s)")
     print(f"steps        {report.steps}")
     print("segment         command   mean speed (2nd half)")
     for seg in report.segments:
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         if args.record and os.path.exists(args.record) and not args.overwrite:
             raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
-        make_policy("learned" if args.controller == "rl" else "library", args.gait_dir or None, args.library_mode,
+        make_policy(args.controller, args.gait_dir or None, args.library_mode,
                     args.policy_file or None)
     except ValueError as exc:
         parser.error(str(exc))
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
     if args.json:
-        print(json.dumps(report.summary()))
+        print(json.dumps(report.summary(), allow_nan=False))
     else:
         print_report(report, config)
     if report.fell or report.stalled:

@@ -148,7 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     if start is not None:
         results.append((f"warm start only ({info.get('warm_start')}, untrained)", acceptance(start)))
     for mode in ("nearest", "interpolate"):
-        results.append((f"classic HZD ({mode})", acceptance(make_policy("library", mode=mode))))
+        results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode))))
     card = model_card(info, results)
     print(card)
     if not results[0][1]["passed"] and not args.allow_failing:

@@ -9,8 +9,7 @@ from rabbit_hzd_controller.alpha import alpha_matrix, expand_alpha
 from rabbit_hzd_controller.bezier import bezier, bezier_derivative
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
 from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip, foot_velocity_from_hip
-from rabbit_hzd_controller.pd import pd_torque
-from rabbit_hzd_controller.phase import phase, phase_bounds_from_alpha, phase_rate, stance_hip_position
+from rabbit_hzd_controller.phase import PhaseBounds, phase_bounds_from_alpha, stance_hip_position
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 
@@ -19,8 +18,25 @@ def gait():
     return GaitLibrary.load().nearest(1.0)
 
 
+# ---- the control law written out from the paper: the reference the controller's inlined
+# ---- 1 kHz tick is checked against (the package has one implementation, the tick)
+def phase(p_hip: float, bounds: PhaseBounds) -> float:
+    """tau = (p_hip - p_plus) / (p_minus - p_plus), saturated to [0, 1]."""
+    return min(1.0, max(0.0, (p_hip - bounds.p_plus) / bounds.span))
+
+
+def phase_rate(p_hip: float, p_hip_rate: float, bounds: PhaseBounds) -> float:
+    """d tau / dt by the chain rule; zero where tau is saturated."""
+    return p_hip_rate / bounds.span if 0.0 < (p_hip - bounds.p_plus) / bounds.span < 1.0 else 0.0
+
+
+def pd_torque(q_d: float, dq_d: float, q: float, dq: float, kp: float, kd: float, limit: float) -> float:
+    """u = Kp (q_d - q) + Kd (dq_d - dq), saturated to +-limit (N m)."""
+    return min(limit, max(-limit, kp * (q_d - q) + kd * (dq_d - dq)))
+
+
 def reference_torques(alpha, kp, kd, limit, stance, q, dq):
-    """The control law written out from the paper with the pure helper functions."""
+    """The control law written out from the paper."""
     geom = LegGeometry()
     m = alpha_matrix(alpha)
     idx = (3, 4, 5, 6) if stance == Leg.LEFT else (5, 6, 3, 4)
@@ -49,11 +65,17 @@ def test_compute_matches_the_written_out_law(gait, stance):
         assert c.stance == stance  # swing foot far above ground: no switch
 
 
-def test_pd_law_and_saturation():
-    assert pd_torque(0.1, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == pytest.approx(10.0)
-    assert pd_torque(0.0, 1.0, 0.0, 0.0, 100.0, 5.0, 150.0) == pytest.approx(5.0)
-    assert pd_torque(10.0, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == 150.0
-    assert pd_torque(-10.0, 0.0, 0.0, 0.0, 100.0, 5.0, 150.0) == -150.0
+def test_saturated_phase_has_no_rate_and_the_pd_law_saturates(gait):
+    """The controller holds tau in [0, 1] with a zero rate outside the step, and clips
+    u = Kp e + Kd de at the torque limit."""
+    c = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp))
+    q = [0.0, 0.9, 0.0, 1.2, 0.2, 0.4, 0.2]  # stance foot far ahead of the hip: before the step, tau = 0
+    c.compute(q, [0.0] * 7)
+    assert c.tau == 0.0
+    q_far = [0.0, 0.9, 0.0, -0.9, 0.2, 0.4, 0.2]  # stance foot far behind: past the step, tau = 1
+    torques = c.compute(q_far, [0.0] * 7)
+    assert c.tau == 1.0
+    assert max(abs(t) for t in torques) == pytest.approx(150.0)
 
 
 def test_torques_never_exceed_the_limit(gait):

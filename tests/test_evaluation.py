@@ -18,7 +18,7 @@ from rabbit_policy.runtime.policies import make_policy
 from rabbit_policy.evaluation.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
 
 ROOT = Path(__file__).resolve().parents[1]
-CLASSIC = make_policy("library")
+CLASSIC = make_policy("classic")
 SCENARIOS = {s.name: s for s in PUSH_SCENARIOS}
 
 
@@ -92,7 +92,7 @@ def test_push_outcomes_and_stall_detection():
     hard = push_trial(CLASSIC, 1.0, SCENARIOS["large_backward"], duration=8.0)
     assert hard.failed
     if hard.stalled:  # stopped upright: no touchdown for 2 s, and the walk ends there
-        assert hard.stall_time == pytest.approx(hard.steps[-1].time + 2.0, abs=2e-3)
+        assert hard.stall_time == pytest.approx(hard.touchdowns[-1].time + 2.0, abs=2e-3)
         assert hard.duration == pytest.approx(hard.stall_time)
     assert survives(CLASSIC, 1.0, 2.0, push_time=2.0, horizon=2.0)
     assert not survives(CLASSIC, 1.0, -40.0, push_time=2.0, horizon=2.0)
@@ -114,12 +114,12 @@ def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
     s = SCENARIOS[scenario]
     fast = push_trial(CLASSIC, 1.0, s, duration=7.0)
     pushes = ",".join(f"{p.time}:{p.force_x}:{p.duration}" for p in s.pushes)
-    out = run_script("scripts/run_stack.py", "--controller", "hzd", "--speed", "1.0", "--duration", "7",
+    out = run_script("scripts/run_stack.py", "--controller", "classic", "--speed", "1.0", "--duration", "7",
                      "--push", pushes, "--json", timeout=120)
     assert out.returncode == (1 if fast.failed else 0), out.stderr[-2000:]
     stack = json.loads(out.stdout)
     assert (stack["fell"], stack["stalled"]) == (fast.fell, fast.stalled)
-    assert stack["steps"] == len(fast.steps)
+    assert stack["steps"] == fast.steps
     for stack_time, fast_time in ((stack["fall_time"], fast.fall_time), (stack["stall_time"], fast.stall_time)):
         assert (stack_time is None) == (fast_time is None)
         if fast_time is not None:
@@ -175,21 +175,21 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     results = json.loads((tmp_path / "results.json").read_text())
     report = (tmp_path / "report.md").read_text()
     assert "## Summary" in report and "walking cycle stable at every speed tested" in report
-    for name, dimension in (("classic", 10), ("hzd_rl", 13)):
+    for name, dimension in (("classic", 10), ("learned", 13)):
         analysis = results["poincare"][name]["1.00"]
         assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True
         assert results["tracking"][name]["outcome"] == "walked"
         assert len(results["tracking"][name]["segments"]) == 2
     table = {row["scenario"]: row for row in results["push"]["table"]}
     assert set(table) == {"small_forward", "small_backward", "large_backward"}
-    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in ("classic", "hzd_rl"))
-    assert set(results["push_sweep"]) == {"classic", "hzd_rl"}
-    for figure in ("tracking", "limit_cycle_classic", "limit_cycle_hzd_rl", "convergence", "poincare", "push",
+    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in ("classic", "learned"))
+    assert set(results["push_sweep"]) == {"classic", "learned"}
+    for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "convergence", "poincare", "push",
                    "sweep"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
     assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {
-        ("classic", "large_backward"), ("hzd_rl", "large_backward")}
+        ("classic", "large_backward"), ("learned", "large_backward")}
     for video in results["videos"]:
         assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
     bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")

@@ -15,26 +15,12 @@ from rabbit_hzd_controller.kinematics import (
 from rabbit_hzd_controller.phase import (
     PhaseBounds,
     end_of_step_pitch,
-    phase,
     phase_bounds_from_alpha,
-    phase_rate,
     stance_hip_position,
 )
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 GEOM = LegGeometry()
-
-
-def test_phase_is_normalised_and_saturated():
-    b = PhaseBounds(p_plus=-0.2, p_minus=0.25)
-    assert phase(-0.2, b) == 0.0
-    assert phase(0.25, b) == 1.0
-    assert phase(0.025, b) == pytest.approx(0.5)
-    assert phase(-1.0, b) == 0.0
-    assert phase(1.0, b) == 1.0
-    assert phase_rate(0.025, 0.9, b) == pytest.approx(0.9 / 0.45)
-    assert phase_rate(0.3, 0.9, b) == 0.0  # saturated: no motion along the gait
-    assert phase_rate(-0.3, 0.9, b) == 0.0
 
 
 def test_bounds_must_be_ordered():

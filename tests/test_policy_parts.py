@@ -94,7 +94,7 @@ def test_alpha_outside_joint_waypoint_bounds_is_rejected():
 
 def test_policies():
     library = GaitLibrary.load()
-    policy = make_policy("library", mode="interpolate")
+    policy = make_policy("classic", mode="interpolate")
     assert isinstance(policy, LibraryPolicy)
     from rabbit_policy.runtime.speed_window import Observation
 
@@ -104,7 +104,7 @@ def test_policies():
     with pytest.raises(PolicyUnavailable, match="does not exist"):
         make_policy("learned", policy_file="/nonexistent/policy.pt")
     with pytest.raises(ValueError):
-        make_policy("library", mode="best")
+        make_policy("classic", mode="best")
 
 
 def test_learned_policy_checkpoint_round_trip(tmp_path):

@@ -19,7 +19,9 @@ from rabbit_msgs_py.conversions import alpha_to_msg
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
-from rabbit_policy.experiment.setup import setup_walk
+from rabbit_policy.experiment.loop import ClosedLoop
+from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.runtime.policies import LibraryPolicy
 from rabbit_sim.sim_node import SimNode
 
 from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
@@ -39,11 +41,11 @@ def _recorder(store: list):
 
 
 def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
-    walk = setup_walk(GaitLibrary.load().nearest(speed))
-    data = walk.loop.data
+    loop = ClosedLoop(Scenario.constant(speed), LibraryPolicy(GaitLibrary.load()))
+    data = loop.data
     rows = [data.qpos.tolist() + data.qvel.tolist()]
     for _ in range(int(round(duration / 0.001))):
-        walk.loop.step()
+        loop.tick()
         rows.append(data.qpos.tolist() + data.qvel.tolist())
     return np.array(rows)
 

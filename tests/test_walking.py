@@ -1,4 +1,5 @@
-"""Closed-loop walking in real MuJoCo with the HZD controller core and the shipped gaits."""
+"""Closed-loop walking in real MuJoCo with the HZD controller core and the shipped gaits,
+on the one closed loop (``rabbit_policy.experiment``) and through ``scripts/walk.py``."""
 
 import json
 import math
@@ -8,8 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from rabbit_policy.experiment.loop import ClosedLoop, walk_gait
+from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.experiment.setup import setup_walk, walk_gait
+from rabbit_policy.runtime.policies import GaitCommand
 
 ROOT = Path(__file__).resolve().parents[1]
 LIBRARY = GaitLibrary.load()
@@ -17,15 +20,16 @@ LIBRARY = GaitLibrary.load()
 
 def test_ten_second_walk_at_one_metre_per_second():
     result = walk_gait(LIBRARY.nearest(1.0), 10.0)
-    assert not result.fell
+    assert not result.failed
     assert result.steps >= 15
-    assert result.mean_speed == pytest.approx(1.0, rel=0.05)
+    assert result.mean_speed(5.0) == pytest.approx(1.0, rel=0.05)
 
 
 def _trace(duration):
     """Walk and record per tick: phase, stance, step count, and MuJoCo foot contacts."""
-    setup = setup_walk(LIBRARY.nearest(1.0))
-    loop, c = setup.loop, setup.controller
+    gait = LIBRARY.nearest(1.0)
+    loop = ClosedLoop(Scenario.constant(gait.speed), start=GaitCommand(gait.alpha, gait.kd), kp=gait.kp)
+    c = loop.controller
     model, data = loop.model, loop.data
     feet = (model.geom("left_foot").id, model.geom("right_foot").id)
     rows = []
@@ -39,8 +43,8 @@ def _trace(duration):
                     touching[leg] = True
         rows.append((data.time, c.tau, int(c.stance), c.steps, c.touchdown, tuple(touching)))
 
-    result = loop.run(duration, on_tick=record)
-    assert not result.fell
+    loop.observer = record
+    assert not loop.run(duration)
     return rows
 
 
@@ -90,8 +94,8 @@ def test_exactly_one_stance_switch_per_step(trace):
 @pytest.mark.parametrize("gait", LIBRARY.gaits, ids=lambda g: f"{g.speed:.2f}")
 def test_every_shipped_gait_walks_sixty_seconds_at_its_speed(gait):
     result = walk_gait(gait, 60.0)
-    assert not result.fell
-    assert abs(result.mean_speed - gait.speed) <= 0.05 * gait.speed
+    assert not result.failed
+    assert abs(result.mean_speed(30.0) - gait.speed) <= 0.05 * gait.speed
 
 
 def test_library_covers_the_required_speeds():
@@ -104,23 +108,48 @@ def test_library_covers_the_required_speeds():
         assert g.info["validation"]["passed"]
 
 
-def test_walk_script_json():
-    out = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "walk.py"), "--controller", "hzd", "--speed", "0.9",
-         "--duration", "5", "--json"],
-        capture_output=True, text=True, timeout=120, check=True,
-    )
+WALK_KEYS = {"fell", "stalled", "fall_time", "stall_time", "duration", "steps", "mean_speed", "peak_torque",
+             "rejected", "touchdowns", "segments", "controller", "policy", "scenario", "real_time_factor"}
+
+
+def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(ROOT / "scripts" / "walk.py"), *args],
+                          capture_output=True, text=True, timeout=180, check=check)
+
+
+def test_walk_script_json_has_the_same_keys_with_and_without_a_schedule():
+    constant = json.loads(_walk_script("--controller", "classic", "--speed", "0.9", "--duration", "5", "--json").stdout)
+    scheduled = json.loads(_walk_script("--controller", "hzd", "--schedule", "0:0.9,2:1.0", "--duration", "5",
+                                        "--json").stdout)
+    assert set(constant) == set(scheduled) == WALK_KEYS
+    assert constant["controller"] == scheduled["controller"] == "classic"
+    assert constant["fell"] is False and constant["stalled"] is False
+    assert constant["mean_speed"] == pytest.approx(0.9, abs=0.05)
+    assert len(constant["touchdowns"]) == constant["steps"] >= 7
+    assert [s["command"] for s in scheduled["segments"]] == [0.9, 1.0]
+    for segment in scheduled["segments"]:
+        assert set(segment) == {"command", "start", "end", "mean_speed", "reach_time"}
+
+
+def test_walk_script_reports_a_fall_as_json_null_not_nan():
+    out = _walk_script("--controller", "classic", "--speed", "1.0", "--duration", "6", "--push", "1:-400:0.1",
+                       "--json", check=False)
+    assert out.returncode == 1
+    assert "NaN" not in out.stdout
     summary = json.loads(out.stdout)
-    for key in ("fell", "steps", "mean_speed", "step_length", "step_period", "peak_torque"):
-        assert key in summary
-    assert summary["fell"] is False
-    assert summary["gait_speed"] == pytest.approx(0.9)
+    assert summary["fell"] or summary["stalled"]
+    assert summary["mean_speed"] is None
 
 
-def test_walk_script_rejects_bad_duration():
-    out = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "walk.py"), "--duration", "-1"],
-        capture_output=True, text=True, timeout=60,
-    )
+@pytest.mark.parametrize("args, word", [
+    (("--duration", "-1"), "duration"),
+    (("--speed", "nan"), "speed"),
+    (("--schedule", "1:0.8"), "t = 0"),
+    (("--push", "2:50"), "push"),
+    (("--friction", "0"), "friction"),
+    (("--controller", "best"), "controller"),
+])
+def test_walk_script_bad_arguments_are_one_line_and_exit_2(args, word):
+    out = _walk_script(*args, check=False)
     assert out.returncode == 2
-    assert "duration" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1 and word in out.stderr

@@ -15,13 +15,13 @@ from .controller import (
 )
 from .gait import Gait
 from .kinematics import LegGeometry, foot_from_hip, foot_velocity_from_hip, leg_inverse_kinematics
-from .phase import PhaseBounds, phase, phase_bounds_from_alpha, phase_rate, stance_hip_position
+from .phase import PhaseBounds, phase_bounds_from_alpha, stance_hip_position
 
 __all__ = [
     "ACTUATED_JOINTS", "DEGREE", "JOINT_NAMES", "N_ALPHA", "N_FREE", "OUTPUTS",
     "ControllerConfig", "Gait", "HZDController", "Leg", "LegGeometry", "PhaseBounds",
     "alpha_matrix", "bernstein", "bezier", "bezier_derivative", "bezier_matrix",
     "expand_alpha", "foot_from_hip", "foot_velocity_from_hip", "infer_stance", "leg_inverse_kinematics",
-    "phase", "phase_bounds_from_alpha", "phase_rate", "reduce_alpha", "stance_hip_position",
+    "phase_bounds_from_alpha", "reduce_alpha", "stance_hip_position",
     "validate_alpha", "validate_kd",
 ]

@@ -1,9 +1,13 @@
-"""The HZD phase variable tau(q) and its time derivative.
+"""What the HZD phase variable tau(q) is built from: the stance hip position and the phase
+bounds a gait implies.
 
 ``tau = (p_hip - p_plus) / (p_minus - p_plus)``, saturated to [0, 1], where ``p_hip`` is the
 horizontal position of the hip relative to the stance foot (m, world x axis) and
 ``p_plus`` / ``p_minus`` are its values at the start / end of a step. ``p_hip`` depends on
-the torso pitch and the stance-leg angles only, so tau is state based (no clock).
+the torso pitch and the stance-leg angles only, so tau is state based (no clock). tau
+and its rate are computed in one place, the controller's tick
+(:meth:`rabbit_hzd_controller.controller.HZDController.compute`), which the tests check
+against the law written out from the paper.
 """
 
 from __future__ import annotations
@@ -39,18 +43,6 @@ class PhaseBounds:
 def stance_hip_position(geom: LegGeometry, pitch: float, hip: float, knee: float) -> float:
     """Horizontal hip position relative to the stance foot, ``p_hip(q)`` (m)."""
     return -foot_from_hip(geom, pitch, hip, knee)[0]
-
-
-def phase(p_hip: float, bounds: PhaseBounds) -> float:
-    """Saturated phase ``tau`` in [0, 1] for a hip position ``p_hip`` (m)."""
-    s = (p_hip - bounds.p_plus) / bounds.span
-    return 0.0 if s < 0.0 else 1.0 if s > 1.0 else s
-
-
-def phase_rate(p_hip: float, p_hip_rate: float, bounds: PhaseBounds) -> float:
-    """``d tau / dt`` (1/s) by the chain rule; zero where tau is saturated."""
-    s = (p_hip - bounds.p_plus) / bounds.span
-    return p_hip_rate / bounds.span if 0.0 < s < 1.0 else 0.0
 
 
 def end_of_step_pitch(alpha: Sequence[float], geom: LegGeometry) -> float:

@@ -47,5 +47,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.CMD_SPEED, Float64, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH, Wrench, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),
+        TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
     )
 }

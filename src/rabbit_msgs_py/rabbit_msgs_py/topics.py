@@ -32,7 +32,12 @@ of the state on which the stance switched, ``frame_id`` = the new stance foot
 (``left_foot`` / ``right_foot``, the model's foot sites). The policy node evaluates its
 policy on this event."""
 
+INITIAL_STATE = "/sim/initial_state"
+"""sensor_msgs/JointState (transient local), the 7 joints' positions and velocities the
+simulator starts from and returns to on ``/sim/reset``: the state at phase 0 of the gait in
+force, published by ``policy_node`` with every gait. The simulator knows no gait."""
+
 RESET_SERVICE = "/sim/reset"
-"""std_srvs/Trigger: put the robot back on the current gait at t = 0."""
+"""std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
 PAUSE_SERVICE = "/sim/pause"
 """std_srvs/SetBool: data=true pauses the physics, false resumes."""

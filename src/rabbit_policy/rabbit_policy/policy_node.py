@@ -3,18 +3,21 @@ averaged hip speed, as in the paper's Fig. 2.
 
 Subscribes ``/cmd_speed`` (m/s), ``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns,
 from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
-start and then at every step. The policy's inputs are the paper's: the commanded speed v_d,
+start and then at every step, and with each gait ``/sim/initial_state`` (transient local):
+the state at phase 0 of that gait with the hip moving at ``initial_speed``, where the
+simulator starts and resets (it knows no gait itself). The policy's inputs are the paper's: the commanded speed v_d,
 the mean hip speed and the mean of (v_d - hip speed) over the last step (the samples after
 the previous touchdown up to this touchdown's stamp, at most ``window``; see
 :mod:`.speed_window`); the decision takes effect at the
 next touchdown (the controller queues it). Parameters:
 
-* ``policy``: ``learned`` (the HZD-RL network, default: the shipped one) or ``library``
-  (classic HZD gait library, the paper's baseline).
+* ``policy``: ``learned`` (the HZD-RL network, default: the shipped one) or ``classic``
+  (classic HZD gait library, the paper's baseline); ``library`` is an alias of classic.
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
 * ``policy_file``: learned policy checkpoint ('' = the packaged one).
-* ``initial_speed``: v_d before the first ``/cmd_speed`` (m/s).
+* ``initial_speed``: v_d before the first ``/cmd_speed`` and the hip speed of the initial
+  state (m/s).
 * ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
 * ``window``: longest averaging window (ticks, 1000).
 
@@ -32,9 +35,12 @@ ensure_localhost_discovery()
 
 from geometry_msgs.msg import TwistStamped  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
 
+from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
+from rabbit_msgs_py.joints import JOINT_NAMES  # noqa: E402
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
@@ -76,6 +82,7 @@ class PolicyNode(Node):
                                       value("policy_file") or None)
             self.window = SpeedWindow(int(value("window")))
             self.desired_speed = clamp_speed(float(value("initial_speed")), self.min_speed, self.max_speed)
+            self.initial_speed = self.desired_speed
         except (PolicyUnavailable, ValueError, TypeError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from exc
 
@@ -86,6 +93,7 @@ class PolicyNode(Node):
         self._previous_step: int | None = None  # stamp (ns) of the last touchdown decided on
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
+        self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
@@ -144,6 +152,12 @@ class PolicyNode(Node):
         self._alpha_pub.publish(alpha_to_msg(command.alpha))
         self._kd_pub.publish(Float64(data=float(command.kd)))
         self.decisions += 1
+        try:
+            qpos, qvel = state_on_gait(command.alpha, self.initial_speed)
+        except (ValueError, ZeroDivisionError) as exc:
+            self.get_logger().error(f"no initial state on the gait just published: {exc}", throttle_duration_sec=5.0)
+            return
+        self._initial_state_pub.publish(JointState(name=list(JOINT_NAMES), position=qpos, velocity=qvel))
 
 
 def main(args: list[str] | None = None) -> int:

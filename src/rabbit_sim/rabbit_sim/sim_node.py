@@ -21,9 +21,10 @@ Modes (parameter ``mode``):
   commands resume. Ticks whose torque (the reply to the previous state) had not arrived
   when the next step was due are counted as late.
 
-The robot starts (and restarts on ``/sim/reset``) at phase 0 of the gait in force on
-``/hzd/alpha`` (transient local, published by the policy node), moving at
-``initial_speed``; until a gait arrives the simulation waits. When the robot falls (the
+The robot starts (and restarts on ``/sim/reset``) in the newest state on
+``/sim/initial_state`` (transient local; ``policy_node`` publishes the state at phase 0 of
+the gait in force); until one arrives the simulation waits. The simulator knows no gait
+and no controller. When the robot falls (the
 paper's limits) ``/fallen`` turns true and the physics halts until a reset.
 """
 
@@ -50,10 +51,8 @@ from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64MultiArray  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
-from rabbit_hzd_controller.controller import ControllerConfig, validate_alpha  # noqa: E402
-from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import MessageError, alpha_from_msg, torques_from_msg  # noqa: E402
+from rabbit_msgs_py.conversions import MessageError, joint_state_vectors, torques_from_msg  # noqa: E402
 from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
 from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
@@ -69,7 +68,7 @@ class SimSettings:
     """sim_node parameters (see the README's parameter table).
 
     model: ``paper`` or ``drives`` (see :func:`rabbit_sim.model.load_model`).
-    mode: ``lockstep`` or ``realtime``. initial_speed: hip speed (m/s) at start and reset.
+    mode: ``lockstep`` or ``realtime``.
     push_duration: how long a ``/push`` wrench is held (s, sim time).
     push_schedule: scripted pushes the simulator applies itself at exact sim times,
         ``"T:FX:DUR,..."`` (s, N, s; :mod:`rabbit_msgs_py.pushes`), again after a reset;
@@ -87,7 +86,6 @@ class SimSettings:
 
     model: str = "paper"
     mode: str = "lockstep"
-    initial_speed: float = 1.0
     push_duration: float = 0.1
     push_schedule: str = ""
     max_push_force: float = 2000.0
@@ -101,7 +99,7 @@ class SimSettings:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise NodeStartError(f"mode must be one of {MODES}, got {self.mode!r}")
-        for name in ("initial_speed", "push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
+        for name in ("push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
             if not getattr(self, name) > 0.0:
                 raise NodeStartError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.stop_time < 0.0 or self.damping < 0.0:
@@ -142,7 +140,7 @@ class SimNode(Node):
             raise NodeStartError(f"sim_node: {exc}") from exc
 
         self._lock = threading.RLock()
-        self._alpha: list[float] | None = None
+        self._initial_state: tuple[list[float], list[float]] | None = None
         self._started = False
         self._paused = self.settings.start_paused
         self._halted = False  # fell or reached stop_time
@@ -152,9 +150,7 @@ class SimNode(Node):
         self._held_torques: list[float] | None = None
         self._reset_requested = False
         self._last_publish_wall = 0.0
-        self._scheduled_pushes = list(self.settings.pushes)
-        self.pushes_applied = 0  # scheduled and /push
-        self._pushing = False
+        self.sim.schedule_pushes(self.settings.pushes)  # the Simulator applies them, as on the fast path
         self.pushes_rejected = 0
         # realtime bookkeeping
         self._latest_torques = [0.0] * N_ACTUATED
@@ -182,7 +178,7 @@ class SimNode(Node):
         self._fallen_pub = self.create_publisher(Bool, topics.FALLEN, qos.STATUS_QOS)
         self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
-        self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
+        self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
         self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause)
@@ -201,8 +197,8 @@ class SimNode(Node):
             self._physics_thread = threading.Thread(target=self._realtime_loop, name="physics", daemon=True)
             self._physics_thread.start()
         self.get_logger().info(
-            f"RABBIT simulation ({self.settings.model} model, {self.settings.mode} mode) waiting for a gait on "
-            f"{topics.ALPHA}"
+            f"RABBIT simulation ({self.settings.model} model, {self.settings.mode} mode) waiting for a state on "
+            f"{topics.INITIAL_STATE}"
         )
 
     # ----------------------------------------------------------------- status
@@ -242,20 +238,18 @@ class SimNode(Node):
             self.settings = replace(self.settings, push_duration=float(value))
         return SetParametersResult(successful=True)
 
-    def _on_alpha(self, msg: Float64MultiArray) -> None:
+    def _on_initial_state(self, msg: JointState) -> None:
         try:
-            alpha = alpha_from_msg(msg)
-            validate_alpha(alpha, ControllerConfig())  # the same checks the controller applies
-            state_on_gait(alpha, self.settings.initial_speed)  # a gait the robot can be placed on
-        except (MessageError, ValueError) as exc:
-            self.get_logger().error(f"ignoring malformed {topics.ALPHA}: {exc}")
+            state = joint_state_vectors(msg.name, msg.position, msg.velocity)
+        except MessageError as exc:
+            self.get_logger().error(f"ignoring malformed {topics.INITIAL_STATE}: {exc}")
             return
         with self._lock:
-            self._alpha = alpha
+            self._initial_state = state
             if not self._started:
-                self._place_on_gait()
+                self._place()
                 self.get_logger().info(
-                    f"robot placed on the gait at {self.settings.initial_speed:.2f} m/s; simulation "
+                    f"robot placed in the initial state (hip at {state[1][0]:.2f} m/s); simulation "
                     + ("paused" if self._paused else "running")
                 )
 
@@ -280,8 +274,8 @@ class SimNode(Node):
             if self._reset_requested:
                 self._awaiting_reply = False
                 self._reset_requested = False
-                self._place_on_gait()
-                self.get_logger().info(f"robot back on the gait at t = 0 s, {self.settings.initial_speed:.2f} m/s")
+                self._place()
+                self.get_logger().info("robot back in the initial state at t = 0 s")
                 return
             if self._paused:
                 self._held_torques = torques
@@ -302,9 +296,7 @@ class SimNode(Node):
             self.get_logger().warning("push: the model is planar; force.y, torque.x and torque.z are ignored")
         with self._lock:
             self.sim.push(msg.force.x, self.settings.push_duration, msg.force.z, msg.torque.y)
-            self._pushing = True
             self._publish_push_applied()
-            self.pushes_applied += 1
             self.get_logger().info(
                 f"push at t = {self.sim.time:.3f} s: fx = {msg.force.x:.1f} N, fz = {msg.force.z:.1f} N, "
                 f"ty = {msg.torque.y:.1f} N m for {self.settings.push_duration:.3f} s"
@@ -312,9 +304,9 @@ class SimNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._lock:
-            if self._alpha is None:
+            if self._initial_state is None:
                 response.success = False
-                response.message = f"no gait received on {topics.ALPHA} yet"
+                response.message = f"no initial state received on {topics.INITIAL_STATE} yet"
                 return response
             if self._awaiting_reply:
                 # the reply to the state in flight is still due: reset when it arrives
@@ -322,9 +314,9 @@ class SimNode(Node):
                 response.success = True
                 response.message = "reset at the next tick"
                 return response
-            self._place_on_gait()
+            self._place()
         response.success = True
-        response.message = f"robot back on the gait at t = 0 s, {self.settings.initial_speed:.2f} m/s"
+        response.message = "robot back in the initial state at t = 0 s"
         self.get_logger().info(response.message)
         return response
 
@@ -343,15 +335,13 @@ class SimNode(Node):
         return response
 
     # ---------------------------------------------------------------- physics
-    def _place_on_gait(self) -> None:
-        qpos, qvel = state_on_gait(self._alpha, self.settings.initial_speed)
-        self.sim.reset(qpos, qvel)
-        if self._pushing:  # the reset removed it
-            self._pushing = False
+    def _place(self) -> None:
+        pushing = any(self.sim.push_wrench)
+        self.sim.reset(*self._initial_state)
+        if pushing:  # the reset removed it
             self._publish_push_applied()
         self._started = True
         self._halted = False
-        self._scheduled_pushes = list(self.settings.pushes)
         self._held_torques = None
         self._unanswered.clear()
         self._latest_torque_wall = -1.0
@@ -381,21 +371,13 @@ class SimNode(Node):
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
-        was_pushing = self._pushing
         sim.step(torques)
         self.ticks += 1
-        if was_pushing:  # read the wrench only while a push acts (1 kHz hot path)
-            self._pushing = any(sim.push_wrench)
-            if not self._pushing:
-                self._publish_push_applied()  # the push ended
-        while self._scheduled_pushes and sim.time >= self._scheduled_pushes[0].time - 1e-9:
-            push = self._scheduled_pushes.pop(0)  # acts from the next step on, as on the fast path
-            sim.push(push.force_x, push.duration)
-            self._pushing = True
+        if sim.push_changed:  # a scheduled push started, or a push ended
             self._publish_push_applied()
-            self.pushes_applied += 1
-            self.get_logger().info(f"scheduled push at t = {sim.time:.3f} s: fx = {push.force_x:.1f} N "
-                                   f"for {push.duration:.3f} s")
+            fx, fz, ty = sim.push_wrench
+            if fx or fz or ty:
+                self.get_logger().info(f"scheduled push at t = {sim.time:.3f} s: fx = {fx:.1f} N")
         self._last_tick_wall = time.perf_counter()
         if self._first_tick_wall is None:
             self._first_tick_wall = self._last_tick_wall
@@ -504,6 +486,11 @@ class SimNode(Node):
         self._step(torques)
         self._publish_state()
         self._unanswered.append(self._last_publish_wall)
+
+    @property
+    def pushes_applied(self) -> int:
+        """Pushes started since the node started (scheduled and ``/push``)."""
+        return self.sim.pushes_started
 
     def statistics(self) -> dict[str, float | int]:
         """Counters for scripts and benchmarks."""

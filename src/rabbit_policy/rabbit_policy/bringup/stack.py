@@ -45,9 +45,11 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
+from rabbit_policy.experiment.result import json_number  # noqa: E402
 from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule  # noqa: E402
+from rabbit_policy.runtime.policies import controller_name  # noqa: E402
+from rabbit_sim.simulation import StopRules  # noqa: E402
 
-CONTROLLERS = {"hzd": "library", "rl": "learned"}
 NODE_MODULES = {
     "policy_node": "rabbit_policy.policy_node",
     "hzd_controller_node": "rabbit_hzd_controller.hzd_controller_node",
@@ -62,7 +64,7 @@ class StackConfig:
 
     duration: float
     schedule: tuple[tuple[float, float], ...]
-    controller: str = "hzd"
+    controller: str = "classic"
     mode: str = "lockstep"
     model: str = "paper"
     library_mode: str = "nearest"
@@ -75,22 +77,19 @@ class StackConfig:
     record_compression: str = "none"
     record_overwrite: bool = False
     record_stats_file: str = ""
-    stall_after: float = 2.0  # s of sim time without a touchdown that end the run as stalled
+    rules: StopRules = StopRules()  # the fall and stall rules of every experiment
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
             raise ValueError("duration must be > 0 s")
-        if not self.stall_after > 0.0:
-            raise ValueError("stall_after must be > 0 s")
-        if self.controller not in CONTROLLERS:
-            raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}")
+        object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
         """The ROS parameters of each node for this run (the recorder only if recording)."""
         params: dict[str, dict[str, object]] = {
             "policy_node": {
-                "policy": CONTROLLERS[self.controller],
+                "policy": self.controller,
                 "library_mode": self.library_mode,
                 "gait_dir": self.gait_dir,
                 "policy_file": self.policy_file,
@@ -100,7 +99,6 @@ class StackConfig:
             "sim_node": {
                 "model": self.model,
                 "mode": self.mode,
-                "initial_speed": self.schedule[0][1],
                 "stop_time": self.duration,
                 "push_duration": self.push_duration,
                 "push_schedule": format_pushes(self.pushes),
@@ -137,15 +135,16 @@ class Segment:
             return float("nan")
         return (self.x_end - self.x_mid) / (self.t_end - self.t_mid)
 
-    def summary(self) -> dict[str, float]:
-        return {"command": self.command, "start": self.start, "end": self.end, "mean_speed": self.mean_speed}
+    def summary(self) -> dict[str, float | None]:
+        return {"command": self.command, "start": self.start, "end": self.end,
+                "mean_speed": json_number(self.mean_speed)}
 
 
 @dataclass
 class RunReport:
     """What a run did: the JSON printed by ``run_stack.py --json``. ``stalled``: no
-    touchdown for ``StackConfig.stall_after`` s (the robot stopped upright), as the fast
-    path (:func:`~.policy_walk.walk_policy`) defines it; the run ends there."""
+    touchdown for ``StackConfig.rules.stall_after`` s (the robot stopped upright), the rule
+    of every experiment (:class:`~rabbit_sim.simulation.StopRules`); the run ends there."""
 
     fell: bool
     fall_time: float | None
@@ -172,7 +171,7 @@ class RunReport:
             "error": self.error,
             "sim_time": self.sim_time,
             "wall_time": self.wall_time,
-            "rtf": self.rtf,
+            "rtf": json_number(self.rtf),
             "steps": self.steps,
             "segments": [s.summary() for s in self.segments],
         }
@@ -243,9 +242,9 @@ class Supervisor(Node):
         t = stamp_to_seconds(msg.header.stamp)
         x = msg.position[0]
         self.sim_time = t
-        if not self.stalled and t - self._last_step_time > self.config.stall_after:
+        if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
             self.stalled, self.stall_time = True, t
-            self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.stall_after} s, stalled")
+            self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
         while self._next_segment < len(self.segments) and t >= self.segments[self._next_segment].start - 1e-9:
             segment = self.segments[self._next_segment]
             self._speed_pub.publish(Float64(data=segment.command))

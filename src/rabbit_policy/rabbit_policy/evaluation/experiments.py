@@ -1,5 +1,5 @@
 """The paper's section IV as data: speed tracking, limit cycles, Poincaré stability and
-push recovery of classic HZD and HZD-RL, on the ROS-free fast path (:mod:`.policy_walk`).
+push recovery of classic HZD and HZD-RL, on the one ROS-free closed loop (:mod:`rabbit_policy.experiment.loop`).
 
 Every experiment returns plain JSON-ready dicts (what ``results.json`` holds) and, where
 a figure needs more than that, the walks themselves; :mod:`.figures` draws them and

@@ -1,0 +1,60 @@
+"""Each package.xml declares exactly what its package's code imports (as rosdep keys), so a
+colcon/rosdep user gets every dependency and nothing unused: the venv hides a missing one."""
+
+from __future__ import annotations
+
+import ast
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.unit
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+PACKAGES = ("rabbit_msgs_py", "rabbit_sim", "rabbit_hzd_controller", "rabbit_policy")
+
+ROSDEP_KEYS = {
+    # Python modules from PyPI / Debian -> rosdep keys
+    "numpy": "python3-numpy", "mujoco": "python3-mujoco", "PIL": "python3-pil",
+    "matplotlib": "python3-matplotlib", "torch": "python3-torch", "gymnasium": "python3-gymnasium",
+    "cma": "python3-cma", "rosbags": "python3-rosbags", "yaml": "python3-yaml",
+    # ROS 2 packages: the key is the package name
+    **{name: name for name in ("rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs", "std_srvs",
+                               "rcl_interfaces", "builtin_interfaces")},
+    **{name: name for name in PACKAGES},
+}
+
+
+def imported_modules(package: str) -> set[str]:
+    """Top-level modules imported anywhere in the package's code (functions included)."""
+    names: set[str] = set()
+    for path in (SRC / package / package).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                names.update(alias.name.split(".")[0] for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names.add(node.module.split(".")[0])
+    return {n for n in names if n not in sys.stdlib_module_names and n != package}
+
+
+def declared(package: str) -> set[str]:
+    root = ET.parse(SRC / package / "package.xml").getroot()
+    return {e.text.strip() for e in root if e.tag in ("depend", "exec_depend") and e.text}
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_package_xml_declares_what_the_code_imports(package):
+    modules = imported_modules(package)
+    unknown = sorted(m for m in modules if m not in ROSDEP_KEYS)
+    assert not unknown, f"{package} imports {unknown}: add their rosdep keys to this test and package.xml"
+    needed = {ROSDEP_KEYS[m] for m in modules}
+    have = declared(package)
+    assert not needed - have, f"{package}/package.xml lacks {sorted(needed - have)}"
+    assert not have - needed, f"{package}/package.xml declares {sorted(have - needed)}, which nothing imports"
+
+
+def test_the_shared_layer_and_the_simulator_import_no_controller_or_policy():
+    assert not imported_modules("rabbit_msgs_py") & {"rabbit_sim", "rabbit_hzd_controller", "rabbit_policy"}
+    assert not imported_modules("rabbit_sim") & {"rabbit_hzd_controller", "rabbit_policy"}
