@@ -34,17 +34,10 @@ a resumed run starts fresh episodes).
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 from rabbit_msgs_py.cli import ArgumentParser
-import csv
-import json
-import os
-import signal
-import sys
-import threading
-import time
-from multiprocessing import active_children
-from pathlib import Path
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -86,199 +79,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return args
 
 
-def make_trainer(args: argparse.Namespace, net):
-    """The ES or PPO trainer and its configuration."""
-    if args.algo == "es":
-        from rabbit_policy.learning.es import ESConfig, EvolutionStrategy
-
-        config = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
-                          max_steps=args.max_steps, seed=args.seed, workers=args.workers)
-        return EvolutionStrategy(net, config), config
-    from rabbit_policy.learning.ppo import PPOConfig, PPOTrainer
-
-    config = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
-                       lr=args.ppo_lr, init_log_std=args.init_log_std,
-                       target_kl=args.target_kl or None, gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed)
-    return PPOTrainer(net, config), config
-
-
-def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) -> dict:
-    """One ``eval.csv`` row from an acceptance result."""
-    errors = [abs(c["error"]) for c in result["constant"] if c["error"] is not None]
-    reaches = [s["reach_time"] for s in result["schedule"]["segments"][1:]]
-    return {"iteration": iteration, "wall_s": round(wall, 1), "env_steps": env_steps, "passed": result["passed"],
-            "failures": result["failures"], "total_error": round(result["total_error"], 4),
-            "worst_speed_error": round(max(errors), 4) if errors else None,
-            "falls": sum(c["fell"] for c in result["constant"]) + int(result["schedule"]["fell"]),
-            "slowest_reach_s": None if None in reaches else round(max(reaches), 2)}
-
-
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
-    out: Path = args.out
-    if out.exists() and not args.resume and any(out.iterdir()):
-        print(f"error: {out} is not empty; use --resume or another --out", file=sys.stderr)
-        return 2
-    checkpoint_path = out / "checkpoint.pt"
-    if args.resume and not checkpoint_path.is_file():
-        print(f"error: --resume: no {checkpoint_path}", file=sys.stderr)
-        return 2
+    from rabbit_policy.learning.training import TrainingConfig, train
 
-    from multiprocessing import get_context
-
-    import torch
-    from tqdm import tqdm
-
-    from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
-    from rabbit_policy.learning.env import ActionBounds
-    from rabbit_policy.learning.es import ignore_interrupts
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
-    from rabbit_policy.runtime.policies import NetworkPolicy
-    from rabbit_policy.learning.warm_start import initial_network
-
-    start = time.perf_counter()  # wall time includes the warm start and the evaluations
-    torch.set_num_threads(1)
-    torch.manual_seed(args.seed)
-    out.mkdir(parents=True, exist_ok=True)
-    library = GaitLibrary.load()
-    bounds = ActionBounds.from_library(library)
-    net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
-                               "none" if args.resume else args.warm_start)
-    state: dict = {}
-    if args.resume:
-        state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
-        if state["algo"] != args.algo:
-            print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
-            return 2
-        net.load_state_dict(state["net"])
-    elif mse is not None:
-        print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
-              "(normalised action units)", flush=True)
-    eval_pool = get_context("fork").Pool(args.workers, initializer=ignore_interrupts) if args.eval_every else None
-    trainer, config = make_trainer(args, net)
-    if state:
-        trainer.load_state_dict(state["trainer"])
-    elapsed_before = state.get("wall_s", 0.0)
-    best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
-    warm_start_result: dict = state.get("warm_start", {})  # its acceptance at iteration 0, if evaluated
-    first_pass = state.get("first_pass")
-
-    def wall() -> float:
-        return elapsed_before + time.perf_counter() - start
-
-    def info(extra: dict | None = None) -> dict:
-        return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
-                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config.to_dict(),
-                "warm_start": args.warm_start, "eval_every": args.eval_every,
-                "parameters": parameter_count(net), **(extra or {})}
-
-    def save_checkpoint() -> None:
-        torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
-                    "best": best, "first_pass": first_pass, "warm_start": warm_start_result}, checkpoint_path)
-        PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()).save(out / "policy.pt")
-        (out / "summary.json").write_text(json.dumps({"info": info(), "first_pass": first_pass, "best": best,
-                                                      "warm_start": warm_start_result}, indent=2) + "\n")
-
-    def evaluate() -> None:
-        nonlocal best, first_pass
-        result = acceptance(NetworkPolicy(net), map_fn=eval_pool.map)
-        row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
-        append_csv(out / "eval.csv", row)
-        baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
-        if baseline:
-            warm_start_result["passed"] = result["passed"]
-            warm_start_result["failures"] = result["failures"]
-        elif result["passed"] and first_pass is None:
-            first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
-        if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
-            best = {**row, "rank": list(acceptance_rank(result))}
-            PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result})).save(
-                out / "best.pt")
-        bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
-                  f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
-                  f"slowest reach {row['slowest_reach_s']} s)")
-
-    def interrupt(_signum, _frame):
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, interrupt)  # SIGTERM saves a checkpoint like Ctrl-C
-    bar = tqdm(total=args.iterations, initial=trainer.iteration, unit="it", disable=args.no_progress,
-               dynamic_ncols=True)
-    if args.no_progress:
-        bar.write = print  # type: ignore[method-assign]
-    interrupted = False
-    try:
-        if args.eval_every and trainer.iteration == 0:
-            evaluate()  # the starting point (warm start) as a baseline
-        while trainer.iteration < args.iterations:
-            stats = trainer.step()
-            append_csv(out / "log.csv", {"wall_s": round(wall(), 1), **stats})
-            bar.update(1)
-            bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
-                            falls=f"{stats['fall_fraction']:.2f}")
-            if args.no_progress:
-                print(json.dumps(stats), flush=True)
-            if args.eval_every and trainer.iteration % args.eval_every == 0:
-                evaluate()
-                if args.stop_when_passed and first_pass is not None:
-                    break
-            if trainer.iteration % args.checkpoint_every == 0:
-                save_checkpoint()
-    except KeyboardInterrupt:
-        interrupted = True
-        bar.write("interrupted: saving a checkpoint")
-    finally:
-        bar.close()
-        save_checkpoint()
-        if not interrupted:
-            trainer.close()
-            if eval_pool is not None:
-                eval_pool.close()
-                eval_pool.join()
-    print(json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
-                      "wall_s": round(wall(), 1), "first_pass": first_pass,
-                      "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
-    if interrupted:
-        stop_workers(trainer, eval_pool)
-    return 0
-
-
-def stop_workers(trainer, eval_pool) -> None:
-    """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
-    them from starting replacement workers), kill and reap whatever worker is left, and
-    leave without multiprocessing's exit handlers. ``Pool.terminate()`` can block on a
-    queue lock held by an interrupted worker (runs hung after ``pkill -f train.py``, which
-    signals the workers too), so it gets a few seconds in a thread and the kill does not
-    depend on it."""
-    def terminate() -> None:
-        trainer.close(terminate=True)
-        if eval_pool is not None:
-            eval_pool.terminate()
-
-    stopper = threading.Thread(target=terminate, daemon=True)
-    stopper.start()
-    stopper.join(timeout=5.0)
-    for _ in range(2):  # a second pass for a replacement started meanwhile
-        children = active_children()
-        for child in children:
-            child.kill()
-        for child in children:
-            child.join(timeout=5.0)  # reap: no zombies left behind
-        time.sleep(0.2)
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(0)
-
-
-def append_csv(path: Path, row: dict) -> None:
-    """Append ``row``; write the header first if the file is new."""
-    new = not path.exists()
-    with path.open("a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(row))
-        if new:
-            writer.writeheader()
-        writer.writerow(row)
+    return train(TrainingConfig(**vars(args)))
 
 
 if __name__ == "__main__":
