@@ -38,6 +38,11 @@ SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_pr
              "realtime_recording")
 
 
+def rounded(value: float | None, digits: int) -> float | None:
+    """``round`` that passes None (a statistic without data) through."""
+    return None if value is None else round(value, digits)
+
+
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
@@ -53,9 +58,9 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
         stats = nodes["sim_node"].statistics()
         return {
-            "realtime_in_process_late_fraction": round(stats["late_fraction"], 5),
-            "realtime_in_process_latency_p50_ms": round(stats["latency_p50_ms"], 3),
-            "realtime_in_process_latency_p99_ms": round(stats["latency_p99_ms"], 3),
+            "realtime_in_process_late_fraction": rounded(stats["late_fraction"], 5),
+            "realtime_in_process_latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
+            "realtime_in_process_latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
             "realtime_in_process_fell": report.fell,
         }
     if name == "realtime_recording":
@@ -71,7 +76,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             "recorder_msgs_per_s": round(rec["messages"] / rec["wall_s"], 1),
             "recorder_joint_states_recorded": rec["counts"]["/joint_states"],
             "recorder_joint_states_published": sim["states_published"],
-            "recorder_realtime_late_fraction": round(sim["late_fraction"], 5),
+            "recorder_realtime_late_fraction": rounded(sim["late_fraction"], 5),
             "recorder_run_fell": report.fell,
         }
     with tempfile.TemporaryDirectory() as tmp:
@@ -81,10 +86,10 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         stats = json.loads(stats_path.read_text())
     return {
         "realtime_rtf": round(report.rtf, 3),
-        "realtime_rate_hz": round(stats["tick_rate_hz"], 1),
-        "realtime_late_fraction": round(stats["late_fraction"], 5),
-        "latency_p50_ms": round(stats["latency_p50_ms"], 3),
-        "latency_p99_ms": round(stats["latency_p99_ms"], 3),
+        "realtime_rate_hz": rounded(stats["tick_rate_hz"], 1),
+        "realtime_late_fraction": rounded(stats["late_fraction"], 5),
+        "latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
+        "latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
         "realtime_ticks": stats["ticks"],
         "realtime_damped_ticks": stats["damped_ticks"],
         "realtime_fell": report.fell,

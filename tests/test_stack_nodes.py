@@ -218,7 +218,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
             damped_before = sim.damped_ticks
             time.sleep(0.3)
             assert sim.damped_ticks - damped_before > 20
-            assert sim._damping_active or sim.fallen
+            assert sim.watchdog.active or sim.fallen
             with ros_context() as (ctx_b, ex_b), spinning(ex_b):
                 ex_b.add_node(HZDControllerNode(context=ctx_b))
                 # start again from the gait (the robot is falling or down by now)
@@ -227,7 +227,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
                 received = sim.torques_received
                 # torques flow again, damping is off and the robot walks on
                 assert wait_until(lambda: sim.torques_received > received + 500, 10.0), sim.statistics()
-                assert not sim.fallen and not sim._damping_active
+                assert not sim.fallen and not sim.watchdog.active
 
 
 def test_scheduled_pushes_reach_the_torso_at_their_sim_time():

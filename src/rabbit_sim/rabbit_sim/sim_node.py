@@ -34,7 +34,6 @@ import json
 import sys
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -59,6 +58,7 @@ from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .model import load_model  # noqa: E402
 from .simulation import Simulator  # noqa: E402
+from .stepping import Lockstep, RealtimeClock, Reply, TickStatistics, Watchdog, WatchdogEvent  # noqa: E402
 
 MODES = ("lockstep", "realtime")
 
@@ -145,29 +145,13 @@ class SimNode(Node):
         self._paused = self.settings.start_paused
         self._halted = False  # fell or reached stop_time
         self._fallen = False
-        # lockstep bookkeeping
-        self._awaiting_reply = False
-        self._held_torques: list[float] | None = None
-        self._reset_requested = False
-        self._last_publish_wall = 0.0
         self.sim.schedule_pushes(self.settings.pushes)  # the Simulator applies them, as on the fast path
         self.pushes_rejected = 0
-        # realtime bookkeeping
-        self._latest_torques = [0.0] * N_ACTUATED
+        self.stats = TickStatistics()  # counters: read by tests, run_stack and the benchmarks
+        self.lockstep = Lockstep(self.settings.resend_timeout)
+        self.watchdog = Watchdog(self.settings.watchdog_timeout, self.settings.damping)
+        self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
         self._latest_torque_wall = -1.0
-        self._unanswered: deque[float] = deque()
-        self._damping_active = False
-        self.latencies_ms: deque[float] = deque(maxlen=600_000)
-        # counters (read by tests, run_stack and the benchmarks)
-        self.ticks = 0
-        self.states_published = 0
-        self.torques_received = 0
-        self.torques_rejected = 0
-        self.late_ticks = 0
-        self.damped_ticks = 0
-        self.resends = 0
-        self._first_tick_wall: float | None = None
-        self._last_tick_wall = 0.0
 
         self._joint_msg = JointState(name=list(JOINT_NAMES))
         self._hip_msg = TwistStamped()
@@ -215,6 +199,14 @@ class SimNode(Node):
         """Simulation time (s)."""
         return self.sim.time
 
+    # counters, for tests and scripts
+    ticks = property(lambda self: self.stats.ticks)
+    states_published = property(lambda self: self.stats.states_published)
+    torques_received = property(lambda self: self.stats.torques_received)
+    torques_rejected = property(lambda self: self.stats.torques_rejected)
+    damped_ticks = property(lambda self: self.watchdog.damped_ticks)
+    resends = property(lambda self: self.lockstep.resends)
+
     def close(self) -> None:
         """Stop the physics thread (realtime mode); called before the node is destroyed."""
         self._running = False
@@ -258,30 +250,22 @@ class SimNode(Node):
         try:
             torques = torques_from_msg(msg)
         except MessageError as exc:
-            self.torques_rejected += 1
+            self.stats.torques_rejected += 1
             self.get_logger().error(f"ignoring malformed {topics.JOINT_TORQUES}: {exc}", throttle_duration_sec=1.0)
             return
         with self._lock:
-            self.torques_received += 1
+            self.stats.torque_received(now)
             if self.settings.mode == "realtime":
                 self._latest_torques = torques
                 self._latest_torque_wall = now
-                if self._unanswered:
-                    self.latencies_ms.append((now - self._unanswered.popleft()) * 1e3)
                 return
-            if not self._awaiting_reply:
-                return  # unsolicited (a second controller?); the supervisor timer warns
-            if self._reset_requested:
-                self._awaiting_reply = False
-                self._reset_requested = False
+            reply = self.lockstep.on_reply(torques, self._paused)
+            if reply is Reply.RESET:
                 self._place()
                 self.get_logger().info("robot back in the initial state at t = 0 s")
-                return
-            if self._paused:
-                self._held_torques = torques
-                self._awaiting_reply = False
-                return
-            self._advance(torques)
+            elif reply is Reply.STEP:
+                self._advance(torques)
+            # IGNORE: unsolicited (a second controller?), the supervisor timer warns; HOLD: kept until unpaused
 
     def _on_push(self, msg: Wrench) -> None:
         values = (msg.force.x, msg.force.z, msg.torque.y)
@@ -308,9 +292,8 @@ class SimNode(Node):
                 response.success = False
                 response.message = f"no initial state received on {topics.INITIAL_STATE} yet"
                 return response
-            if self._awaiting_reply:
+            if self.lockstep.request_reset():
                 # the reply to the state in flight is still due: reset when it arrives
-                self._reset_requested = True
                 response.success = True
                 response.message = "reset at the next tick"
                 return response
@@ -324,10 +307,10 @@ class SimNode(Node):
         with self._lock:
             self._paused = bool(request.data)
             if not self._paused and self.settings.mode == "lockstep":
-                if self._held_torques is not None:
-                    torques, self._held_torques = self._held_torques, None
-                    self._advance(torques)
-                elif self._awaiting_reply:
+                held = self.lockstep.take_held()
+                if held is not None:
+                    self._advance(held)
+                elif self.lockstep.awaiting_reply:
                     self._publish_state()  # the reply is still due: a controller that came late gets the state
         response.success = True
         response.message = "paused" if request.data else "running"
@@ -342,24 +325,23 @@ class SimNode(Node):
             self._publish_push_applied()
         self._started = True
         self._halted = False
-        self._held_torques = None
-        self._unanswered.clear()
+        self.lockstep.restart()
+        self.stats.unanswered.clear()
         self._latest_torque_wall = -1.0
         if self._fallen:
             self._fallen = False
             self._fallen_pub.publish(Bool(data=False))
         if self.settings.mode == "lockstep":
             self._publish_state()
-            self._awaiting_reply = True
+            self.lockstep.published()
 
     def _advance(self, torques: list[float]) -> None:
-        """Lockstep: apply one reply, step, publish the next state (or halt)."""
-        self._awaiting_reply = False
+        """Lockstep: apply one reply, step, publish the next state (its reply is then due,
+        unless the physics halted)."""
         self._step(torques)
         self._publish_state()
-        if self._halted:
-            return
-        self._awaiting_reply = True
+        if not self._halted:
+            self.lockstep.published()
 
     def _publish_push_applied(self) -> None:
         """``/push_applied``: the push acting from now on (zeros: none)."""
@@ -372,15 +354,12 @@ class SimNode(Node):
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
         sim.step(torques)
-        self.ticks += 1
+        self.stats.tick(time.perf_counter())
         if sim.push_changed:  # a scheduled push started, or a push ended
             self._publish_push_applied()
             fx, fz, ty = sim.push_wrench
             if fx or fz or ty:
                 self.get_logger().info(f"scheduled push at t = {sim.time:.3f} s: fx = {fx:.1f} N")
-        self._last_tick_wall = time.perf_counter()
-        if self._first_tick_wall is None:
-            self._first_tick_wall = self._last_tick_wall
         if sim.fallen():
             self._halted = True
             self._fallen = True
@@ -394,7 +373,7 @@ class SimNode(Node):
             self._halted = True
             self.get_logger().info(f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
 
-    def _publish_state(self) -> None:
+    def _publish_state(self, track_latency: bool = False) -> None:
         data = self.sim.data
         stamp = stamp_of(data.time)
         msg = self._joint_msg
@@ -407,11 +386,10 @@ class SimNode(Node):
         hip.twist.linear.x = float(data.qvel[0])
         hip.twist.linear.z = float(data.qvel[1])
         hip.twist.angular.y = float(data.qvel[2])
-        self._last_publish_wall = time.perf_counter()
         self._state_pub.publish(msg)
         self._hip_pub.publish(hip)
         self._clock_pub.publish(Clock(clock=stamp))
-        self.states_published += 1
+        self.stats.state_sent(time.perf_counter(), track_latency)
 
     def _lockstep_supervise(self) -> None:
         """Wall-clock timer (20 Hz): re-send the state when its reply is overdue."""
@@ -422,12 +400,9 @@ class SimNode(Node):
                 throttle_duration_sec=10.0,
             )
         with self._lock:
-            if not self._awaiting_reply or self._paused:
+            waited = self.lockstep.resend_due(self._paused)
+            if waited is None:
                 return
-            waited = time.perf_counter() - self._last_publish_wall
-            if waited < self.settings.resend_timeout:
-                return
-            self.resends += 1
             self.get_logger().warning(
                 f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
                 f"re-sending it (is hzd_controller_node running?)",
@@ -437,19 +412,13 @@ class SimNode(Node):
 
     def _realtime_loop(self) -> None:
         """Physics thread: one step per 1 ms of wall-clock time, zero-order hold."""
-        dt = self.sim.timestep
-        next_tick = time.perf_counter()
+        clock = RealtimeClock(self.sim.timestep)
         held = 0
         while self._running:
-            next_tick += dt
-            remaining = next_tick - time.perf_counter()
-            if remaining > 0.0:
-                time.sleep(remaining)  # releases the GIL for the executor thread
-            if next_tick < time.perf_counter() - 0.05:  # fell behind by more than 50 ticks
-                next_tick = time.perf_counter()
+            clock.wait()  # sleeping releases the GIL for the executor thread
             with self._lock:
                 if not self._started or self._paused or self._halted:
-                    self._unanswered.clear()
+                    self.stats.unanswered.clear()
                     continue
                 if self._latest_torque_wall < 0.0:
                     # hold the initial state (re-published every 10 ms) until the controller answers
@@ -462,55 +431,27 @@ class SimNode(Node):
 
     def _realtime_tick(self) -> None:
         now = time.perf_counter()
-        if self._unanswered:  # the reply to the previous state has not come yet
-            self.late_ticks += 1
-            while self._unanswered and now - self._unanswered[0] > 0.02:
-                self._unanswered.popleft()  # lost: never answered within 20 ms
-        fresh = self._latest_torque_wall >= 0.0 and now - self._latest_torque_wall <= self.settings.watchdog_timeout
-        if fresh:
-            torques = self._latest_torques
-            if self._damping_active:
-                self._damping_active = False
-                self.get_logger().info(f"torque commands resumed at t = {self.sim.time:.3f} s; damping off")
-        else:
-            qvel = self.sim.data.qvel
-            d = self.settings.damping
-            torques = [-d * qvel[i] for i in range(3, 3 + N_ACTUATED)]
-            self.damped_ticks += 1
-            if not self._damping_active:
-                self._damping_active = True
-                self.get_logger().warning(
-                    f"watchdog: no torque for {self.settings.watchdog_timeout * 1e3:.0f} ms at t = {self.sim.time:.3f} s; "
-                    f"applying damping ({d:.0f} N m s/rad) until commands resume"
-                )
+        self.stats.realtime_tick_due(now)
+        rates = self.sim.data.qvel[3:3 + N_ACTUATED].tolist()
+        torques, event = self.watchdog.torques(self._latest_torques, self._latest_torque_wall, now, rates)
+        if event is WatchdogEvent.RESUMED:
+            self.get_logger().info(f"torque commands resumed at t = {self.sim.time:.3f} s; damping off")
+        elif event is WatchdogEvent.TRIPPED:
+            self.get_logger().warning(
+                f"watchdog: no torque for {self.watchdog.timeout * 1e3:.0f} ms at t = {self.sim.time:.3f} s; "
+                f"applying damping ({self.watchdog.damping:.0f} N m s/rad) until commands resume"
+            )
         self._step(torques)
-        self._publish_state()
-        self._unanswered.append(self._last_publish_wall)
+        self._publish_state(track_latency=True)
 
     @property
     def pushes_applied(self) -> int:
         """Pushes started since the node started (scheduled and ``/push``)."""
         return self.sim.pushes_started
 
-    def statistics(self) -> dict[str, float | int]:
-        """Counters for scripts and benchmarks."""
-        lat = sorted(self.latencies_ms)
-        pick = (lambda q: lat[min(len(lat) - 1, int(q * len(lat)))]) if lat else (lambda q: float("nan"))
-        return {
-            "ticks": self.ticks,
-            "sim_time": self.sim.time,
-            "states_published": self.states_published,
-            "torques_received": self.torques_received,
-            "torques_rejected": self.torques_rejected,
-            "late_ticks": self.late_ticks,
-            "damped_ticks": self.damped_ticks,
-            "resends": self.resends,
-            "tick_rate_hz": (self.ticks - 1) / (self._last_tick_wall - self._first_tick_wall)
-            if self._first_tick_wall is not None and self._last_tick_wall > self._first_tick_wall else float("nan"),
-            "late_fraction": self.late_ticks / self.ticks if self.ticks else float("nan"),
-            "latency_p50_ms": pick(0.5),
-            "latency_p99_ms": pick(0.99),
-        }
+    def statistics(self) -> dict:
+        """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
+        return self.stats.summary(self.sim.time, {"damped_ticks": self.damped_ticks, "resends": self.resends})
 
 
 def main(args: list[str] | None = None) -> int:
