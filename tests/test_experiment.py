@@ -1,0 +1,140 @@
+"""The one closed loop (rabbit_policy.experiment): scenarios, stop rules, pushes, model
+options, torque delay, and the result's one mean-speed definition."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from rabbit_policy.experiment.loop import ClosedLoop, walk
+from rabbit_policy.experiment.result import json_number
+from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.policies import LibraryPolicy
+from rabbit_sim.model import ModelOptions, load_model
+from rabbit_sim.simulation import FallLimits, Simulator, StopRules
+
+LIBRARY = GaitLibrary.load()
+CLASSIC = LibraryPolicy(LIBRARY)
+
+
+# ------------------------------------------------------------------ unit
+@pytest.mark.unit
+@pytest.mark.parametrize("kwargs, message", [
+    ({"schedule": ((1.0, 1.0),)}, "start at t = 0"),
+    ({"schedule": ((0.0, 1.0), (0.0, 1.2))}, "increase"),
+    ({"schedule": ((0.0, math.nan),)}, "finite"),
+    ({"torque_delay": -0.001}, "torque_delay"),
+    ({"window": 0}, "window"),
+])
+def test_scenario_rejects_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        Scenario(**kwargs)
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("kwargs", [{"variant": "moon"}, {"friction": 0.0}, {"friction": math.inf},
+                                    {"torso_mass_scale": -1.0}])
+def test_model_options_reject_bad_values(kwargs):
+    with pytest.raises(ValueError):
+        ModelOptions(**kwargs)
+
+
+@pytest.mark.unit
+def test_stop_rules():
+    rules = StopRules(stall_after=2.0)
+    assert not rules.stalled(3.9, 2.0) and rules.stalled(4.01, 2.0)
+    with pytest.raises(ValueError):
+        StopRules(stall_after=0.0)
+    assert json_number(math.nan) is None and json_number(math.inf) is None and json_number(1.5) == 1.5
+
+
+# ------------------------------------------------------------------ model
+@pytest.mark.sim
+def test_model_options_change_the_compiled_model():
+    paper = load_model()
+    changed = load_model(ModelOptions(friction=0.4, torso_mass_scale=1.15))
+    torso = paper.body("torso").id
+    assert changed.geom("left_foot").friction[0] == pytest.approx(0.4)
+    assert changed.geom("right_foot").friction[0] == pytest.approx(0.4)
+    assert paper.geom("left_foot").friction[0] == pytest.approx(0.8)
+    assert changed.body_mass[torso] == pytest.approx(1.15 * paper.body_mass[torso])
+    np.testing.assert_allclose(changed.body_inertia[torso], 1.15 * paper.body_inertia[torso])
+    drives = load_model(ModelOptions("drives"))
+    assert drives.dof_armature[3] == pytest.approx(0.83, abs=0.01)
+
+
+@pytest.mark.sim
+def test_a_slippery_floor_changes_the_walk():
+    fine = walk(CLASSIC, Scenario.constant(1.0), 4.0)
+    icy = walk(CLASSIC, Scenario.constant(1.0, model=ModelOptions(friction=0.05)), 4.0)
+    assert not fine.failed
+    assert icy.failed or abs(icy.mean_speed(2.0) - fine.mean_speed(2.0)) > 0.01
+
+
+# ------------------------------------------------------------------ the loop
+@pytest.mark.sim
+def test_the_inlined_fall_check_is_the_fall_limits_rule():
+    """The loop inlines FallLimits.fallen on its hot path: both say the same thing."""
+    limits = FallLimits()
+    result = walk(CLASSIC, Scenario.constant(1.0, pushes=(Push(1.0, -400.0, 0.2),)), 4.0, record_state=True)
+    assert result.fell
+    fallen = [limits.fallen(q[1], q[2]) for q in result.qpos]
+    assert fallen[-1] and not any(fallen[:-1])  # the walk ends on the first fallen tick
+    assert result.fall_time == pytest.approx(result.times[-1])
+
+
+@pytest.mark.sim
+def test_a_scheduled_push_acts_from_its_time_for_its_duration():
+    model = load_model()
+    sim = Simulator(model)
+    loop = ClosedLoop(Scenario.constant(1.0), CLASSIC)
+    sim = loop.sim
+    sim.schedule_pushes([Push(0.0105, 50.0, 0.003)])
+    seen = []
+    loop.observer = lambda lp, _t: seen.append((round(lp.time, 6), lp.sim.push_wrench[0]))
+    loop.run(max_ticks=20)
+    pushed = [t for t, fx in seen if fx]
+    assert pushed == [0.011, 0.012, 0.013]  # due at 10.5 ms: applied after the step that reaches 11 ms, 3 steps
+
+
+@pytest.mark.sim
+def test_stall_ends_the_walk_and_is_reported():
+    # a strong backward push stops the classic gait at 0.7 m/s upright or throws it over
+    result = walk(CLASSIC, Scenario.constant(0.7, pushes=(Push(2.0, -150.0, 0.1),)), 8.0)
+    assert result.failed
+    if result.stalled:
+        assert result.stall_time == pytest.approx(result.touchdowns[-1].time + 2.0, abs=2e-3)
+        assert result.end_time == pytest.approx(result.stall_time)
+
+
+@pytest.mark.sim
+def test_a_torque_delay_applies_each_tick_s_torques_that_much_later():
+    delayed = ClosedLoop(Scenario.constant(1.0, torque_delay=0.005), CLASSIC)
+    computed, applied = [], []
+    compute = delayed.controller.compute
+    delayed.controller.compute = lambda q, dq: computed.append(compute(q, dq)) or computed[-1]
+    delayed.observer = lambda lp, t: applied.append(list(t))
+    delayed.run(max_ticks=40)
+    assert applied[:5] == [computed[0]] * 5  # the first torques, held over the 5 ms
+    assert applied[5:] == computed[:35]  # then each tick's torques, 5 ticks later
+    assert computed[10] != computed[0]
+    # measured: the classic gaits walk with up to 3 ms of delay, some fail at 4-5 ms
+    result = walk(CLASSIC, Scenario.constant(1.0, torque_delay=0.002), 10.0)
+    assert not result.failed
+
+
+@pytest.mark.sim
+def test_mean_speed_is_displacement_over_time_and_matches_the_hip_speed_samples():
+    result = walk(CLASSIC, Scenario(schedule=((0.0, 0.9), (3.0, 1.2))), 6.0)
+    assert result.mean_speed(1.0, 3.0) == pytest.approx(
+        (result.hip_x[2999] - result.hip_x[999]) / (result.times[2999] - result.times[999]))
+    mask = (result.times > 1.0 + 1e-9) & (result.times <= 3.0 + 1e-9)
+    assert result.mean_speed(1.0, 3.0) == pytest.approx(result.hip_speed[mask].mean(), abs=1e-9)
+    summary = result.summary()
+    json.dumps(summary, allow_nan=False)
+    assert [s["command"] for s in summary["segments"]] == [0.9, 1.2]
+    assert summary["segments"][1]["reach_time"] is not None
