@@ -1,17 +1,19 @@
 #!/usr/bin/env python3
-"""Benchmark: closed-loop (MuJoCo + HZD controller core) steps per second against raw
-``mj_step`` steps per second on the same model, in the same process.
+"""Benchmark: closed-loop steps per second against raw ``mj_step`` steps per second on the
+same model, in the same process.
 
     scripts/bench_sim.py [--steps 20000] [--repeats 3] [--speed 1.0] [--model paper]
 
-Both loops start from the same state on the classic gait nearest ``--speed``:
+All loops start from the same state on the classic gait for ``--speed``:
 * raw: ``mujoco.mj_step`` in a plain Python loop with the controls held at zero;
-* closed loop: :meth:`rabbit_sim.simulation.ClosedLoop.step` (read qpos/qvel, one
-  ``HZDController.compute`` tick, write ctrl, ``mj_step``), i.e. what walk.py, the
-  gait optimizer and the training environment run.
+* closed loop: :meth:`rabbit_policy.experiment.loop.ClosedLoop.run` with the classic
+  policy deciding every step: the whole tick every experiment runs (controller, step,
+  pushes, schedule, speed window, recording, stop rules, decisions at touchdowns);
+* step only: ``HZDController.compute`` + ``Simulator.step`` and nothing else (what this
+  benchmark timed before the closed loop was unified).
 Each is timed ``--repeats`` times (best kept). Prints one JSON object with
-``closed_loop_steps_per_s``, ``raw_steps_per_s`` and ``ratio`` (goal: >= 0.5) plus
-the controller's own cost per tick.
+``closed_loop_steps_per_s``, ``raw_steps_per_s`` and ``ratio`` (goal: >= 0.5), the step-only
+figures, and the controller's own cost per tick.
 """
 
 from __future__ import annotations
@@ -64,6 +66,14 @@ def main() -> None:
         elapsed = time.perf_counter() - start
         return args.steps / elapsed, loop.failed
 
+    def step_only_rate() -> float:
+        loop = ClosedLoop(scenario, LibraryPolicy(library))
+        compute, step, qpos, qvel = loop.controller.compute, loop.sim.step, loop.data.qpos, loop.data.qvel
+        start = time.perf_counter()
+        for _ in range(args.steps):
+            step(compute(qpos.tolist(), qvel.tolist()))
+        return args.steps / (time.perf_counter() - start)
+
     def controller_rate() -> float:
         loop = ClosedLoop(scenario, LibraryPolicy(library))
         compute = loop.controller.compute
@@ -76,11 +86,14 @@ def main() -> None:
     raw = max(raw_rate() for _ in range(args.repeats))
     closed_runs = [closed_rate() for _ in range(args.repeats)]
     closed = max(r for r, _ in closed_runs)
+    step_only = max(step_only_rate() for _ in range(args.repeats))
     ctrl = max(controller_rate() for _ in range(args.repeats))
     print(json.dumps({
         "closed_loop_steps_per_s": round(closed, 1),
         "raw_steps_per_s": round(raw, 1),
         "ratio": round(closed / raw, 3),
+        "step_only_steps_per_s": round(step_only, 1),
+        "step_only_ratio": round(step_only / raw, 3),
         "controller_ticks_per_s": round(ctrl, 1),
         "controller_us_per_tick": round(1e6 / ctrl, 2),
         "closed_loop_fell": any(f for _, f in closed_runs),

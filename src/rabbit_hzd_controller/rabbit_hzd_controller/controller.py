@@ -94,6 +94,8 @@ class _Outputs:
     coeffs: tuple[tuple[float, ...], ...]
     diffs: tuple[tuple[float, ...], ...]
     bounds: PhaseBounds
+    p_plus: float  # bounds.p_plus and bounds.span as plain attributes (span is a property)
+    span: float
 
 
 def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarray:
@@ -150,11 +152,14 @@ def _digest(alpha: np.ndarray, config: ControllerConfig) -> _Outputs:
     m = alpha_matrix(alpha)
     coeffs = tuple(tuple(float(v) for v in m[:, j]) for j in range(4))
     diffs = tuple(tuple(5.0 * (c[k + 1] - c[k]) for k in range(5)) for c in coeffs)
+    bounds = phase_bounds_from_alpha(alpha, config.geometry)
     return _Outputs(
         alpha=tuple(float(v) for v in alpha),
         coeffs=coeffs,
         diffs=diffs,
-        bounds=phase_bounds_from_alpha(alpha, config.geometry),
+        bounds=bounds,
+        p_plus=bounds.p_plus,
+        span=bounds.span,
     )
 
 
@@ -191,7 +196,12 @@ class HZDController:
         self.touchdown = False
 
     def set_alpha(self, alpha: Sequence[float]) -> None:
-        """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``)."""
+        """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``).
+        The gait that would be in force anyway (a policy repeating itself) is not
+        validated and digested again."""
+        in_force = self._pending if self._pending is not None else self._active
+        if isinstance(alpha, tuple) and alpha == in_force.alpha:
+            return
         self._pending = _digest(validate_alpha(alpha, self.config), self.config)
 
     def set_kd(self, kd: float) -> None:
@@ -227,8 +237,10 @@ class HZDController:
         """One control tick: joint positions ``q`` and velocities ``dq`` (7 each, in
         ``JOINT_NAMES`` order) -> torques (N m) in ``ACTUATED_JOINTS`` order."""
         cfg = self.config
-        lf = cfg.geometry.femur
-        lt = cfg.geometry.tibia
+        geometry = cfg.geometry
+        lf = geometry.femur
+        lt = geometry.tibia
+        min_phase = cfg.touchdown_min_phase
         pitch = q[2]
         dpitch = dq[2]
         self.touchdown = False
@@ -238,12 +250,12 @@ class HZDController:
             else:
                 sh, sk, wh, wk = q[5], q[6], q[3], q[4]
             out = self._active
-            bounds = out.bounds
+            span = out.span
             phi_f = sh - pitch
             phi_t = phi_f - sk
             p_hip = -(lf * sin(phi_f) + lt * sin(phi_t))
-            s = (p_hip - bounds.p_plus) / bounds.span
-            if s < cfg.touchdown_min_phase or self.touchdown:
+            s = (p_hip - out.p_plus) / span
+            if s < min_phase or self.touchdown:
                 break
             sw_f = wh - pitch
             swing_height = q[1] - lf * cos(sw_f) - lt * cos(sw_f - wk)
@@ -265,7 +277,7 @@ class HZDController:
             t = s
             dphi_f = dsh - dpitch
             dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
-            dtau = dp_hip / bounds.span
+            dtau = dp_hip / span
         self.tau = t
 
         # Bernstein bases of degree 5 (values) and 4 (derivative).

@@ -169,7 +169,7 @@ class ClosedLoop:
             while self._changes and t >= self._changes[0][0] - 1e-9:
                 self.desired_speed = self._changes.pop(0)[1]
             self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
-        x, height, pitch = qpos[:3].tolist()
+        x, height, pitch = qpos.tolist()[:3]
         self._times.append(t)
         self._xs.append(x)
         if self.record_state:

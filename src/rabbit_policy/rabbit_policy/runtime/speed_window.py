@@ -64,23 +64,20 @@ class SpeedWindow:
                     since_ns: int | None = None) -> Observation:
         """Averages over the newest ``size`` samples with ``since_ns`` < stamp <= ``stamp_ns``
         (no bound if None). An empty window gives (v_d, v_d, 0): on the commanded speed."""
-        samples = list(self._samples)
-        if stamp_ns is not None:
-            end = len(samples)
-            while end and samples[end - 1][0] > stamp_ns:
-                end -= 1
-            samples = samples[:end]
-        samples = samples[-self.size:]
-        if since_ns is not None:
-            begin = 0
-            while begin < len(samples) and samples[begin][0] <= since_ns:
-                begin += 1
-            samples = samples[begin:]
-        if not samples:
+        # newest first: skip samples after stamp_ns, stop at since_ns or after size samples
+        picked: list[tuple[int, float, float]] = []
+        for sample in reversed(self._samples):
+            stamp = sample[0]
+            if stamp_ns is not None and stamp > stamp_ns:
+                continue
+            if (since_ns is not None and stamp <= since_ns) or len(picked) == self.size:
+                break
+            picked.append(sample)
+        if not picked:
             return Observation(desired_speed, desired_speed, 0.0)
-        n = len(samples)
-        return Observation(
-            desired_speed,
-            sum(s[1] for s in samples) / n,
-            sum(s[2] for s in samples) / n,
-        )
+        speed_sum = error_sum = 0.0
+        for _stamp, speed, error in reversed(picked):  # summed oldest first, as they came
+            speed_sum += speed
+            error_sum += error
+        n = len(picked)
+        return Observation(desired_speed, speed_sum / n, error_sum / n)
