@@ -8,7 +8,7 @@ the state at phase 0 of that gait with the hip moving at ``initial_speed``, wher
 simulator starts and resets (it knows no gait itself). The policy's inputs are the paper's: the commanded speed v_d,
 the mean hip speed and the mean of (v_d - hip speed) over the last step (the samples after
 the previous touchdown up to this touchdown's stamp, at most ``window``; see
-:mod:`.speed_window`); the decision takes effect at the
+:mod:`rabbit_policy.runtime.speed_window`); the decision takes effect at the
 next touchdown (the controller queues it). Parameters:
 
 * ``policy``: ``learned`` (the HZD-RL network, default: the shipped one) or ``classic``

@@ -1,2 +1,4 @@
-"""RABBIT in MuJoCo: the packaged MJCF model (:mod:`.model`), the ROS-free closed loop
-(:mod:`.simulation`) and, on top, the simulator node."""
+"""RABBIT in MuJoCo: the packaged MJCF model (:mod:`.model`, with model options), the physics every
+experiment steps (:mod:`.simulation`: ``Simulator``, fall and stall rules), the simulator
+node (:mod:`.sim_node`) over its ROS-free stepping rules (:mod:`.stepping`), recording and
+rendering. It knows no controller and no policy."""

@@ -1,7 +1,7 @@
 """Bring-up of the whole stack in place of a launch file (used by ``scripts/run_stack.py``,
 ``scripts/bench_stack.py`` and the tests).
 
-* :class:`StackConfig` says what to run; :mod:`.scenario` parses
+* :class:`StackConfig` says what to run; :mod:`rabbit_policy.experiment.scenario` parses
   the script's ``--speed-schedule "0:0.8,10:1.2"`` and ``--push "t:fx:duration"``.
 * :class:`Supervisor` is the experiment node: it publishes ``/cmd_speed`` at the
   scheduled sim times (read from ``/joint_states`` stamps), counts steps (``/hzd/step``),
@@ -45,7 +45,7 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
 from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
 
-from rabbit_policy.experiment.result import json_number  # noqa: E402
+from rabbit_policy.experiment.result import json_number, mean_speed_between  # noqa: E402
 from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule  # noqa: E402
 from rabbit_policy.runtime.policies import controller_name  # noqa: E402
 from rabbit_sim.simulation import StopRules  # noqa: E402
@@ -131,9 +131,9 @@ class Segment:
     @property
     def mean_speed(self) -> float:
         """Mean hip speed over the segment's second half (NaN if not reached)."""
-        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end) or self.t_end <= self.t_mid:
+        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end):
             return float("nan")
-        return (self.x_end - self.x_mid) / (self.t_end - self.t_mid)
+        return mean_speed_between(self.t_mid, self.x_mid, self.t_end, self.x_end)
 
     def summary(self) -> dict[str, float | None]:
         return {"command": self.command, "start": self.start, "end": self.end,

@@ -4,7 +4,7 @@ push recovery of classic HZD and HZD-RL, on the one ROS-free closed loop (:mod:`
 Every experiment returns plain JSON-ready dicts (what ``results.json`` holds) and, where
 a figure needs more than that, the walks themselves; :mod:`.figures` draws them and
 ``scripts/evaluate.py`` runs it all. The two controllers are policies
-(:mod:`.policies`): ``classic`` = the gait library (nearest gait to the commanded speed,
+(:mod:`rabbit_policy.runtime.policies`): ``classic`` = the gait library (nearest gait to the commanded speed,
 no speed feedback), ``learned`` = the HZD-RL network.
 
 Definitions used in the tables:
@@ -15,7 +15,7 @@ Definitions used in the tables:
 * settling time: from the change of command to the moment after which the filtered
   speed stays within ``tolerance`` of the command until the segment ends (s; None if it
   never settles);
-* reach time: the acceptance definition (:mod:`.acceptance`): the first whole step whose
+* reach time: the one definition (:mod:`rabbit_policy.experiment.result`): the first whole step whose
   mean speed is within ``tolerance``.
 """
 

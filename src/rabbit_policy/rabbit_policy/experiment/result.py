@@ -50,6 +50,12 @@ class Decision:
     rejected: bool = False
 
 
+def mean_speed_between(t0: float, x0: float, t1: float, x1: float) -> float:
+    """The one definition of mean speed: hip displacement over elapsed sim time (m/s) from
+    (t0 s, x0 m) to (t1 s, x1 m); NaN for an empty span."""
+    return (x1 - x0) / (t1 - t0) if t1 > t0 else float("nan")
+
+
 def json_number(value: float | None) -> float | None:
     """``value`` for JSON: None for None, NaN or infinity (strict JSON has no NaN)."""
     if value is None:
@@ -130,16 +136,14 @@ class WalkResult:
     def mean_speed(self, start: float, end: float | None = None) -> float:
         """Mean speed over (start, end] (m/s, see the module docstring); NaN when no tick
         lies in between."""
-        t0, x0 = self._sample(start)
-        t1, x1 = self._sample(self.end_time if end is None else end)
-        return (x1 - x0) / (t1 - t0) if t1 > t0 else float("nan")
+        return mean_speed_between(*self._sample(start), *self._sample(self.end_time if end is None else end))
 
     def step_speeds(self) -> list[tuple[float, float, float]]:
         """Every whole step as (start s, end s, mean speed m/s), touchdown to touchdown
         (the first from the start of the walk)."""
         steps, t0, x0 = [], self.start_time, self.start_x
         for td in self.touchdowns:
-            steps.append((t0, td.time, (td.hip_x - x0) / (td.time - t0)))
+            steps.append((t0, td.time, mean_speed_between(t0, x0, td.time, td.hip_x)))
             t0, x0 = td.time, td.hip_x
         return steps
 

@@ -8,7 +8,7 @@ queued and takes effect at the next touchdown.
 * Observation (m/s): the paper's three inputs — desired speed v_d, the mean hip speed over
   the last step (touchdown to touchdown, at most ``window`` ticks) and the mean of
   (v_d - hip speed) over the same ticks, taken at the touchdown
-  (:class:`~.speed_window.SpeedWindow`; why one step and not 200 ticks: see there).
+  (:class:`~rabbit_policy.runtime.speed_window.SpeedWindow`; why one step and not 200 ticks: see there).
 * Action: the 20 free Bezier coefficients (rad, the core's order, see
   ``rabbit_hzd_controller.alpha``) and Kd (N m s/rad), inside :class:`ActionBounds`.
   The coefficients are joint waypoints, so the bounds come from the classic gaits'
