@@ -43,7 +43,7 @@ def evaluation_table(results: list[tuple[str, dict]]) -> list[str]:
     schedule = results[0][1]["schedule"]["segments"]
     lines += ["", "Speed schedule 0.8 → 1.2 → 0.9 → 1.5 → 0.7 m/s, 10 s each (seconds to the first "
               "one-step average within 0.05 m/s; goal ≤ 4 s):", "",
-              "| controller | " + " | ".join(f"{s['speed']:.1f}" for s in schedule) + " | fell | passed |",
+              "| controller | " + " | ".join(f"{s['command']:.1f}" for s in schedule) + " | fell | passed |",
               "|---|" + "---|" * (len(schedule) + 2)]
     for name, result in results:
         cells = [fmt(s["reach_time"], 2) for s in result["schedule"]["segments"]]
@@ -85,7 +85,7 @@ def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
         f"scaled to the action bounds, {info.get('parameters', 633)} parameters: 20 free Bezier "
         "coefficients + Kd). Inputs: commanded speed, the last step's mean hip speed and mean "
         "speed error (m/s). Output: the gait for the next step. Loaded by default by "
-        "`policy_node` (`policy:=learned`) and `scripts/walk.py --controller rl`.", "",
+        "`policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned`.", "",
         "## Training", "",
         f"- algorithm: **{info.get('algorithm')}**, seed {info.get('seed')}, workers {info.get('workers')}, "
         f"warm start from the classic gait library: {info.get('warm_start')}",
