@@ -19,12 +19,12 @@ figures, and the controller's own cost per tick.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 
 import mujoco
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -88,7 +88,7 @@ def main() -> None:
     closed = max(r for r, _ in closed_runs)
     step_only = max(step_only_rate() for _ in range(args.repeats))
     ctrl = max(controller_rate() for _ in range(args.repeats))
-    print(json.dumps({
+    print(strict_json.dumps({
         "closed_loop_steps_per_s": round(closed, 1),
         "raw_steps_per_s": round(raw, 1),
         "ratio": round(closed / raw, 3),

@@ -30,6 +30,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -105,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--only", choices=SCENARIOS, help="run one scenario in this process")
     args = parser.parse_args(argv)
     if args.only:
-        print(json.dumps(run_scenario(args.only, args.duration, args.realtime_duration, args.speed)))
+        print(strict_json.dumps(run_scenario(args.only, args.duration, args.realtime_duration, args.speed)))
         return 0
     # every scenario in a fresh interpreter: a run must not inherit another's ROS state
     out: dict[str, object] = {}
@@ -119,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         out.update(json.loads(result.stdout.strip().splitlines()[-1]))
     out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration,
                 "executor": "EventsExecutor"})
-    print(json.dumps(out))
+    print(strict_json.dumps(out))
     return 0
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 import json
 import subprocess
@@ -125,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             "best_wall_s": None if best is None else best["wall_s"],
             "warm_start_passed": summary.get("warm_start", {}).get("passed"),
         })
-    print(json.dumps(report))
+    print(strict_json.dumps(report))
     return 0
 
 

@@ -21,12 +21,12 @@ Exit status: 0 written, 2 bad arguments or no policy.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_sim.gl_backend import choose_headless_gl
@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
                "push": push, "push_sweep": sweep, "videos": videos}
-    (out / "results.json").write_text(json.dumps(results, indent=1))
+    (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
     log(f"wrote {out / 'report.md'}")
     return 0

@@ -22,13 +22,13 @@ gaits were refined this way (the README's "gait library" section has the command
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -132,7 +132,7 @@ def main(argv: list[str] | None = None) -> int:
         report.append({"speed": speed, "cost": gait.cost, "step_length": gait.step_length,
                        "step_period": gait.step_period, "kd": gait.kd,
                        **{f"validation_{k}": v for k, v in validation.items()}})
-    print(json.dumps(sorted(report, key=lambda r: r["speed"]), indent=1))
+    print(strict_json.dumps(sorted(report, key=lambda r: r["speed"]), indent=1))
     return 0 if all(r["validation_passed"] for r in report) else 1
 
 

@@ -25,12 +25,12 @@ Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import signal
 import sys
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
     if args.json:
-        print(json.dumps(report.summary(), allow_nan=False))
+        print(strict_json.dumps(report.summary()))
     else:
         print_report(report, config)
     if report.fell or report.stalled:

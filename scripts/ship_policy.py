@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import argparse
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
-import json
 import shutil
 import sys
 from pathlib import Path
@@ -91,7 +91,7 @@ def model_card(info: dict, results: list[tuple[str, dict]]) -> str:
         f"warm start from the classic gait library: {info.get('warm_start')}",
         f"- iterations: {info.get('iteration')}, environment steps (walking steps): {info.get('env_steps')}, "
         f"wall time: {info.get('wall_s')} s on the machine that trained it",
-        f"- configuration: `{json.dumps(cfg)}`",
+        f"- configuration: `{strict_json.dumps(cfg)}`",
         "- environment: `RabbitHZD-v0` (one env step = one walking step; reward −(v̄ − v_d)², "
         "fall penalty −10; v_d uniform in [0.7, 1.5] m/s, changed once per episode)",
         f"- regenerate: `{train_command(info)}`, then `scripts/ship_policy.py runs/X/best.pt` "
@@ -159,7 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         TARGET.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(args.policy, TARGET / "hzd_rl_policy.pt")
         (TARGET / "MODEL_CARD.md").write_text(card)
-        (TARGET / "evaluation.json").write_text(json.dumps(dict(results), indent=1) + "\n")
+        (TARGET / "evaluation.json").write_text(strict_json.dumps(dict(results), indent=1) + "\n")
         print(f"shipped to {TARGET / 'hzd_rl_policy.pt'}", file=sys.stderr)
     return 0
 

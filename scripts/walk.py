@@ -30,11 +30,11 @@ Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
                **result.summary(args.tolerance),
                "real_time_factor": round(result.duration / wall, 1) if wall > 0 else None}
     if args.json:
-        print(json.dumps(summary, allow_nan=False))
+        print(strict_json.dumps(summary))
     else:
         print_summary(summary)
     return 1 if result.failed else 0

@@ -83,3 +83,14 @@ def test_gait_parameters_are_latched():
     assert qos.GAIT_QOS.durability == DurabilityPolicy.TRANSIENT_LOCAL
     assert qos.GAIT_QOS.reliability == ReliabilityPolicy.RELIABLE
     assert qos.STREAM_QOS.reliability == ReliabilityPolicy.RELIABLE
+
+
+def test_strict_json_writes_null_for_non_finite_numbers():
+    import json
+    import math
+
+    from rabbit_msgs_py import strict_json
+
+    text = strict_json.dumps({"a": math.nan, "b": [1.5, math.inf, (-math.inf, 2)], "c": "x"})
+    assert json.loads(text) == {"a": None, "b": [1.5, None, [None, 2]], "c": "x"}
+    assert "NaN" not in text and "Infinity" not in text

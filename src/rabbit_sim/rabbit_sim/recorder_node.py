@@ -21,11 +21,11 @@ calls :meth:`RecorderNode.close`).
 
 from __future__ import annotations
 
-import json
 import sys
 import time
 from pathlib import Path
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()
@@ -137,7 +137,7 @@ class RecorderNode(Node):
             cpu = time.process_time() - self._start_cpu
             stats = {"messages": total, "counts": self.bag.counts, "wall_s": wall, "cpu_s": cpu,
                      "cpu_share": cpu / wall if wall > 0 else None, "error": self.error}
-            Path(self.stats_file).write_text(json.dumps(stats) + "\n")
+            Path(self.stats_file).write_text(strict_json.dumps(stats) + "\n")
 
 
 def main(args: list[str] | None = None) -> int:

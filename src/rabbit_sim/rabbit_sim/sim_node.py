@@ -30,13 +30,13 @@ paper's limits) ``/fallen`` turns true and the physics halts until a reset.
 
 from __future__ import annotations
 
-import json
 import sys
 import threading
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()
@@ -214,7 +214,7 @@ class SimNode(Node):
             self._physics_thread.join(timeout=1.0)
         if self.settings.stats_file:
             try:
-                Path(self.settings.stats_file).write_text(json.dumps(self.statistics()) + "\n")
+                Path(self.settings.stats_file).write_text(strict_json.dumps(self.statistics()) + "\n")
             except OSError as exc:
                 self.get_logger().error(f"cannot write stats_file {self.settings.stats_file}: {exc}")
 

@@ -17,11 +17,11 @@ mean over the last step) and a step's mean speed here are the same number.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from rabbit_msgs_py.strict_json import finite_or_none
 from rabbit_policy.experiment.scenario import Scenario
 
 REACH_TOLERANCE = 0.05
@@ -58,10 +58,7 @@ def mean_speed_between(t0: float, x0: float, t1: float, x1: float) -> float:
 
 def json_number(value: float | None) -> float | None:
     """``value`` for JSON: None for None, NaN or infinity (strict JSON has no NaN)."""
-    if value is None:
-        return None
-    value = float(value)
-    return value if math.isfinite(value) else None
+    return None if value is None else finite_or_none(float(value))
 
 
 @dataclass

@@ -36,7 +36,6 @@ a resumed run starts fresh episodes).
 from __future__ import annotations
 
 import csv
-import json
 import os
 import signal
 import sys
@@ -45,6 +44,8 @@ import time
 from dataclasses import dataclass
 from multiprocessing import active_children
 from pathlib import Path
+
+from rabbit_msgs_py import strict_json
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ def train(args: TrainingConfig) -> int:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
                     "best": best, "first_pass": first_pass, "warm_start": warm_start_result}, checkpoint_path)
         PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()).save(out / "policy.pt")
-        (out / "summary.json").write_text(json.dumps({"info": info(), "first_pass": first_pass, "best": best,
+        (out / "summary.json").write_text(strict_json.dumps({"info": info(), "first_pass": first_pass, "best": best,
                                                       "warm_start": warm_start_result}, indent=2) + "\n")
 
     def evaluate() -> None:
@@ -220,7 +221,7 @@ def train(args: TrainingConfig) -> int:
             bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
                             falls=f"{stats['fall_fraction']:.2f}")
             if args.no_progress:
-                print(json.dumps(stats), flush=True)
+                print(strict_json.dumps(stats), flush=True)
             if args.eval_every and trainer.iteration % args.eval_every == 0:
                 evaluate()
                 if args.stop_when_passed and first_pass is not None:
@@ -238,7 +239,7 @@ def train(args: TrainingConfig) -> int:
             if eval_pool is not None:
                 eval_pool.close()
                 eval_pool.join()
-    print(json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
+    print(strict_json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
                       "wall_s": round(wall(), 1), "first_pass": first_pass,
                       "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
     if interrupted:
