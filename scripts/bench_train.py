@@ -21,9 +21,6 @@ Prints one JSON object:
 from __future__ import annotations
 
 import argparse
-
-from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
 import json
 import subprocess
 import sys
@@ -31,6 +28,9 @@ import tempfile
 import time
 from multiprocessing import get_context
 from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -16,12 +16,12 @@ Exit status: 0 written, 1 the bag cannot be read or holds no /joint_states.
 from __future__ import annotations
 
 import argparse
-
-from rabbit_msgs_py.cli import ArgumentParser
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from rabbit_msgs_py.cli import ArgumentParser
 
 
 def read_run(bag: Path) -> dict[str, np.ndarray]:

@@ -15,12 +15,12 @@ checkpoint's ``info``, the evaluation table). Refuses a policy that fails the ch
 from __future__ import annotations
 
 import argparse
-
-from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
 import shutil
 import sys
 from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = ROOT / "src" / "rabbit_policy" / "rabbit_policy" / "trained"
