@@ -153,3 +153,14 @@ def test_walk_script_bad_arguments_are_one_line_and_exit_2(args, word):
     out = _walk_script(*args, check=False)
     assert out.returncode == 2
     assert len(out.stderr.strip().splitlines()) == 1 and word in out.stderr
+
+
+def test_walk_script_model_errors_reach_the_scenario():
+    out = _walk_script("--controller", "rl", "--speed", "1.0", "--duration", "3", "--model", "drives",
+                       "--friction", "0.6", "--torso-mass-scale", "1.1", "--torque-delay", "0.002",
+                       "--push", "1:20:0.1", "--json", check=False)
+    summary = json.loads(out.stdout)
+    assert set(summary) == WALK_KEYS and summary["controller"] == "learned"
+    assert summary["scenario"]["model"] == {"variant": "drives", "friction": 0.6, "torso_mass_scale": 1.1}
+    assert summary["scenario"]["torque_delay_s"] == 0.002 and summary["scenario"]["pushes"] == "1.0:20.0:0.1"
+    assert out.returncode == (1 if summary["fell"] or summary["stalled"] else 0)
