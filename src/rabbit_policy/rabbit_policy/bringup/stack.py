@@ -43,7 +43,7 @@ from std_srvs.srv import SetBool  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
-from rabbit_msgs_py.runtime import spin_timeout_of  # noqa: E402
+from rabbit_msgs_py.runtime import freeze_start_up_objects, spin_timeout_of  # noqa: E402
 
 from rabbit_policy.experiment.result import json_number, mean_speed_between  # noqa: E402
 from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule  # noqa: E402
@@ -349,6 +349,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         executor = make_executor(context, executor_kind)
         for node in nodes.values():
             executor.add_node(node)
+        freeze_start_up_objects()
         spin_timeout = min(spin_timeout_of(node) for node in nodes.values())
         error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout, stop=stop)
         drain_until = time.monotonic() + 0.3  # deliver what is in flight (last states, recorder)
