@@ -5,30 +5,10 @@
     scripts/train.py --algo ppo --seed 0 --workers 2 --out runs/ppo0 [--iterations 200]
     scripts/train.py ... --resume          # continue from OUT/checkpoint.pt
 
-Both start from the same network warm-started on the classic gait library
-(``rabbit_policy.learning.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
-``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.learning.es`` (antithetic pairs, centred ranks, Adam; one iteration =
-one generation; ``--workers`` processes evaluate the population). PPO:
-``rabbit_policy.learning.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
-of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
-
-Outputs in OUT:
-* ``log.csv``: one row per iteration (wall time, env steps, returns, fall fraction, mean
-  |v̄ - v_d| per step, algorithm statistics); a progress bar on the terminal.
-* ``eval.csv``: every ``--eval-every`` iterations the current deterministic policy runs
-  the acceptance checks (``rabbit_policy.evaluation.acceptance``: 9 constant speeds x 30 s and the
-  0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
-* ``policy.pt``: the latest policy; ``best.pt``: the trained policy (iteration >= 1; the
-  warm start is evaluated at iteration 0 as a baseline only) that did best on the
-  acceptance checks so far (fewest failed checks, then smallest summed error);
-  ``checkpoint.pt``: everything needed to ``--resume`` (written every
-  ``--checkpoint-every`` iterations, at the end, on Ctrl-C and on SIGTERM — then the
-  worker processes are killed); ``summary.json``: when a trained policy (iteration >= 1)
-  first passed the acceptance (iteration, wall time, env steps), the best result, and
-  whether the warm start alone passed.
-``--stop-when-passed`` ends training at the first passing evaluation of a trained policy.
-Deterministic for a given seed and worker count (ES: exactly, also across --resume; PPO:
-a resumed run starts fresh episodes).
+The training loop is ``rabbit_policy.learning.training`` (its docstring: the warm start,
+ES and PPO, and what OUT holds: ``log.csv``, ``eval.csv``, ``policy.pt``, ``best.pt``,
+``checkpoint.pt``, ``summary.json``). ``--stop-when-passed`` ends training at the first
+passing evaluation of a trained policy.
 """
 
 from __future__ import annotations

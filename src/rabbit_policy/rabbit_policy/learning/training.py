@@ -1,11 +1,6 @@
 """The HZD-RL training loop behind ``scripts/train.py``: warm start, ES or PPO iterations,
-acceptance evaluations, checkpoints, ``--resume`` and clean interruption. What it does
-and writes (the command line's help):
-
-
-    scripts/train.py --algo es  --seed 0 --workers 2 --out runs/es0 [--iterations 60]
-    scripts/train.py --algo ppo --seed 0 --workers 2 --out runs/ppo0 [--iterations 200]
-    scripts/train.py ... --resume          # continue from OUT/checkpoint.pt
+acceptance evaluations, checkpoints, ``--resume`` and clean interruption
+(:func:`train` with a :class:`TrainingConfig`).
 
 Both start from the same network warm-started on the classic gait library
 (``rabbit_policy.learning.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
