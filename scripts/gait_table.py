@@ -6,7 +6,6 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 from rabbit_msgs_py.cli import ArgumentParser

@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
-import numpy as np
 
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
