@@ -46,6 +46,9 @@ class Leg(IntEnum):
         return Leg.RIGHT if self is Leg.LEFT else Leg.LEFT
 
 
+_LEFT = Leg.LEFT  # one global lookup on the hot path instead of two
+
+
 @dataclass(frozen=True)
 class ControllerConfig:
     """Fixed parameters of the HZD controller.
@@ -245,7 +248,7 @@ class HZDController:
         dpitch = dq[2]
         self.touchdown = False
         for _ in range(2):
-            if self.stance is Leg.LEFT:
+            if self.stance is _LEFT:
                 sh, sk, wh, wk = q[3], q[4], q[5], q[6]
             else:
                 sh, sk, wh, wk = q[5], q[6], q[3], q[4]
@@ -263,7 +266,7 @@ class HZDController:
                 break
             self._switch_stance()
 
-        if self.stance is Leg.LEFT:
+        if self.stance is _LEFT:
             dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
         else:
             dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
@@ -301,17 +304,14 @@ class HZDController:
         kp = cfg.kp
         kd = self.kd
         limit = cfg.torque_limit
-        torques = [0.0, 0.0, 0.0, 0.0]
-        ys = (sh, sk, wh, wk)
-        dys = (dsh, dsk, dwh, dwk)
-        for j in range(4):
-            a = out.coeffs[j]
-            d = out.diffs[j]
-            yd = a[0] * b0 + a[1] * b1 + a[2] * b2 + a[3] * b3 + a[4] * b4 + a[5] * b5
-            dyd = (d[0] * c0 + d[1] * c1 + d[2] * c2 + d[3] * c3 + d[4] * c4) * dtau
-            tq = kp * (yd - ys[j]) + kd * (dyd - dys[j])
-            torques[j] = limit if tq > limit else -limit if tq < -limit else tq
-        if self.stance is Leg.LEFT:
+        torques = []
+        for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy in zip(
+                out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk)):
+            yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
+            dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
+            tq = kp * (yd - y) + kd * (dyd - dy)
+            torques.append(limit if tq > limit else -limit if tq < -limit else tq)
+        if self.stance is _LEFT:
             return torques
         return [torques[2], torques[3], torques[0], torques[1]]
 

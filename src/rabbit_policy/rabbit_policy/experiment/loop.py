@@ -81,6 +81,7 @@ class ClosedLoop:
         self.observer = observer
         self.record_state = record_state
         self.window = SpeedWindow(scenario.window) if (policy is not None or observe_speed) else None
+        self._add_speed = None if self.window is None else self.window.add
         self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._stall_after = scenario.rules.stall_after
         fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
@@ -101,6 +102,7 @@ class ClosedLoop:
         self.start_x = float(self.data.qpos[0])
         self._times: list[float] = []
         self._xs: list[float] = []
+        self._append_time, self._append_x = self._times.append, self._xs.append  # bound once: the hot path
         self._qpos_rows: list[np.ndarray] = []
         self._qvel_rows: list[np.ndarray] = []
         self._stance: list[int] = []
@@ -170,15 +172,14 @@ class ClosedLoop:
                 self.desired_speed = self._changes.pop(0)[1]
             self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
         x, height, pitch = qpos.tolist()[:3]
-        self._times.append(t)
-        self._xs.append(x)
+        self._append_time(t)
+        self._append_x(x)
         if self.record_state:
             self._qpos_rows.append(qpos.copy())
             self._qvel_rows.append(qvel.copy())
             self._stance.append(int(controller.stance))
-        window = self.window
-        if window is not None:
-            window.add(i, qvel[0], self.desired_speed)
+        if self._add_speed is not None:
+            self._add_speed(i, qvel[0], self.desired_speed)
         if self.observer is not None:
             self.observer(self, torques)
         stop = False
