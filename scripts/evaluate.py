@@ -83,9 +83,10 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures
-    from rabbit_sim.model import ModelOptions
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_policy.evaluation.report import render_report
+    from rabbit_policy.evaluation.robustness import robustness
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_sim.model import ModelOptions
 
     try:
         policies = {"classic": make_policy("classic", args.gait_dir, "nearest"),
@@ -130,6 +131,11 @@ def main(argv: list[str] | None = None) -> int:
             log("impulse sweep")
             sweep = evaluation.push_sweep(policies, config, model, map_fn)
             figures.sweep_figure(sweep, out / "sweep.png")
+        robust = {}
+        if config.robustness is not None:
+            for name, policy in policies.items():
+                robust[name] = robustness(policy, config.robustness, map_fn, log)
+            figures.transitions_figure(robust, out / "transitions.png")
     finally:
         if pool:
             pool.close()
@@ -145,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
                         "wall_time_s": time.perf_counter() - start,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
-               "push": push, "push_sweep": sweep, "videos": videos}
+               "push": push, "push_sweep": sweep, "robustness": robust, "videos": videos}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
     log(f"wrote {out / 'report.md'}")

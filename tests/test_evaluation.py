@@ -184,8 +184,14 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert set(table) == {"small_forward", "small_backward", "large_backward"}
     assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in ("classic", "learned"))
     assert set(results["push_sweep"]) == {"classic", "learned"}
+    assert set(results["robustness"]) == {"classic", "learned"}
+    for name in ("classic", "learned"):
+        robust = results["robustness"][name]
+        assert robust["speed_grid"]["total"] == 2 and robust["transitions"]["total"] == 2
+        assert robust["random_sequences"]["total"] == 2 and len(robust["push_margins"]) == 2
+    assert "## Robustness" in report
     for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "convergence", "poincare", "push",
-                   "sweep"):
+                   "sweep", "transitions"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
     assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {
@@ -194,3 +200,22 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
         assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
     bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")
     assert bad.returncode == 2 and "does not exist" in bad.stderr
+
+
+def test_robustness_quick_parts_and_their_definitions():
+    from rabbit_policy.evaluation import robustness as rb
+
+    config = rb.RobustnessConfig.quick()
+    times = rb.phase_times(CLASSIC, 1.0, 2.0, (0.0, 0.5))
+    assert times[0] >= 2.0 and 0.15 < times[1] - times[0] < 0.4  # half a 0.4-0.7 s step
+    schedule = rb.random_schedule(3, config)
+    assert schedule == rb.random_schedule(3, config) and schedule[0][0] == 0.0
+    gaps = [b[0] - a[0] for a, b in zip(schedule, schedule[1:])]
+    assert all(2.0 - 1e-3 <= g <= 5.0 + 1e-3 for g in gaps)
+    assert all(0.7 <= v <= 1.5 for _, v in schedule)
+    margin = rb.push_margin(CLASSIC, 1.0, -1, config)
+    assert margin["direction"] == "backward" and 0 <= margin["largest_survived_Ns"] <= config.max_impulse
+    if not margin["capped"]:
+        assert margin["first_failing_phases"]
+    grid = rb.speed_grid(CLASSIC, config)
+    assert [r["speed"] for r in grid["rows"]] == [0.75, 1.25]

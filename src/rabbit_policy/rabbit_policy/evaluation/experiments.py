@@ -28,13 +28,14 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
 
-from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
-from rabbit_policy.runtime.policies import Policy
 from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep,
                                                     push_trial, scenario_table)
+from rabbit_policy.evaluation.robustness import RobustnessConfig
+from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
 from rabbit_policy.experiment.loop import walk as run_walk
 from rabbit_policy.experiment.result import WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario, Schedule
+from rabbit_policy.runtime.policies import Policy
 from rabbit_sim.model import ModelOptions
 
 MapFn = Callable[[Callable, Iterable], Iterable]
@@ -61,6 +62,7 @@ class EvaluationConfig:
     video_fps: float = 10.0
     video_size: tuple[int, int] = (224, 168)
     series_rate: float = 50.0  # Hz of the time series stored in results.json
+    robustness: RobustnessConfig | None = field(default_factory=RobustnessConfig)
 
     @classmethod
     def quick(cls) -> EvaluationConfig:
@@ -69,7 +71,8 @@ class EvaluationConfig:
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
                    sweep=SweepConfig(impulses=(3.0, 12.0), push_times=(3.0,), horizon=2.0),
-                   video_scenarios=("large_backward",), video_fps=5.0, video_size=(160, 120))
+                   video_scenarios=("large_backward",), video_fps=5.0, video_size=(160, 120),
+                   robustness=RobustnessConfig.quick())
 
     def __post_init__(self) -> None:
         names = {s.name for s in self.scenarios}
@@ -91,7 +94,8 @@ class EvaluationConfig:
                     "impulses_Ns": list(self.sweep.impulses), "push_duration_s": self.sweep.duration,
                     "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon},
                 "video_scenarios": list(self.video_scenarios), "video_fps": self.video_fps,
-                "video_size": list(self.video_size)}
+                "video_size": list(self.video_size),
+                "robustness": None if self.robustness is None else self.robustness.to_dict()}
 
 
 # ------------------------------------------------------------------ signals

@@ -151,3 +151,27 @@ def sweep_figure(sweep: dict[str, dict[str, dict]], path: Path) -> Path:
         ax.legend(fontsize=7, loc="lower left")
     axes[0].set_ylabel("fraction of push times survived")
     return _save(fig, path)
+
+
+def transitions_figure(robustness: dict[str, dict], path: Path) -> Path:
+    """The ordered speed-change matrix per controller: green = passed at every phase,
+    orange = slow or never reached, red = fell or stalled at some phase."""
+    names = list(robustness)
+    fig, axes = plt.subplots(1, len(names), figsize=(4.2 * len(names), 4.0), squeeze=False)
+    for ax, name in zip(axes[0], names):
+        pairs = robustness[name]["transitions"]["pairs"]
+        speeds = sorted({p["from"] for p in pairs} | {p["to"] for p in pairs})
+        index = {v: i for i, v in enumerate(speeds)}
+        grid = np.full((len(speeds), len(speeds), 3), 0.9)
+        for p in pairs:
+            colour = (0.2, 0.7, 0.3) if p["passed"] else (0.85, 0.2, 0.2) if p["fell_or_stalled"] else (0.95, 0.6, 0.1)
+            grid[index[p["from"]], index[p["to"]]] = colour
+        ax.imshow(grid, origin="lower")
+        ax.set_xticks(range(len(speeds)), [f"{v:.1f}" for v in speeds], fontsize=7)
+        ax.set_yticks(range(len(speeds)), [f"{v:.1f}" for v in speeds], fontsize=7)
+        ax.set_xlabel("to (m/s)")
+        ax.set_ylabel("from (m/s)")
+        result = robustness[name]["transitions"]
+        ax.set_title(f"{_label(name)}: {result['passed']}/{result['total']} passed", fontsize=9)
+    return _save(fig, path)
+

@@ -1,0 +1,78 @@
+#!/usr/bin/env python3
+"""The broad evaluation of one or both controllers (``rabbit_policy.evaluation.robustness``):
+every speed, every speed change at several phases, random command sequences, push margins
+at every phase, model errors. ROS-free; prints one JSON object (``--out`` also writes it).
+
+    scripts/robustness.py --controller classic learned --workers 2 --out runs/robustness.json
+    scripts/robustness.py --controller learned --parts grid transitions --quick
+
+``--library-mode`` picks the classic variant (nearest or interpolate); ``--policy-file`` the
+learned one. Exit status 0, or 2 for bad arguments.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+PARTS = ("grid", "transitions", "random", "pushes", "models")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--controller", nargs="+", choices=("classic", "learned", "hzd", "rl"), default=["classic"])
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest")
+    parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
+    parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
+    parser.add_argument("--out", type=Path, default=None, help="also write the JSON here")
+    args = parser.parse_args(argv)
+    if args.workers < 1:
+        parser.error("--workers must be >= 1")
+
+    from multiprocessing import get_context
+
+    from rabbit_policy.evaluation import robustness as rb
+    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
+
+    try:
+        policies = {controller_name(c): make_policy(c, mode=args.library_mode, policy_file=args.policy_file)
+                    for c in args.controller}
+    except (PolicyUnavailable, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    config = rb.RobustnessConfig.quick() if args.quick else rb.RobustnessConfig()
+    parts = {"grid": rb.speed_grid, "transitions": rb.transitions, "random": rb.random_sequences,
+             "pushes": rb.push_margins, "models": rb.model_errors}
+    start = time.perf_counter()
+    results: dict = {"config": config.to_dict(), "controllers": {}}
+    pool = get_context("fork").Pool(args.workers) if args.workers > 1 else None
+    try:
+        for name, policy in policies.items():
+            results["controllers"][name] = {"policy": policy.name}
+            for part in args.parts:
+                print(f"[{time.perf_counter() - start:7.1f} s] {name}: {part}", file=sys.stderr, flush=True)
+                results["controllers"][name][part] = parts[part](policy, config, pool.map if pool else map)
+    finally:
+        if pool is not None:
+            pool.close()
+            pool.join()
+    results["wall_time_s"] = round(time.perf_counter() - start, 1)
+    text = strict_json.dumps(results)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(text + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
