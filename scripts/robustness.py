@@ -30,6 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--controller", nargs="+", choices=("classic", "learned", "hzd", "rl"), default=["classic"])
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest")
     parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
+    parser.add_argument("--max-command-step", type=float, default=0.0, help="command rate limit (m/s per step)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
@@ -44,7 +45,8 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
 
     try:
-        policies = {controller_name(c): make_policy(c, mode=args.library_mode, policy_file=args.policy_file)
+        policies = {controller_name(c): make_policy(c, mode=args.library_mode, policy_file=args.policy_file,
+                                                            max_command_step=args.max_command_step)
                     for c in args.controller}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

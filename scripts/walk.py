@@ -70,6 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
                         help="classic: nearest gait or blend of the two around the command")
     parser.add_argument("--policy-file", default=None, help="learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--max-command-step", type=non_negative, default=0.0,
+                        help="command rate limit (m/s per step; 0: none, the default)")
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
@@ -110,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     controller = controller_name(args.controller)
     try:
-        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file)
+        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -130,3 +130,29 @@ def test_learned_policy_checkpoint_round_trip(tmp_path):
         make_policy("learned", policy_file=tmp_path / "broken.pt")
     with pytest.raises(PolicyUnavailable, match="does not exist"):
         make_policy("learned", policy_file=tmp_path / "missing.pt")
+
+
+def test_rate_limited_policy_moves_the_command_by_at_most_its_step():
+    from rabbit_policy.runtime.policies import RateLimitedPolicy
+    from rabbit_policy.runtime.speed_window import Observation
+
+    seen = []
+
+    class Recorder:
+        name = "recorder"
+
+        def act(self, observation):
+            seen.append(observation)
+            return None
+
+    limited = RateLimitedPolicy(Recorder(), 0.1)
+    limited.act(Observation(1.5, 1.5, 0.0))  # starts at the requested command
+    limited.act(Observation(1.0, 1.5, -0.4))
+    limited.act(Observation(1.0, 1.45, -0.45))
+    assert [round(o.desired_speed, 9) for o in seen] == [1.5, 1.4, 1.3]
+    # the error input is consistent with the limited command: mean(v_d - v) + (limited - requested)
+    assert seen[1].mean_error == pytest.approx(-0.4 + 0.4) and seen[2].mean_error == pytest.approx(-0.45 + 0.3)
+    assert limited.name == "recorder+limit0.1"
+    with pytest.raises(ValueError):
+        RateLimitedPolicy(Recorder(), 0.0)
+    assert make_policy("classic", max_command_step=0.2).name == "classic/nearest+limit0.2"

@@ -20,6 +20,8 @@ next touchdown (the controller queues it). Parameters:
   state (m/s).
 * ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
 * ``window``: longest averaging window (ticks, 1000).
+* ``max_command_step``: command rate limit, m/s per step (0.0 = none, the default): the
+  policy sees a command that follows ``/cmd_speed`` by at most this much per step.
 
 NaN/inf commands are rejected with an error; the last good command stays in force.
 """
@@ -69,6 +71,7 @@ class PolicyNode(Node):
             "min_speed": 0.7,
             "max_speed": 1.5,
             "window": 1000,
+            "max_command_step": 0.0,
         }
         for name, default in params.items():
             self.declare_parameter(name, overrides.get(name, default))
@@ -79,7 +82,7 @@ class PolicyNode(Node):
             if not self.min_speed < self.max_speed:
                 raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
             self.policy = make_policy(value("policy"), value("gait_dir") or None, value("library_mode"),
-                                      value("policy_file") or None)
+                                      value("policy_file") or None, float(value("max_command_step")))
             self.window = SpeedWindow(int(value("window")))
             self.desired_speed = clamp_speed(float(value("initial_speed")), self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed

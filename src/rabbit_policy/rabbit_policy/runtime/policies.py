@@ -14,6 +14,7 @@ for classic, ``rl`` for learned.
 
 from __future__ import annotations
 
+import math
 import pickle
 from dataclasses import dataclass
 from importlib.resources import files
@@ -67,6 +68,31 @@ class LibraryPolicy:
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
 
 
+class RateLimitedPolicy:
+    """A policy whose command follows the requested one by at most ``max_step`` m/s per
+    decision (per walking step): the usual rate limit on a scheduled gait library. The
+    inner policy sees the limited command, and the speed error input consistently
+    (mean(v_d - v) shifted by the limited minus the requested command). Stateful: the
+    first decision starts at the requested command."""
+
+    def __init__(self, policy: Policy, max_step: float) -> None:
+        if not (math.isfinite(max_step) and max_step > 0.0):
+            raise ValueError(f"the command rate limit must be a finite number > 0 m/s per step, got {max_step}")
+        self.policy = policy
+        self.max_step = max_step
+        self.name = f"{policy.name}+limit{max_step:g}"
+        self.command: float | None = None
+
+    def act(self, observation: Observation) -> GaitCommand:
+        wanted = observation.desired_speed
+        if self.command is None:
+            self.command = wanted
+        else:
+            self.command += min(self.max_step, max(-self.max_step, wanted - self.command))
+        shift = self.command - wanted
+        return self.policy.act(Observation(self.command, observation.mean_speed, observation.mean_error + shift))
+
+
 def packaged_policy_file() -> Path:
     """Where the shipped learned policy lives (it may not exist yet)."""
     return Path(str(files("rabbit_policy") / "trained" / "hzd_rl_policy.pt"))
@@ -109,9 +135,12 @@ def controller_name(name: str) -> str:
 
 
 def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "nearest",
-                policy_file: str | Path | None = None) -> Policy:
+                policy_file: str | Path | None = None, max_command_step: float = 0.0) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
-    message a user can act on."""
+    message a user can act on. ``max_command_step`` > 0 wraps it in a
+    :class:`RateLimitedPolicy` (m/s per step; 0: no limit)."""
+    if max_command_step:
+        return RateLimitedPolicy(make_policy(kind, gait_dir, mode, policy_file), max_command_step)
     kind = controller_name(kind)
     if kind == "classic":
         try:
