@@ -158,3 +158,50 @@ def test_config_validation():
     with pytest.raises(ValueError):
         ControllerConfig(touchdown_min_phase=1.5)
     assert math.isfinite(ControllerConfig().kp)
+
+
+def test_blend_makes_the_desired_outputs_continuous_across_a_gait_change():
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    library = GaitLibrary.load()
+    fast, slow = library.nearest(1.5), library.nearest(1.4)
+    q, _ = state_on_gait(fast.alpha, 1.5, tau=1.0)  # end of a step: the swing foot is on the ground
+    q[1] -= 1e-6  # ... and a hair into it
+    still = [0.0] * 7  # no motion: the torques are Kp (y_d - y) alone
+
+    def torques(blend: float, new_alpha) -> list[float]:
+        c = HZDController(fast.alpha, fast.kd, ControllerConfig(kp=fast.kp, blend_phase=blend))
+        c.set_alpha(new_alpha)
+        out = c.compute(q, still)
+        assert c.touchdown and c.alpha == tuple(new_alpha)
+        return out
+
+    kept = torques(0.0, fast.alpha)  # the old gait goes on
+    jumped = torques(0.0, slow.alpha)  # the new gait at once: the outputs jump
+    blended = torques(0.3, slow.alpha)  # the new gait, starting where the old one was
+    np.testing.assert_allclose(blended, kept, atol=1e-6)
+    assert max(abs(a - b) for a, b in zip(jumped, kept)) > 50.0
+    with pytest.raises(ValueError):
+        ControllerConfig(blend_phase=1.5)
+
+
+def test_blend_fades_out_within_its_phase(gait):
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    offsets = (0.005, -0.005, 0.002, 0.0)  # as a gait change at phase 0.1 would leave them
+    plain = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp))
+    for tau, blending in ((0.15, True), (0.6, False)):
+        q, _ = state_on_gait(gait.alpha, gait.speed, tau=tau)  # on the gait, at rest: only Kp terms
+        dq = [0.0] * 7
+        c = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp, blend_phase=0.2))
+        c._blend = (0.1, offsets)
+        got, want = c.compute(q, dq), plain.compute(q, dq)
+        assert c.tau == pytest.approx(tau, abs=1e-6)
+        if blending:  # inside the blend: offset by kp * offset * w, w = smoothstep-down
+            r = (tau - 0.1) / 0.2
+            w = 1.0 - r * r * (3.0 - 2.0 * r)
+            assert c._blend is not None
+            assert got[0] - want[0] == pytest.approx(gait.kp * offsets[0] * w, rel=0.02)
+        else:  # past it: the plain law, and the blend is dropped
+            assert c._blend is None
+            np.testing.assert_allclose(got, want)

@@ -30,6 +30,7 @@ from typing import Sequence
 import numpy as np
 
 from .alpha import N_ALPHA, OUTPUTS, alpha_matrix, impact_violation
+from .bezier import bezier
 from .kinematics import LegGeometry, foot_from_hip
 from .phase import PhaseBounds, phase_bounds_from_alpha
 
@@ -67,6 +68,10 @@ class ControllerConfig:
         by 0.3 rad: a waypoint may lie a little outside the curve it shapes. alpha outside
         these bounds is rejected.
     max_kd: upper bound on the derivative gain (N m s/rad).
+    blend_phase: when a touchdown brings a different gait, the desired outputs start where
+        the old gait's would have been at that state and blend into the new gait's over this
+        much phase (smoothstep; 0 = off, the default: the new gait's outputs at once, a
+        jump of up to 0.5 rad between library gaits).
     """
 
     kp: float = 3000.0
@@ -78,6 +83,7 @@ class ControllerConfig:
     hip_coefficient_range: tuple[float, float] = (-1.6, 1.6)
     knee_coefficient_range: tuple[float, float] = (-0.3, 1.9)
     max_kd: float = 300.0
+    blend_phase: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("kp", "torque_limit", "min_step_length", "max_kd"):
@@ -86,6 +92,8 @@ class ControllerConfig:
                 raise ValueError(f"ControllerConfig.{name} must be finite and > 0, got {value}")
         if not 0.0 < self.touchdown_min_phase < 1.0:
             raise ValueError("ControllerConfig.touchdown_min_phase must be in (0, 1)")
+        if not 0.0 <= self.blend_phase <= 1.0:
+            raise ValueError("ControllerConfig.blend_phase must be in [0, 1]")
 
 
 @dataclass(frozen=True)
@@ -197,6 +205,8 @@ class HZDController:
         self.steps = 0
         self.tau = 0.0
         self.touchdown = False
+        self._replaced: _Outputs | None = None  # the gait a touchdown just replaced
+        self._blend: tuple[float, tuple[float, ...]] | None = None  # (phase at the switch, offsets rad)
 
     def set_alpha(self, alpha: Sequence[float]) -> None:
         """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``).
@@ -282,6 +292,8 @@ class HZDController:
             dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
             dtau = dp_hip / span
         self.tau = t
+        if self._replaced is not None:
+            self._start_blend(t, (sh, sk, wh, wk), p_hip)
 
         # Bernstein bases of degree 5 (values) and 4 (derivative).
         u = 1.0 - t
@@ -305,21 +317,51 @@ class HZDController:
         kd = self.kd
         limit = cfg.torque_limit
         torques = []
-        for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy in zip(
-                out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk)):
-            yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
-            dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
-            tq = kp * (yd - y) + kd * (dyd - dy)
-            torques.append(limit if tq > limit else -limit if tq < -limit else tq)
+        blend = self._blend
+        if blend is None:
+            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy in zip(
+                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk)):
+                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
+                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
+                tq = kp * (yd - y) + kd * (dyd - dy)
+                torques.append(limit if tq > limit else -limit if tq < -limit else tq)
+        else:  # the same law on the blended outputs y_d + offset * w(tau)
+            length = cfg.blend_phase
+            r = (t - blend[0]) / length
+            if r >= 1.0:
+                self._blend = None
+            r = 0.0 if r < 0.0 else 1.0 if r > 1.0 else r
+            w = 1.0 - r * r * (3.0 - 2.0 * r)
+            dw = -6.0 * r * (1.0 - r) / length * dtau
+            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy, off in zip(
+                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk), blend[1]):
+                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w
+                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau + off * dw
+                tq = kp * (yd - y) + kd * (dyd - dy)
+                torques.append(limit if tq > limit else -limit if tq < -limit else tq)
         if self.stance is _LEFT:
             return torques
         return [torques[2], torques[3], torques[0], torques[1]]
+
+    def _start_blend(self, tau: float, outputs: tuple[float, ...], p_hip: float) -> None:
+        """Right after a touchdown that changed the gait: the offsets (rad) from the new
+        gait's desired outputs to the replaced gait's at this state, blended out over
+        ``blend_phase`` of phase (see :class:`ControllerConfig`)."""
+        old, self._replaced = self._replaced, None
+        s_old = (p_hip - old.p_plus) / old.span
+        t_old = 0.0 if s_old < 0.0 else 1.0 if s_old > 1.0 else s_old
+        offsets = tuple(bezier(old_c, t_old) - bezier(new_c, tau)
+                        for old_c, new_c in zip(old.coeffs, self._active.coeffs))
+        self._blend = (tau, offsets)
 
     def _switch_stance(self) -> None:
         self.stance = self.stance.other()
         self.steps += 1
         self.touchdown = True
+        self._blend = None
         if self._pending is not None:
+            if self.config.blend_phase > 0.0 and self._pending.alpha != self._active.alpha:
+                self._replaced = self._active
             self._active = self._pending
             self._pending = None
         if self._pending_kd is not None:
