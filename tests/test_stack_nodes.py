@@ -169,6 +169,38 @@ def test_reset_service_puts_the_robot_back_on_the_gait():
         assert nodes["controller"].controller.steps >= 2  # restarted, walking again
 
 
+def _call(executor, client, request):
+    future = client.call_async(request)
+    assert spin_until(executor, future.done)
+    return future.result()
+
+
+def test_resets_never_wedge_lockstep():
+    """Back-to-back resets, and a reset while paused at t = 0 followed by unpausing: the
+    placed state equals the one the controller already answered, yet it is answered (the
+    reset is an event the controller hears, not inferred from stamps or values)."""
+    from std_srvs.srv import SetBool
+
+    with ros_context() as (context, executor):
+        import rclpy
+
+        nodes = _start_stack(context, executor, start_paused=True)
+        sim = nodes["sim"]
+        user = rclpy.create_node("resetter", context=context)
+        executor.add_node(user)
+        reset = user.create_client(Trigger, topics.RESET_SERVICE)
+        pause = user.create_client(SetBool, topics.PAUSE_SERVICE)
+        assert spin_until(executor, lambda: reset.service_is_ready() and pause.service_is_ready())
+        assert spin_until(executor, lambda: sim.lockstep.held_torques is not None)  # t = 0 answered, paused
+        assert _call(executor, reset, Trigger.Request()).success  # a reset while paused at t = 0
+        assert _call(executor, pause, SetBool.Request(data=False)).success
+        assert spin_until(executor, lambda: sim.time >= 0.3, timeout=10.0), f"stuck at t = {sim.time}"
+        for _ in range(20):  # back to back
+            assert _call(executor, reset, Trigger.Request()).success
+        assert spin_until(executor, lambda: sim.time >= 0.3, timeout=10.0), f"stuck at t = {sim.time}"
+        assert not sim.fallen
+
+
 def _start_sim_and_policy(context, executor, **sim_params):
     nodes = {"policy": PolicyNode(context=context), "sim": SimNode(context=context, **sim_params)}
     for node in nodes.values():

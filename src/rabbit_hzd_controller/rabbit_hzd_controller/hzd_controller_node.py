@@ -7,9 +7,12 @@ controller started late gets the gait in force); publishes ``/joint_torques`` (4
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
 the ROS-free loop runs.
 
-* Time is the simulation's: the stamp of each ``/joint_states`` message. A stamp older
-  than the last one means the simulation was reset: the controller restarts on the gait
-  in force, with the stance leg read from the state.
+* Time is the simulation's: the stamp of each ``/joint_states`` message. A reset is an
+  event: a new count on ``/sim/resets`` restarts the controller on the gait in force (stance
+  leg read from the state) and makes it answer the next state even if it equals the last
+  one answered; the placed state, if it arrived first and was taken for a re-send, is
+  answered then. (A stamp older than the last one also restarts it, for simulators that do
+  not publish ``/sim/resets``.)
 * The first gait received becomes active at once; later ones (alpha and Kd alike) are
   queued to the next touchdown, so the constraints stay continuous within a step.
 * Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
@@ -29,7 +32,7 @@ ensure_localhost_discovery()
 
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray, Header, UInt32  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import (  # noqa: E402
@@ -71,6 +74,9 @@ class HZDControllerNode(Node):
         self._last_stamp = -1
         self._last_state: tuple[list[float], list[float]] | None = None
         self._waiting_state: JointState | None = None  # arrived before the gait was complete
+        self._resets: int | None = None  # the last count seen on /sim/resets
+        self._restart = False  # a reset was announced: restart on the next state
+        self._dropped: JointState | None = None  # the last state dropped as a re-send
         self.states_received = 0
         self.torques_published = 0
         self.rejected_gaits = 0
@@ -82,6 +88,7 @@ class HZDControllerNode(Node):
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
+        self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
     # --------------------------------------------------------------- gait
@@ -109,6 +116,19 @@ class HZDControllerNode(Node):
             self.controller.queue_kd(kd)
         self._answer_waiting_state()
 
+    def _on_resets(self, msg: UInt32) -> None:
+        first = self._resets is None
+        if msg.data == self._resets:
+            return
+        self._resets = msg.data
+        if first:
+            return  # the count in force when this node started: nothing to restart
+        self._restart = True
+        self._last_stamp, self._last_state = -1, None  # answer the placed state even if it repeats
+        if self._dropped is not None:  # it came before this event and was taken for a re-send
+            msg_state, self._dropped = self._dropped, None
+            self._on_state(msg_state)
+
     def _answer_waiting_state(self) -> None:
         """Answer the state that arrived before the first complete gait, if any."""
         if self._waiting_state is not None and self._alpha is not None and self._kd is not None:
@@ -126,6 +146,7 @@ class HZDControllerNode(Node):
         self.states_received += 1
         stamp = stamp_to_ns(msg.header.stamp)
         if stamp == self._last_stamp and (q, dq) == self._last_state:
+            self._dropped = msg
             return  # a re-send of the state answered last
         if self._alpha is None or self._kd is None:
             self._waiting_state = msg
@@ -136,13 +157,15 @@ class HZDControllerNode(Node):
             )
             return
         controller = self.controller
-        if controller is None or stamp < self._last_stamp:
+        if controller is None or self._restart or stamp < self._last_stamp:
             stance = infer_stance(q, self.config.geometry)
             if controller is None:
                 controller = self.controller = HZDController(self._alpha, self._kd, self.config, stance)
             else:
                 controller.reset(self._alpha, self._kd, stance)
-                self.get_logger().info("simulation time went back (reset): controller restarted on the gait")
+                self.get_logger().info("simulation reset: controller restarted on the gait")
+            self._restart = False
+        self._dropped = None
         torques = controller.compute(q, dq)
         self._last_stamp = stamp
         self._last_state = (q, dq)

@@ -9,7 +9,7 @@ from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Float64MultiArray, Header
+from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, UInt32
 
 from . import qos, topics
 
@@ -48,5 +48,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.PUSH, Wrench, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
+        TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
     )
 }

@@ -37,6 +37,12 @@ INITIAL_STATE = "/sim/initial_state"
 simulator starts from and returns to on ``/sim/reset``: the state at phase 0 of the gait in
 force, published by ``policy_node`` with every gait. The simulator knows no gait."""
 
+RESETS = "/sim/resets"
+"""std_msgs/UInt32 (transient local): how many times sim_node has placed the robot (1 at the
+start, +1 at every reset), published just before the placed state. The controller restarts
+on it and answers the placed state even when it equals the last state it answered: a
+reset is an event, not inferred from stamps or values."""
+
 RESET_SERVICE = "/sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
 PAUSE_SERVICE = "/sim/pause"

@@ -47,7 +47,7 @@ from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Bool, Float64MultiArray  # noqa: E402
+from std_msgs.msg import Bool, Float64MultiArray, UInt32  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
@@ -160,6 +160,8 @@ class SimNode(Node):
         self._hip_pub = self.create_publisher(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
         self._clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK_QOS)
         self._fallen_pub = self.create_publisher(Bool, topics.FALLEN, qos.STATUS_QOS)
+        self._resets_pub = self.create_publisher(UInt32, topics.RESETS, qos.STATUS_QOS)
+        self.placements = 0  # start + resets, published on /sim/resets
         self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
@@ -321,6 +323,8 @@ class SimNode(Node):
     def _place(self) -> None:
         pushing = any(self.sim.push_wrench)
         self.sim.reset(*self._initial_state)
+        self.placements += 1
+        self._resets_pub.publish(UInt32(data=self.placements))  # before the placed state goes out
         if pushing:  # the reset removed it
             self._publish_push_applied()
         self._started = True
@@ -403,9 +407,13 @@ class SimNode(Node):
             waited = self.lockstep.resend_due(self._paused)
             if waited is None:
                 return
+            controllers = self.count_publishers(topics.JOINT_TORQUES)
+            why = (f"no node publishes {topics.JOINT_TORQUES}: is hzd_controller_node running?" if controllers == 0
+                   else "the controller has not answered: it waits for a gait on "
+                        f"{topics.ALPHA} and {topics.KD}, or is busy")
             self.get_logger().warning(
                 f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
-                f"re-sending it (is hzd_controller_node running?)",
+                f"re-sending it ({why})",
                 throttle_duration_sec=5.0,
             )
             self._publish_state()
