@@ -29,6 +29,7 @@ import math
 import os
 import signal
 import sys
+from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
@@ -93,8 +94,13 @@ def main(argv: list[str] | None = None) -> int:
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
         )
-        if args.record and os.path.exists(args.record) and not args.overwrite:
-            raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
+        if args.record and os.path.exists(args.record):
+            from rabbit_sim.bag import is_bag_directory
+
+            if not args.overwrite:
+                raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
+            if not is_bag_directory(Path(args.record)):
+                raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
         make_policy(args.controller, args.gait_dir or None, args.library_mode,
                     args.policy_file or None)
     except ValueError as exc:

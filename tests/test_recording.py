@@ -81,6 +81,7 @@ def test_bag_holds_every_message_the_stack_published(recorded):
 def test_metadata_yaml_matches_the_mcap(recorded):
     bag, _nodes, _compression = recorded
     meta = yaml.safe_load((bag / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    assert meta["ros_distro"] == "jazzy"
     assert meta["version"] == 9 and meta["storage_identifier"] == "mcap"
     _header, _summary, messages = _read_all(bag)
     counts = Counter(topic for topic, *_ in messages)
@@ -122,6 +123,13 @@ def test_existing_or_impossible_outputs_are_refused(tmp_path):
     writer = BagWriter(bag, overwrite=True)  # replaces it
     writer.add_topic("/cmd_speed", "std_msgs/msg/Float64", qos)
     writer.close()
+    precious = tmp_path / "thesis"
+    precious.mkdir()
+    (precious / "chapter1.tex").write_text("years of work")
+    for not_a_bag in (precious, tmp_path / "thesis" / "chapter1.tex"):
+        with pytest.raises(BagError, match="not a bag directory"):
+            BagWriter(not_a_bag, overwrite=True)
+    assert (precious / "chapter1.tex").read_text() == "years of work"
     with pytest.raises(BagError, match="does not exist"):
         BagWriter(tmp_path / "missing" / "bag")
     with pytest.raises(BagError):
@@ -158,3 +166,33 @@ def test_record_script_closes_the_bag_on_a_signal(tmp_path, sig):
     assert meta["rosbag2_bagfile_information"]["version"] == 9
     _header, summary, messages = _read_all(bag)  # a complete, readable MCAP (summary written)
     assert summary is not None and messages == []
+
+
+def test_a_recording_that_fails_fails_the_run(tmp_path):
+    """A bag that cannot be written (here: the file-size limit, as a full disk would) is a
+    failed run: exit status 3 and the error in the JSON, not "error": null."""
+    import json
+    import subprocess
+    import sys
+
+    limit = 300_000  # bytes: the bag outgrows it within a second of simulation
+    code = ("import resource, runpy, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
+            f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit})); "
+            f"sys.argv = ['run_stack.py', '--duration', '4', '--record', {str(tmp_path / 'bag')!r}, '--json']; "
+            f"runpy.run_path({str(ROOT / 'scripts' / 'run_stack.py')!r}, run_name='__main__')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
+    assert out.returncode == 3, out.stderr[-2000:]
+    report = json.loads(out.stdout.strip().splitlines()[-1])  # Fast DDS may print above it: the limit hits its SHM files
+    assert report["error"].startswith("recording failed") and report["completed"] is False
+    assert "File too large" in report["error"] or "status" in report["error"], report["error"]
+
+
+def test_run_stack_refuses_to_overwrite_what_is_not_a_bag(tmp_path):
+    import subprocess
+    import sys
+
+    (tmp_path / "notes.txt").write_text("keep me")
+    out = subprocess.run([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--record", str(tmp_path),
+                          "--overwrite"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "not a bag directory" in out.stderr
+    assert (tmp_path / "notes.txt").read_text() == "keep me"

@@ -70,7 +70,8 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
     rclpy's own signal handlers are turned off: they shut the context down under a running
     callback (whose next publish then fails). Here a signal only sets a flag; the callback
     in progress finishes, then the node is closed and destroyed in order.
-    Returns the process exit status (0, or 1 if the node could not be built)."""
+    Returns the process exit status (0, or 1 if the node could not be built or reports
+    ``failed``)."""
     ensure_localhost_discovery()
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -101,6 +102,8 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
             close = getattr(node, "close", None)
             if close is not None:
                 close()
+            if getattr(node, "failed", False):  # the node could not do its job (a recording that failed)
+                status = 1
             node.destroy_node()
         if context.ok():
             rclpy.shutdown(context=context)

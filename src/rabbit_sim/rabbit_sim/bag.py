@@ -5,6 +5,7 @@ MCAP file with the ``ros2`` profile, ``ros2msg`` schemas and ``cdr`` messages) t
 
 from __future__ import annotations
 
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +16,27 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode, StoragePlu
 from rosbags.typesys import Stores, get_typestore
 
 COMPRESSIONS = ("none", "zstd")
+
+
+ROS_DISTRO = "jazzy"
+BAG_FILE_SUFFIXES = (".mcap", ".db3", ".zstd")
+
+
+def is_bag_directory(path: Path) -> bool:
+    """True for a directory holding only what a rosbag2 bag holds (``metadata.yaml`` and
+    storage files), at least one of them: the only kind ``overwrite`` may delete."""
+    if not path.is_dir() or path.is_symlink():
+        return False
+    entries = list(path.iterdir())
+    return bool(entries) and all(
+        e.is_file() and (e.name == "metadata.yaml" or e.name.endswith(BAG_FILE_SUFFIXES)) for e in entries)
+
+
+def set_ros_distro(metadata: Path, distro: str) -> None:
+    """Write ``ros_distro: <distro>`` into a bag's metadata.yaml (the rosbags writer puts its
+    own name there; ``ros2 bag info`` shows the distribution)."""
+    text = metadata.read_text()
+    metadata.write_text(re.sub(r"^(\s*ros_distro:).*$", rf"\1 {distro}", text, count=1, flags=re.M))
 
 
 class BagError(RuntimeError):
@@ -55,7 +77,10 @@ class BagWriter:
         if path.exists():
             if not overwrite:
                 raise BagError(f"{path} exists; choose another directory or pass --overwrite")
-            shutil.rmtree(path) if path.is_dir() else path.unlink()
+            if not is_bag_directory(path):
+                raise BagError(f"{path} is not a bag directory (only metadata.yaml and *.mcap/*.db3 files); "
+                               "refusing to overwrite it")
+            shutil.rmtree(path)
         if not path.parent.exists():
             raise BagError(f"cannot create {path}: the directory {path.parent} does not exist")
         self.path = path
@@ -93,5 +118,6 @@ class BagWriter:
         self.closed = True
         try:
             self._writer.close()
+            set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
         except OSError as exc:
             raise BagError(f"cannot finish {self.path}: {exc}") from exc

@@ -123,15 +123,30 @@ class RecorderNode(Node):
 
         return write
 
+    @property
+    def failed(self) -> bool:
+        """True once writing or finishing the bag failed (the process then exits with 1)."""
+        return self.error is not None
+
     def close(self) -> None:
-        """Finish the bag (MCAP summary, metadata.yaml)."""
+        """Finish the bag (MCAP summary, metadata.yaml); a failure is kept in ``error``. Safe
+        to call twice."""
+        if self.bag.closed:
+            return
         try:
             self.bag.close()
         except BagError as exc:
+            self.error = self.error or str(exc)
             self.get_logger().error(str(exc))
+            self._write_stats()
             return
         total = sum(self.bag.counts.values())
-        self.get_logger().info(f"bag {self.bag.path} closed: {total} messages")
+        self.get_logger().info(f"bag {self.bag.path} closed: {total} messages"
+                               + (f", but recording stopped early: {self.error}" if self.error else ""))
+        self._write_stats()
+
+    def _write_stats(self) -> None:
+        total = sum(self.bag.counts.values())
         if self.stats_file:
             wall = time.perf_counter() - self._start_wall
             cpu = time.process_time() - self._start_cpu

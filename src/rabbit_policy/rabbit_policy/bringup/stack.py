@@ -23,12 +23,15 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Sequence
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
@@ -355,6 +358,11 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         drain_until = time.monotonic() + 0.3  # deliver what is in flight (last states, recorder)
         while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=0.005)
+        recorder = nodes.get("recorder_node")
+        if recorder is not None:
+            recorder.close()  # finish the bag now: a failure to is the run's failure
+            if recorder.error and not error:
+                error = f"recording failed: {recorder.error}"
         report = supervisor.report(error)
         return report, nodes
     finally:
@@ -411,17 +419,39 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
 
     from rabbit_msgs_py.runtime import make_executor
 
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    procs = NodeProcesses(config, log=log)
-    supervisor = Supervisor(config, context=context)
-    try:
-        executor = make_executor(context)
-        executor.add_node(supervisor)
-        error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
+    with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
+        if config.record and not config.record_stats_file:  # where the recorder says how it ended
+            config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
+        context = rclpy.Context()
+        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+        procs = NodeProcesses(config, log=log)
+        supervisor = Supervisor(config, context=context)
+        error = None
+        try:
+            executor = make_executor(context)
+            executor.add_node(supervisor)
+            error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
+        finally:
+            codes = procs.stop()
+            supervisor.destroy_node()
+            if context.ok():
+                rclpy.shutdown(context=context)
+        if config.record:
+            error = error or recording_error(codes.get("recorder_node", 0), config.record_stats_file)
         return supervisor.report(error)
-    finally:
-        procs.stop()
-        supervisor.destroy_node()
-        if context.ok():
-            rclpy.shutdown(context=context)
+
+
+def recording_error(exit_status: int, stats_file: str) -> str | None:
+    """Why a recording failed (None if it did not): the recorder's own message from its
+    stats file, else its exit status."""
+    try:
+        message = json.loads(Path(stats_file).read_text()).get("error")
+    except (OSError, ValueError):
+        message = None
+    if message:
+        return f"recording failed: {message}"
+    if exit_status != 0:
+        return f"recording failed: recorder_node exited with status {exit_status} (see its log)"
+    if not Path(stats_file).is_file():
+        return "recording failed: recorder_node did not finish its bag (no stats written)"
+    return None
