@@ -23,7 +23,7 @@ os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)
 KIND = {
     "test_bezier_alpha": "unit", "test_phase_kinematics": "unit", "test_poincare": "unit",
     "test_manifests": "unit", "test_stepping": "unit", "test_policy_parts": "unit",
-    "test_msgs_conversions": "unit",
+    "test_msgs_conversions": "unit", "test_parameters": "ros",
     "test_controller": "sim", "test_model": "sim", "test_walking": "sim", "test_experiment": "sim",
     "test_env": "sim", "test_gait_optimization": "sim", "test_evaluation": "sim", "test_training": "sim",
     "test_stack_nodes": "ros", "test_recording": "ros", "test_run_stack_script": "ros",

@@ -25,11 +25,13 @@ the ROS-free loop runs.
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()
 
+from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray, Header, UInt32  # noqa: E402
@@ -42,6 +44,7 @@ from rabbit_msgs_py.conversions import (  # noqa: E402
     stamp_to_ns,
     torques_to_msg,
 )
+from rabbit_msgs_py.parameters import Param, coerce, declare  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd  # noqa: E402
@@ -49,24 +52,30 @@ from .controller import ControllerConfig, HZDController, Leg, infer_stance, vali
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
 
+_DEFAULTS = ControllerConfig()
+CONTROLLER_PARAMS = {
+    "kp": Param(_DEFAULTS.kp, "proportional gain of the PD law, N m/rad, finite > 0", dynamic=True),
+    "torque_limit": Param(_DEFAULTS.torque_limit, "torque saturation, N m, finite > 0 (RABBIT: 150)"),
+    "touchdown_min_phase": Param(_DEFAULTS.touchdown_min_phase,
+                                 "phase the swing foot must pass before a touchdown counts, in (0, 1)"),
+    "max_kd": Param(_DEFAULTS.max_kd, "largest Kd accepted on /hzd/kd, N m s/rad, finite > 0", dynamic=True),
+    "blend_phase": Param(_DEFAULTS.blend_phase, "blend a new gait in over this much phase after a touchdown "
+                                                "that brings it, in [0, 1] (0 = off)", dynamic=True),
+}
+
+
 class HZDControllerNode(Node):
-    """Parameters: ``kp`` (N m/rad), ``torque_limit`` (N m), ``touchdown_min_phase``,
-    ``max_kd`` (N m s/rad)."""
+    """Parameters: :data:`CONTROLLER_PARAMS` (``kp``, ``max_kd`` and ``blend_phase`` may
+    change at run time; the rest are read-only)."""
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context)
-        defaults = ControllerConfig()
-        for name in ("kp", "torque_limit", "touchdown_min_phase", "max_kd"):
-            self.declare_parameter(name, float(overrides.get(name, getattr(defaults, name))))
+        values = declare(self, CONTROLLER_PARAMS, overrides)
         try:
-            self.config = ControllerConfig(
-                kp=self.get_parameter("kp").value,
-                torque_limit=self.get_parameter("torque_limit").value,
-                touchdown_min_phase=self.get_parameter("touchdown_min_phase").value,
-                max_kd=self.get_parameter("max_kd").value,
-            )
+            self.config = ControllerConfig(**values)
         except (ValueError, TypeError) as exc:
-            raise NodeStartError(f"hzd_controller_node: {exc}") from exc
+            raise NodeStartError(f"hzd_controller_node: {exc}") from None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.controller: HZDController | None = None
         self._alpha: list[float] | None = None  # last good gait received
@@ -90,6 +99,26 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
+
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        """``kp``, ``max_kd``, ``blend_phase`` at run time, validated as at start (read-only
+        ones are refused by rclpy before this is called)."""
+        changes = {}
+        for param in parameters:
+            if param.name not in CONTROLLER_PARAMS:
+                continue
+            try:
+                changes[param.name] = coerce(param.name, param.value, CONTROLLER_PARAMS[param.name].default)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        try:
+            config = replace(self.config, **changes)
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        self.config = config
+        if self.controller is not None:
+            self.controller.config = config
+        return SetParametersResult(successful=True)
 
     # --------------------------------------------------------------- gait
     def _on_alpha(self, msg: Float64MultiArray) -> None:

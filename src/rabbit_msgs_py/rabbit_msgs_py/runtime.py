@@ -79,7 +79,13 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
     stop = []
     previous = {sig: signal.signal(sig, lambda *_: stop.append(True)) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
-    rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
+    except Exception as exc:  # noqa: BLE001 - rclpy raises RCLError for a broken params file or bad --ros-args
+        print(f"error: {one_line(str(exc))}", flush=True)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        return 1
     node = None
     status = 0
     try:
@@ -110,6 +116,12 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return status
+
+
+def one_line(text: str, limit: int = 300) -> str:
+    """The first line of ``text``, cut to ``limit`` characters (error messages for a log)."""
+    first = text.strip().splitlines()[0] if text.strip() else ""
+    return first if len(first) <= limit else first[: limit - 3] + "..."
 
 
 class NodeStartError(RuntimeError):

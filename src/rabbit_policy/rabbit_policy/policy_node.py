@@ -36,6 +36,7 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 ensure_localhost_discovery()
 
 from geometry_msgs.msg import TwistStamped  # noqa: E402
+from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
@@ -43,6 +44,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
 from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.joints import JOINT_NAMES  # noqa: E402
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E402
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
@@ -57,37 +59,40 @@ def clamp_speed(value: float, low: float, high: float) -> float:
     return min(max(value, low), high)
 
 
+POLICY_PARAMS = {
+    "policy": Param("learned", "learned (the HZD-RL network) or classic (the HZD gait library; alias library)"),
+    "library_mode": Param("nearest", "classic: nearest gait, or interpolate between the two around the command"),
+    "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
+    "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
+    "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
+                                "within [min_speed, max_speed]"),
+    "min_speed": Param(0.7, "lowest command, m/s; /cmd_speed below is clamped", dynamic=True),
+    "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True),
+    "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1"),
+    "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)"),
+}
+
+
 class PolicyNode(Node):
     """The gait policy node."""
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("policy_node", context=context)
-        params = {
-            "policy": "learned",
-            "library_mode": "nearest",
-            "gait_dir": "",
-            "policy_file": "",
-            "initial_speed": 1.0,
-            "min_speed": 0.7,
-            "max_speed": 1.5,
-            "window": 1000,
-            "max_command_step": 0.0,
-        }
-        for name, default in params.items():
-            self.declare_parameter(name, overrides.get(name, default))
-        value = lambda name: self.get_parameter(name).value  # noqa: E731
-        self.min_speed = float(value("min_speed"))
-        self.max_speed = float(value("max_speed"))
+        values = declare(self, POLICY_PARAMS, overrides)
         try:
+            self.min_speed = finite("min_speed", values["min_speed"], 0.1, 3.0)
+            self.max_speed = finite("max_speed", values["max_speed"], 0.1, 3.0)
             if not self.min_speed < self.max_speed:
                 raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
-            self.policy = make_policy(value("policy"), value("gait_dir") or None, value("library_mode"),
-                                      value("policy_file") or None, float(value("max_command_step")))
-            self.window = SpeedWindow(int(value("window")))
-            self.desired_speed = clamp_speed(float(value("initial_speed")), self.min_speed, self.max_speed)
+            self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
+                                      values["policy_file"] or None,
+                                      finite("max_command_step", values["max_command_step"], 0.0))
+            self.window = SpeedWindow(values["window"])
+            self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
-        except (PolicyUnavailable, ValueError, TypeError) as exc:
-            raise NodeStartError(f"policy_node: {exc}") from exc
+        except (PolicyUnavailable, ValueError) as exc:
+            raise NodeStartError(f"policy_node: {exc}") from None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self.decisions = 0
         self.rejected_commands = 0
@@ -104,6 +109,24 @@ class PolicyNode(Node):
         self.get_logger().info(
             f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; send speeds on {topics.CMD_SPEED}"
         )
+
+    def _on_set_parameters(self, parameters: list) -> SetParametersResult:
+        """``min_speed``/``max_speed`` at run time, validated as at start (the command in
+        force is clamped into the new range); read-only ones are refused by rclpy."""
+        low, high = self.min_speed, self.max_speed
+        for param in parameters:
+            if param.name not in ("min_speed", "max_speed"):
+                continue
+            try:
+                value = finite(param.name, coerce(param.name, param.value, 0.0), 0.1, 3.0)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+            low, high = (value, high) if param.name == "min_speed" else (low, value)
+        if not low < high:
+            return SetParametersResult(successful=False, reason=f"min_speed ({low}) must be below max_speed ({high})")
+        self.min_speed, self.max_speed = low, high
+        self.desired_speed = min(max(self.desired_speed, low), high)
+        return SetParametersResult(successful=True)
 
     def _on_cmd_speed(self, msg: Float64) -> None:
         try:

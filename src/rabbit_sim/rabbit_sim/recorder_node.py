@@ -38,6 +38,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from rabbit_msgs_py import topics as topic_names  # noqa: E402
 from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_ns  # noqa: E402
+from rabbit_msgs_py.parameters import Param, declare  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
@@ -55,6 +56,16 @@ def _subscription_qos(spec: TopicSpec) -> QoSProfile:
     )
 
 
+RECORDER_PARAMS = {
+    "output": Param("", "bag directory to create (required)"),
+    "topics": Param([""], "topics to record ([''] = every stack topic)"),
+    "compression": Param("none", "none or zstd (MCAP chunk compression)"),
+    "log_time": Param("receive", "message log time: receive (wall clock) or sim (/clock)"),
+    "overwrite": Param(False, "replace an existing bag directory (never anything else)"),
+    "stats_file": Param("", "write the recording statistics as JSON here when closing ('' = don't)"),
+}
+
+
 class RecorderNode(Node):
     """Bag recorder. ``counts`` holds messages written per topic."""
 
@@ -63,11 +74,8 @@ class RecorderNode(Node):
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("recorder_node", context=context)
-        defaults = {"output": "", "topics": [""], "compression": "none", "log_time": "receive", "overwrite": False,
-                    "stats_file": ""}
-        for name, default in defaults.items():
-            self.declare_parameter(name, overrides.get(name, default))
-        value = lambda name: self.get_parameter(name).value  # noqa: E731
+        values = declare(self, RECORDER_PARAMS, overrides)
+        value = values.__getitem__
         output = value("output")
         names = [t for t in value("topics") if t] or list(STACK_TOPICS)
         unknown = [t for t in names if t not in STACK_TOPICS]

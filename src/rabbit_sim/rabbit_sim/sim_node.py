@@ -30,6 +30,7 @@ paper's limits) ``/fallen`` turns true and the physics halts until a reset.
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 import time
@@ -53,6 +54,7 @@ from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import MessageError, joint_state_vectors, torques_from_msg  # noqa: E402
 from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E402
 from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
@@ -100,10 +102,15 @@ class SimSettings:
         if self.mode not in MODES:
             raise NodeStartError(f"mode must be one of {MODES}, got {self.mode!r}")
         for name in ("push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
-            if not getattr(self, name) > 0.0:
-                raise NodeStartError(f"{name} must be > 0, got {getattr(self, name)}")
-        if self.stop_time < 0.0 or self.damping < 0.0:
-            raise NodeStartError("stop_time and damping must be >= 0")
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise NodeStartError(f"{name} must be a finite number > 0, got {value}")
+        for name in ("stop_time", "damping"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise NodeStartError(f"{name} must be a finite number >= 0, got {value}")
+        if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
+            raise NodeStartError(f"stats_file {self.stats_file}: its directory does not exist")
         try:
             pushes = parse_pushes(self.push_schedule)
         except ValueError as exc:
@@ -117,6 +124,21 @@ class SimSettings:
         return parse_pushes(self.push_schedule)
 
 
+SIM_PARAMS = {
+    "model": Param("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)"),
+    "mode": Param("lockstep", "lockstep (one state, one torque reply; deterministic) or realtime (1 kHz wall clock)"),
+    "push_duration": Param(0.1, "how long a /push wrench is held, s of sim time, > 0", dynamic=True),
+    "push_schedule": Param("", "pushes applied at sim times, 'T:FX:DUR,...' (s, N, s); '' = none"),
+    "max_push_force": Param(2000.0, "larger push components are rejected, N, > 0"),
+    "stop_time": Param(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)"),
+    "resend_timeout": Param(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0"),
+    "watchdog_timeout": Param(0.05, "realtime: wall s without a torque before damping takes over, > 0"),
+    "damping": Param(20.0, "realtime watchdog damping gain, N m s/rad, >= 0"),
+    "start_paused": Param(False, "start with the physics paused (/sim/pause false runs it)"),
+    "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
+}
+
+
 def stamp_of(seconds: float) -> Time:
     """Sim time (s) -> builtin_interfaces/Time, rounded to the nanosecond."""
     ns = int(round(seconds * 1e9))
@@ -128,13 +150,9 @@ class SimNode(Node):
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("sim_node", context=context)
-        defaults = SimSettings()
-        for name in SimSettings.__dataclass_fields__:
-            self.declare_parameter(name, overrides.get(name, getattr(defaults, name)))
+        values = declare(self, SIM_PARAMS, overrides)
         try:
-            self.settings = SimSettings(
-                **{n: self.get_parameter(n).value for n in SimSettings.__dataclass_fields__}
-            )
+            self.settings = SimSettings(**values)
             self.sim = Simulator(load_model(self.settings.model))
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"sim_node: {exc}") from exc
@@ -226,10 +244,11 @@ class SimNode(Node):
         for param in parameters:
             if param.name != "push_duration":
                 return SetParametersResult(successful=False, reason=f"{param.name} is fixed at start-up")
-            value = param.value
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not value > 0.0:
-                return SetParametersResult(successful=False, reason="push_duration must be a number > 0 (s)")
-            self.settings = replace(self.settings, push_duration=float(value))
+            try:
+                value = finite("push_duration", coerce(param.name, param.value, 0.0), low=1e-9)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=f"{exc} (s)")
+            self.settings = replace(self.settings, push_duration=value)
         return SetParametersResult(successful=True)
 
     def _on_initial_state(self, msg: JointState) -> None:

@@ -15,7 +15,6 @@ for classic, ``rl`` for learned.
 from __future__ import annotations
 
 import math
-import pickle
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
@@ -157,6 +156,7 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
                                     "or give policy_file")
         try:
             return LearnedPolicy(path)
-        except (OSError, RuntimeError, KeyError, ValueError, EOFError, pickle.UnpicklingError) as exc:
-            raise PolicyUnavailable(f"cannot load policy file {path}: {exc}") from exc
+        except Exception as exc:  # noqa: BLE001 - any file that is not a checkpoint: torch raises many kinds
+            raise PolicyUnavailable(f"cannot load policy file {path}: not a policy checkpoint "
+                                    f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None
     raise AssertionError(kind)  # controller_name() admits only CONTROLLERS

@@ -1,0 +1,66 @@
+"""Node parameters a ROS user can trust (needs rclpy): declared up front with a description
+(units, range) and whether they may change at run time, an integer accepted where a double
+is meant (``-p kp:=3000``, as most ROS nodes do), and anything else of the wrong type a
+one-line :class:`~rabbit_msgs_py.runtime.NodeStartError` instead of a traceback.
+
+``ros2 param describe`` shows the description; ``ros2 param set`` on a read-only parameter
+is refused by rclpy with the reason.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import ParameterDescriptor
+
+from .runtime import NodeStartError
+
+_TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter: default (its type is the parameter's), description (say units and
+    range), and whether ``ros2 param set`` may change it while the node runs."""
+
+    default: Any
+    description: str
+    dynamic: bool = False
+
+
+def coerce(name: str, value: Any, default: Any) -> Any:
+    """``value`` as the type of ``default`` (an int for a float is fine); raises
+    ``ValueError`` with one line naming the parameter otherwise."""
+    kind = type(default)
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if kind is int and isinstance(value, bool) or not isinstance(value, kind):
+        raise ValueError(f"parameter {name} must be {_TYPE_NAMES.get(kind, kind.__name__)}, got {value!r}")
+    return value
+
+
+def finite(name: str, value: float, low: float | None = None, high: float | None = None) -> float:
+    """``value`` if finite and within [low, high]; else ``ValueError`` naming ``name``."""
+    if not math.isfinite(value) or (low is not None and value < low) or (high is not None and value > high):
+        bounds = f" in [{low if low is not None else '-inf'}, {high if high is not None else 'inf'}]"
+        raise ValueError(f"{name} must be a finite number{bounds if low is not None or high is not None else ''},"
+                         f" got {value}")
+    return value
+
+
+def declare(node, params: dict[str, Param], overrides: dict[str, Any]) -> dict[str, Any]:
+    """Declare ``params`` on ``node`` (``overrides``: values from the code that builds the
+    node, below ``--ros-args``) and return their values, each of its declared type; raises
+    :class:`NodeStartError` with one line for a value of the wrong type."""
+    values = {}
+    for name, spec in params.items():
+        descriptor = ParameterDescriptor(description=spec.description, read_only=not spec.dynamic,
+                                         dynamic_typing=True)
+        node.declare_parameter(name, overrides.get(name, spec.default), descriptor)
+        try:
+            values[name] = coerce(name, node.get_parameter(name).value, spec.default)
+        except ValueError as exc:
+            raise NodeStartError(f"{node.get_name()}: {exc}") from None
+    return values

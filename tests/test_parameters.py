@@ -1,0 +1,90 @@
+"""Node parameters a ROS user can trust: integers for doubles, one-line errors, validation at
+start, read-only parameters refused at run time, run-time changes validated."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from rclpy.parameter import Parameter
+
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py.parameters import coerce
+from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_policy.policy_node import PolicyNode
+from rabbit_sim.sim_node import SimNode
+
+from ros_helpers import ros_context
+
+pytestmark = pytest.mark.ros
+
+
+def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
+    assert coerce("kp", 3000, 1.0) == 3000.0 and isinstance(coerce("kp", 3000, 1.0), float)
+    for value, default in ((True, 1.0), ("fast", 1.0), (1.5, 1), (True, 1), (1, "a")):
+        with pytest.raises(ValueError, match="parameter x must be"):
+            coerce("x", value, default)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["rabbit_hzd_controller.hzd_controller_node", "-p", "kp:=fast"], "parameter kp must be a number"),
+    (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "not a policy checkpoint"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "initial_speed must be a finite number"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
+    (["rabbit_sim.sim_node", "-p", "damping:=nan"], "damping must be a finite number"),
+    (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "stop_time must be a finite number"),
+    (["rabbit_sim.sim_node", "-p", "stats_file:=/nonexistent/dir/stats.json"], "does not exist"),
+])
+def test_bad_parameters_stop_a_node_with_one_line(args, message):
+    module, *params = args
+    out = subprocess.run([sys.executable, "-m", module, "--ros-args", *params], capture_output=True, text=True,
+                         timeout=60)
+    assert out.returncode == 1
+    errors = [line for line in (out.stdout + out.stderr).splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and message in errors[0], out.stdout + out.stderr
+    assert "Traceback" not in out.stdout + out.stderr
+
+
+def test_a_broken_params_file_is_one_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("sim_node:\n  ros__parameters:\n    mode: [broken\n")
+    out = subprocess.run([sys.executable, "-m", "rabbit_sim.sim_node", "--ros-args", "--params-file", str(bad)],
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 1 and "Traceback" not in out.stdout + out.stderr
+    assert [line for line in out.stdout.splitlines() if line.startswith("error:")]
+
+
+def test_integer_parameters_where_doubles_are_meant():
+    with ros_context() as (context, _executor):
+        controller = HZDControllerNode(context=context, kp=3000, max_kd=250)
+        assert controller.config.kp == 3000.0 and controller.config.max_kd == 250.0
+        controller.destroy_node()
+        with pytest.raises(NodeStartError, match="parameter kp must be a number"):
+            HZDControllerNode(context=context, kp="fast")
+
+
+def test_run_time_changes_are_validated_and_read_only_ones_refused():
+    with ros_context() as (context, _executor):
+        controller = HZDControllerNode(context=context)
+        assert controller.set_parameters([Parameter("kp", value=2500.0)])[0].successful
+        assert controller.config.kp == 2500.0
+        result = controller.set_parameters([Parameter("kp", value=-5.0)])[0]
+        assert not result.successful and "kp" in result.reason and controller.config.kp == 2500.0
+        assert not controller.set_parameters([Parameter("torque_limit", value=100.0)])[0].successful
+        assert controller.config.torque_limit == 150.0
+        policy = PolicyNode(context=context, policy="classic")
+        assert not policy.set_parameters([Parameter("policy", value="learned")])[0].successful
+        assert not policy.set_parameters([Parameter("max_speed", value=0.5)])[0].successful  # below min_speed
+        assert policy.set_parameters([Parameter("max_speed", value=1.2)])[0].successful
+        assert policy.max_speed == 1.2 and policy.desired_speed <= 1.2
+        sim = SimNode(context=context)
+        assert not sim.set_parameters([Parameter("mode", value="realtime")])[0].successful
+        assert sim.set_parameters([Parameter("push_duration", value=1)])[0].successful  # an integer: fine
+        assert sim.settings.push_duration == 1.0
+        assert not sim.set_parameters([Parameter("push_duration", value=float("nan"))])[0].successful
+        for node in (controller, policy, sim):
+            close = getattr(node, "close", None)
+            if close:
+                close()
+            node.destroy_node()
