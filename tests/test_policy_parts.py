@@ -156,3 +156,10 @@ def test_rate_limited_policy_moves_the_command_by_at_most_its_step():
     with pytest.raises(ValueError):
         RateLimitedPolicy(Recorder(), 0.0)
     assert make_policy("classic", max_command_step=0.2).name == "classic/nearest+limit0.2"
+
+
+def test_a_huge_command_logs_a_short_line():
+    from rabbit_policy.policy_node import clamp_message
+
+    line = clamp_message(1e308, 0.7, 1.5, 1.5)
+    assert "1e+308" in line and len(line) < 100

@@ -73,6 +73,11 @@ POLICY_PARAMS = {
 }
 
 
+def clamp_message(value: float, low: float, high: float, clamped: float) -> str:
+    """The log line for a clamped command; any value prints short (``1e+308``, not 309 digits)."""
+    return f"{topics.CMD_SPEED} {value:.4g} m/s is outside [{low:g}, {high:g}]; clamped to {clamped:.2f} m/s"
+
+
 class PolicyNode(Node):
     """The gait policy node."""
 
@@ -136,10 +141,7 @@ class PolicyNode(Node):
             self.get_logger().error(f"rejected {topics.CMD_SPEED}: {exc}; keeping {self.desired_speed:.2f} m/s")
             return
         if speed != msg.data:
-            self.get_logger().warning(
-                f"{topics.CMD_SPEED} {msg.data:.3f} m/s is outside [{self.min_speed}, {self.max_speed}]; "
-                f"clamped to {speed:.2f} m/s"
-            )
+            self.get_logger().warning(clamp_message(msg.data, self.min_speed, self.max_speed, speed))
         if speed != self.desired_speed:
             self.get_logger().info(f"commanded speed {speed:.2f} m/s")
         self.desired_speed = speed
