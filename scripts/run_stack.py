@@ -18,7 +18,8 @@ Ctrl-C stops the nodes cleanly and prints what was measured so far.
 
 With ``--json``: one object with ``fell``, ``rtf``, ``segments`` (``command``,
 ``mean_speed``, ``start``, ``end``) and more; node logs go to stderr.
-Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments, 3 the run did not complete
+Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments or another
+stack already running in this ROS_DOMAIN_ID (they would cross-talk), 3 the run did not complete
 (a node died, no progress, interrupted).
 """
 
@@ -82,7 +83,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_policy.experiment.scenario import parse_pushes, parse_schedule
-    from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
+    from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
 
     try:
         schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
@@ -107,6 +108,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     except PolicyUnavailable as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+    present = other_stack()
+    if present:
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        print(f"error: another rabbit-hzd stack runs in ROS_DOMAIN_ID={domain} ({', '.join(present)}); stop it, or "
+              f"start this one in another domain: ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} "
+              "scripts/run_stack.py ...", file=sys.stderr)
         return 2
 
     # Ctrl-C / SIGTERM end the run cleanly: the loop sees the flag, stops the nodes and

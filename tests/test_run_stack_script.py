@@ -75,3 +75,21 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     assert 0.0 < report["sim_time"] < 600.0
     assert _alive(children) == []
     assert "Traceback" not in err and "FATAL" not in err
+
+
+def test_a_second_stack_in_the_same_domain_is_refused():
+    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--json"],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while len(_node_processes(first.pid)) < 3 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        time.sleep(2.0)  # let its nodes come up and be discovered
+        second = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.2", "--duration", "2", "--json"],
+                                capture_output=True, text=True, timeout=120)
+        assert second.returncode == 2, second.stderr[-2000:]
+        assert "another rabbit-hzd stack runs in ROS_DOMAIN_ID=" in second.stderr
+        assert first.poll() is None  # the first one was left alone
+    finally:
+        first.send_signal(signal.SIGINT)
+        first.communicate(timeout=60)

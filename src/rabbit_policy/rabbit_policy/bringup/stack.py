@@ -280,6 +280,33 @@ class Supervisor(Node):
         )
 
 
+STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
+
+
+def other_stack(wait: float = 1.5) -> list[str]:
+    """Nodes of another rabbit-hzd stack visible in this ROS domain (after ``wait`` s of
+    discovery), or publishers of its topics; empty if none. Two stacks in one domain
+    cross-talk (one's /cmd_speed moves the other), so a launch refuses to start beside one."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        node = rclpy.create_node("run_stack_probe", context=context)
+        deadline = time.monotonic() + wait
+        found: list[str] = []
+        while time.monotonic() < deadline and not found:
+            time.sleep(0.1)
+            found = sorted({name for name in node.get_node_names() if name in STACK_NODE_NAMES})
+            for topic in (topics.JOINT_STATES, topics.JOINT_TORQUES, topics.ALPHA):
+                if node.count_publishers(topic):
+                    found.append(f"a publisher of {topic}")
+        node.destroy_node()
+        return found
+    finally:
+        rclpy.shutdown(context=context)
+
+
 def ros_arguments(parameters: dict[str, object]) -> list[str]:
     """``{"mode": "lockstep", "stop_time": 5.0}`` ->
     ``["--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0"]``; empty strings are
