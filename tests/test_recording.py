@@ -196,3 +196,39 @@ def test_run_stack_refuses_to_overwrite_what_is_not_a_bag(tmp_path):
                           "--overwrite"], capture_output=True, text=True, timeout=60)
     assert out.returncode == 2 and "not a bag directory" in out.stderr
     assert (tmp_path / "notes.txt").read_text() == "keep me"
+
+
+def test_a_bag_cut_short_is_recovered(tmp_path):
+    """A recorder killed mid-run leaves an MCAP without summary or metadata.yaml; `record.py
+    --recover` rebuilds a bag that rosbags and mcap read, holding every whole chunk."""
+    import subprocess
+    import sys
+
+    from mcap.reader import make_reader
+    from rosbags.rosbag2 import Reader
+
+    bag = tmp_path / "cut"
+    writer_code = (
+        "import os; from rabbit_sim.bag import BagWriter, QosSpec; "
+        f"w = BagWriter({str(bag)!r}); w.add_topic('/cmd_speed', 'std_msgs/msg/Float64', QosSpec(True, False, 10)); "
+        "[w.write('/cmd_speed', 1_000_000 * i, bytes(4) + (float(i)).hex().encode()[:8]) for i in range(60000)]; "
+        "os._exit(0)"  # no close: as if killed
+    )
+    subprocess.run([sys.executable, "-c", writer_code], check=True, timeout=120)
+    assert not (bag / "metadata.yaml").exists()
+    with pytest.raises(Exception):
+        with Reader(bag):
+            pass
+    out = subprocess.run([sys.executable, str(ROOT / "scripts" / "record.py"), str(bag), "--recover"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    recovered = tmp_path / "cut.recovered"
+    with Reader(recovered) as reader:
+        count = sum(1 for _ in reader.messages())
+    assert 40000 < count < 60000  # all but the chunk in progress (1 MiB of ~20-byte records here)
+    with (recovered / "cut.recovered.mcap").open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None and sum(summary.statistics.channel_message_counts.values()) == count
+    again = subprocess.run([sys.executable, str(ROOT / "scripts" / "record.py"), str(tmp_path / "nothing"),
+                            "--recover"], capture_output=True, text=True, timeout=60)
+    assert again.returncode == 1 and "no MCAP file" in again.stderr

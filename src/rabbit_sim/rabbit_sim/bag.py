@@ -9,6 +9,7 @@ import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2 import Writer, WriterError
@@ -121,3 +122,56 @@ class BagWriter:
             set_ros_distro(self.path / "metadata.yaml", ROS_DISTRO)
         except OSError as exc:
             raise BagError(f"cannot finish {self.path}: {exc}") from exc
+
+
+@dataclass(frozen=True)
+class Recovery:
+    """What :func:`recover_bag` saved: messages per topic, and why reading stopped."""
+
+    output: Path
+    counts: dict[str, int]
+    stopped: str
+
+    @property
+    def messages(self) -> int:
+        return sum(self.counts.values())
+
+
+def recover_bag(damaged: str | Path, output: str | Path,
+                qos_of: Callable[[str], QosSpec] = lambda _topic: QosSpec(True, False, 10)) -> Recovery:
+    """Rebuild a complete bag in ``output`` (a new directory) from the MCAP file of a bag
+    cut short (SIGKILL, full disk, power loss: no summary, no metadata.yaml), as ``ros2 bag
+    reindex`` would: every message of every chunk written whole is kept; reading stops at
+    the first truncated or corrupt record. ``qos_of(topic)``: the QoS to record for a topic
+    (the damaged file's channel metadata is not parsed). Raises :class:`BagError`."""
+    from mcap.stream_reader import StreamReader
+    from mcap.records import Channel, Message, Schema
+
+    damaged = Path(damaged)
+    files = sorted(damaged.glob("*.mcap")) if damaged.is_dir() else [damaged]
+    if not files or not files[0].is_file():
+        raise BagError(f"no MCAP file in {damaged}")
+    schemas: dict[int, str] = {}
+    channels: dict[int, tuple[str, str]] = {}
+    messages: list[tuple[int, int, bytes]] = []
+    stopped = "end of file"
+    with files[0].open("rb") as stream:
+        try:
+            for record in StreamReader(stream, skip_magic=False, validate_crcs=True).records:
+                if isinstance(record, Schema):
+                    schemas[record.id] = record.name
+                elif isinstance(record, Channel):
+                    channels[record.id] = (record.topic, schemas.get(record.schema_id, ""))
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    messages.append((record.channel_id, record.log_time, bytes(record.data)))
+        except Exception as exc:  # noqa: BLE001 - a cut file ends in any kind of broken record
+            stopped = f"{type(exc).__name__} after {len(messages)} messages (the cut-off end)"
+    writer = BagWriter(output)
+    try:
+        for topic, type_name in channels.values():
+            writer.add_topic(topic, type_name, qos_of(topic))
+        for channel_id, log_time, data in sorted(messages, key=lambda m: m[1]):
+            writer.write(channels[channel_id][0], log_time, data)
+    finally:
+        writer.close()
+    return Recovery(writer.path, dict(writer.counts), stopped)

@@ -56,6 +56,17 @@ def _subscription_qos(spec: TopicSpec) -> QoSProfile:
     )
 
 
+def recorded_qos(topic: str) -> QosSpec:
+    """The QoS a bag records for a topic: its publisher's, from the stack's catalogue
+    (reliable, volatile, depth 10 for a topic the stack does not know)."""
+    spec = STACK_TOPICS.get(topic)
+    if spec is None:
+        return QosSpec(True, False, 10)
+    return QosSpec(reliable=spec.qos.reliability == ReliabilityPolicy.RELIABLE,
+                   transient_local=spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL,
+                   depth=spec.qos.depth)
+
+
 RECORDER_PARAMS = {
     "output": Param("", "bag directory to create (required)"),
     "topics": Param([""], "topics to record ([''] = every stack topic)"),
@@ -99,11 +110,7 @@ class RecorderNode(Node):
         self.error: str | None = None
         for name in names:
             spec = STACK_TOPICS[name]
-            self.bag.add_topic(name, spec.type_name, QosSpec(
-                reliable=spec.qos.reliability == ReliabilityPolicy.RELIABLE,
-                transient_local=spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL,
-                depth=spec.qos.depth,
-            ))
+            self.bag.add_topic(name, spec.type_name, recorded_qos(name))
             self.create_subscription(
                 spec.msg_class, name, self._writer_for(name), _subscription_qos(spec), raw=True
             )
