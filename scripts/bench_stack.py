@@ -62,6 +62,8 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             "realtime_in_process_late_fraction": rounded(stats["late_fraction"], 5),
             "realtime_in_process_latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
             "realtime_in_process_latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
+            "realtime_in_process_worst_delay_ms": rounded(stats["latency_max_ms"], 3),
+            "realtime_in_process_skipped_ticks": stats["skipped_ticks"],
             "realtime_in_process_fell": report.fell,
         }
     if name == "realtime_recording":
@@ -91,6 +93,8 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         "realtime_late_fraction": rounded(stats["late_fraction"], 5),
         "latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
         "latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
+        "worst_delay_ms": rounded(stats["latency_max_ms"], 3),
+        "realtime_skipped_ticks": stats["skipped_ticks"],
         "realtime_ticks": stats["ticks"],
         "realtime_damped_ticks": stats["damped_ticks"],
         "realtime_fell": report.fell,

@@ -314,3 +314,20 @@ def test_push_topic_applies_good_wrenches_and_rejects_bad_ones():
         t = sim.time
         assert spin_until(executor, lambda: sim.time >= t + 1.0)
         assert not sim.fallen  # a small push: the robot walks on
+
+
+def test_realtime_smoke_steps_at_wall_clock_pace_and_reports_its_lateness():
+    """Realtime in one process for 2 s: the physics runs in the spinning thread (no physics
+    thread), about 1000 ticks per wall second, and the statistics say how late it was.
+    No timing target here (that is scripts/bench_stack.py): any machine passes."""
+    import threading
+
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), mode="realtime")
+    before = threading.active_count()
+    report, nodes = run_in_process(config)
+    stats = nodes["sim_node"].statistics()
+    assert report.completed or report.fell
+    assert stats["ticks"] >= 1000 and stats["tick_rate_hz"] is not None and stats["tick_rate_hz"] < 1100
+    assert 0.0 <= stats["late_fraction"] <= 1.0 and stats["skipped_ticks"] >= 0
+    assert stats["latency_max_ms"] >= stats["latency_p99_ms"]
+    assert threading.active_count() <= before  # no physics thread left behind

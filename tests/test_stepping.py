@@ -63,20 +63,18 @@ def test_an_overdue_reply_makes_the_state_go_out_again():
     assert lock.resends == 1
 
 
-def test_realtime_clock_sleeps_to_the_next_tick_and_restarts_when_far_behind():
-    clock, slept = FakeClock(), []
-
-    def sleep(seconds: float) -> None:
-        slept.append(seconds)
-        clock.now += seconds
-
-    pacer = RealtimeClock(0.001, max_lag=0.05, clock=clock, sleep=sleep)
-    pacer.wait()
-    assert slept == [pytest.approx(0.001)]
-    clock.now += 0.2  # a 200 ms stall
-    pacer.wait()
-    assert len(slept) == 1  # late: no sleep
-    assert pacer.next_tick == pytest.approx(clock.now)  # starts afresh, no burst of catch-up ticks
+def test_realtime_clock_runs_due_ticks_catches_up_a_little_and_skips_the_rest():
+    clock = FakeClock()
+    pacer = RealtimeClock(0.001, max_burst=2, clock=clock)
+    assert pacer.due() == 1  # the first tick is due at once
+    assert pacer.due() == 0 and pacer.wait_time() == pytest.approx(0.001)
+    clock.now += 0.0021  # woken late: two ticks due, run back to back
+    assert pacer.due() == 2 and pacer.skipped == 0
+    clock.now += 0.05  # a 50 ms stall: one tick now, the other 49 skipped, no burst
+    assert pacer.due() == 1 and pacer.skipped == 49
+    assert pacer.due() == 0
+    pacer.restart()
+    assert pacer.wait_time() == pytest.approx(0.001)
 
 
 def test_watchdog_damps_stale_torques_and_says_when():

@@ -14,12 +14,16 @@ Modes (parameter ``mode``):
   a live one ignores the duplicate (it answers each distinct state once), so exactly one
   reply per state is ever applied. A reset or pause requested while a reply is due takes
   effect when that reply arrives.
-* ``realtime``: a physics thread steps at 1 kHz of wall-clock time, zero-order hold on the
-  newest torque. After start and reset the physics holds the initial state (re-publishing
-  it) until the first torque arrives, so the robot does not start under damping. A watchdog applies damping torques ``-damping * joint rate`` when no
-  torque arrived for ``watchdog_timeout`` s and says so in the log; it logs again when
-  commands resume. Ticks whose torque (the reply to the previous state) had not arrived
-  when the next step was due are counted as late.
+* ``realtime``: the physics steps at 1 kHz of wall-clock time, zero-order hold on the
+  newest torque, in the thread that spins the node (a 1 ms timer wakes it; the wall clock
+  paces it): no second thread, so a tick never waits for the GIL. After a late wake-up it
+  catches up by at most two ticks and skips the rest (counted, logged). After start and
+  reset the physics holds the initial state (re-publishing it) until the first torque
+  arrives. A watchdog applies damping torques ``-damping * joint rate`` when no torque
+  arrived for ``watchdog_timeout`` s (8 ms: the gaits go unstable at about 10 ms of
+  delay) and says so in the log; it logs again when commands resume. Ticks whose torque
+  (the reply to the previous state) had not arrived when the next step was due are late;
+  once a second the log says when the loop fell behind (late ticks, worst delay).
 
 The robot starts (and restarts on ``/sim/reset``) in the newest state on
 ``/sim/initial_state`` (transient local; ``policy_node`` publishes the state at phase 0 of
@@ -63,6 +67,9 @@ from .simulation import Simulator  # noqa: E402
 from .stepping import Lockstep, RealtimeClock, Reply, TickStatistics, Watchdog, WatchdogEvent  # noqa: E402
 
 MODES = ("lockstep", "realtime")
+REPLY_GRACE = 0.0006
+"""s: a realtime tick whose reply is still on its way waits this long for it (the reply's
+callback then runs the tick) before stepping on the previous torque."""
 
 
 @dataclass(frozen=True)
@@ -93,7 +100,7 @@ class SimSettings:
     max_push_force: float = 2000.0
     stop_time: float = 0.0
     resend_timeout: float = 0.2
-    watchdog_timeout: float = 0.05
+    watchdog_timeout: float = 0.008
     damping: float = 20.0
     start_paused: bool = False
     stats_file: str = ""
@@ -132,7 +139,8 @@ SIM_PARAMS = {
     "max_push_force": Param(2000.0, "larger push components are rejected, N, > 0"),
     "stop_time": Param(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)"),
     "resend_timeout": Param(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0"),
-    "watchdog_timeout": Param(0.05, "realtime: wall s without a torque before damping takes over, > 0"),
+    "watchdog_timeout": Param(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
+                                     "(the gaits go unstable at about 10 ms of torque delay)"),
     "damping": Param(20.0, "realtime watchdog damping gain, N m s/rad, >= 0"),
     "start_paused": Param(False, "start with the physics paused (/sim/pause false runs it)"),
     "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
@@ -189,17 +197,17 @@ class SimNode(Node):
         self._fallen_pub.publish(Bool(data=False))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        self._running = True
-        self._physics_thread: threading.Thread | None = None
-        # realtime: executors spinning this node wait at most 0.5 ms so the physics thread
-        # gets the interpreter on time (see rabbit_msgs_py.runtime.spin_timeout_of)
-        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.0005
+        # realtime: the physics steps in the thread that spins this node, woken by a 1 ms
+        # timer and paced by the wall clock (RealtimeClock): no second thread, so a tick
+        # never waits for the GIL; executors spinning it wait at most 1 ms
+        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001
+        self.clock = RealtimeClock(self.sim.timestep)
+        self._held_ticks = 0
+        self._late_window = (0, 0, time.perf_counter())  # ticks, late ticks, start of the window
         if self.settings.mode == "lockstep":
             self.create_timer(0.05, self._lockstep_supervise)
         else:
-            sys.setswitchinterval(0.0005)  # let the executor thread in between physics ticks
-            self._physics_thread = threading.Thread(target=self._realtime_loop, name="physics", daemon=True)
-            self._physics_thread.start()
+            self.create_timer(self.sim.timestep, self._realtime_wake)
         self.get_logger().info(
             f"RABBIT simulation ({self.settings.model} model, {self.settings.mode} mode) waiting for a state on "
             f"{topics.INITIAL_STATE}"
@@ -228,10 +236,7 @@ class SimNode(Node):
     resends = property(lambda self: self.lockstep.resends)
 
     def close(self) -> None:
-        """Stop the physics thread (realtime mode); called before the node is destroyed."""
-        self._running = False
-        if self._physics_thread is not None:
-            self._physics_thread.join(timeout=1.0)
+        """Write the statistics file; called before the node is destroyed."""
         if self.settings.stats_file:
             try:
                 Path(self.settings.stats_file).write_text(strict_json.dumps(self.statistics()) + "\n")
@@ -279,6 +284,8 @@ class SimNode(Node):
             if self.settings.mode == "realtime":
                 self._latest_torques = torques
                 self._latest_torque_wall = now
+                if self._started and not (self._paused or self._halted) and self.clock.overdue() >= 0.0:
+                    self._run_due_ticks()  # the tick waited for this reply
                 return
             reply = self.lockstep.on_reply(torques, self._paused)
             if reply is Reply.RESET:
@@ -437,24 +444,48 @@ class SimNode(Node):
             )
             self._publish_state()
 
-    def _realtime_loop(self) -> None:
-        """Physics thread: one step per 1 ms of wall-clock time, zero-order hold."""
-        clock = RealtimeClock(self.sim.timestep)
-        held = 0
-        while self._running:
-            clock.wait()  # sleeping releases the GIL for the executor thread
-            with self._lock:
-                if not self._started or self._paused or self._halted:
-                    self.stats.unanswered.clear()
-                    continue
-                if self._latest_torque_wall < 0.0:
-                    # hold the initial state (re-published every 10 ms) until the controller answers
-                    held += 1
-                    if held % 10 == 1:
-                        self._publish_state()
-                    continue
-                held = 0
-                self._realtime_tick()
+    def _realtime_wake(self) -> None:
+        """Realtime timer (1 ms): run the ticks now due by the wall clock, zero-order hold."""
+        with self._lock:
+            if not self._started or self._paused or self._halted:
+                self.stats.unanswered.clear()
+                self.clock.restart()
+                return
+            if self.stats.unanswered and self.clock.overdue() < REPLY_GRACE:
+                return  # the reply is on its way (queued behind this timer): it runs the tick
+            self._run_due_ticks()
+
+    def _run_due_ticks(self) -> None:
+        """The ticks due now by the wall clock (caller holds the lock)."""
+        for _ in range(self.clock.due()):
+            if self._latest_torque_wall < 0.0:
+                # hold the initial state (re-published every 10 ms) until the controller answers
+                self._held_ticks += 1
+                if self._held_ticks % 10 == 1:
+                    self._publish_state()
+                continue
+            self._held_ticks = 0
+            self._realtime_tick()
+            if self._halted:
+                break
+        self._report_lateness()
+
+    def _report_lateness(self) -> None:
+        """Once a second: say in the log when the control loop fell behind (late torques,
+        skipped ticks), with the worst delay."""
+        ticks, late, since = self._late_window
+        now = time.perf_counter()
+        if now - since < 1.0:
+            return
+        new_ticks, new_late = self.stats.ticks - ticks, self.stats.late_ticks - late
+        skipped = self.clock.skipped
+        if new_ticks and (new_late / new_ticks > 0.05 or skipped):
+            worst = max(list(self.stats.latencies_ms)[-new_ticks:] or [0.0])
+            self.get_logger().warning(
+                f"realtime: the control loop fell behind at t = {self.sim.time:.2f} s: {new_late} of {new_ticks} "
+                f"ticks late in the last second, worst delay {worst:.1f} ms, {skipped} ticks skipped so far"
+            )
+        self._late_window = (self.stats.ticks, self.stats.late_ticks, now)
 
     def _realtime_tick(self) -> None:
         now = time.perf_counter()
@@ -478,7 +509,8 @@ class SimNode(Node):
 
     def statistics(self) -> dict:
         """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
-        return self.stats.summary(self.sim.time, {"damped_ticks": self.damped_ticks, "resends": self.resends})
+        return self.stats.summary(self.sim.time, {"damped_ticks": self.damped_ticks, "resends": self.resends,
+                                                  "skipped_ticks": self.clock.skipped})
 
 
 def main(args: list[str] | None = None) -> int:

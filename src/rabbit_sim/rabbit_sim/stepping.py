@@ -5,8 +5,9 @@ thread; every rule here is unit-tested without rclpy.
 * :class:`Lockstep`: one torque reply per published state. A reply arriving while none is
   due is ignored; a reset or pause requested while a reply is due takes effect when that
   reply arrives; an overdue reply makes the state go out again (:meth:`Lockstep.resend_due`).
-* :class:`RealtimeClock`: one tick per timestep of wall-clock time; after falling behind
-  by more than ``max_lag`` s it starts afresh instead of running ticks back to back.
+* :class:`RealtimeClock`: one tick per timestep of wall-clock time, run from the thread
+  that spins the node (no second thread waiting for the GIL); after a late wake-up it
+  catches up by at most ``max_burst`` ticks and skips the rest.
 * :class:`Watchdog`: in realtime, torques older than ``timeout`` s are replaced by damping
   ``-damping * joint rate``; it says when it trips and when commands resume.
 * :class:`TickStatistics`: counters, late ticks and state->torque latencies; JSON-ready
@@ -94,21 +95,41 @@ class Lockstep:
 
 
 class RealtimeClock:
-    """Paces ticks at ``period`` s of wall-clock time (see the module docstring)."""
+    """Paces ticks at ``period`` s of wall-clock time without sleeping (the caller is woken
+    by a timer and asks :meth:`due`): at most ``max_burst`` ticks are run back to back to
+    catch up after a late wake-up; beyond that the missed ticks are skipped (sim time then
+    falls behind wall time, and the caller says so) instead of stepping many times on one
+    torque."""
 
-    def __init__(self, period: float, max_lag: float = 0.05, clock: Callable[[], float] = time.perf_counter,
-                 sleep: Callable[[float], None] = time.sleep) -> None:
-        self.period, self.max_lag, self.clock, self.sleep = period, max_lag, clock, sleep
+    def __init__(self, period: float, max_burst: int = 2, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.period, self.max_burst, self.clock = period, max_burst, clock
         self.next_tick = clock()
+        self.skipped = 0
 
-    def wait(self) -> None:
-        """Sleep until the next tick is due (at once if it is late)."""
-        self.next_tick += self.period
-        remaining = self.next_tick - self.clock()
-        if remaining > 0.0:
-            self.sleep(remaining)
-        if self.next_tick < self.clock() - self.max_lag:  # far behind: start afresh
-            self.next_tick = self.clock()
+    def restart(self) -> None:
+        """The next tick is due one period from now."""
+        self.next_tick = self.clock() + self.period
+
+    def due(self) -> int:
+        """How many ticks to run now (0 if the next is not due yet)."""
+        now = self.clock()
+        if now < self.next_tick:
+            return 0
+        behind = int((now - self.next_tick) / self.period) + 1
+        if behind > self.max_burst:
+            self.skipped += behind - 1
+            self.next_tick = now + self.period
+            return 1
+        self.next_tick += behind * self.period
+        return behind
+
+    def overdue(self) -> float:
+        """Seconds since the next tick fell due (negative: not due yet)."""
+        return self.clock() - self.next_tick
+
+    def wait_time(self) -> float:
+        """Seconds until the next tick is due (0 if it is)."""
+        return max(0.0, self.next_tick - self.clock())
 
 
 class WatchdogEvent(Enum):
@@ -191,6 +212,7 @@ class TickStatistics:
         """JSON-ready counters (None where a rate or percentile has no data)."""
         span = self.last_tick_wall - (self.first_tick_wall or 0.0)
         lat = list(self.latencies_ms)
+        extra = {**(extra or {}), "latency_max_ms": max(lat) if lat else None}
         return {
             "ticks": self.ticks,
             "sim_time": sim_time,
@@ -198,7 +220,7 @@ class TickStatistics:
             "torques_received": self.torques_received,
             "torques_rejected": self.torques_rejected,
             "late_ticks": self.late_ticks,
-            **(extra or {}),
+            **extra,
             "tick_rate_hz": (self.ticks - 1) / span if self.first_tick_wall is not None and span > 0 else None,
             "late_fraction": self.late_ticks / self.ticks if self.ticks else None,
             "latency_p50_ms": _percentile(lat, 0.5),
