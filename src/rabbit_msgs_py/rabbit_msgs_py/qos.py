@@ -12,7 +12,8 @@
 * Events (``/hzd/step``): reliable, keep last 10.
 * Monitors that only need the newest state (run_stack's supervisor): best effort,
   keep last 1 — a slow monitor never holds the 1 kHz loop back.
-* Clock: reliable, keep last 1 (the newest time is the only one that matters).
+* Clock: reliable, keep last 10 (a recorder in lockstep must get every one; the newest
+  is the one that matters to anyone else).
 """
 
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -34,7 +35,7 @@ GAIT_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
-CLOCK_QOS = _reliable(1)
+CLOCK_QOS = _reliable(10)
 MONITOR_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,

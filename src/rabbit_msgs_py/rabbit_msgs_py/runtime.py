@@ -94,7 +94,7 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         executor.add_node(node)
         freeze_start_up_objects()
         timeout = spin_timeout_of(node)
-        while not stop and context.ok():
+        while not stop and context.ok() and not getattr(node, "done", False):
             executor.spin_once(timeout_sec=timeout)
         # a node that must not lose what is queued (the recorder) spins on a little
         drain_until = time.monotonic() + float(getattr(node, "drain_on_exit", 0.0))

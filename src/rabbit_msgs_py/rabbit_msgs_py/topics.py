@@ -43,6 +43,11 @@ start, +1 at every reset), published just before the placed state. The controlle
 on it and answers the placed state even when it equals the last state it answered: a
 reset is an event, not inferred from stamps or values."""
 
+RECORDER_PROGRESS = "/recorder/progress"
+"""std_msgs/UInt64: how many ``/joint_states`` messages recorder_node has written, after
+each. In lockstep with ``wait_for_recorder`` sim_node publishes the next state only while
+the recorder is at most a few states behind, so under any load no message is lost."""
+
 RESET_SERVICE = "/sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
 PAUSE_SERVICE = "/sim/pause"

@@ -34,7 +34,9 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
+from std_msgs.msg import UInt64  # noqa: E402
 
+from rabbit_msgs_py import qos  # noqa: E402
 from rabbit_msgs_py import topics as topic_names  # noqa: E402
 from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec  # noqa: E402
 from rabbit_msgs_py.conversions import stamp_to_ns  # noqa: E402
@@ -108,6 +110,9 @@ class RecorderNode(Node):
         self._start_cpu = time.process_time()
         self._sim_now = 0
         self.error: str | None = None
+        self.done = False  # run_node stops spinning when true
+        self._progress = UInt64()
+        self._progress_pub = self.create_publisher(UInt64, topic_names.RECORDER_PROGRESS, qos.STREAM_QOS)
         for name in names:
             spec = STACK_TOPICS[name]
             self.bag.add_topic(name, spec.type_name, recorded_qos(name))
@@ -122,6 +127,7 @@ class RecorderNode(Node):
 
     def _writer_for(self, topic: str):
         is_clock = topic == topic_names.CLOCK
+        is_state = topic == topic_names.JOINT_STATES
 
         def write(data: bytes) -> None:
             if self.error is not None:
@@ -134,7 +140,12 @@ class RecorderNode(Node):
                 self.bag.write(topic, stamp, data)
             except BagError as exc:
                 self.error = str(exc)
+                self.done = True  # the process ends (exit status 1): a stack waiting for it learns at once
                 self.get_logger().error(f"recording stopped: {exc}")
+                return
+            if is_state:  # tell a lockstep simulator how far the recording is
+                self._progress.data = self.bag.counts[topic]
+                self._progress_pub.publish(self._progress)
 
         return write
 

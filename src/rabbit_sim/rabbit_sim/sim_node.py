@@ -52,7 +52,7 @@ from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Bool, Float64MultiArray, UInt32  # noqa: E402
+from std_msgs.msg import Bool, Float64MultiArray, UInt32, UInt64  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
@@ -67,6 +67,9 @@ from .simulation import Simulator  # noqa: E402
 from .stepping import Lockstep, RealtimeClock, Reply, TickStatistics, Watchdog, WatchdogEvent  # noqa: E402
 
 MODES = ("lockstep", "realtime")
+RECORDER_LAG = 4
+"""Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
+keep 10: with at most 4 outstanding none is ever overwritten)."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
@@ -89,6 +92,8 @@ class SimSettings:
     damping: realtime watchdog damping gain (N m s/rad).
     start_paused: start with the physics paused (``/sim/pause`` false starts it); the
         launch script uses it to start the run once every node is connected.
+    wait_for_recorder: lockstep, hold the next state while the recorder is more than
+        :data:`RECORDER_LAG` states behind (the launch script sets it when recording).
     stats_file: write :meth:`SimNode.statistics` as JSON to this path when the node
         closes ('' = don't); the benchmarks read it.
     """
@@ -103,6 +108,7 @@ class SimSettings:
     watchdog_timeout: float = 0.008
     damping: float = 20.0
     start_paused: bool = False
+    wait_for_recorder: bool = False
     stats_file: str = ""
 
     def __post_init__(self) -> None:
@@ -143,6 +149,8 @@ SIM_PARAMS = {
                                      "(the gaits go unstable at about 10 ms of torque delay)"),
     "damping": Param(20.0, "realtime watchdog damping gain, N m s/rad, >= 0"),
     "start_paused": Param(False, "start with the physics paused (/sim/pause false runs it)"),
+    "wait_for_recorder": Param(False, "lockstep: publish the next state only while the recorder (/recorder/progress) "
+                                      "is at most a few states behind, so a recording loses nothing under any load"),
     "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
 }
 
@@ -192,6 +200,10 @@ class SimNode(Node):
         self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
+        self._recorded = 0  # /joint_states the recorder has written
+        self._state_held_for_recorder = False
+        if self.settings.wait_for_recorder:
+            self.create_subscription(UInt64, topics.RECORDER_PROGRESS, self._on_recorder_progress, qos.STREAM_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
         self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause)
         self._fallen_pub.publish(Bool(data=False))
@@ -367,11 +379,27 @@ class SimNode(Node):
 
     def _advance(self, torques: list[float]) -> None:
         """Lockstep: apply one reply, step, publish the next state (its reply is then due,
-        unless the physics halted)."""
+        unless the physics halted) — held while a recorder we wait for lags behind."""
         self._step(torques)
+        if self._recorder_lags():
+            self._state_held_for_recorder = True
+            return
+        self._send_next_state()
+
+    def _send_next_state(self) -> None:
         self._publish_state()
         if not self._halted:
             self.lockstep.published()
+
+    def _recorder_lags(self) -> bool:
+        return self.settings.wait_for_recorder and self.stats.states_published - self._recorded > RECORDER_LAG
+
+    def _on_recorder_progress(self, msg: UInt64) -> None:
+        with self._lock:
+            self._recorded = msg.data
+            if self._state_held_for_recorder and not self._recorder_lags():
+                self._state_held_for_recorder = False
+                self._send_next_state()
 
     def _publish_push_applied(self) -> None:
         """``/push_applied``: the push acting from now on (zeros: none)."""
@@ -430,6 +458,11 @@ class SimNode(Node):
                 throttle_duration_sec=10.0,
             )
         with self._lock:
+            if self._state_held_for_recorder:
+                self.get_logger().warning(
+                    f"lockstep: waiting for the recorder ({self.stats.states_published - self._recorded} states behind)",
+                    throttle_duration_sec=5.0)
+                return
             waited = self.lockstep.resend_due(self._paused)
             if waited is None:
                 return

@@ -106,6 +106,7 @@ class StackConfig:
                 "push_duration": self.push_duration,
                 "push_schedule": format_pushes(self.pushes),
                 "start_paused": True,
+                "wait_for_recorder": bool(self.record) and self.mode == "lockstep",
                 "stats_file": self.stats_file,
             },
         }
@@ -463,8 +464,8 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
             supervisor.destroy_node()
             if context.ok():
                 rclpy.shutdown(context=context)
-        if config.record:
-            error = error or recording_error(codes.get("recorder_node", 0), config.record_stats_file)
+        if config.record:  # a failed recording is the cause whatever else it led to
+            error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
         return supervisor.report(error)
 
 
