@@ -19,7 +19,7 @@ ROSDEP_KEYS = {
     # Python modules from PyPI / Debian -> rosdep keys
     "numpy": "python3-numpy", "mujoco": "python3-mujoco", "PIL": "python3-pil",
     "matplotlib": "python3-matplotlib", "torch": "python3-torch", "gymnasium": "python3-gymnasium",
-    "cma": "python3-cma", "rosbags": "python3-rosbags", "yaml": "python3-yaml", "tqdm": "python3-tqdm",
+    "cma": "python3-cma", "rosbags": "python3-rosbags", "yaml": "python3-yaml", "tqdm": "python3-tqdm", "mcap": "python3-mcap",
     # ROS 2 packages: the key is the package name
     **{name: name for name in ("rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs", "std_srvs",
                                "rcl_interfaces", "builtin_interfaces")},
