@@ -299,7 +299,7 @@ class SimNode(Node):
                 if self._started and not (self._paused or self._halted) and self.clock.overdue() >= 0.0:
                     self._run_due_ticks()  # the tick waited for this reply
                 return
-            reply = self.lockstep.on_reply(torques, self._paused)
+            reply = self.lockstep.on_reply(torques, self._paused or self._recorder_missed_start())
             if reply is Reply.RESET:
                 self._place()
                 self.get_logger().info("robot back in the initial state at t = 0 s")
@@ -347,7 +347,7 @@ class SimNode(Node):
         with self._lock:
             self._paused = bool(request.data)
             if not self._paused and self.settings.mode == "lockstep":
-                held = self.lockstep.take_held()
+                held = None if self._recorder_missed_start() else self.lockstep.take_held()
                 if held is not None:
                     self._advance(held)
                 elif self.lockstep.awaiting_reply:
@@ -394,10 +394,17 @@ class SimNode(Node):
     def _recorder_lags(self) -> bool:
         return self.settings.wait_for_recorder and self.stats.states_published - self._recorded > RECORDER_LAG
 
+    def _recorder_missed_start(self) -> bool:
+        """Waiting for the recorder and it has not written the first state yet: the loop
+        does not step (the reply is held) until it has."""
+        return self.settings.wait_for_recorder and self._recorded == 0
+
     def _on_recorder_progress(self, msg: UInt64) -> None:
         with self._lock:
             self._recorded = msg.data
-            if self._state_held_for_recorder and not self._recorder_lags():
+            if not self._paused and self.lockstep.held_torques is not None and not self._recorder_missed_start():
+                self._advance(self.lockstep.take_held())  # the first state is recorded: go
+            elif self._state_held_for_recorder and not self._recorder_lags():
                 self._state_held_for_recorder = False
                 self._send_next_state()
 
@@ -458,6 +465,11 @@ class SimNode(Node):
                 throttle_duration_sec=10.0,
             )
         with self._lock:
+            if self._started and self._recorder_missed_start():
+                self._publish_state()  # again, until the recorder has it (the controller answers a state once)
+                self.get_logger().info("lockstep: waiting for the recorder to receive the first state",
+                                       throttle_duration_sec=5.0)
+                return
             if self._state_held_for_recorder:
                 self.get_logger().warning(
                     f"lockstep: waiting for the recorder ({self.stats.states_published - self._recorded} states behind)",

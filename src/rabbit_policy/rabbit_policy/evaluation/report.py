@@ -190,8 +190,9 @@ def robustness_section(robustness: dict) -> list[str]:
         return []
     names = list(robustness)
     lines = ["## Robustness: every speed, every change, random commands, pushes at every phase, model errors", "",
-             "Definitions in `rabbit_policy/evaluation/robustness.py`; the transition matrix is in "
-             "`transitions.png`.", "",
+             "Definitions in `rabbit_policy/evaluation/robustness.py`.", "",
+             "![ordered speed changes: passed at every phase (green), slow (orange), fell or stalled (red)]"
+             "(transitions.png)", "",
              "| check | " + " | ".join(_label(n) for n in names) + " |", "|---|" + "---|" * len(names)]
 
     def row(title: str, cell) -> None:
