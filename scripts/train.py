@@ -63,7 +63,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     from rabbit_policy.learning.training import TrainingConfig, train
 
-    return train(TrainingConfig(**vars(args)))
+    if args.algo == "es":
+        from rabbit_policy.learning.es import ESConfig
+
+        trainer = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
+                           max_steps=args.max_steps, seed=args.seed, workers=args.workers)
+    else:
+        from rabbit_policy.learning.ppo import PPOConfig
+
+        trainer = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
+                            lr=args.ppo_lr, init_log_std=args.init_log_std, target_kl=args.target_kl or None,
+                            gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed)
+    return train(TrainingConfig(algo=args.algo, out=args.out, trainer=trainer, workers=args.workers,
+                                iterations=args.iterations, checkpoint_every=args.checkpoint_every,
+                                eval_every=args.eval_every, stop_when_passed=args.stop_when_passed,
+                                warm_start=args.warm_start, no_progress=args.no_progress, resume=args.resume))
 
 
 if __name__ == "__main__":

@@ -37,6 +37,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
+from typing import Any
 from multiprocessing import active_children
 from pathlib import Path
 
@@ -45,59 +46,44 @@ from rabbit_msgs_py import strict_json
 
 @dataclass(frozen=True)
 class TrainingConfig:
-    """One training run (``scripts/train.py``'s options; see its help for each)."""
+    """One training run (``scripts/train.py``'s options; see its help for each). ``trainer``
+    holds the algorithm's own hyper-parameters: an ``ESConfig`` or a ``PPOConfig`` (their
+    ``seed``, ``workers`` and ``max_steps`` are the run's)."""
 
     algo: str
     out: Path
-    seed: int = 0
+    trainer: Any
     workers: int = 2
     iterations: int = 60
-    max_steps: int = 40
     checkpoint_every: int = 5
     eval_every: int = 2
     stop_when_passed: bool = False
     warm_start: str = "scheduled"
     no_progress: bool = False
     resume: bool = False
-    # ES
-    pairs: int = 8
-    sigma: float = 0.02
-    lr: float = 0.01
-    episodes: int = 8
-    # PPO
-    envs: int = 4
-    steps: int = 128
-    epochs: int = 10
-    minibatches: int = 4
-    ppo_lr: float = 1e-4
-    target_kl: float = 0.02
-    gae_lambda: float = 0.95
-    gamma: float = 0.99
-    init_log_std: float = -3.5
 
     def __post_init__(self) -> None:
         if self.algo not in ("es", "ppo"):
             raise ValueError(f"algo must be es or ppo, got {self.algo!r}")
-        if min(self.workers, self.iterations, self.max_steps, self.checkpoint_every, self.envs) < 1:
-            raise ValueError("workers, iterations, max_steps, checkpoint_every and envs must be >= 1")
+        if min(self.workers, self.iterations, self.checkpoint_every) < 1:
+            raise ValueError("workers, iterations and checkpoint_every must be >= 1")
         if self.eval_every < 0:
             raise ValueError("eval_every must be >= 0")
 
+    @property
+    def seed(self) -> int:
+        return self.trainer.seed
+
 
 def make_trainer(args: TrainingConfig, net):
-    """The ES or PPO trainer and its configuration."""
+    """The ES or PPO trainer for the configured algorithm."""
     if args.algo == "es":
-        from rabbit_policy.learning.es import ESConfig, EvolutionStrategy
+        from rabbit_policy.learning.es import EvolutionStrategy
 
-        config = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
-                          max_steps=args.max_steps, seed=args.seed, workers=args.workers)
-        return EvolutionStrategy(net, config), config
-    from rabbit_policy.learning.ppo import PPOConfig, PPOTrainer
+        return EvolutionStrategy(net, args.trainer)
+    from rabbit_policy.learning.ppo import PPOTrainer
 
-    config = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
-                       lr=args.ppo_lr, init_log_std=args.init_log_std,
-                       target_kl=args.target_kl or None, gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed)
-    return PPOTrainer(net, config), config
+    return PPOTrainer(net, args.trainer)
 
 
 def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) -> dict:
@@ -154,7 +140,7 @@ def train(args: TrainingConfig) -> int:
         print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
               "(normalised action units)", flush=True)
     eval_pool = get_context("fork").Pool(args.workers, initializer=ignore_interrupts) if args.eval_every else None
-    trainer, config = make_trainer(args, net)
+    trainer = make_trainer(args, net)
     if state:
         trainer.load_state_dict(state["trainer"])
     elapsed_before = state.get("wall_s", 0.0)
@@ -167,7 +153,7 @@ def train(args: TrainingConfig) -> int:
 
     def info(extra: dict | None = None) -> dict:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
-                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config.to_dict(),
+                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": args.trainer.to_dict(),
                 "warm_start": args.warm_start, "eval_every": args.eval_every,
                 "parameters": parameter_count(net), **(extra or {})}
 
