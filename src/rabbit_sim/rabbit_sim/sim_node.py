@@ -215,7 +215,7 @@ class SimNode(Node):
         self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001
         self.clock = RealtimeClock(self.sim.timestep)
         self._held_ticks = 0
-        self._late_window = (0, 0, time.perf_counter())  # ticks, late ticks, start of the window
+        self._late_window = (0, 0, 0, time.perf_counter())  # ticks, late, skipped, start of the window
         if self.settings.mode == "lockstep":
             self.create_timer(0.05, self._lockstep_supervise)
         else:
@@ -516,21 +516,21 @@ class SimNode(Node):
         self._report_lateness()
 
     def _report_lateness(self) -> None:
-        """Once a second: say in the log when the control loop fell behind (late torques,
-        skipped ticks), with the worst delay."""
-        ticks, late, since = self._late_window
+        """Once a second: say in the log when the control loop fell behind in that second
+        (more than 5 % late ticks, or skipped ticks), with the worst delay."""
+        ticks, late, skipped, since = self._late_window
         now = time.perf_counter()
         if now - since < 1.0:
             return
         new_ticks, new_late = self.stats.ticks - ticks, self.stats.late_ticks - late
-        skipped = self.clock.skipped
-        if new_ticks and (new_late / new_ticks > 0.05 or skipped):
+        new_skipped = self.clock.skipped - skipped
+        if new_ticks and (new_late / new_ticks > 0.05 or new_skipped):
             worst = max(list(self.stats.latencies_ms)[-new_ticks:] or [0.0])
             self.get_logger().warning(
                 f"realtime: the control loop fell behind at t = {self.sim.time:.2f} s: {new_late} of {new_ticks} "
-                f"ticks late in the last second, worst delay {worst:.1f} ms, {skipped} ticks skipped so far"
+                f"ticks late and {new_skipped} skipped in the last second, worst delay {worst:.1f} ms"
             )
-        self._late_window = (self.stats.ticks, self.stats.late_ticks, now)
+        self._late_window = (self.stats.ticks, self.stats.late_ticks, self.clock.skipped, now)
 
     def _realtime_tick(self) -> None:
         now = time.perf_counter()
