@@ -201,6 +201,32 @@ def test_resets_never_wedge_lockstep():
         assert not sim.fallen
 
 
+def test_lockstep_applies_no_torque_while_two_controllers_publish():
+    """A rogue publisher on /joint_torques: lockstep applies nothing (the physics waits, an
+    error in the log); once it is gone the one controller is asked again and the walk goes on."""
+    with ros_context() as (context, executor):
+        import rclpy
+
+        nodes = _start_stack(context, executor)
+        sim = nodes["sim"]
+        assert spin_until(executor, lambda: sim.time >= 0.5)
+        rogue = rclpy.create_node("rogue_controller", context=context)
+        executor.add_node(rogue)
+        publisher = rogue.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
+        timer = rogue.create_timer(0.001, lambda: publisher.publish(Float64MultiArray(data=[150.0, -150.0, 150.0, -150.0])))
+        assert spin_until(executor, lambda: sim._two_controllers, timeout=10.0)
+        frozen = sim.time
+        spin_for(executor, 1.0)
+        assert sim.time == frozen and not sim.fallen  # no torque applied, from either
+        assert sim.torques_rejected > 0
+        rogue.destroy_timer(timer)
+        rogue.destroy_publisher(publisher)
+        assert spin_until(executor, lambda: sim.time >= frozen + 1.0, timeout=20.0), f"stuck at {sim.time}"
+        assert not sim.fallen
+        executor.remove_node(rogue)
+        rogue.destroy_node()
+
+
 def _start_sim_and_policy(context, executor, **sim_params):
     nodes = {"policy": PolicyNode(context=context), "sim": SimNode(context=context, **sim_params)}
     for node in nodes.values():

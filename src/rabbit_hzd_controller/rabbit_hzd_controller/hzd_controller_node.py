@@ -84,6 +84,7 @@ class HZDControllerNode(Node):
         self._last_state: tuple[list[float], list[float]] | None = None
         self._waiting_state: JointState | None = None  # arrived before the gait was complete
         self._resets: int | None = None  # the last count seen on /sim/resets
+        self._answer_again: int | None = None  # ... and on /sim/answer_again
         self._restart = False  # a reset was announced: restart on the next state
         self._dropped: JointState | None = None  # the last state dropped as a re-send
         self.states_received = 0
@@ -98,6 +99,7 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
+        self.create_subscription(UInt32, topics.ANSWER_AGAIN, self._on_answer_again, qos.STATUS_QOS)
         self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
@@ -153,8 +155,21 @@ class HZDControllerNode(Node):
         if first:
             return  # the count in force when this node started: nothing to restart
         self._restart = True
-        self._last_stamp, self._last_state = -1, None  # answer the placed state even if it repeats
-        if self._dropped is not None:  # it came before this event and was taken for a re-send
+        self._forget_last_state()
+
+    def _on_answer_again(self, msg: UInt32) -> None:
+        first = self._answer_again is None
+        if msg.data == self._answer_again:
+            return
+        self._answer_again = msg.data
+        if not first:
+            self._forget_last_state()
+
+    def _forget_last_state(self) -> None:
+        """Answer the next state even if it repeats the last one answered; a state dropped
+        as a re-send before the event that asked for this is answered now."""
+        self._last_stamp, self._last_state = -1, None
+        if self._dropped is not None:
             msg_state, self._dropped = self._dropped, None
             self._on_state(msg_state)
 

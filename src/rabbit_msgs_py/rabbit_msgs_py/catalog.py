@@ -50,5 +50,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
         TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
+        TopicSpec(topics.ANSWER_AGAIN, UInt32, qos.STATUS_QOS),
     )
 }

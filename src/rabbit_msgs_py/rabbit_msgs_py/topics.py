@@ -43,6 +43,12 @@ start, +1 at every reset), published just before the placed state. The controlle
 on it and answers the placed state even when it equals the last state it answered: a
 reset is an event, not inferred from stamps or values."""
 
+ANSWER_AGAIN = "/sim/answer_again"
+"""std_msgs/UInt32 (transient local): a count sim_node raises when it needs the state it
+re-sends next to be answered although the controller answered it before (after it ignored
+replies while two controllers published). The controller forgets the state it answered
+last; unlike ``/sim/resets`` it does not restart."""
+
 RECORDER_PROGRESS = "/recorder/progress"
 """std_msgs/UInt64: how many ``/joint_states`` messages recorder_node has written, after
 each. In lockstep with ``wait_for_recorder`` sim_node publishes the next state only while

@@ -49,6 +49,7 @@ ensure_localhost_discovery()
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped  # noqa: E402
 from rcl_interfaces.msg import SetParametersResult  # noqa: E402
+from rclpy.event_handler import SubscriptionEventCallbacks  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
@@ -70,6 +71,8 @@ MODES = ("lockstep", "realtime")
 RECORDER_LAG = 4
 """Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
 keep 10: with at most 4 outstanding none is ever overwritten)."""
+PROBE_WINDOW = 0.3
+"""s: lockstep with two publishers on /joint_torques counts the replies to one state this long."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
@@ -197,7 +200,14 @@ class SimNode(Node):
         self._resets_pub = self.create_publisher(UInt32, topics.RESETS, qos.STATUS_QOS)
         self.placements = 0  # start + resets, published on /sim/resets
         self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
-        self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
+        self._controllers = 0  # publishers matched on /joint_torques
+        self._two_controllers = False  # lockstep: replies counted, not applied, until one controller is known
+        self._probe: dict = {}
+        self._answer_again_pub = self.create_publisher(UInt32, topics.ANSWER_AGAIN, qos.STATUS_QOS)
+        self._answer_again = 0
+        self._answer_again_pub.publish(UInt32(data=0))  # the count in force: a controller that starts now sees 0
+        self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS,
+                                 event_callbacks=SubscriptionEventCallbacks(matched=self._on_torque_sources))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
         self._recorded = 0  # /joint_states the recorder has written
@@ -299,6 +309,11 @@ class SimNode(Node):
                 if self._started and not (self._paused or self._halted) and self.clock.overdue() >= 0.0:
                     self._run_due_ticks()  # the tick waited for this reply
                 return
+            if self._two_controllers:
+                self.stats.torques_rejected += 1
+                self._probe["replies"] += 1
+                self._probe["torques"] = torques
+                return  # whose? lockstep applies no torque until one controller is known
             reply = self.lockstep.on_reply(torques, self._paused or self._recorder_missed_start())
             if reply is Reply.RESET:
                 self._place()
@@ -306,6 +321,56 @@ class SimNode(Node):
             elif reply is Reply.STEP:
                 self._advance(torques)
             # IGNORE: unsolicited (a second controller?), the supervisor timer warns; HOLD: kept until unpaused
+
+    def _on_torque_sources(self, status) -> None:
+        """Publishers on /joint_torques matched or gone (a QoS event, immediate). Lockstep
+        with more than one: apply no reply and probe — ask for the due state to be answered
+        again and count the replies (:meth:`_probe_verdict`). A controller that died may
+        still count as matched for a while (until its lease expires), so the count alone
+        does not stop the loop; two replies to one state do."""
+        with self._lock:
+            self._controllers = status.current_count
+            if self.settings.mode != "lockstep":
+                return
+            if self._controllers > 1 and not self._two_controllers:
+                self._two_controllers = True
+                self._start_probe()
+            elif self._controllers <= 1 and self._two_controllers:
+                self._two_controllers = False
+                self.get_logger().info(f"one publisher on {topics.JOINT_TORQUES} again: the physics goes on")
+                self._ask_again()
+
+    def _ask_again(self) -> None:
+        """Ask the controller(s) to answer the due state again, and re-send it."""
+        self._answer_again += 1
+        self._answer_again_pub.publish(UInt32(data=self._answer_again))
+        if self._started and self.lockstep.awaiting_reply:
+            self._publish_state()
+
+    def _start_probe(self) -> None:
+        self._probe = {"replies": 0, "torques": None, "since": time.perf_counter()}
+        self._ask_again()
+
+    def _probe_verdict(self) -> None:
+        """After PROBE_WINDOW of counting replies to the state asked again: one reply = one
+        live controller (the other was a stale match): go on with its reply; none = no
+        controller yet: go on waiting as usual; two or more = two live sources: stay
+        stopped, say so, and probe again."""
+        probe = self._probe
+        if time.perf_counter() - probe["since"] < PROBE_WINDOW:
+            return
+        if probe["replies"] >= 2:
+            self.get_logger().error(
+                f"{self._controllers} publishers on {topics.JOINT_TORQUES} and {probe['replies']} replies to one state: "
+                f"lockstep applies torques from exactly one controller; the physics waits at t = {self.sim.time:.3f} s "
+                "until only one is left", throttle_duration_sec=5.0)
+            self._start_probe()
+            return
+        self._two_controllers = False
+        if probe["torques"] is not None:
+            reply = self.lockstep.on_reply(probe["torques"], self._paused or self._recorder_missed_start())
+            if reply is Reply.STEP:
+                self._advance(probe["torques"])
 
     def _on_push(self, msg: Wrench) -> None:
         values = (msg.force.x, msg.force.z, msg.torque.y)
@@ -458,13 +523,10 @@ class SimNode(Node):
 
     def _lockstep_supervise(self) -> None:
         """Wall-clock timer (20 Hz): re-send the state when its reply is overdue."""
-        controllers = self.count_publishers(topics.JOINT_TORQUES)
-        if controllers > 1:
-            self.get_logger().warning(
-                f"{controllers} publishers on {topics.JOINT_TORQUES}: lockstep expects exactly one controller",
-                throttle_duration_sec=10.0,
-            )
         with self._lock:
+            if self._two_controllers:
+                self._probe_verdict()
+                return
             if self._started and self._recorder_missed_start():
                 self._publish_state()  # again, until the recorder has it (the controller answers a state once)
                 self.get_logger().info("lockstep: waiting for the recorder to receive the first state",
