@@ -214,7 +214,7 @@ def test_lockstep_applies_no_torque_while_two_controllers_publish():
         executor.add_node(rogue)
         publisher = rogue.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
         timer = rogue.create_timer(0.001, lambda: publisher.publish(Float64MultiArray(data=[150.0, -150.0, 150.0, -150.0])))
-        assert spin_until(executor, lambda: sim._two_controllers, timeout=10.0)
+        assert spin_until(executor, lambda: sim.probe.active, timeout=10.0)
         frozen = sim.time
         spin_for(executor, 1.0)
         assert sim.time == frozen and not sim.fallen  # no torque applied, from either

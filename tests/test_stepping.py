@@ -101,3 +101,34 @@ def test_statistics_count_late_ticks_and_latencies_and_stay_json():
     assert summary["latency_p50_ms"] == pytest.approx(0.5)
     stats.realtime_tick_due(1.1)  # unanswered for 99 ms: lost, dropped
     assert not stats.unanswered
+
+
+def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit():
+    from rabbit_sim.stepping import RecorderGate
+
+    off = RecorderGate(False)
+    assert not off.missed_start() and not off.lags(100)
+    gate = RecorderGate(True, max_lag=4)
+    assert gate.missed_start()
+    gate.recorded = 1
+    assert not gate.missed_start() and not gate.lags(5) and gate.lags(6)
+
+
+def test_source_probe_counts_replies_for_its_window():
+    from rabbit_sim.stepping import SourceProbe, Verdict
+
+    clock = FakeClock()
+    probe = SourceProbe(window=0.3, clock=clock)
+    probe.start()
+    probe.reply([1.0] * 4)
+    assert probe.verdict() is None  # the window is not over
+    clock.now += 0.31
+    assert probe.verdict() is Verdict.ONE and not probe.active and probe.torques == [1.0] * 4
+    probe.start()
+    probe.reply([1.0] * 4)
+    probe.reply([2.0] * 4)
+    clock.now += 0.31
+    assert probe.verdict() is Verdict.MANY and probe.active  # two live sources: go on probing
+    probe.start()
+    clock.now += 0.31
+    assert probe.verdict() is Verdict.NONE

@@ -65,7 +65,8 @@ from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
 from .model import load_model  # noqa: E402
 from .simulation import Simulator  # noqa: E402
-from .stepping import Lockstep, RealtimeClock, Reply, TickStatistics, Watchdog, WatchdogEvent  # noqa: E402
+from .stepping import (  # noqa: E402
+    Lockstep, RealtimeClock, RecorderGate, Reply, SourceProbe, TickStatistics, Verdict, Watchdog, WatchdogEvent)
 
 MODES = ("lockstep", "realtime")
 RECORDER_LAG = 4
@@ -201,8 +202,7 @@ class SimNode(Node):
         self.placements = 0  # start + resets, published on /sim/resets
         self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._controllers = 0  # publishers matched on /joint_torques
-        self._two_controllers = False  # lockstep: replies counted, not applied, until one controller is known
-        self._probe: dict = {}
+        self.probe = SourceProbe(PROBE_WINDOW)  # lockstep, two of them: replies counted, not applied
         self._answer_again_pub = self.create_publisher(UInt32, topics.ANSWER_AGAIN, qos.STATUS_QOS)
         self._answer_again = 0
         self._answer_again_pub.publish(UInt32(data=0))  # the count in force: a controller that starts now sees 0
@@ -210,8 +210,7 @@ class SimNode(Node):
                                  event_callbacks=SubscriptionEventCallbacks(matched=self._on_torque_sources))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
-        self._recorded = 0  # /joint_states the recorder has written
-        self._state_held_for_recorder = False
+        self.recorder = RecorderGate(self.settings.wait_for_recorder, RECORDER_LAG)
         if self.settings.wait_for_recorder:
             self.create_subscription(UInt64, topics.RECORDER_PROGRESS, self._on_recorder_progress, qos.STREAM_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
@@ -309,12 +308,11 @@ class SimNode(Node):
                 if self._started and not (self._paused or self._halted) and self.clock.overdue() >= 0.0:
                     self._run_due_ticks()  # the tick waited for this reply
                 return
-            if self._two_controllers:
+            if self.probe.active:
                 self.stats.torques_rejected += 1
-                self._probe["replies"] += 1
-                self._probe["torques"] = torques
+                self.probe.reply(torques)
                 return  # whose? lockstep applies no torque until one controller is known
-            reply = self.lockstep.on_reply(torques, self._paused or self._recorder_missed_start())
+            reply = self.lockstep.on_reply(torques, self._paused or self.recorder.missed_start())
             if reply is Reply.RESET:
                 self._place()
                 self.get_logger().info("robot back in the initial state at t = 0 s")
@@ -332,11 +330,10 @@ class SimNode(Node):
             self._controllers = status.current_count
             if self.settings.mode != "lockstep":
                 return
-            if self._controllers > 1 and not self._two_controllers:
-                self._two_controllers = True
+            if self._controllers > 1 and not self.probe.active:
                 self._start_probe()
-            elif self._controllers <= 1 and self._two_controllers:
-                self._two_controllers = False
+            elif self._controllers <= 1 and self.probe.active:
+                self.probe.active = False
                 self.get_logger().info(f"one publisher on {topics.JOINT_TORQUES} again: the physics goes on")
                 self._ask_again()
 
@@ -348,29 +345,23 @@ class SimNode(Node):
             self._publish_state()
 
     def _start_probe(self) -> None:
-        self._probe = {"replies": 0, "torques": None, "since": time.perf_counter()}
+        self.probe.start()
         self._ask_again()
 
     def _probe_verdict(self) -> None:
-        """After PROBE_WINDOW of counting replies to the state asked again: one reply = one
-        live controller (the other was a stale match): go on with its reply; none = no
-        controller yet: go on waiting as usual; two or more = two live sources: stay
-        stopped, say so, and probe again."""
-        probe = self._probe
-        if time.perf_counter() - probe["since"] < PROBE_WINDOW:
-            return
-        if probe["replies"] >= 2:
+        """One reply to the state asked again: go on with it; none: wait as usual; two or
+        more: two live sources, stay stopped, say so, probe again."""
+        verdict = self.probe.verdict()
+        if verdict is Verdict.MANY:
             self.get_logger().error(
-                f"{self._controllers} publishers on {topics.JOINT_TORQUES} and {probe['replies']} replies to one state: "
-                f"lockstep applies torques from exactly one controller; the physics waits at t = {self.sim.time:.3f} s "
-                "until only one is left", throttle_duration_sec=5.0)
+                f"{self._controllers} publishers on {topics.JOINT_TORQUES} and {self.probe.replies} replies to one "
+                f"state: lockstep applies torques from exactly one controller; the physics waits at "
+                f"t = {self.sim.time:.3f} s until only one is left", throttle_duration_sec=5.0)
             self._start_probe()
-            return
-        self._two_controllers = False
-        if probe["torques"] is not None:
-            reply = self.lockstep.on_reply(probe["torques"], self._paused or self._recorder_missed_start())
-            if reply is Reply.STEP:
-                self._advance(probe["torques"])
+        elif verdict is Verdict.ONE:
+            torques = self.probe.torques
+            if self.lockstep.on_reply(torques, self._paused or self.recorder.missed_start()) is Reply.STEP:
+                self._advance(torques)
 
     def _on_push(self, msg: Wrench) -> None:
         values = (msg.force.x, msg.force.z, msg.torque.y)
@@ -412,7 +403,7 @@ class SimNode(Node):
         with self._lock:
             self._paused = bool(request.data)
             if not self._paused and self.settings.mode == "lockstep":
-                held = None if self._recorder_missed_start() else self.lockstep.take_held()
+                held = None if self.recorder.missed_start() else self.lockstep.take_held()
                 if held is not None:
                     self._advance(held)
                 elif self.lockstep.awaiting_reply:
@@ -446,8 +437,8 @@ class SimNode(Node):
         """Lockstep: apply one reply, step, publish the next state (its reply is then due,
         unless the physics halted) — held while a recorder we wait for lags behind."""
         self._step(torques)
-        if self._recorder_lags():
-            self._state_held_for_recorder = True
+        if self.recorder.lags(self.stats.states_published):
+            self.recorder.state_held = True
             return
         self._send_next_state()
 
@@ -456,21 +447,14 @@ class SimNode(Node):
         if not self._halted:
             self.lockstep.published()
 
-    def _recorder_lags(self) -> bool:
-        return self.settings.wait_for_recorder and self.stats.states_published - self._recorded > RECORDER_LAG
-
-    def _recorder_missed_start(self) -> bool:
-        """Waiting for the recorder and it has not written the first state yet: the loop
-        does not step (the reply is held) until it has."""
-        return self.settings.wait_for_recorder and self._recorded == 0
-
     def _on_recorder_progress(self, msg: UInt64) -> None:
         with self._lock:
-            self._recorded = msg.data
-            if not self._paused and self.lockstep.held_torques is not None and not self._recorder_missed_start():
+            recorder = self.recorder
+            recorder.recorded = msg.data
+            if not self._paused and self.lockstep.held_torques is not None and not recorder.missed_start():
                 self._advance(self.lockstep.take_held())  # the first state is recorded: go
-            elif self._state_held_for_recorder and not self._recorder_lags():
-                self._state_held_for_recorder = False
+            elif recorder.state_held and not recorder.lags(self.stats.states_published):
+                recorder.state_held = False
                 self._send_next_state()
 
     def _publish_push_applied(self) -> None:
@@ -524,17 +508,18 @@ class SimNode(Node):
     def _lockstep_supervise(self) -> None:
         """Wall-clock timer (20 Hz): re-send the state when its reply is overdue."""
         with self._lock:
-            if self._two_controllers:
+            if self.probe.active:
                 self._probe_verdict()
                 return
-            if self._started and self._recorder_missed_start():
+            if self._started and self.recorder.missed_start():
                 self._publish_state()  # again, until the recorder has it (the controller answers a state once)
                 self.get_logger().info("lockstep: waiting for the recorder to receive the first state",
                                        throttle_duration_sec=5.0)
                 return
-            if self._state_held_for_recorder:
+            if self.recorder.state_held:
                 self.get_logger().warning(
-                    f"lockstep: waiting for the recorder ({self.stats.states_published - self._recorded} states behind)",
+                    f"lockstep: waiting for the recorder ({self.stats.states_published - self.recorder.recorded} "
+                    "states behind)",
                     throttle_duration_sec=5.0)
                 return
             waited = self.lockstep.resend_due(self._paused)

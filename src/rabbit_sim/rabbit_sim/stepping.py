@@ -226,3 +226,60 @@ class TickStatistics:
             "latency_p50_ms": _percentile(lat, 0.5),
             "latency_p99_ms": _percentile(lat, 0.99),
         }
+
+
+class RecorderGate:
+    """Lockstep flow control against a recorder (``/recorder/progress``): the loop does not
+    step until the recorder has the first state, and holds each next state while the
+    recorder is more than ``max_lag`` states behind (its subscriptions keep 10: with at most
+    4 outstanding none is ever overwritten). Disabled: never holds."""
+
+    def __init__(self, enabled: bool, max_lag: int = 4) -> None:
+        self.enabled, self.max_lag = enabled, max_lag
+        self.recorded = 0  # /joint_states the recorder has written
+        self.state_held = False  # a state waits for the recorder
+
+    def missed_start(self) -> bool:
+        """The recorder has not written the first state yet."""
+        return self.enabled and self.recorded == 0
+
+    def lags(self, published: int) -> bool:
+        """More than ``max_lag`` of the ``published`` states are not recorded yet."""
+        return self.enabled and published - self.recorded > self.max_lag
+
+
+class Verdict(Enum):
+    """What the replies to a state asked again say about the torque sources."""
+
+    ONE = "one"  # one live controller (another match was a dead one not expired yet)
+    NONE = "none"  # no reply: no controller answering yet
+    MANY = "many"  # two or more live sources: wait, probe again
+
+
+class SourceProbe:
+    """While two publishers match on /joint_torques (lockstep): the due state is asked again
+    and the replies are counted for ``window`` s; a reply is never applied before the
+    verdict."""
+
+    def __init__(self, window: float = 0.3, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.window, self.clock = window, clock
+        self.active = False
+        self.replies = 0
+        self.torques: list[float] | None = None
+        self.since = 0.0
+
+    def start(self) -> None:
+        self.active, self.replies, self.torques, self.since = True, 0, None, self.clock()
+
+    def reply(self, torques: list[float]) -> None:
+        self.replies += 1
+        self.torques = torques
+
+    def verdict(self) -> Verdict | None:
+        """None until the window is over; then ONE, NONE or MANY (the probe ends unless MANY)."""
+        if self.clock() - self.since < self.window:
+            return None
+        if self.replies >= 2:
+            return Verdict.MANY
+        self.active = False
+        return Verdict.ONE if self.replies == 1 else Verdict.NONE
