@@ -23,7 +23,7 @@ $(STAMP): requirements.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xm
 	touch $@
 
 demo: $(STAMP)
-	$(PY) scripts/run_stack.py --controller hzd --speed-schedule "0:0.8,10:1.1" --duration 20
+	$(PY) scripts/run_stack.py --controller classic --speed-schedule "0:0.8,10:1.1" --duration 20
 
 test: $(STAMP)
 	$(PY) -m pytest
