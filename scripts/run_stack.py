@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
                         help="classic policy: nearest gait or blend of the two around the speed")
     parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
-    parser.add_argument("--policy-file", default="", help="--controller rl: policy checkpoint (default: packaged)")
+    parser.add_argument("--policy-file", default="", help="--controller learned: policy checkpoint (default: packaged)")
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
