@@ -194,7 +194,7 @@ def test_blend_fades_out_within_its_phase(gait):
         q, _ = state_on_gait(gait.alpha, gait.speed, tau=tau)  # on the gait, at rest: only Kp terms
         dq = [0.0] * 7
         c = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp, blend_phase=0.2))
-        c._blend = (0.1, offsets)
+        c._blend = (0.1, offsets, (0.0,) * 4, 0.2)
         got, want = c.compute(q, dq), plain.compute(q, dq)
         assert c.tau == pytest.approx(tau, abs=1e-6)
         if blending:  # inside the blend: offset by kp * offset * w, w = smoothstep-down
@@ -205,3 +205,65 @@ def test_blend_fades_out_within_its_phase(gait):
         else:  # past it: the plain law, and the blend is dropped
             assert c._blend is None
             np.testing.assert_allclose(got, want)
+
+
+def _desired(c: HZDController, q, dq, eps: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """The desired outputs y_d and dy_d/dt (stance/swing order) the controller tracks at
+    (q, dq), read back from copies of it without saturation: with Kd = 0 the torques are
+    Kp (y_d - y); with Kd = 1 they grow by dy_d - dy."""
+    import copy
+
+    out = []
+    for kd in (0.0, 1.0):
+        probe = copy.deepcopy(c)
+        probe.kd = kd
+        probe.config = ControllerConfig(kp=probe.config.kp, torque_limit=1e9,
+                                        within_step_blend=probe.config.within_step_blend)
+        out.append(np.array(probe.compute(q, dq)))
+    kp = c.config.kp
+    stance = c.stance
+    y = np.array([q[3], q[4], q[5], q[6]] if stance == 0 else [q[5], q[6], q[3], q[4]])
+    dy = np.array([dq[3], dq[4], dq[5], dq[6]] if stance == 0 else [dq[5], dq[6], dq[3], dq[4]])
+    order = [0, 1, 2, 3] if stance == 0 else [2, 3, 0, 1]
+    u0, u1 = out[0][order], out[1][order]
+    return u0 / kp + y, (u1 - u0) + dy
+
+
+def test_apply_now_keeps_the_desired_outputs_and_their_rates_continuous():
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    library = GaitLibrary.load()
+    first, second, third = library.nearest(1.0), library.nearest(0.7), library.nearest(1.5)
+    q, dq = state_on_gait(first.alpha, 1.0, tau=0.3)
+    c = HZDController(first.alpha, 0.0, ControllerConfig(within_step_blend=0.2))
+    c.compute(q, dq)
+    before = _desired(c, q, dq)
+    c.apply_now(second.alpha, 10.0)
+    assert c.alpha == second.alpha and c.kd == 10.0
+    after = _desired(c, q, dq)
+    np.testing.assert_allclose(after[0], before[0], atol=1e-9)  # y_d continuous
+    np.testing.assert_allclose(after[1], before[1], atol=1e-6)  # dy_d/dt continuous
+    c.compute(q, dq)  # the blend starts at this state
+    # a second change in the middle of the blend starts from the blended outputs
+    q2, dq2 = state_on_gait(first.alpha, 1.0, tau=0.35)
+    mid = _desired(c, q2, dq2)
+    c.compute(q2, dq2)
+    c.apply_now(third.alpha)
+    np.testing.assert_allclose(_desired(c, q2, dq2)[0], mid[0], atol=1e-9)
+    np.testing.assert_allclose(_desired(c, q2, dq2)[1], mid[1], atol=1e-6)
+    # after the blend's phase the new gait's own outputs are tracked
+    plain = HZDController(third.alpha, 0.0)
+    q3, dq3 = state_on_gait(first.alpha, 1.0, tau=0.9)
+    c.compute(q2, dq2)
+    np.testing.assert_allclose(_desired(c, q3, dq3)[0], _desired(plain, q3, dq3)[0], atol=1e-9)
+
+
+def test_apply_now_rejects_bad_input_and_changes_nothing(gait):
+    c = HZDController(gait.alpha, gait.kd)
+    with pytest.raises(ValueError):
+        c.apply_now([float("nan")] * 24)
+    with pytest.raises(ValueError):
+        c.apply_now(gait.alpha, -1.0)
+    assert c.alpha == tuple(gait.alpha) and c.kd == gait.kd
+    with pytest.raises(ValueError):
+        ControllerConfig(within_step_blend=0.0)

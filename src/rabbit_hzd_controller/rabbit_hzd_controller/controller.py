@@ -30,7 +30,7 @@ from typing import Sequence
 import numpy as np
 
 from .alpha import N_ALPHA, OUTPUTS, alpha_matrix, impact_violation
-from .bezier import bezier
+from .bezier import bezier, bezier_derivative
 from .kinematics import LegGeometry, foot_from_hip
 from .phase import PhaseBounds, phase_bounds_from_alpha
 
@@ -72,6 +72,9 @@ class ControllerConfig:
         the old gait's would have been at that state and blend into the new gait's over this
         much phase (smoothstep; 0 = off, the default: the new gait's outputs at once, a
         jump of up to 0.5 rad between library gaits).
+    within_step_blend: a gait applied within a step (:meth:`HZDController.apply_now`, the
+        policy deciding every N ticks) always blends in this way, over this much phase, so
+        the desired outputs stay continuous (> 0).
     """
 
     kp: float = 3000.0
@@ -84,6 +87,7 @@ class ControllerConfig:
     knee_coefficient_range: tuple[float, float] = (-0.3, 1.9)
     max_kd: float = 300.0
     blend_phase: float = 0.0
+    within_step_blend: float = 0.2
 
     def __post_init__(self) -> None:
         for name in ("kp", "torque_limit", "min_step_length", "max_kd"):
@@ -94,6 +98,8 @@ class ControllerConfig:
             raise ValueError("ControllerConfig.touchdown_min_phase must be in (0, 1)")
         if not 0.0 <= self.blend_phase <= 1.0:
             raise ValueError("ControllerConfig.blend_phase must be in [0, 1]")
+        if not 0.0 < self.within_step_blend <= 1.0:
+            raise ValueError("ControllerConfig.within_step_blend must be in (0, 1]")
 
 
 @dataclass(frozen=True)
@@ -159,6 +165,21 @@ def infer_stance(q: Sequence[float], geometry: LegGeometry | None = None) -> Leg
     return Leg.LEFT if left[0] >= right[0] else Leg.RIGHT
 
 
+_BlendState = tuple[float, tuple[float, ...], tuple[float, ...], float]
+"""A blend in progress: (phase at its start, position offsets rad, rate offsets rad per
+unit phase, length in phase)."""
+
+
+def _blend_shape(r: float, length: float) -> tuple[float, float, float, float]:
+    """The blend's shape functions at ``r`` = (phase - start) / length, clamped to [0, 1]:
+    w = 1 - smoothstep(r) carries the position offsets (w(0) = 1, w'(0) = w(1) = w'(1) = 0),
+    h = length r (1 - r)^2 the rate offsets (h(0) = 0, dh/dphase(0) = 1, h(1) = h'(1) = 0);
+    returns (w, dw/dphase, h, dh/dphase)."""
+    r = 0.0 if r < 0.0 else 1.0 if r > 1.0 else r
+    u = 1.0 - r
+    return 1.0 - r * r * (3.0 - 2.0 * r), -6.0 * r * u / length, length * r * u * u, u * (1.0 - 3.0 * r)
+
+
 def _digest(alpha: np.ndarray, config: ControllerConfig) -> _Outputs:
     m = alpha_matrix(alpha)
     coeffs = tuple(tuple(float(v) for v in m[:, j]) for j in range(4))
@@ -181,7 +202,8 @@ class HZDController:
     with :meth:`set_alpha` becomes active at the next touchdown so the constraints stay
     continuous within a step. ``kd`` (N m s/rad) set with :meth:`set_kd` applies at once;
     :meth:`queue_kd` holds it to the next touchdown like alpha (a gait decided for the
-    next step, as the policy node and the learning environment use it).
+    next step, as the policy node and the learning environment use it). :meth:`apply_now`
+    makes a gait active within the step, its outputs blended in from the ones in force.
     """
 
     def __init__(
@@ -205,8 +227,10 @@ class HZDController:
         self.steps = 0
         self.tau = 0.0
         self.touchdown = False
-        self._replaced: _Outputs | None = None  # the gait a touchdown just replaced
-        self._blend: tuple[float, tuple[float, ...]] | None = None  # (phase at the switch, offsets rad)
+        self._replaced: _Outputs | None = None  # the gait a touchdown (or apply_now) just replaced
+        self._replaced_blend: _BlendState | None = None  # its blend then, if any
+        self._blend: _BlendState | None = None
+        self._blend_length = self.config.blend_phase  # of the next blend to start
 
     def set_alpha(self, alpha: Sequence[float]) -> None:
         """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``).
@@ -216,6 +240,23 @@ class HZDController:
         if isinstance(alpha, tuple) and alpha == in_force.alpha:
             return
         self._pending = _digest(validate_alpha(alpha, self.config), self.config)
+
+    def apply_now(self, alpha: Sequence[float], kd: float | None = None) -> None:
+        """Make ``alpha`` (and ``kd`` if given) active from the next tick, within the step:
+        the desired outputs start where the ones in force are at that state (a blend in
+        progress included) and blend into the new gait's over ``within_step_blend`` of
+        phase, so they stay continuous. Clears a queued gait. Raises ``ValueError`` (and
+        changes nothing) for a bad alpha or Kd."""
+        new_kd = None if kd is None else validate_kd(kd, self.config)
+        self._pending = None
+        if not (isinstance(alpha, tuple) and alpha == self._active.alpha):
+            digested = _digest(validate_alpha(alpha, self.config), self.config)
+            self._replaced, self._replaced_blend = self._active, self._blend
+            self._active = digested
+            self._blend_length = self.config.within_step_blend
+        if new_kd is not None:
+            self.kd = new_kd
+            self._pending_kd = None
 
     def set_kd(self, kd: float) -> None:
         """Set the derivative gain, effective at the next tick (raises ``ValueError``)."""
@@ -325,18 +366,15 @@ class HZDController:
                 dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
                 tq = kp * (yd - y) + kd * (dyd - dy)
                 torques.append(limit if tq > limit else -limit if tq < -limit else tq)
-        else:  # the same law on the blended outputs y_d + offset * w(tau)
-            length = cfg.blend_phase
-            r = (t - blend[0]) / length
+        else:  # the same law on the blended outputs y_d + c(tau) (see _blend_shape)
+            r = (t - blend[0]) / blend[3]
             if r >= 1.0:
                 self._blend = None
-            r = 0.0 if r < 0.0 else 1.0 if r > 1.0 else r
-            w = 1.0 - r * r * (3.0 - 2.0 * r)
-            dw = -6.0 * r * (1.0 - r) / length * dtau
-            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy, off in zip(
-                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk), blend[1]):
-                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w
-                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau + off * dw
+            w, dw, h, dh = _blend_shape(r, blend[3])
+            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy, off, rate in zip(
+                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk), blend[1], blend[2]):
+                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w + rate * h
+                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4 + off * dw + rate * dh) * dtau
                 tq = kp * (yd - y) + kd * (dyd - dy)
                 torques.append(limit if tq > limit else -limit if tq < -limit else tq)
         if self.stance is _LEFT:
@@ -344,24 +382,46 @@ class HZDController:
         return [torques[2], torques[3], torques[0], torques[1]]
 
     def _start_blend(self, tau: float, outputs: tuple[float, ...], p_hip: float) -> None:
-        """Right after a touchdown that changed the gait: the offsets (rad) from the new
-        gait's desired outputs to the replaced gait's at this state, blended out over
-        ``blend_phase`` of phase (see :class:`ControllerConfig`)."""
+        """Right after the gait changed (a touchdown with ``blend_phase``, or
+        :meth:`apply_now`): the offsets (rad) from the new gait's desired outputs to the
+        replaced ones at this state (a blend in progress included), blended out over the
+        blend length. Within a step (the replaced gait was not ended by a touchdown) the
+        rates are matched too (rad per unit of the new gait's phase), so y_d and dy_d/dt
+        are both continuous; after a touchdown only the positions are (the impact changed
+        the velocities anyway)."""
         old, self._replaced = self._replaced, None
+        old_blend, self._replaced_blend = self._replaced_blend, None
+        within_step = not self.touchdown
         s_old = (p_hip - old.p_plus) / old.span
         t_old = 0.0 if s_old < 0.0 else 1.0 if s_old > 1.0 else s_old
-        offsets = tuple(bezier(old_c, t_old) - bezier(new_c, tau)
-                        for old_c, new_c in zip(old.coeffs, self._active.coeffs))
-        self._blend = (tau, offsets)
+        if old_blend is None:
+            w = dw = h = dh = 0.0
+            old_offsets = old_rates = (0.0,) * 4
+        else:
+            w, dw, h, dh = _blend_shape((t_old - old_blend[0]) / old_blend[3], old_blend[3])
+            old_offsets, old_rates = old_blend[1], old_blend[2]
+        new = self._active
+        offsets = tuple(bezier(old_c, t_old) + off * w + rate * h - bezier(new_c, tau)
+                        for old_c, new_c, off, rate in zip(old.coeffs, new.coeffs, old_offsets, old_rates))
+        if within_step and 0.0 < s_old < 1.0:  # d/dtau_new = d/dtau_old * span_new / span_old
+            ratio = new.span / old.span
+            rates = tuple((bezier_derivative(old_c, t_old) + off * dw + rate * dh) * ratio
+                          - bezier_derivative(new_c, tau)
+                          for old_c, new_c, off, rate in zip(old.coeffs, new.coeffs, old_offsets, old_rates))
+        else:
+            rates = (0.0,) * 4
+        self._blend = (tau, offsets, rates, self._blend_length)
 
     def _switch_stance(self) -> None:
         self.stance = self.stance.other()
         self.steps += 1
         self.touchdown = True
         self._blend = None
+        self._replaced = self._replaced_blend = None  # an apply_now this very tick: the new gait at once
         if self._pending is not None:
             if self.config.blend_phase > 0.0 and self._pending.alpha != self._active.alpha:
                 self._replaced = self._active
+                self._blend_length = self.config.blend_phase
             self._active = self._pending
             self._pending = None
         if self._pending_kd is not None:

@@ -14,7 +14,10 @@ the ROS-free loop runs.
   answered then. (A stamp older than the last one also restarts it, for simulators that do
   not publish ``/sim/resets``.)
 * The first gait received becomes active at once; later ones (alpha and Kd alike) are
-  queued to the next touchdown, so the constraints stay continuous within a step.
+  queued to the next touchdown, so the constraints stay continuous within a step. With
+  ``gait_timing:=at_once`` (for a policy deciding every N ticks, ``policy_node``'s
+  ``decision_period``) they apply when they arrive instead, alpha blended in from the
+  outputs in force (``HZDController.apply_now``: continuous outputs).
 * Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
   violated) are rejected with a logged error; the last good gait stays in force.
 * A state identical to the last one answered (a lockstep re-send) is not answered twice;
@@ -61,17 +64,28 @@ CONTROLLER_PARAMS = {
     "max_kd": Param(_DEFAULTS.max_kd, "largest Kd accepted on /hzd/kd, N m s/rad, finite > 0", dynamic=True),
     "blend_phase": Param(_DEFAULTS.blend_phase, "blend a new gait in over this much phase after a touchdown "
                                                 "that brings it, in [0, 1] (0 = off)", dynamic=True),
+    "within_step_blend": Param(_DEFAULTS.within_step_blend, "gait_timing at_once: blend a new gait in over "
+                                                            "this much phase, in (0, 1]", dynamic=True),
+}
+GAIT_TIMINGS = ("next_step", "at_once")
+NODE_PARAMS = {
+    "gait_timing": Param("next_step", "when a new gait applies: next_step (queued to the next touchdown) or "
+                                      "at_once (blended in within the step; for policy_node decision_period > 0)"),
 }
 
 
 class HZDControllerNode(Node):
-    """Parameters: :data:`CONTROLLER_PARAMS` (``kp``, ``max_kd`` and ``blend_phase`` may
-    change at run time; the rest are read-only)."""
+    """Parameters: :data:`CONTROLLER_PARAMS` (``kp``, ``max_kd``, ``blend_phase`` and
+    ``within_step_blend`` may change at run time; the rest are read-only) and
+    :data:`NODE_PARAMS`."""
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context)
-        values = declare(self, CONTROLLER_PARAMS, overrides)
+        values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
+        self.gait_timing = values.pop("gait_timing")
         try:
+            if self.gait_timing not in GAIT_TIMINGS:
+                raise ValueError(f"gait_timing must be one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
             self.config = ControllerConfig(**values)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
@@ -132,7 +146,10 @@ class HZDControllerNode(Node):
             return
         self._alpha = alpha
         if self.controller is not None:
-            self.controller.set_alpha(alpha)
+            if self.gait_timing == "at_once":
+                self.controller.apply_now(tuple(alpha))
+            else:
+                self.controller.set_alpha(alpha)
         self._answer_waiting_state()
 
     def _on_kd(self, msg: Float64) -> None:
@@ -144,7 +161,10 @@ class HZDControllerNode(Node):
             return
         self._kd = kd
         if self.controller is not None:
-            self.controller.queue_kd(kd)
+            if self.gait_timing == "at_once":
+                self.controller.set_kd(kd)
+            else:
+                self.controller.queue_kd(kd)
         self._answer_waiting_state()
 
     def _on_resets(self, msg: UInt32) -> None:

@@ -22,6 +22,10 @@ next touchdown (the controller queues it). Parameters:
 * ``window``: longest averaging window (ticks, 1000).
 * ``max_command_step``: command rate limit, m/s per step (0.0 = none, the default): the
   policy sees a command that follows ``/cmd_speed`` by at most this much per step.
+* ``decision_period``: 0 (default) decides once per step as above; N > 0 decides every N
+  ticks of sim time (hip-speed stamps) on the moving average over the last
+  ``decision_window`` ticks, as the paper evaluates its network; the controller must then
+  apply gaits at once (``hzd_controller_node`` ``gait_timing:=at_once``).
 
 NaN/inf commands are rejected with an error; the last good command stays in force.
 """
@@ -48,7 +52,13 @@ from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E4
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
-from rabbit_policy.runtime.policies import GaitCommand, PolicyUnavailable, make_policy  # noqa: E402
+from rabbit_policy.runtime.policies import (  # noqa: E402
+    DEFAULT_DECISION_WINDOW,
+    GaitCommand,
+    PeriodicPolicy,
+    PolicyUnavailable,
+    make_policy,
+)
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow  # noqa: E402
 
 
@@ -70,6 +80,9 @@ POLICY_PARAMS = {
     "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1"),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)"),
+    "decision_period": Param(0, "0: decide once per step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, "
+                                "for a controller with gait_timing at_once"),
+    "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1"),
 }
 
 
@@ -92,7 +105,12 @@ class PolicyNode(Node):
             self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
                                       values["policy_file"] or None,
                                       finite("max_command_step", values["max_command_step"], 0.0))
-            self.window = SpeedWindow(values["window"])
+            self.decision_period = values["decision_period"]
+            if self.decision_period < 0:
+                raise ValueError(f"decision_period must be >= 0 ticks, got {self.decision_period}")
+            if self.decision_period:
+                self.policy = PeriodicPolicy(self.policy, self.decision_period, values["decision_window"])
+            self.window = SpeedWindow(values["decision_window"] if self.decision_period else values["window"])
             self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
         except (PolicyUnavailable, ValueError) as exc:
@@ -104,6 +122,7 @@ class PolicyNode(Node):
         self.last_observation: Observation | None = None
         self._pending_steps: list[int] = []
         self._previous_step: int | None = None  # stamp (ns) of the last touchdown decided on
+        self._next_decision: int | None = None  # decision_period > 0: stamp (ns) of the next decision
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
@@ -151,16 +170,25 @@ class PolicyNode(Node):
         newest = self.window.newest_stamp
         if newest is not None and stamp < newest:
             self._pending_steps.clear()  # simulation reset: old step events are void
-            self._previous_step = None
+            self._previous_step = self._next_decision = None
         try:
             self.window.add(stamp, msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
             self.get_logger().error(f"ignoring {topics.HIP_VELOCITY}: {exc}", throttle_duration_sec=1.0)
             return
-        if self._pending_steps and stamp >= self._pending_steps[0]:
+        if self.decision_period:
+            if self._next_decision is None:
+                self._next_decision = stamp + self.decision_period * 1_000_000
+            elif stamp >= self._next_decision:
+                self._decide(self.window.observation(self.desired_speed, stamp))
+                self._next_decision += self.decision_period * 1_000_000 * (
+                    1 + (stamp - self._next_decision) // (self.decision_period * 1_000_000))
+        elif self._pending_steps and stamp >= self._pending_steps[0]:
             self._flush_steps(stamp)
 
     def _on_step(self, msg: Header) -> None:
+        if self.decision_period:
+            return  # decisions come by sim time instead
         stamp = stamp_to_ns(msg.stamp)
         self._pending_steps.append(stamp)
         newest = self.window.newest_stamp

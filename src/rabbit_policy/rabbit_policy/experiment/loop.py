@@ -16,7 +16,9 @@ One tick (:meth:`ClosedLoop.tick`):
 4. at a touchdown the policy sees the window's observation over the step just ended and
    its gait (alpha, Kd) is queued for the next touchdown — as ``policy_node`` answers
    ``/hzd/step``. Without a policy the gait in force stays (a fixed gait; the learning
-   environment sets the gait itself between touchdowns).
+   environment sets the gait itself between touchdowns). A policy deciding every N ticks
+   (:class:`~rabbit_policy.runtime.policies.PeriodicPolicy`) instead sees the moving
+   average over its window every N ticks, and its gait applies at once, blended in.
 
 The robot starts at phase 0 of the starting gait, left stance, its hip moving at the
 scenario's first commanded speed (or ``start_speed``), as ``sim_node`` places it.
@@ -35,7 +37,7 @@ from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import GaitCommand, Policy
+from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import Simulator
@@ -80,7 +82,9 @@ class ClosedLoop:
         self.sim.schedule_pushes(scenario.pushes)
         self.observer = observer
         self.record_state = record_state
-        self.window = SpeedWindow(scenario.window) if (policy is not None or observe_speed) else None
+        self._period = decision_period(policy)
+        window = policy.decision_window if self._period else scenario.window
+        self.window = SpeedWindow(window) if (policy is not None or observe_speed) else None
         self._add_speed = None if self.window is None else self.window.add
         self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._stall_after = scenario.rules.stall_after
@@ -130,11 +134,14 @@ class ClosedLoop:
         """Command ``speed`` m/s from now on (the schedule's later changes still apply)."""
         self.desired_speed = float(speed)
 
-    def observation(self) -> Observation:
+    def observation(self, moving: bool = False) -> Observation:
         """The policy's observation over the last whole step (touchdown to touchdown; since
-        the start before the first)."""
+        the start before the first), or with ``moving`` the moving average over the last
+        window's ticks (a policy deciding every N ticks)."""
         if self.window is None:
             raise RuntimeError("this loop keeps no speed window (no policy, observe_speed=False)")
+        if moving:
+            return self.window.observation(self.desired_speed)
         return self.window.observation(self.desired_speed, since_ns=self._previous_touchdown_tick)
 
     def set_gait(self, command: GaitCommand) -> bool:
@@ -143,6 +150,15 @@ class ClosedLoop:
         try:
             self.controller.set_alpha(command.alpha)
             self.controller.queue_kd(command.kd)
+        except ValueError:
+            return False
+        return True
+
+    def apply_gait(self, command: GaitCommand) -> bool:
+        """Apply a gait at once, within the step, blended in (``HZDController.apply_now``);
+        False (and the gait in force stays) if the controller rejects it."""
+        try:
+            self.controller.apply_now(command.alpha, command.kd)
         except ValueError:
             return False
         return True
@@ -182,6 +198,8 @@ class ClosedLoop:
             self._add_speed(i, qvel[0], self.desired_speed)
         if self.observer is not None:
             self.observer(self, torques)
+        if self._period and (i + 1) % self._period == 0:
+            self._decide_now(t)
         stop = False
         if not (self._min_height < height < self._max_height and -self._max_pitch < pitch < self._max_pitch):
             if not self.fell:
@@ -201,11 +219,18 @@ class ClosedLoop:
         self.touchdowns.append(Touchdown(t, float(foot[0]), float(data.qpos[0])))
         self._last_touchdown_time = t
         self._previous_touchdown_tick, self._last_touchdown_tick = self._last_touchdown_tick, i
-        if self.policy is not None:
+        if self.policy is not None and not self._period:
             observation = self.observation()
             command = self.policy.act(observation)
             accepted = self.set_gait(command)
             self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))
+
+    def _decide_now(self, t: float) -> None:
+        """A periodic policy's decision: the moving average, the gait applied at once."""
+        observation = self.observation(moving=True)
+        command = self.policy.act(observation)
+        accepted = self.apply_gait(command)
+        self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))
 
     # -------------------------------------------------------------------- run
     def run(self, duration: float | None = None, stop_on_fall: bool = True, until_touchdown: bool = False,

@@ -256,8 +256,9 @@ def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
         result = walk(policy, Scenario(schedule=schedule, model=ModelOptions(problem.model_variant)), switch + horizon)
     except (ValueError, ZeroDivisionError, OverflowError):
         return Approach(problem.speed * horizon, None, True)
-    if result.failed:  # fell or stalled
-        return Approach(problem.speed * horizon, None, True)
+    if result.failed:  # fell or stalled: graded by how long it walked after the switch
+        walked = max(0.0, min(horizon, (result.fall_time or result.stall_time or 0.0) - switch))
+        return Approach(problem.speed * (2.0 * horizon - walked), None, True)
     shortfall, previous = 0.0, 0.0
     for start, end, speed in result.step_speeds():
         if start >= switch - 1e-9:
@@ -282,7 +283,7 @@ def _start_gait(speed: float) -> Gait:
 
 def approach_cost(x: np.ndarray, problem: GaitProblem) -> tuple[float, dict[float, Approach]]:
     """The ``approach_from`` term of the objective (``approach_weight`` per metre of
-    shortfall, a fall counts as never moving) and what each start speed measured."""
+    shortfall, a fall or stall costs more than any walk, less the longer it walked after the switch) and what each start speed measured."""
     results = {speed: approach(x, problem, _start_gait(speed)) for speed in problem.approach_from}
     return problem.approach_weight * sum(r.shortfall for r in results.values()), results
 

@@ -22,6 +22,10 @@ queued and takes effect at the next touchdown.
   Truncated after ``max_steps`` steps.
 * v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
   uniformly from the middle half of the episode.
+* ``decision_period`` N > 0: one environment step is N control ticks (1 ms) instead, the
+  observation the moving average over the last ``window`` ticks, and the action applies
+  at once, blended in (``HZDController.apply_now``), as the paper evaluates its network
+  at every simulation step. ``max_steps`` and the command change count environment steps.
 * Reset: the robot starts at phase 0 of the classic gait nearest v_d, on it.
   ``reset(options={"desired_speed": v0, "next_speed": v1})`` fixes the two commands
   (stratified sampling in ES, evaluation); otherwise both are drawn.
@@ -71,7 +75,10 @@ class RabbitHZDEnv(gym.Env):
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = 60, window: int = 1000, fall_penalty: float = -10.0,
-                 rules: StopRules = StopRules(), margin: float = 0.15) -> None:
+                 rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0) -> None:
+        if not (isinstance(decision_period, int) and decision_period >= 0):
+            raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {decision_period!r}")
+        self.decision_period = decision_period
         self.library = GaitLibrary.load()
         self.bounds = ActionBounds.from_library(self.library, margin)
         self.action_space = gym.spaces.Box(self.bounds.low.astype(np.float32), self.bounds.high.astype(np.float32),
@@ -91,7 +98,7 @@ class RabbitHZDEnv(gym.Env):
 
     # ------------------------------------------------------------------ helpers
     def _observation(self) -> np.ndarray:
-        obs = self._loop.observation()
+        obs = self._loop.observation(moving=bool(self.decision_period))
         clipped = np.clip(obs.as_tuple(), self.observation_space.low, self.observation_space.high)
         return clipped.astype(np.float32)
 
@@ -100,6 +107,13 @@ class RabbitHZDEnv(gym.Env):
         loop = self._loop
         loop.run(max_ticks=self._max_ticks, until_touchdown=True)
         return loop.fell, loop.stalled
+
+    def _run_decision(self) -> tuple[bool, bool]:
+        """One environment step: to the next touchdown, or N ticks with a decision period."""
+        if not self.decision_period:
+            return self._run_to_touchdown()
+        self._loop.run(max_ticks=self.decision_period)
+        return self._loop.fell, self._loop.stalled
 
     def _speed_option(self, options: dict, key: str, drawn: float) -> float:
         """``options[key]`` (m/s) if given and inside the speed range, else ``drawn``."""
@@ -137,10 +151,10 @@ class RabbitHZDEnv(gym.Env):
         action = np.clip(np.asarray(action, dtype=float), self.bounds.low, self.bounds.high)
         try:
             command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))
-            rejected = not self._loop.set_gait(command)
+            rejected = not (self._loop.apply_gait(command) if self.decision_period else self._loop.set_gait(command))
         except ValueError:
             rejected = True
-        fell, stalled = self._run_to_touchdown()
+        fell, stalled = self._run_decision()
         self._steps += 1
         obs = self._observation()
         mean_speed = float(obs[1])

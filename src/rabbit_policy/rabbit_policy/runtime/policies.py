@@ -92,6 +92,38 @@ class RateLimitedPolicy:
         return self.policy.act(Observation(self.command, observation.mean_speed, observation.mean_error + shift))
 
 
+DEFAULT_DECISION_WINDOW = 500
+"""Moving-average window (ticks, 1 ms) of a policy deciding every N ticks: about one step."""
+
+
+class PeriodicPolicy:
+    """A policy that decides every ``period`` control ticks (1 ms) instead of once per step,
+    as the paper evaluates its network at every simulation step: its observation is the
+    moving average over the last ``window`` ticks, and its gait applies at once, blended in
+    from the outputs in force (``HZDController.apply_now``: continuous outputs). The loop
+    that runs it reads ``decision_period``/``decision_window``; ``act`` is the inner
+    policy's."""
+
+    def __init__(self, policy: Policy, period: int, window: int = DEFAULT_DECISION_WINDOW) -> None:
+        if not (isinstance(period, int) and period >= 1):
+            raise ValueError(f"the decision period must be a whole number of ticks >= 1, got {period!r}")
+        if not (isinstance(window, int) and window >= 1):
+            raise ValueError(f"the decision window must be a whole number of ticks >= 1, got {window!r}")
+        self.policy = policy
+        self.decision_period = period
+        self.decision_window = window
+        self.name = f"{policy.name}@{period}ticks"
+
+    def act(self, observation: Observation) -> GaitCommand:
+        return self.policy.act(observation)
+
+
+def decision_period(policy: Policy | None) -> int:
+    """Ticks between a policy's decisions; 0: once per step, at the touchdown, for the next
+    step (every policy but a :class:`PeriodicPolicy`)."""
+    return getattr(policy, "decision_period", 0)
+
+
 def packaged_policy_file() -> Path:
     """Where the shipped learned policy lives (it may not exist yet)."""
     return Path(str(files("rabbit_policy") / "trained" / "hzd_rl_policy.pt"))
@@ -134,10 +166,14 @@ def controller_name(name: str) -> str:
 
 
 def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "nearest",
-                policy_file: str | Path | None = None, max_command_step: float = 0.0) -> Policy:
+                policy_file: str | Path | None = None, max_command_step: float = 0.0,
+                decision_period: int = 0) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on. ``max_command_step`` > 0 wraps it in a
-    :class:`RateLimitedPolicy` (m/s per step; 0: no limit)."""
+    :class:`RateLimitedPolicy` (m/s per step; 0: no limit); ``decision_period`` > 0 in a
+    :class:`PeriodicPolicy` (ticks; 0: once per step)."""
+    if decision_period:
+        return PeriodicPolicy(make_policy(kind, gait_dir, mode, policy_file, max_command_step), decision_period)
     if max_command_step:
         return RateLimitedPolicy(make_policy(kind, gait_dir, mode, policy_file), max_command_step)
     kind = controller_name(kind)
