@@ -89,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_sim.model import ModelOptions
 
     try:
-        policies = {"classic": make_policy("classic", args.gait_dir, "nearest"),
+        policies = {"classic": make_policy("classic", args.gait_dir),
                     "learned": make_policy("learned", policy_file=args.policy_file)}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

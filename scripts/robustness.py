@@ -28,9 +28,12 @@ def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controller", nargs="+", choices=("classic", "learned", "hzd", "rl"), default=["classic"])
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest")
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate")
     parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
     parser.add_argument("--max-command-step", type=float, default=0.0, help="command rate limit (m/s per step)")
+    parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
+                        help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
+                             "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
@@ -46,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         policies = {controller_name(c): make_policy(c, mode=args.library_mode, policy_file=args.policy_file,
-                                                            max_command_step=args.max_command_step)
+                                                            max_command_step=args.max_command_step,
+                                                            decision_period=args.decision_period)
                     for c in args.controller}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -49,10 +49,13 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
                         help='pushes on the torso, e.g. "5:60:0.1" (s, N, s)')
     parser.add_argument("--model", choices=("paper", "drives"), default="paper")
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic policy: nearest gait or blend of the two around the speed")
     parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
     parser.add_argument("--policy-file", default="", help="--controller learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--decision-period", type=int, default=-1, metavar="TICKS",
+                        help="-1: the policy's own (classic: every 20 ticks; learned: as trained; the default), 0: "
+                             "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
@@ -92,6 +95,7 @@ def main(argv: list[str] | None = None) -> int:
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
             model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir,
             policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
+            decision_period=args.decision_period,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
         )

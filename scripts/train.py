@@ -29,6 +29,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--iterations", "--generations", type=int, default=60, dest="iterations",
                         help="ES generations / PPO iterations in all (including resumed ones)")
     parser.add_argument("--max-steps", type=int, default=40, help="walking steps per training episode")
+    parser.add_argument("--decision-period", type=int, default=0, metavar="TICKS",
+                        help="0: one env step per walking step (the gait for the next step); N > 0: every N "
+                             "ticks, the gait applied at once (the policy then runs that way everywhere)")
+    parser.add_argument("--distribution", choices=("paper", "broad"), default="paper",
+                        help="episodes: the paper's (one command change) or broad (commands every 2-5 s, "
+                             "pushes, model errors, torque delays); rabbit_policy.learning.env.DISTRIBUTIONS")
     parser.add_argument("--checkpoint-every", type=int, default=5)
     parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
     parser.add_argument("--stop-when-passed", action="store_true")
@@ -54,6 +60,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if min(args.workers, args.iterations, args.max_steps, args.checkpoint_every) < 1 or args.eval_every < 0:
         parser.error("--workers, --iterations, --max-steps, --checkpoint-every must be >= 1, --eval-every >= 0")
+    if args.decision_period < 0:
+        parser.error("--decision-period must be >= 0 ticks")
     if args.envs is None:
         args.envs = 2 * args.workers
     return args
@@ -67,13 +75,15 @@ def main(argv: list[str] | None = None) -> int:
         from rabbit_policy.learning.es import ESConfig
 
         trainer = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
-                           max_steps=args.max_steps, seed=args.seed, workers=args.workers)
+                           max_steps=args.max_steps, seed=args.seed, workers=args.workers,
+                           decision_period=args.decision_period, distribution=args.distribution)
     else:
         from rabbit_policy.learning.ppo import PPOConfig
 
         trainer = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
                             lr=args.ppo_lr, init_log_std=args.init_log_std, target_kl=args.target_kl or None,
-                            gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed)
+                            gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed,
+                            decision_period=args.decision_period, distribution=args.distribution)
     return train(TrainingConfig(algo=args.algo, out=args.out, trainer=trainer, workers=args.workers,
                                 iterations=args.iterations, checkpoint_every=args.checkpoint_every,
                                 eval_every=args.eval_every, stop_when_passed=args.stop_when_passed,

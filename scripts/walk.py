@@ -67,11 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--torso-mass-scale", type=positive, default=1.0, help="factor on the torso mass and inertia")
     parser.add_argument("--torque-delay", type=non_negative, default=0.0, help="torque delay (s, whole ms)")
     parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="nearest",
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic: nearest gait or blend of the two around the command")
     parser.add_argument("--policy-file", default=None, help="learned: policy checkpoint (default: packaged)")
     parser.add_argument("--max-command-step", type=non_negative, default=0.0,
                         help="command rate limit (m/s per step; 0: none, the default)")
+    parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
+                        help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
+                             "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     return parser
@@ -112,7 +115,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     controller = controller_name(args.controller)
     try:
-        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step)
+        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step,
+                             args.decision_period)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

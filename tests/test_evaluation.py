@@ -219,3 +219,71 @@ def test_robustness_quick_parts_and_their_definitions():
         assert margin["first_failing_phases"]
     grid = rb.speed_grid(CLASSIC, config)
     assert [r["speed"] for r in grid["rows"]] == [0.75, 1.25]
+
+
+# ------------------------------------------------------------------ broad acceptance (checks 1-6)
+def _robust(grid_ok=True, changes_ok=True, sequences_ok=True, drives_error=0.01, delay_outcome="walked",
+            margins=((1.0, "forward", 20), (1.0, "backward", 12))) -> dict:
+    return {
+        "speed_grid": {"passed": 3 if grid_ok else 2, "total": 3, "worst_error": 0.02, "failed_speeds": [],
+                       "fell_or_stalled": []},
+        "transitions": {"passed": 2 if changes_ok else 1, "total": 2, "fell_or_stalled": 0,
+                        "pairs": [{"from": 0.8, "to": 1.4, "passed": changes_ok}, {"from": 1.4, "to": 0.8,
+                                                                                  "passed": True}]},
+        "random_sequences": {"passed": 100 if sequences_ok else 99, "total": 100},
+        "push_margins": [{"speed": v, "direction": d, "largest_survived_Ns": n, "capped": False}
+                         for v, d, n in margins],
+        "model_errors": {"rows": [
+            {"case": "drives", "speed": 1.0, "outcome": "walked", "error": drives_error},
+            {"case": "friction 0.3", "speed": 1.0, "outcome": "fell", "error": None},  # a probe: not judged
+            {"case": "torque delay 5 ms", "speed": 1.0, "outcome": delay_outcome, "error": None}]},
+    }
+
+
+def test_judge_applies_checks_1_to_6_as_the_issue_states_them():
+    from rabbit_policy.evaluation.acceptance import judge
+
+    classic = [{"speed": 1.0, "direction": "forward", "largest_survived_Ns": 16},
+               {"speed": 1.0, "direction": "backward", "largest_survived_Ns": 6}]
+    scenarios = [{"name": "s", "impulse_Ns": 8.0, "survived": True}]
+    stable = {"1.00": {"magnitudes": [0.5, 0.9]}}
+
+    def verdict(robust, **kw):
+        args = dict(classic_margins=classic, scenarios=scenarios, stability=stable, peak_torque=150.0, outputs=21)
+        return judge(robust, **{**args, **kw})
+
+    assert verdict(_robust())["passed"]
+    # 4: forward 20 >= classic's 16 (>= 15: not below it is enough); backward 12 >= 2 x 6
+    assert not verdict(_robust(margins=((1.0, "forward", 15), (1.0, "backward", 12))))["passed"]
+    assert verdict(_robust(margins=((1.0, "forward", 20), (1.0, "backward", 11))))["failed"] == ["4_pushes"]
+    assert verdict(_robust(), scenarios=[{"name": "s", "impulse_Ns": 8.0, "survived": False}])["failed"] == [
+        "4_pushes"]
+    assert verdict(_robust(grid_ok=False))["failed"] == ["1_speed_grid"]
+    assert verdict(_robust(changes_ok=False))["failed"] == ["2_transitions"]
+    assert verdict(_robust(sequences_ok=False))["failed"] == ["3_random_sequences"]
+    assert verdict(_robust(drives_error=0.06))["failed"] == ["5_model_errors"]
+    assert verdict(_robust(delay_outcome="fell"))["failed"] == ["5_model_errors"]
+    assert verdict(_robust(), stability={"1.00": {"magnitudes": [1.01]}})["failed"] == ["6_still_hzd"]
+    assert verdict(_robust(), stability={"1.00": {"error": "no cycle"}})["failed"] == ["6_still_hzd"]
+    assert verdict(_robust(), outputs=24)["failed"] == ["6_still_hzd"]
+    # a check without its inputs fails
+    assert set(judge({})["failed"]) == {"1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes",
+                                        "5_model_errors", "6_still_hzd"}
+
+
+@pytest.mark.slow
+def test_broad_acceptance_quick_runs_every_check_on_the_real_loop():
+    from rabbit_policy.evaluation.acceptance import broad_acceptance
+    from rabbit_policy.evaluation.robustness import RobustnessConfig
+
+    result = broad_acceptance(CLASSIC, make_policy("classic", mode="nearest", decision_period=0),
+                              RobustnessConfig.quick(), stability_samples=30)
+    assert set(result["checks"]) == {"1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes",
+                                     "5_model_errors", "6_still_hzd"}
+    assert result["checks"]["1_speed_grid"]["passed"]  # the calibrated library walks 0.75 and 1.25 m/s
+    scenarios = result["checks"]["4_pushes"]["detail"]["scenarios"]
+    assert len(scenarios) == 3 and all(s["impulse_Ns"] != 0 for s in scenarios)
+    drives = [r for r in result["checks"]["5_model_errors"]["detail"] if r["case"] == "drives"]
+    assert drives and drives[0]["error"] < -0.05  # no speed feedback: the drives model walks too slowly
+    assert not result["passed"]
+    assert result["checks"]["6_still_hzd"]["detail"]["outputs"] == 21

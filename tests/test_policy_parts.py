@@ -94,9 +94,17 @@ def test_alpha_outside_joint_waypoint_bounds_is_rejected():
 
 def test_policies():
     library = GaitLibrary.load()
-    policy = make_policy("classic", mode="interpolate")
-    assert isinstance(policy, LibraryPolicy)
+    from rabbit_policy.runtime.policies import CLASSIC_DECISION_PERIOD, PeriodicPolicy, decision_period
     from rabbit_policy.runtime.speed_window import Observation
+
+    policy = make_policy("classic", mode="interpolate", decision_period=0)
+    assert isinstance(policy, LibraryPolicy) and decision_period(policy) == 0
+    periodic = make_policy("classic")  # the default: calibrated interpolation, every 20 ticks
+    assert isinstance(periodic, PeriodicPolicy) and decision_period(periodic) == CLASSIC_DECISION_PERIOD
+    assert periodic.policy.mode == "interpolate"
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError):
+            make_policy("classic", decision_period=bad)
 
     command = policy.act(Observation(1.05, 0.9, 0.15))
     expected = library.interpolate(1.05)
@@ -155,7 +163,8 @@ def test_rate_limited_policy_moves_the_command_by_at_most_its_step():
     assert limited.name == "recorder+limit0.1"
     with pytest.raises(ValueError):
         RateLimitedPolicy(Recorder(), 0.0)
-    assert make_policy("classic", max_command_step=0.2).name == "classic/nearest+limit0.2"
+    assert make_policy("classic", "", "nearest", max_command_step=0.2, decision_period=0).name == \
+        "classic/nearest+limit0.2"
 
 
 def test_a_huge_command_logs_a_short_line():
@@ -163,3 +172,30 @@ def test_a_huge_command_logs_a_short_line():
 
     line = clamp_message(1e308, 0.7, 1.5, 1.5)
     assert "1e+308" in line and len(line) < 100
+
+
+def test_calibrated_interpolation_picks_the_blend_measured_to_walk_at_the_command():
+    from rabbit_policy.runtime.gait_library import Calibration
+
+    library = GaitLibrary.load()
+    assert library.calibration is not None  # shipped: interpolation.json beside the gaits
+    bare = GaitLibrary(library.gaits)
+    # a made-up calibration for three gaits: the first pair's middle blends fail, the
+    # second pair walks faster than its design speeds in the middle
+    three = GaitLibrary(library.gaits[:3])
+    lo, mid, hi = three.speeds
+    calibration = Calibration((((0.0, lo), (0.5, None), (1.0, mid)),
+                               ((0.0, mid), (0.5, hi + 0.2), (1.0, hi))))
+    calibrated = GaitLibrary(three.gaits, calibration)
+    # between the first two gaits only the failed middle would bracket: the nearest gait instead
+    between = 0.5 * (lo + mid)
+    assert calibrated.interpolate(between).alpha == three.nearest(between).alpha
+    # a speed the second pair's blends walk at: the blend by measured speed, not by design speed
+    target = hi + 0.1
+    chosen = calibrated.interpolate(min(target, hi))  # hi itself: its own gait (clamped)
+    assert chosen.alpha == three.gaits[-1].alpha
+    w = calibration.weight_for(1, mid + 0.5 * (hi - mid))
+    assert w is not None and 0.0 < w < 0.5 + 1e-9
+    assert bare.interpolate(1.05).info["weight"] == pytest.approx((1.05 - 1.0) / 0.1)
+    with pytest.raises(ValueError, match="covers"):
+        GaitLibrary(library.gaits[:2], calibration)

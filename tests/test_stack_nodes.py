@@ -41,7 +41,7 @@ def _recorder(store: list):
 
 
 def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
-    loop = ClosedLoop(Scenario.constant(speed), LibraryPolicy(GaitLibrary.load()))
+    loop = ClosedLoop(Scenario.constant(speed), LibraryPolicy(GaitLibrary.load(), "interpolate"))
     data = loop.data
     rows = [data.qpos.tolist() + data.qvel.tolist()]
     for _ in range(int(round(duration / 0.001))):
@@ -51,7 +51,9 @@ def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
 
 
 def test_lockstep_is_reproducible_and_matches_the_ros_free_loop():
-    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
+    # decisions once per step: they apply at the next touchdown, long after they are sent,
+    # so lockstep cannot depend on when they arrive (every N ticks it can: see docs)
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), decision_period=0)
     runs = []
     for _ in range(2):
         states: list = []
@@ -80,6 +82,17 @@ def test_stack_walks_and_cmd_speed_changes_the_speed():
     assert report.steps >= 18
     # the policy decided once at start and once per step
     assert nodes["policy_node"].decisions == pytest.approx(report.steps + 1, abs=2)
+
+
+def test_decisions_every_n_ticks_walk_through_the_stack_with_gaits_applied_at_once():
+    config = StackConfig(duration=6.0, schedule=((0.0, 1.0), (3.0, 1.2)), decision_period=50)
+    report, nodes = run_in_process(config)
+    assert report.completed and not report.fell and not report.stalled
+    assert nodes["hzd_controller_node"].gait_timing == "at_once"  # told by policy_node on /hzd/gait_timing
+    # about one decision per 50 ms of sim time (plus the one at start), not one per step
+    assert nodes["policy_node"].decisions == pytest.approx(6.0 / 0.05, abs=3)
+    assert report.steps < 20
+    assert nodes["hzd_controller_node"].rejected_gaits == 0
 
 
 def test_bad_speed_commands_are_clamped_or_rejected():

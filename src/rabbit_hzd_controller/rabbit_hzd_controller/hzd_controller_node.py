@@ -14,10 +14,11 @@ the ROS-free loop runs.
   answered then. (A stamp older than the last one also restarts it, for simulators that do
   not publish ``/sim/resets``.)
 * The first gait received becomes active at once; later ones (alpha and Kd alike) are
-  queued to the next touchdown, so the constraints stay continuous within a step. With
-  ``gait_timing:=at_once`` (for a policy deciding every N ticks, ``policy_node``'s
-  ``decision_period``) they apply when they arrive instead, alpha blended in from the
-  outputs in force (``HZDController.apply_now``: continuous outputs).
+  queued to the next touchdown, so the constraints stay continuous within a step. For a
+  policy deciding every N ticks (``policy_node`` ``decision_period``, or a learned policy
+  trained so) they apply when they arrive instead, alpha blended in from the outputs in
+  force (``HZDController.apply_now``: continuous outputs). Which of the two follows
+  ``/hzd/gait_timing`` (from the policy node) unless the ``gait_timing`` parameter forces it.
 * Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
   violated) are rejected with a logged error; the last good gait stays in force.
 * A state identical to the last one answered (a lockstep re-send) is not answered twice;
@@ -37,7 +38,7 @@ ensure_localhost_discovery()
 from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64, Float64MultiArray, Header, UInt32  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import (  # noqa: E402
@@ -69,8 +70,9 @@ CONTROLLER_PARAMS = {
 }
 GAIT_TIMINGS = ("next_step", "at_once")
 NODE_PARAMS = {
-    "gait_timing": Param("next_step", "when a new gait applies: next_step (queued to the next touchdown) or "
-                                      "at_once (blended in within the step; for policy_node decision_period > 0)"),
+    "gait_timing": Param("policy", "when a new gait applies: policy (as /hzd/gait_timing says; next_step until "
+                                   "it does), next_step (queued to the next touchdown) or at_once (blended in "
+                                   "within the step)"),
 }
 
 
@@ -82,10 +84,11 @@ class HZDControllerNode(Node):
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
-        self.gait_timing = values.pop("gait_timing")
+        self.follow_policy_timing = values.pop("gait_timing") == "policy"
+        self.gait_timing = "next_step" if self.follow_policy_timing else self.get_parameter("gait_timing").value
         try:
             if self.gait_timing not in GAIT_TIMINGS:
-                raise ValueError(f"gait_timing must be one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
+                raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
             self.config = ControllerConfig(**values)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
@@ -112,6 +115,7 @@ class HZDControllerNode(Node):
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
+        self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         self.create_subscription(UInt32, topics.ANSWER_AGAIN, self._on_answer_again, qos.STATUS_QOS)
         self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
@@ -151,6 +155,16 @@ class HZDControllerNode(Node):
             else:
                 self.controller.set_alpha(alpha)
         self._answer_waiting_state()
+
+    def _on_gait_timing(self, msg: String) -> None:
+        if not self.follow_policy_timing or msg.data == self.gait_timing:
+            return
+        if msg.data not in GAIT_TIMINGS:
+            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {msg.data!r}: not one of {GAIT_TIMINGS}; "
+                                    f"keeping {self.gait_timing}")
+            return
+        self.gait_timing = msg.data
+        self.get_logger().info(f"gaits apply {'when they arrive, blended in' if msg.data == 'at_once' else 'at the next touchdown'}")
 
     def _on_kd(self, msg: Float64) -> None:
         try:

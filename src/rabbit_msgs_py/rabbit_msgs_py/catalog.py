@@ -10,7 +10,7 @@ from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, UInt32
+from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, String, UInt32
 
 from . import qos, topics
 
@@ -45,6 +45,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.STEP, Header, qos.EVENT_QOS),
         TopicSpec(topics.ALPHA, Float64MultiArray, qos.GAIT_QOS),
         TopicSpec(topics.KD, Float64, qos.GAIT_QOS),
+        TopicSpec(topics.GAIT_TIMING, String, qos.GAIT_QOS),
         TopicSpec(topics.CMD_SPEED, Float64, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH, Wrench, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),

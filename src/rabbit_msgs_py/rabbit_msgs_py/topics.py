@@ -16,6 +16,11 @@ ALPHA = "/hzd/alpha"
 """std_msgs/Float64MultiArray, 6 x 4 Bezier coefficients (rad), see conversions."""
 KD = "/hzd/kd"
 """std_msgs/Float64, derivative gain (N m s/rad)."""
+GAIT_TIMING = "/hzd/gait_timing"
+"""std_msgs/String (transient local), published by the policy node: how its gaits are
+meant to apply, ``next_step`` (decided once per step, for the next one) or ``at_once``
+(decided every N ticks, applied when they arrive, blended in). The controller follows it
+unless its ``gait_timing`` parameter says otherwise."""
 CMD_SPEED = "/cmd_speed"
 """std_msgs/Float64, desired forward speed (m/s)."""
 PUSH = "/push"

@@ -22,10 +22,11 @@ next touchdown (the controller queues it). Parameters:
 * ``window``: longest averaging window (ticks, 1000).
 * ``max_command_step``: command rate limit, m/s per step (0.0 = none, the default): the
   policy sees a command that follows ``/cmd_speed`` by at most this much per step.
-* ``decision_period``: 0 (default) decides once per step as above; N > 0 decides every N
-  ticks of sim time (hip-speed stamps) on the moving average over the last
-  ``decision_window`` ticks, as the paper evaluates its network; the controller must then
-  apply gaits at once (``hzd_controller_node`` ``gait_timing:=at_once``).
+* ``decision_period``: 0 (default) decides as the policy was made to: once per step as
+  above, or every N ticks for a learned policy trained so; N > 0 decides every N ticks of
+  sim time (hip-speed stamps) on the moving average over the last step's duration (at most
+  ``decision_window`` ticks), as the paper evaluates its network. ``/hzd/gait_timing``
+  tells the controller which (``at_once`` for periodic decisions).
 
 NaN/inf commands are rejected with an error; the last good command stays in force.
 """
@@ -43,7 +44,7 @@ from geometry_msgs.msg import TwistStamped  # noqa: E402
 from rcl_interfaces.msg import SetParametersResult  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64, Float64MultiArray, Header  # noqa: E402
+from std_msgs.msg import Float64, Float64MultiArray, Header, String  # noqa: E402
 
 from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
 from rabbit_msgs_py import qos, topics  # noqa: E402
@@ -55,8 +56,8 @@ from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 from rabbit_policy.runtime.policies import (  # noqa: E402
     DEFAULT_DECISION_WINDOW,
     GaitCommand,
-    PeriodicPolicy,
     PolicyUnavailable,
+    decision_period,
     make_policy,
 )
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow  # noqa: E402
@@ -71,7 +72,7 @@ def clamp_speed(value: float, low: float, high: float) -> float:
 
 POLICY_PARAMS = {
     "policy": Param("learned", "learned (the HZD-RL network) or classic (the HZD gait library; alias library)"),
-    "library_mode": Param("nearest", "classic: nearest gait, or interpolate between the two around the command"),
+    "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) or nearest gait"),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
@@ -80,8 +81,8 @@ POLICY_PARAMS = {
     "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1"),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)"),
-    "decision_period": Param(0, "0: decide once per step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, "
-                                "for a controller with gait_timing at_once"),
+    "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
+                                 "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied at once"),
     "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1"),
 }
 
@@ -104,12 +105,14 @@ class PolicyNode(Node):
                 raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
             self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
                                       values["policy_file"] or None,
-                                      finite("max_command_step", values["max_command_step"], 0.0))
-            self.decision_period = values["decision_period"]
-            if self.decision_period < 0:
-                raise ValueError(f"decision_period must be >= 0 ticks, got {self.decision_period}")
-            if self.decision_period:
-                self.policy = PeriodicPolicy(self.policy, self.decision_period, values["decision_window"])
+                                      finite("max_command_step", values["max_command_step"], 0.0),
+                                      None if values["decision_period"] == -1 else max(values["decision_period"], 0))
+            if values["decision_period"] < -1:
+                raise ValueError(f"decision_period must be -1 (the policy's own), 0 or N > 0 ticks, "
+                                 f"got {values['decision_period']}")
+            if values["decision_window"] < 1:
+                raise ValueError(f"decision_window must be >= 1 tick, got {values['decision_window']}")
+            self.decision_period = decision_period(self.policy)
             self.window = SpeedWindow(values["decision_window"] if self.decision_period else values["window"])
             self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
@@ -123,9 +126,13 @@ class PolicyNode(Node):
         self._pending_steps: list[int] = []
         self._previous_step: int | None = None  # stamp (ns) of the last touchdown decided on
         self._next_decision: int | None = None  # decision_period > 0: stamp (ns) of the next decision
+        self._last_step: int | None = None  # ... the last touchdown's stamp (ns)
+        self._step_duration: int | None = None  # ... and the last whole step's duration (ns): the average's span
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
+        self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
+        self._timing_pub.publish(String(data="at_once" if self.decision_period else "next_step"))
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
@@ -170,7 +177,7 @@ class PolicyNode(Node):
         newest = self.window.newest_stamp
         if newest is not None and stamp < newest:
             self._pending_steps.clear()  # simulation reset: old step events are void
-            self._previous_step = self._next_decision = None
+            self._previous_step = self._next_decision = self._last_step = self._step_duration = None
         try:
             self.window.add(stamp, msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
@@ -180,15 +187,20 @@ class PolicyNode(Node):
             if self._next_decision is None:
                 self._next_decision = stamp + self.decision_period * 1_000_000
             elif stamp >= self._next_decision:
-                self._decide(self.window.observation(self.desired_speed, stamp))
+                since = None if self._step_duration is None else stamp - self._step_duration
+                self._decide(self.window.observation(self.desired_speed, stamp, since))
                 self._next_decision += self.decision_period * 1_000_000 * (
                     1 + (stamp - self._next_decision) // (self.decision_period * 1_000_000))
         elif self._pending_steps and stamp >= self._pending_steps[0]:
             self._flush_steps(stamp)
 
     def _on_step(self, msg: Header) -> None:
-        if self.decision_period:
-            return  # decisions come by sim time instead
+        if self.decision_period:  # decisions come by sim time; the steps set the averaging span
+            stamp = stamp_to_ns(msg.stamp)
+            if self._last_step is not None and stamp > self._last_step:
+                self._step_duration = stamp - self._last_step
+            self._last_step = stamp
+            return
         stamp = stamp_to_ns(msg.stamp)
         self._pending_steps.append(stamp)
         newest = self.window.newest_stamp

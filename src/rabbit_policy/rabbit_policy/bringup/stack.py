@@ -63,16 +63,20 @@ NODE_MODULES = {
 
 @dataclass(frozen=True)
 class StackConfig:
-    """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0."""
+    """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0.
+    ``decision_period``: -1 = the policy's own (classic: every 20 ticks; learned: as
+    trained), 0 = once per step, N > 0 = every N ticks, the controller applying each gait at
+    once (told so on ``/hzd/gait_timing``)."""
 
     duration: float
     schedule: tuple[tuple[float, float], ...]
     controller: str = "classic"
     mode: str = "lockstep"
     model: str = "paper"
-    library_mode: str = "nearest"
+    library_mode: str = "interpolate"
     gait_dir: str = ""
     policy_file: str = ""
+    decision_period: int = -1
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
     stats_file: str = ""
@@ -87,6 +91,9 @@ class StackConfig:
             raise ValueError("duration must be > 0 s")
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
+        if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
+            raise ValueError(f"decision_period must be -1 (the policy's own), 0 or a whole number of ticks, "
+                             f"got {self.decision_period!r}")
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
         """The ROS parameters of each node for this run (the recorder only if recording)."""
@@ -97,6 +104,7 @@ class StackConfig:
                 "gait_dir": self.gait_dir,
                 "policy_file": self.policy_file,
                 "initial_speed": self.schedule[0][1],
+                "decision_period": self.decision_period,
             },
             "hzd_controller_node": {},
             "sim_node": {

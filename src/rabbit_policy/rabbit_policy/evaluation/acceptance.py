@@ -103,3 +103,155 @@ def acceptance_rank(result: dict) -> tuple[int, float]:
     """Sort key, lower is better: failed checks, then the summed errors (constant-speed
     |error| in m/s + reach times as a fraction of the segment)."""
     return result["failures"], result["total_error"]
+
+
+# ====================================================================== the broad acceptance
+# The learning issue's checks 1-6 for a shipped learned policy, judged on the broad evaluation
+# (:mod:`.robustness`), the paper's push scenarios and the Poincaré analysis.
+
+@dataclass(frozen=True)
+class BroadCriteria:
+    """Checks 1-6 (speeds m/s, impulses N s, torques N m; see :func:`judge`).
+
+    1. every grid speed walks without fall or stall, last-half mean within the grid tolerance;
+    2. every ordered change between the transition speeds at every phase: no fall or stall,
+       the new speed reached within ``reach_within`` s;
+    3. every random command sequence: no fall or stall;
+    4. push margins at every speed and direction: >= ``push_factor`` x classic's where
+       classic's is below ``push_threshold``, >= classic's elsewhere; and the paper's three
+       push scenarios at ``scenario_speed`` with magnitudes beyond classic's margin survived;
+    5. model errors: ``drives``, foot friction down to 0.4 and torso mass +-15 % within
+       ``model_tolerance``; 3 and 5 ms torque delays walk (the rest are probes, reported);
+    6. still HZD: every Poincaré |lambda| < 1 at the analysed speeds, peak torque within
+       ``torque_limit``, the outputs the paper's (20 free Bezier coefficients + Kd)."""
+
+    push_factor: float = 2.0
+    push_threshold: float = 15.0
+    model_tolerance: float = 0.05
+    judged_models: tuple[str, ...] = ("drives", "friction 0.5", "friction 0.4", "torso mass -15 %",
+                                      "torso mass +15 %")
+    delays_that_must_walk: tuple[str, ...] = ("torque delay 3 ms", "torque delay 5 ms")
+    torque_limit: float = 150.0
+
+
+def _push_verdicts(margins: list[dict], classic: list[dict] | None, criteria: BroadCriteria) -> list[dict]:
+    reference = {(m["speed"], m["direction"]): m["largest_survived_Ns"] for m in (classic or [])}
+    rows = []
+    for m in margins:
+        base = reference.get((m["speed"], m["direction"]))
+        if base is None:
+            need = None
+        else:
+            need = criteria.push_factor * base if base < criteria.push_threshold else base
+        rows.append({"speed": m["speed"], "direction": m["direction"], "survived_Ns": m["largest_survived_Ns"],
+                     "classic_Ns": base, "required_Ns": need,  # reaching the sweep's cap passes: no more measured
+                     "passed": need is not None and (m["largest_survived_Ns"] >= need or m.get("capped", False))})
+    return rows
+
+
+def judge(robust: dict, classic_margins: list[dict] | None = None, scenarios: list[dict] | None = None,
+          stability: dict | None = None, peak_torque: float | None = None, outputs: int | None = None,
+          criteria: BroadCriteria = BroadCriteria()) -> dict:
+    """Verdicts of checks 1-6 from measured results (pure): ``robust`` = :func:`.robustness.robustness`
+    of the policy, ``classic_margins`` = classic HZD's push margins (the reference of 4),
+    ``scenarios`` = rows ``{"name", "impulse_Ns", "survived"}`` of the paper's scenarios,
+    ``stability`` = ``{speed: {"magnitudes": [...]} or {"error": ...}}`` (|lambda| per eigenvalue),
+    ``peak_torque`` (N m) over the evaluation, ``outputs`` = the policy's output count (21:
+    20 free coefficients + Kd). A check without its inputs fails, saying so."""
+    checks: dict[str, dict] = {}
+    grid = robust.get("speed_grid")
+    checks["1_speed_grid"] = {"passed": bool(grid) and grid["passed"] == grid["total"],
+                              "detail": grid and {k: grid[k] for k in ("passed", "total", "worst_error",
+                                                                       "failed_speeds", "fell_or_stalled")}}
+    changes = robust.get("transitions")
+    checks["2_transitions"] = {"passed": bool(changes) and changes["passed"] == changes["total"],
+                               "detail": changes and {"passed": changes["passed"], "total": changes["total"],
+                                                      "fell_or_stalled": changes["fell_or_stalled"],
+                                                      "failed": [[p["from"], p["to"]] for p in changes["pairs"]
+                                                                 if not p["passed"]]}}
+    sequences = robust.get("random_sequences")
+    checks["3_random_sequences"] = {"passed": bool(sequences) and sequences["passed"] == sequences["total"],
+                                    "detail": sequences and {"passed": sequences["passed"],
+                                                             "total": sequences["total"]}}
+    margins = _push_verdicts(robust.get("push_margins") or [], classic_margins, criteria)
+    scenario_ok = bool(scenarios) and all(s["survived"] for s in scenarios)
+    checks["4_pushes"] = {"passed": bool(margins) and all(m["passed"] for m in margins) and scenario_ok,
+                          "detail": {"margins": margins, "scenarios": scenarios}}
+    models = {(r["case"], r["speed"]): r for r in (robust.get("model_errors") or {}).get("rows", [])}
+    judged = [r for (case, _), r in models.items() if case in criteria.judged_models]
+    delays = [r for (case, _), r in models.items() if case in criteria.delays_that_must_walk]
+    model_ok = bool(judged) and bool(delays) and all(
+        r["error"] is not None and abs(r["error"]) <= criteria.model_tolerance for r in judged) and all(
+        r["outcome"] == "walked" for r in delays)
+    checks["5_model_errors"] = {"passed": model_ok, "detail": [
+        {"case": r["case"], "speed": r["speed"], "outcome": r["outcome"], "error": r["error"],
+         "judged": r in judged or r in delays} for r in models.values()]}
+    moduli = {speed: (a.get("magnitudes") or [None]) for speed, a in (stability or {}).items()}
+    stable = bool(moduli) and all(None not in m and max(m) < 1.0 for m in moduli.values())
+    torque_ok = peak_torque is not None and peak_torque <= criteria.torque_limit + 1e-9
+    checks["6_still_hzd"] = {"passed": stable and torque_ok and outputs == 21,
+                             "detail": {"largest_moduli": {s: (None if None in m else max(m)) for s, m in moduli.items()},
+                                        "peak_torque_Nm": peak_torque, "outputs": outputs}}
+    return {"checks": checks, "passed": all(c["passed"] for c in checks.values()),
+            "failed": [name for name, c in checks.items() if not c["passed"]]}
+
+
+def paper_scenarios(classic_margins: list[dict], speed: float = 1.0, beyond: float = 2.0):
+    """The paper's three push scenarios (pushes at 2, 4 and 6 s, 0.1 s each) at ``speed``,
+    with magnitudes ``beyond`` N s past classic HZD's margin there: a small forward and a
+    small backward push at classic's forward / backward margin + ``beyond``, and a large
+    backward one at twice that."""
+    from rabbit_policy.evaluation.push_recovery import PushScenario
+
+    margin = {m["direction"]: m["largest_survived_Ns"] for m in classic_margins if m["speed"] == speed}
+    forward = margin.get("forward", 0) + beyond
+    backward = margin.get("backward", 0) + beyond
+    return (PushScenario("forward_beyond_classic", forward / 0.1),
+            PushScenario("backward_beyond_classic", -backward / 0.1),
+            PushScenario("large_backward_beyond_classic", -2.0 * backward / 0.1))
+
+
+def _scenario_job(job: tuple) -> dict:
+    from rabbit_policy.evaluation.push_recovery import push_trial
+
+    policy, speed, scenario = job
+    result = push_trial(policy, speed, scenario)
+    return {"name": scenario.name, "impulse_Ns": round(scenario.impulse, 3), "survived": not result.failed,
+            "peak_torque": result.peak_torque}
+
+
+def policy_outputs(policy: Policy) -> int:
+    """How many numbers the policy decides: free Bezier coefficients (the impact equalities
+    hold) + Kd; raises ``ValueError`` if its alpha breaks the equalities."""
+    from rabbit_hzd_controller.alpha import reduce_alpha
+    from rabbit_policy.runtime.speed_window import Observation
+
+    command = policy.act(Observation(1.0, 1.0, 0.0))
+    return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
+
+
+def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: BroadCriteria = BroadCriteria(),
+                     stability_samples: int = 400, map_fn: Callable[[Callable, Iterable], Iterable] = map,
+                     log: Callable[[str], None] = lambda _message: None) -> dict:
+    """Run everything checks 1-6 need for ``policy`` (with ``classic`` as the push
+    reference) and :func:`judge` it. ``config``: a :class:`.robustness.RobustnessConfig`
+    (default: the full one; ``RobustnessConfig.quick()`` for the fast subset)."""
+    from rabbit_policy.evaluation.experiments import _stability_job
+    from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
+
+    config = config or RobustnessConfig()
+    robust = robustness(policy, config, map_fn, log)
+    log(f"{classic.name}: push margins (the reference)")
+    classic_margins = push_margins(classic, config, map_fn)
+    speed = 1.0 if 1.0 in config.push_speeds else config.push_speeds[0]
+    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
+    log(f"{policy.name}: Poincaré analysis")
+    speeds = (0.7, 1.0, 1.3) if stability_samples >= 100 else (1.0,)
+    analyses = list(map_fn(_stability_job, [(policy, v, True, stability_samples, config.model_errors[0].model)
+                                            for v in speeds]))
+    stability = {f"{v:.2f}": a for v, a in zip(speeds, analyses)}
+    peak = max(s["peak_torque"] for s in scenarios)
+    verdict = judge(robust, classic_margins, [{k: s[k] for k in ("name", "impulse_Ns", "survived")} for s in scenarios],
+                    stability, peak, policy_outputs(policy), criteria)
+    return {"policy": policy.name, **verdict, "robustness": robust, "classic_push_margins": classic_margins,
+            "stability": stability, "config": config.to_dict()}

@@ -101,7 +101,7 @@ class RobustnessConfig:
         return cls(grid_speeds=(0.75, 1.25), grid_duration=8.0, transition_speeds=(0.8, 1.4),
                    change_phases=(0.0, 0.5), transition_settle=3.0, random_episodes=2, random_duration=10.0,
                    push_speeds=(1.0,), push_phases=(0.0, 0.5), max_impulse=6, model_speeds=(1.0,),
-                   model_duration=8.0, model_errors=(MODEL_ERRORS[1], MODEL_ERRORS[3]))
+                   model_duration=8.0, model_errors=(MODEL_ERRORS[1], MODEL_ERRORS[3], MODEL_ERRORS[9]))
 
     def to_dict(self) -> dict:
         return {**{k: v for k, v in self.__dict__.items() if k != "model_errors"},
@@ -115,15 +115,16 @@ def _outcome(result) -> str:
 
 
 def phase_times(policy: Policy, speed: float, after: float, phases: Iterable[float],
-                model: ModelOptions = ModelOptions()) -> list[float]:
+                model: ModelOptions = ModelOptions()) -> list[float] | None:
     """Sim times at the given phases (fractions of the step's duration) of the first whole
     step that starts at or after ``after`` s, walking at ``speed`` with no disturbance (the
-    walk is identical up to any later change, so these times place one exactly)."""
+    walk is identical up to any later change, so these times place one exactly); None if
+    the policy does not walk that long at ``speed`` (it fell or stalled)."""
     result = walk(policy, Scenario.constant(speed, model=model), after + 3.0)
     for start, end, _ in result.step_speeds():
         if start >= after - 1e-9:
             return [start + phase * (end - start) for phase in phases]
-    raise RuntimeError(f"no whole step after {after} s at {speed} m/s ({_outcome(result)})")
+    return None
 
 
 # ------------------------------------------------------------------ speed grid
@@ -159,8 +160,12 @@ def transitions(policy: Policy, config: RobustnessConfig, map_fn: MapFn = map) -
     starts = {a: phase_times(policy, a, config.transition_settle, config.change_phases)
               for a in config.transition_speeds}
     jobs = [(policy, a, b, t, phase, config) for a in config.transition_speeds for b in config.transition_speeds
-            if a != b for t, phase in zip(starts[a], config.change_phases)]
+            if a != b and starts[a] is not None for t, phase in zip(starts[a], config.change_phases)]
     rows = list(map_fn(_transition_job, jobs))
+    rows += [{"from": a, "to": b, "phase": phase, "change_time": None, "outcome": "start failed",
+              "reach_time": None, "passed": False}  # the policy does not even walk at a
+             for a in config.transition_speeds if starts[a] is None
+             for b in config.transition_speeds if a != b for phase in config.change_phases]
     pairs = {}
     for row in rows:
         pair = pairs.setdefault((row["from"], row["to"]), {"from": row["from"], "to": row["to"], "passed": True,
@@ -214,6 +219,10 @@ def push_margin(policy: Policy, speed: float, direction: int, config: Robustness
     -1 backward); the phases that failed first."""
     times = phase_times(policy, speed, config.push_settle, config.push_phases)
     largest, failed_phases = 0, []
+    if times is None:  # it does not walk at this speed unpushed
+        return {"speed": speed, "direction": "forward" if direction > 0 else "backward",
+                "largest_survived_Ns": 0, "capped": False, "first_failing_phases": list(config.push_phases),
+                "start_failed": True}
     for impulse in range(1, config.max_impulse + 1):
         ok = list(map_fn(_push_job, [(policy, speed, t, direction * impulse, config) for t in times]))
         if not all(ok):

@@ -137,12 +137,21 @@ class ClosedLoop:
     def observation(self, moving: bool = False) -> Observation:
         """The policy's observation over the last whole step (touchdown to touchdown; since
         the start before the first), or with ``moving`` the moving average over the last
-        window's ticks (a policy deciding every N ticks)."""
+        step's duration up to now (a policy deciding every N ticks; at most the window)."""
         if self.window is None:
             raise RuntimeError("this loop keeps no speed window (no policy, observe_speed=False)")
         if moving:
-            return self.window.observation(self.desired_speed)
+            return self.window.observation(self.desired_speed, since_ns=self._one_step_back())
         return self.window.observation(self.desired_speed, since_ns=self._previous_touchdown_tick)
+
+    def _one_step_back(self) -> int | None:
+        """For the moving average: the tick one step duration (the last whole step's)
+        before the newest sample, so the average spans one step whatever the phase (a
+        whole period of the walking cycle filters its within-step swing); None (the
+        whole window) before the first whole step."""
+        if self._previous_touchdown_tick is None or self._last_touchdown_tick is None:
+            return None
+        return self.ticks - 1 - (self._last_touchdown_tick - self._previous_touchdown_tick)
 
     def set_gait(self, command: GaitCommand) -> bool:
         """Queue a gait for the next touchdown; False (and the gait in force stays) if the

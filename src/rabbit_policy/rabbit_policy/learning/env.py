@@ -21,7 +21,10 @@ queued and takes effect at the next touchdown.
   rad or the hip height leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s).
   Truncated after ``max_steps`` steps.
 * v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
-  uniformly from the middle half of the episode.
+  uniformly from the middle half of the episode (the paper's episodes). ``distribution``
+  (:class:`EpisodeDistribution`, :data:`DISTRIBUTIONS`) widens that: a new command every
+  2-5 s of sim time, a push of random impulse, direction and time, and a model drawn from
+  foot frictions, torso masses, the ``drives`` variant and torque delays.
 * ``decision_period`` N > 0: one environment step is N control ticks (1 ms) instead, the
   observation the moving average over the last ``window`` ticks, and the action applies
   at once, blended in (``HZDController.apply_now``), as the paper evaluates its network
@@ -33,7 +36,7 @@ queued and takes effect at the next touchdown.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import gymnasium as gym
 import numpy as np
@@ -41,7 +44,7 @@ import numpy as np
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.experiment.loop import ClosedLoop
-from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_sim.model import ModelOptions, load_model
@@ -68,6 +71,38 @@ class ActionBounds:
         return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
 
 
+@dataclass(frozen=True)
+class EpisodeDistribution:
+    """What an episode draws besides its first command (times s, speeds m/s, impulses N s).
+
+    command_interval: a new uniform command every U(interval) s of sim time (the first
+        change to the ``next_speed`` reset option if given); None: the paper's one change.
+    push_probability, max_impulse, push_duration: with this probability the episode has one
+        push on the torso, impulse uniform in [-max, max], at a uniform time from 1 s to 1 s
+        before the episode's nominal end.
+    frictions, torso_mass_scales, variants, torque_delays: the model and the delay, each
+        drawn uniformly from its tuple (repeat an entry to weight it; None friction: the
+        packaged one)."""
+
+    command_interval: tuple[float, float] | None = None
+    push_probability: float = 0.0
+    max_impulse: float = 0.0
+    push_duration: float = 0.1
+    frictions: tuple[float | None, ...] = (None,)
+    torso_mass_scales: tuple[float, ...] = (1.0,)
+    variants: tuple[str, ...] = ("paper",)
+    torque_delays: tuple[float, ...] = (0.0,)
+
+
+DISTRIBUTIONS = {
+    "paper": EpisodeDistribution(),
+    "broad": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, max_impulse=15.0,
+                                 frictions=(None, None, 0.6, 0.5, 0.4), torso_mass_scales=(0.85, 1.0, 1.0, 1.15),
+                                 variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.003, 0.005)),
+}
+"""Named episode distributions (``scripts/train.py --episodes``)."""
+
+
 class RabbitHZDEnv(gym.Env):
     """See the module docstring."""
 
@@ -75,7 +110,9 @@ class RabbitHZDEnv(gym.Env):
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = 60, window: int = 1000, fall_penalty: float = -10.0,
-                 rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0) -> None:
+                 rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
+                 distribution: EpisodeDistribution | str = "paper") -> None:
+        self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
         if not (isinstance(decision_period, int) and decision_period >= 0):
             raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {decision_period!r}")
         self.decision_period = decision_period
@@ -93,7 +130,8 @@ class RabbitHZDEnv(gym.Env):
         self.fall_penalty = fall_penalty
         self.rules = rules
         self.model_options = ModelOptions(model) if isinstance(model, str) else model
-        self._model = load_model(self.model_options)
+        self._models = {self.model_options: load_model(self.model_options)}
+        self._model = self._models[self.model_options]
         self._loop: ClosedLoop | None = None
 
     # ------------------------------------------------------------------ helpers
@@ -134,8 +172,9 @@ class RabbitHZDEnv(gym.Env):
         self.desired_speed = self._speed_option(options, "desired_speed", first)
         self._next_speed = self._speed_option(options, "next_speed", second)
         gait = self.library.nearest(self.desired_speed)
-        scenario = Scenario.constant(self.desired_speed, model=self.model_options, rules=self.rules,
-                                     window=self.window_size)
+        scenario = self._draw_scenario()
+        self._model = self._models.get(scenario.model) or self._models.setdefault(scenario.model,
+                                                                                   load_model(scenario.model))
         self._loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd), start_speed=gait.speed,
                                 kp=gait.kp, model=self._model, observe_speed=True)
         self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
@@ -144,6 +183,31 @@ class RabbitHZDEnv(gym.Env):
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
             raise RuntimeError("the starting gait did not reach its first touchdown")
         return self._observation(), {"desired_speed": self.desired_speed}
+
+    def _draw_scenario(self) -> Scenario:
+        """This episode's scenario: the commands, a push, the model and the delay (drawn
+        from ``distribution``; the paper's distribution draws nothing here)."""
+        d, rng = self.distribution, self.np_random
+        lo, hi = self.speed_range
+        horizon = self.max_steps * (self.decision_period / 1000.0 if self.decision_period else 0.6)
+        schedule = [(0.0, self.desired_speed)]
+        if d.command_interval is not None:
+            t, speed = float(rng.uniform(*d.command_interval)), self._next_speed
+            while t < horizon:
+                schedule.append((t, speed))
+                t, speed = t + float(rng.uniform(*d.command_interval)), float(rng.uniform(lo, hi))
+        pushes = ()
+        if d.push_probability > 0.0 and rng.random() < d.push_probability and horizon > 2.0:
+            impulse = float(rng.uniform(-d.max_impulse, d.max_impulse))
+            pushes = (Push(float(rng.uniform(1.0, horizon - 1.0)), impulse / d.push_duration, d.push_duration),)
+        model = ModelOptions(d.variants[int(rng.integers(len(d.variants)))],
+                             friction=d.frictions[int(rng.integers(len(d.frictions)))],
+                             torso_mass_scale=d.torso_mass_scales[int(rng.integers(len(d.torso_mass_scales)))])
+        if d.variants == ("paper",) and d.frictions == (None,) and d.torso_mass_scales == (1.0,):
+            model = self.model_options  # the env's own model (the paper's distribution)
+        delay = d.torque_delays[int(rng.integers(len(d.torque_delays)))]
+        return Scenario(schedule=tuple(schedule), pushes=pushes, model=model, torque_delay=delay, rules=self.rules,
+                        window=self.window_size)
 
     def step(self, action):
         if self._loop is None:
@@ -156,6 +220,7 @@ class RabbitHZDEnv(gym.Env):
             rejected = True
         fell, stalled = self._run_decision()
         self._steps += 1
+        self.desired_speed = self._loop.desired_speed  # the schedule's command (broad distributions)
         obs = self._observation()
         mean_speed = float(obs[1])
         reward = -((mean_speed - self.desired_speed) ** 2)
@@ -165,7 +230,7 @@ class RabbitHZDEnv(gym.Env):
         truncated = not terminated and self._steps >= self.max_steps
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time}
-        if self._steps == self._switch_step:  # the mid-episode change of command
+        if self.distribution.command_interval is None and self._steps == self._switch_step:  # the paper's change
             self.desired_speed = self._next_speed
             self._loop.set_command(self._next_speed)
         return obs, float(reward), terminated, truncated, info

@@ -39,6 +39,8 @@ class ESConfig:
     max_steps: int = 40
     seed: int = 0
     workers: int = 1
+    decision_period: int = 0
+    distribution: str = "paper"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -62,10 +64,10 @@ def ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _init_worker(max_steps: int) -> None:
+def _init_worker(max_steps: int, decision_period: int = 0, distribution: str = "paper") -> None:
     ignore_interrupts()
     torch.set_num_threads(1)
-    env = RabbitHZDEnv(max_steps=max_steps)
+    env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution)
     _WORKER["env"] = env
     _WORKER["net"] = HZDPolicyNet(env.bounds.low, env.bounds.high)
 
@@ -169,7 +171,8 @@ class EvolutionStrategy:
         self.generation = 0
         self.env_steps = 0
         ctx = get_context("fork")
-        self.pool = ctx.Pool(config.workers, initializer=_init_worker, initargs=(config.max_steps,))
+        self.pool = ctx.Pool(config.workers, initializer=_init_worker,
+                             initargs=(config.max_steps, config.decision_period, config.distribution))
 
     def close(self, terminate: bool = False) -> None:
         """Stop the worker pool (``terminate``: at once, without joining; after Ctrl-C)."""

@@ -53,6 +53,8 @@ class PPOConfig:
     init_log_std: float = -3.5
     max_steps: int = 40
     seed: int = 0
+    decision_period: int = 0
+    distribution: str = "paper"
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -96,11 +98,11 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
     return errors
 
 
-def _make_env(max_steps: int):
+def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper"):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
-        return RabbitHZDEnv(max_steps=max_steps)
+        return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution)
 
     return make
 
@@ -119,7 +121,8 @@ class PPOTrainer:
                                           lr=config.lr, eps=1e-5)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
-        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps) for _ in range(config.envs)],
+        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps, config.decision_period, config.distribution)
+                                               for _ in range(config.envs)],
                                               context="fork", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
         self.iteration = 0
         self.env_steps = 0

@@ -166,7 +166,7 @@ def train(args: TrainingConfig) -> int:
 
     def evaluate() -> None:
         nonlocal best, first_pass
-        result = acceptance(NetworkPolicy(net), map_fn=eval_pool.map)
+        result = acceptance(NetworkPolicy(net, decision_period=args.trainer.decision_period), map_fn=eval_pool.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
         baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
