@@ -1,5 +1,6 @@
 # rabbit-hzd: two commands for a fresh machine (see README).
-#   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks, changing speed
+#   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks on the learned policy,
+#               changing speed (down from 1.4 m/s too) and pushed
 #   make test   set up .venv if needed, then run the whole test suite (CI's command)
 #   make test-fast  the edit-loop tier: every test not marked slow
 #   make bench  the benchmarks (simulation, ROS stack, training throughput), JSON lines
@@ -23,7 +24,7 @@ $(STAMP): requirements.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xm
 	touch $@
 
 demo: $(STAMP)
-	$(PY) scripts/run_stack.py --controller classic --speed-schedule "0:0.8,10:1.1" --duration 20
+	$(PY) scripts/run_stack.py --controller learned --speed-schedule "0:0.8,6:1.4,13:0.9,18:1.2" --push "20:-60:0.1" --duration 26
 
 test: $(STAMP)
 	$(PY) -m pytest

@@ -73,6 +73,18 @@ def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, mo
     return videos
 
 
+def judge_policy(policy, robust: dict, classic_margins: list[dict], stability: dict, map_fn) -> dict:
+    """Checks 1-6 for one controller from this evaluation's results, plus the paper's push
+    scenarios beyond classic's margins (three walks)."""
+    from rabbit_policy.evaluation.acceptance import _scenario_job, judge, paper_scenarios, policy_outputs
+
+    speeds = sorted({m["speed"] for m in classic_margins})
+    speed = 1.0 if 1.0 in speeds else speeds[0]
+    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
+    return judge(robust, classic_margins, [{k: s[k] for k in ("name", "impulse_Ns", "survived")} for s in scenarios],
+                 stability, max(s["peak_torque"] for s in scenarios), policy_outputs(policy))
+
+
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     args = build_parser().parse_args(argv)
@@ -136,6 +148,9 @@ def main(argv: list[str] | None = None) -> int:
             for name, policy in policies.items():
                 robust[name] = robustness(policy, config.robustness, map_fn, log)
             figures.transitions_figure(robust, out / "transitions.png")
+            log("acceptance checks 1-6")
+            verdicts = {name: judge_policy(policy, robust[name], robust["classic"]["push_margins"],
+                                           poincare[name], map_fn) for name, policy in policies.items()}
     finally:
         if pool:
             pool.close()
@@ -151,7 +166,8 @@ def main(argv: list[str] | None = None) -> int:
                         "wall_time_s": time.perf_counter() - start,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
-               "push": push, "push_sweep": sweep, "robustness": robust, "videos": videos}
+               "push": push, "push_sweep": sweep, "robustness": robust,
+               "acceptance_1_6": verdicts if config.robustness is not None else {}, "videos": videos}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
     log(f"wrote {out / 'report.md'}")

@@ -35,10 +35,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--distribution", choices=("paper", "broad"), default="paper",
                         help="episodes: the paper's (one command change) or broad (commands every 2-5 s, "
                              "pushes, model errors, torque delays); rabbit_policy.learning.env.DISTRIBUTIONS")
+    parser.add_argument("--fall-penalty", type=float, default=-10.0,
+                        help="reward once when an episode ends by a fall or stall (<= 0)")
     parser.add_argument("--checkpoint-every", type=int, default=5)
     parser.add_argument("--eval-every", type=int, default=2, help="acceptance check period (0: never)")
     parser.add_argument("--stop-when-passed", action="store_true")
-    parser.add_argument("--warm-start", choices=("scheduled", "nearest", "interpolate", "none"), default="scheduled",
+    parser.add_argument("--warm-start", choices=("scheduled", "nearest", "interpolate", "feedback", "none"), default="scheduled",
                         help="fit the network to the classic library first (rabbit_policy.learning.warm_start)")
     parser.add_argument("--no-progress", action="store_true", help="plain lines instead of a progress bar")
     parser.add_argument("--resume", action="store_true")
@@ -62,6 +64,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         parser.error("--workers, --iterations, --max-steps, --checkpoint-every must be >= 1, --eval-every >= 0")
     if args.decision_period < 0:
         parser.error("--decision-period must be >= 0 ticks")
+    if not args.fall_penalty <= 0.0:
+        parser.error("--fall-penalty must be <= 0")
     if args.envs is None:
         args.envs = 2 * args.workers
     return args
@@ -76,14 +80,16 @@ def main(argv: list[str] | None = None) -> int:
 
         trainer = ESConfig(pairs=args.pairs, sigma=args.sigma, lr=args.lr, episodes=args.episodes,
                            max_steps=args.max_steps, seed=args.seed, workers=args.workers,
-                           decision_period=args.decision_period, distribution=args.distribution)
+                           decision_period=args.decision_period, distribution=args.distribution,
+                           fall_penalty=args.fall_penalty)
     else:
         from rabbit_policy.learning.ppo import PPOConfig
 
         trainer = PPOConfig(envs=args.envs, steps=args.steps, epochs=args.epochs, minibatches=args.minibatches,
                             lr=args.ppo_lr, init_log_std=args.init_log_std, target_kl=args.target_kl or None,
                             gae_lambda=args.gae_lambda, gamma=args.gamma, max_steps=args.max_steps, seed=args.seed,
-                            decision_period=args.decision_period, distribution=args.distribution)
+                            decision_period=args.decision_period, distribution=args.distribution,
+                            fall_penalty=args.fall_penalty)
     return train(TrainingConfig(algo=args.algo, out=args.out, trainer=trainer, workers=args.workers,
                                 iterations=args.iterations, checkpoint_every=args.checkpoint_every,
                                 eval_every=args.eval_every, stop_when_passed=args.stop_when_passed,

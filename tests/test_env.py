@@ -110,3 +110,37 @@ def test_es_generation_is_deterministic_for_a_seed_and_worker_count():
         thetas.append(es.theta)
         assert stats["env_steps"] > 0
     assert np.array_equal(thetas[0], thetas[1])
+
+
+def test_decisions_every_n_ticks_step_the_env_by_n_ticks_and_apply_at_once():
+    env = RabbitHZDEnv(max_steps=60, decision_period=20)
+    env.reset(seed=0, options={"desired_speed": 1.0, "next_speed": 1.0})
+    gait = env.library.nearest(1.0)
+    other = env.library.nearest(1.2)
+    start = env._loop.ticks
+    obs, _, terminated, _, info = env.step(np.append(gait.free, gait.kd))
+    assert env._loop.ticks - start == 20 and not terminated
+    obs, _, _, _, info = env.step(np.append(other.free, other.kd))
+    assert env._loop.controller.alpha == tuple(other.alpha)  # at once, not at the next touchdown
+    assert env._loop.controller.pending_alpha is None
+    with pytest.raises(ValueError):
+        RabbitHZDEnv(decision_period=-1)
+
+
+def test_broad_episodes_draw_commands_pushes_models_and_delays():
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
+    drawn = []
+    for seed in range(12):
+        env.reset(seed=seed)
+        drawn.append(env._loop.scenario)
+    for scenario in drawn:
+        times = [t for t, _ in scenario.schedule]
+        assert all(2.0 - 1e-9 <= b - a <= 5.0 + 1e-9 for a, b in zip(times, times[1:]))
+        assert all(0.7 <= v <= 1.5 for _, v in scenario.schedule)
+        assert all(abs(p.impulse) <= 15.0 + 1e-9 for p in scenario.pushes)
+    assert any(s.pushes for s in drawn) and any(not s.pushes for s in drawn)
+    assert {s.model.variant for s in drawn} == {"paper", "drives"}
+    assert len({s.torque_delay for s in drawn}) > 1 and len({s.model.friction for s in drawn}) > 1
+    again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
+    again.reset(seed=3)
+    assert again._loop.scenario == drawn[3]  # seeded

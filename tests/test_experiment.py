@@ -138,3 +138,35 @@ def test_mean_speed_is_displacement_over_time_and_matches_the_hip_speed_samples(
     json.dumps(summary, allow_nan=False)
     assert [s["command"] for s in summary["segments"]] == [0.9, 1.2]
     assert summary["segments"][1]["reach_time"] is not None
+
+
+def test_a_periodic_policy_decides_every_n_ticks_on_a_one_step_moving_average():
+    from rabbit_policy.runtime.policies import PeriodicPolicy, make_policy
+    from rabbit_policy.runtime.speed_window import Observation
+
+    seen: list[Observation] = []
+
+    class Spy:
+        name = "spy"
+
+        def __init__(self) -> None:
+            self.inner = make_policy("classic", decision_period=0)
+
+        def act(self, observation):
+            seen.append(observation)
+            return self.inner.act(observation)
+
+    policy = PeriodicPolicy(Spy(), 25)
+    loop = ClosedLoop(Scenario.constant(1.0), policy)
+    seen.clear()  # the starting gait's decision
+    loop.run(4.0)
+    assert not loop.failed
+    assert len(loop.decisions) == len(seen) == 4000 // 25
+    # the average spans the last whole step: on the cycle it is the step's mean speed,
+    # steady from one decision to the next (the within-step swing averages out)
+    late = [o.mean_speed for o in seen[-40:]]
+    assert max(late) - min(late) < 0.02
+    steps = loop.result().step_speeds()
+    assert abs(late[-1] - steps[-1][2]) < 0.03
+    with pytest.raises(ValueError):
+        PeriodicPolicy(Spy(), 0)

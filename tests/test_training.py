@@ -151,7 +151,7 @@ def test_a_learned_policy_is_shipped_with_a_model_card():
 
 def test_the_shipped_policy_evaluation_reproduces_its_model_card():
     """The model card's table (evaluation.json) is what the shipped file does today."""
-    stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())
+    stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["tracking"]
     name = next(k for k in stored if "shipped" in k)
     result = acceptance(make_policy("learned"))
     assert [c["speed"] for c in result["constant"]] == list(ACCEPTANCE_SPEEDS)
@@ -166,6 +166,20 @@ def test_the_shipped_policy_evaluation_reproduces_its_model_card():
         assert new["mean_speed"] == pytest.approx(old_mean, abs=0.01)
     assert result["passed"] == stored[name]["passed"]
     assert not any(c["fell"] for c in result["constant"]) and not result["schedule"]["fell"]
+
+
+@pytest.mark.slow
+def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(tmp_path):
+    target = packaged_policy_file()
+    before = target.read_bytes()
+    refused = run_script("scripts/ship_policy.py", str(target), "--quick", "--dry-run", timeout=600)
+    assert refused.returncode == 1, refused.stderr[-2000:]
+    assert "fails acceptance checks" in refused.stderr and "not shipped" in refused.stderr
+    assert "## Acceptance 1-6" in refused.stdout and "classic HZD" in refused.stdout
+    assert "shipped with: `scripts/ship_policy.py" in refused.stdout
+    assert target.read_bytes() == before
+    missing = run_script("scripts/ship_policy.py", str(tmp_path / "none.pt"), "--quick", "--dry-run")
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
 def test_walk_script_runs_the_learned_policy():

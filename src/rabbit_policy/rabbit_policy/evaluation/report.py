@@ -222,6 +222,23 @@ def robustness_section(robustness: dict) -> list[str]:
     return lines + [""]
 
 
+def acceptance_section(verdicts: dict) -> list[str]:
+    """The learning issue's checks 1-6 (``acceptance.judge``) per controller."""
+    if not verdicts:
+        return []
+    names = list(verdicts)
+    checks = list(verdicts[names[0]]["checks"])
+    lines = ["## Acceptance checks 1-6 (the learning issue)", "",
+             "Judged by `rabbit_policy.evaluation.acceptance.judge` on the results above; push margins against "
+             "classic HZD's (twice where classic survives less than 15 N s), the paper's three push scenarios at "
+             "1.0 m/s beyond classic's margin, model errors, Poincaré |λ| < 1 and torques.", "",
+             "| check | " + " | ".join(_label(n) for n in names) + " |", "|---|" + "---|" * len(names)]
+    for check in checks:
+        lines.append(f"| {check.replace('_', ' ', 1)} | " + " | ".join(
+            "pass" if verdicts[n]["checks"][check]["passed"] else "**fail**" for n in names) + " |")
+    return lines + [""]
+
+
 def _speeds(speeds: list[float]) -> str:
     return "none" if not speeds else ", ".join(f"{v:.2f}" for v in speeds)
 
@@ -243,4 +260,5 @@ def render_report(results: dict) -> str:
     lines += poincare_section(results["poincare"])
     lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", []))
     lines += robustness_section(results.get("robustness", {}))
+    lines += acceptance_section(results.get("acceptance_1_6", {}))
     return "\n".join(lines)

@@ -98,7 +98,7 @@ DISTRIBUTIONS = {
     "paper": EpisodeDistribution(),
     "broad": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, max_impulse=15.0,
                                  frictions=(None, None, 0.6, 0.5, 0.4), torso_mass_scales=(0.85, 1.0, 1.0, 1.15),
-                                 variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.003, 0.005)),
+                                 variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.002, 0.003)),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
 

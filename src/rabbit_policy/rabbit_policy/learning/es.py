@@ -41,6 +41,7 @@ class ESConfig:
     workers: int = 1
     decision_period: int = 0
     distribution: str = "paper"
+    fall_penalty: float = -10.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -64,10 +65,12 @@ def ignore_interrupts() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _init_worker(max_steps: int, decision_period: int = 0, distribution: str = "paper") -> None:
+def _init_worker(max_steps: int, decision_period: int = 0, distribution: str = "paper",
+                 fall_penalty: float = -10.0) -> None:
     ignore_interrupts()
     torch.set_num_threads(1)
-    env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution)
+    env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
+                       fall_penalty=fall_penalty)
     _WORKER["env"] = env
     _WORKER["net"] = HZDPolicyNet(env.bounds.low, env.bounds.high)
 
@@ -172,7 +175,8 @@ class EvolutionStrategy:
         self.env_steps = 0
         ctx = get_context("fork")
         self.pool = ctx.Pool(config.workers, initializer=_init_worker,
-                             initargs=(config.max_steps, config.decision_period, config.distribution))
+                             initargs=(config.max_steps, config.decision_period, config.distribution,
+                                       config.fall_penalty))
 
     def close(self, terminate: bool = False) -> None:
         """Stop the worker pool (``terminate``: at once, without joining; after Ctrl-C)."""

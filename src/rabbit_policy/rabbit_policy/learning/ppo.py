@@ -55,6 +55,7 @@ class PPOConfig:
     seed: int = 0
     decision_period: int = 0
     distribution: str = "paper"
+    fall_penalty: float = -10.0
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -98,11 +99,12 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
     return errors
 
 
-def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper"):
+def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
-        return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution)
+        return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
+                            fall_penalty=fall_penalty)
 
     return make
 
@@ -121,7 +123,7 @@ class PPOTrainer:
                                           lr=config.lr, eps=1e-5)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
-        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps, config.decision_period, config.distribution)
+        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
                                                for _ in range(config.envs)],
                                               context="fork", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
         self.iteration = 0

@@ -19,6 +19,11 @@ a speed change, steady-state corrections). Three targets (:data:`WARM_STARTS`):
   changes fell). ``nearest`` rather than a blend: blends of neighbouring library gaits
   are not gaits in between (the 0.7/0.8 blends stall, 1.2/1.3 and 1.4/1.5 blends
   overshoot). Its staircase needs more fitting iterations.
+* ``feedback``: the calibrated library blend (``interpolate``) for the command corrected
+  by the measured error, v_d + ``feedback_gain`` * mean(v_d - v): classic HZD scheduled
+  with a proportional speed feedback through the paper's third input. Measured with
+  decisions every 20 ticks (ROS-free, 2026-11-23): gain 0.3 passed 59 of the 72 ordered
+  changes where the library alone passed 51 (neither fell); 0.7 stalled at 0.7 m/s.
 
 Deterministic for a seed.
 """
@@ -53,6 +58,7 @@ class WarmStartConfig:
     speed_spread: float = 0.9
     stale_error_fraction: float = 0.5
     max_decel: float = 0.2
+    feedback_gain: float = 0.3
     lr: float = 3e-3
 
 
@@ -60,6 +66,8 @@ WARM_STARTS = {
     "scheduled": WarmStartConfig(),
     "nearest": WarmStartConfig(target="nearest"),
     "interpolate": WarmStartConfig(target="interpolate", iterations=3000, samples=512, speed_spread=0.3),
+    "feedback": WarmStartConfig(target="feedback", iterations=6000, samples=2048, speed_spread=0.4,
+                                stale_error_fraction=0.0),
 }
 
 
@@ -70,13 +78,18 @@ def scheduled_speed(desired: float, measured: float, max_decel: float = 0.2) -> 
 
 
 def library_targets(library: GaitLibrary, desired: np.ndarray, measured: np.ndarray | None = None,
-                    target: str = "scheduled", max_decel: float = 0.2) -> np.ndarray:
+                    target: str = "scheduled", max_decel: float = 0.2, errors: np.ndarray | None = None,
+                    feedback_gain: float = 0.3) -> np.ndarray:
     """(n, 21) actions (free coefficients + Kd) the classic controller picks for each
-    (commanded, measured) speed pair (``measured`` None: walking at the command)."""
+    (commanded, measured) speed pair (``measured`` None: walking at the command; ``errors``
+    the mean speed errors, None: desired - measured)."""
     measured = desired if measured is None else measured
+    errors = desired - measured if errors is None else errors
     rows = []
-    for v, m in zip(desired, measured):
-        if target == "interpolate":
+    for v, m, e in zip(desired, measured, errors):
+        if target == "feedback":
+            gait = library.interpolate(float(v) + feedback_gain * float(e))
+        elif target == "interpolate":
             gait = library.interpolate(float(v))
         elif target == "scheduled":
             gait = library.nearest(scheduled_speed(float(v), float(m), max_decel))
@@ -100,8 +113,8 @@ def warm_start(net: HZDPolicyNet, library: GaitLibrary, seed: int = 0,
     earlier = np.where(rng.random(config.samples) < config.stale_error_fraction,
                        rng.uniform(lo, hi, config.samples), desired)  # the command the error was measured against
     obs = torch.tensor(np.stack([desired, measured, earlier - measured], axis=1), dtype=torch.float32)
-    targets = torch.tensor(library_targets(library, desired, measured, config.target, config.max_decel),
-                           dtype=torch.float32)
+    targets = torch.tensor(library_targets(library, desired, measured, config.target, config.max_decel,
+                                           earlier - measured, config.feedback_gain), dtype=torch.float32)
     span = net.high - net.low
     optimiser = torch.optim.Adam(net.parameters(), lr=config.lr)
     loss = torch.tensor(0.0)
