@@ -27,6 +27,7 @@ scenario's first commanded speed (or ``start_speed``), as ``sim_node`` places it
 from __future__ import annotations
 
 from collections import deque
+from dataclasses import replace
 from typing import Callable, Sequence
 
 import mujoco
@@ -55,7 +56,8 @@ class ClosedLoop:
     """Simulator + HZD controller (+ gait policy) for one scenario; see the module docstring.
 
     ``start``: the gait in force at t = 0 (default: the policy's :func:`first_command`).
-    ``kp``: the controller's proportional gain (None: ``ControllerConfig``'s). ``model``:
+    ``controller``: the controller's configuration (None: ``ControllerConfig()``); ``kp``
+    overrides its proportional gain (None: keep it). ``model``:
     a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
     keep the speed window without a policy (the learning environment).
@@ -63,6 +65,7 @@ class ClosedLoop:
 
     def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
                  *, start_speed: float | None = None, kp: float | None = None,
+                 controller: ControllerConfig | None = None,
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
                  record_state: bool = False, observe_speed: bool = False) -> None:
         if start is None:
@@ -75,7 +78,9 @@ class ClosedLoop:
         self.sim = Simulator(self.model, scenario.rules.fall)
         self.data = self.sim.data
         self._qpos, self._qvel = self.data.qpos, self.data.qvel  # views, kept (MjData makes one per access)
-        config = ControllerConfig() if kp is None else ControllerConfig(kp=kp)
+        config = controller or ControllerConfig()
+        if kp is not None:
+            config = replace(config, kp=kp)
         self.controller = HZDController(start.alpha, start.kd, config, Leg.LEFT)
         speed = scenario.initial_speed if start_speed is None else start_speed
         self.sim.reset(*state_on_gait(start.alpha, speed, config.geometry))
@@ -279,13 +284,13 @@ class ClosedLoop:
 
 def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: GaitCommand | None = None,
          stop_on_fall: bool = True, record_state: bool = False, observer: Observer | None = None,
-         kp: float | None = None, start_speed: float | None = None,
+         kp: float | None = None, start_speed: float | None = None, controller: ControllerConfig | None = None,
          model: mujoco.MjModel | None = None) -> WalkResult:
     """Walk ``duration`` s of sim time under ``scenario`` with ``policy`` choosing every
     step's gait (or the fixed gait ``start`` when ``policy`` is None); a fall or a stall
     ends the walk unless ``stop_on_fall`` is False."""
-    loop = ClosedLoop(scenario, policy, start, start_speed=start_speed, kp=kp, model=model, observer=observer,
-                      record_state=record_state)
+    loop = ClosedLoop(scenario, policy, start, start_speed=start_speed, kp=kp, controller=controller, model=model,
+                      observer=observer, record_state=record_state)
     loop.run(duration, stop_on_fall=stop_on_fall)
     return loop.result()
 

@@ -83,6 +83,7 @@ class GaitProblem:
     approach_tolerance: float = 0.05
     approach_settle: float = 3.0
     approach_horizon: float = 8.0
+    approach_blend_phase: float = 0.0  # the approach switch: once per step, no blend (as the gaits were designed)
 
 
 @dataclass
@@ -253,7 +254,8 @@ def approach(x: np.ndarray, problem: GaitProblem, start: Gait) -> Approach:
     schedule = ((0.0, start.speed), (switch, problem.speed))
     horizon = problem.approach_horizon
     try:
-        result = walk(policy, Scenario(schedule=schedule, model=ModelOptions(problem.model_variant)), switch + horizon)
+        result = walk(policy, Scenario(schedule=schedule, model=ModelOptions(problem.model_variant)), switch + horizon,
+                      controller=ControllerConfig(blend_phase=problem.approach_blend_phase))
     except (ValueError, ZeroDivisionError, OverflowError):
         return Approach(problem.speed * horizon, None, True)
     if result.failed:  # fell or stalled: graded by how long it walked after the switch
