@@ -29,6 +29,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
 from rabbit_sim.gl_backend import choose_headless_gl
 
 # MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
@@ -43,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
     parser.add_argument("--quick", action="store_true", help="short version for tests")
     parser.add_argument("--workers", type=int, default=2, help="processes for the independent walks")
+    add_backend_arguments(parser)
     parser.add_argument("--model", choices=("paper", "drives"), default="paper")
     parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
     parser.add_argument("--policy-file", default=None, help="HZD-RL checkpoint (default: packaged)")
@@ -91,8 +93,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers < 1:
         build_parser().error("--workers must be >= 1")
 
-    from multiprocessing import get_context
-
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures
     from rabbit_policy.evaluation.report import render_report
@@ -113,8 +113,14 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     log = lambda message: print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr)  # noqa: E731
 
-    pool = get_context("fork").Pool(args.workers) if args.workers > 1 else None
-    map_fn = pool.map if pool else map
+    try:
+        backend = make_backend(backend_config(args))
+    except ValueError as exc:
+        build_parser().error(str(exc))
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    map_fn = backend.map
     try:
         log("speed tracking")
         tracking = {name: evaluation.speed_tracking(policy, config, model)[0] for name, policy in policies.items()}
@@ -152,9 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             verdicts = {name: judge_policy(policy, robust[name], robust["classic"]["push_margins"],
                                            poincare[name], map_fn) for name, policy in policies.items()}
     finally:
-        if pool:
-            pool.close()
-            pool.join()
+        backend.close()
 
     videos: list[dict] = []
     if not args.no_video:

@@ -31,6 +31,7 @@ import numpy as np
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
 
 
 def parse_speeds(text: str) -> list[float]:
@@ -42,34 +43,45 @@ def parse_speeds(text: str) -> list[float]:
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    from rabbit_hzd_controller.gait import Gait
-    from rabbit_policy.runtime.gait_library import packaged_gait_dir
-    from rabbit_policy.gait_design.optimization import (
-        KD_SCALE,
-        GaitProblem,
-        gait_to_decision,
-        optimize_gait,
-    )
-    from rabbit_policy.gait_design.seed import SeedPattern, seed_free_alpha
-    from rabbit_policy.experiment.loop import walk_gait
-
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speeds", type=parse_speeds, default=parse_speeds("0.7,0.8,0.9,1.0,1.1,1.2,1.3,1.4,1.5"))
     parser.add_argument("--start", type=float, default=1.0, help="speed solved first (m/s)")
     parser.add_argument("--generations", type=int, default=100)
     parser.add_argument("--workers", type=int, default=2)
+    add_backend_arguments(parser)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--validate", type=float, default=60.0, help="validation walk (s)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--resume", action="store_true",
                         help="keep gaits in --out that passed validation; solve only the other speeds")
-    parser.add_argument("--approach-weight", type=float, default=GaitProblem.approach_weight,
+    parser.add_argument("--approach-weight", type=float, default=5.0,
                         help="cost per metre of approach shortfall (default %(default)s)")
     parser.add_argument("--approach-from", type=parse_speeds, default=[],
                         help="also minimise the time to reach each speed from these library speeds")
     parser.add_argument("--refine", action="store_true",
                         help="start each speed from its existing gait in --out")
     args = parser.parse_args(argv)
+    try:
+        backend = make_backend(backend_config(args))
+    except ValueError as exc:
+        parser.error(str(exc))
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    try:
+        return _optimize(args, backend)
+    finally:
+        backend.close()
+
+
+def _optimize(args, backend) -> int:
+    from rabbit_hzd_controller.gait import Gait
+    from rabbit_policy.experiment.loop import walk_gait
+    from rabbit_policy.gait_design.optimization import GaitProblem, gait_to_decision, optimize_gait
+    from rabbit_policy.gait_design.seed import SeedPattern, seed_free_alpha
+    from rabbit_policy.runtime.gait_library import packaged_gait_dir
+    from rabbit_policy.gait_design.optimization import KD_SCALE
+
     out = args.out or packaged_gait_dir()
     out.mkdir(parents=True, exist_ok=True)
 
@@ -103,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         gait, check, attempts, wall = None, None, 0, 0.0
         for generations in (args.generations, 2 * args.generations):
             attempts += 1
-            result = optimize_gait(problem, x0, max_generations=generations, workers=args.workers,
+            result = optimize_gait(problem, x0, max_generations=generations, backend=backend,
                                    seed=args.seed, log=lambda s: print(s, flush=True))
             wall += result.wall_time
             gait = result.gait

@@ -20,6 +20,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
 
 PARTS = ("grid", "transitions", "random", "pushes", "models")
 
@@ -36,13 +37,12 @@ def main(argv: list[str] | None = None) -> int:
                              "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--workers", type=int, default=2)
+    add_backend_arguments(parser)
     parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
     parser.add_argument("--out", type=Path, default=None, help="also write the JSON here")
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-
-    from multiprocessing import get_context
 
     from rabbit_policy.evaluation import robustness as rb
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
@@ -60,17 +60,21 @@ def main(argv: list[str] | None = None) -> int:
              "pushes": rb.push_margins, "models": rb.model_errors}
     start = time.perf_counter()
     results: dict = {"config": config.to_dict(), "controllers": {}}
-    pool = get_context("fork").Pool(args.workers) if args.workers > 1 else None
+    try:
+        backend = make_backend(backend_config(args))
+    except ValueError as exc:
+        parser.error(str(exc))
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     try:
         for name, policy in policies.items():
             results["controllers"][name] = {"policy": policy.name}
             for part in args.parts:
                 print(f"[{time.perf_counter() - start:7.1f} s] {name}: {part}", file=sys.stderr, flush=True)
-                results["controllers"][name][part] = parts[part](policy, config, pool.map if pool else map)
+                results["controllers"][name][part] = parts[part](policy, config, backend.map)
     finally:
-        if pool is not None:
-            pool.close()
-            pool.join()
+        backend.close()
     results["wall_time_s"] = round(time.perf_counter() - start, 1)
     text = strict_json.dumps(results)
     if args.out:

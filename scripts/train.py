@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_policy.parallel import add_backend_arguments, backend_config
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -26,6 +27,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--workers", type=int, default=2, help="processes for rollouts and evaluation")
     parser.add_argument("--out", type=Path, required=True)
+    add_backend_arguments(parser)
     parser.add_argument("--iterations", "--generations", type=int, default=60, dest="iterations",
                         help="ES generations / PPO iterations in all (including resumed ones)")
     parser.add_argument("--max-steps", type=int, default=40, help="walking steps per training episode")
@@ -68,6 +70,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         parser.error("--fall-penalty must be <= 0")
     if args.envs is None:
         args.envs = 2 * args.workers
+    try:
+        args.backend_config = backend_config(args)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.algo == "ppo" and args.backend == "ray":
+        parser.error("--backend ray runs ES and the evaluations; PPO's environments still run locally "
+                     "(AsyncVectorEnv): use --backend local with --algo ppo")
     return args
 
 
@@ -93,7 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     return train(TrainingConfig(algo=args.algo, out=args.out, trainer=trainer, workers=args.workers,
                                 iterations=args.iterations, checkpoint_every=args.checkpoint_every,
                                 eval_every=args.eval_every, stop_when_passed=args.stop_when_passed,
-                                warm_start=args.warm_start, no_progress=args.no_progress, resume=args.resume))
+                                warm_start=args.warm_start, no_progress=args.no_progress, resume=args.resume,
+                                backend=args.backend_config))
 
 
 if __name__ == "__main__":

@@ -27,7 +27,7 @@ KIND = {
     "test_controller": "sim", "test_model": "sim", "test_walking": "sim", "test_experiment": "sim",
     "test_env": "sim", "test_gait_optimization": "sim", "test_evaluation": "sim", "test_training": "sim",
     "test_stack_nodes": "ros", "test_recording": "ros", "test_run_stack_script": "ros",
-    "test_ros_install": "ros", "test_colcon_install": "ros",
+    "test_ros_install": "ros", "test_colcon_install": "ros", "test_parallel": "sim",
 }
 
 SLOW = {
@@ -44,6 +44,8 @@ SLOW = {
     "tests/test_recording.py",
     "tests/test_run_stack_script.py",
     "tests/test_colcon_install.py",
+    "tests/test_parallel.py::test_es_on_the_local_backend_is_the_same_for_one_or_two_workers",
+    "tests/test_parallel.py::test_without_ray_installed_the_ray_backend_is_one_line",
 }
 
 

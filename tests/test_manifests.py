@@ -27,6 +27,9 @@ ROSDEP_KEYS = {
 }
 
 
+OPTIONAL = {"ray"}  # rabbit_policy.parallel's --backend ray only, imported when asked: not a dependency
+
+
 def imported_modules(package: str) -> set[str]:
     """Top-level modules imported anywhere in the package's code (functions included)."""
     names: set[str] = set()
@@ -36,7 +39,7 @@ def imported_modules(package: str) -> set[str]:
                 names.update(alias.name.split(".")[0] for alias in node.names)
             elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
                 names.add(node.module.split(".")[0])
-    return {n for n in names if n not in sys.stdlib_module_names and n != package}
+    return {n for n in names if n not in sys.stdlib_module_names and n != package and n not in OPTIONAL}
 
 
 def declared(package: str) -> set[str]:

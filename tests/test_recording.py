@@ -30,8 +30,11 @@ def recorded(request, tmp_path_factory):
     bag = tmp_path_factory.mktemp("bags") / f"run_{request.param}"
     duration = 30.0 if request.param == "none" else 3.0  # the 30 s lockstep run, once
     pushes = (Push(1.0, 40.0, 0.1),) if request.param == "zstd" else ()  # the short run is pushed once
+    # decisions once per step: every gait is then decided on a state the recorder is waited
+    # for; with decisions every N ticks one can fall on the very last state, after the
+    # recording stopped (docs/recording.md)
     config = StackConfig(duration=duration, schedule=((0.0, 0.9), (duration / 2, 1.1)), record=str(bag),
-                         record_compression=request.param, pushes=pushes)
+                         record_compression=request.param, pushes=pushes, decision_period=0)
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell
     return bag, nodes, request.param

@@ -331,8 +331,13 @@ def optimize_gait(
     seed: int = 1,
     workers: int = 1,
     log: Callable[[str], None] | None = None,
+    backend=None,
 ) -> OptimizationResult:
-    """Minimise :func:`evaluate` over the decision vector with CMA-ES from ``x0``."""
+    """Minimise :func:`evaluate` over the decision vector with CMA-ES from ``x0``; the
+    candidates of a generation are evaluated on ``backend`` (a :mod:`rabbit_policy.parallel`
+    backend; None: a local pool of ``workers`` processes, started and stopped here)."""
+    from rabbit_policy.parallel import LocalBackend
+
     import cma  # imported here: only the optimizer needs it
 
     start = time.perf_counter()
@@ -345,23 +350,18 @@ def optimize_gait(
     if popsize:
         options["popsize"] = popsize
     es = cma.CMAEvolutionStrategy(np.asarray(x0, dtype=float), sigma0, options)
-    pool = None
-    if workers > 1:
-        import multiprocessing as mp
-
-        pool = mp.get_context("fork").Pool(workers)
+    own = backend is None
+    backend = LocalBackend(workers) if own else backend
     try:
         while not es.stop():
             candidates = es.ask()
-            args = [(np.asarray(c), problem) for c in candidates]
-            costs = pool.map(_evaluate_cost, args) if pool else [_evaluate_cost(a) for a in args]
+            costs = backend.map(_evaluate_cost, [(np.asarray(c), problem) for c in candidates])
             es.tell(candidates, costs)
             if log and es.countiter % 10 == 0:
                 log(f"  v={problem.speed:.2f} gen {es.countiter:4d} best {es.result.fbest:10.4f}")
     finally:
-        if pool:
-            pool.close()
-            pool.join()
+        if own:
+            backend.close()
     best = np.asarray(es.result.xbest)
     evaluation = evaluate(best, problem, _worker_model(problem.model_variant))
     alpha, kd = decision_to_gait_params(best, problem)

@@ -10,20 +10,21 @@ Per generation, from the current parameters theta (flat vector of the network's 
    the fall penalty's scale);
 3. gradient estimate g = sum_i (rank+_i - rank-_i) eps_i / (2 pairs sigma), plus weight
    decay; Adam step on theta.
-Evaluations run in a process pool (``workers``); results come back in order, so a run is
-deterministic for a given seed and worker count.
+Evaluations run on a :mod:`rabbit_policy.parallel` backend (a local process pool of
+``workers``, or Ray); every evaluation is a pure function of (parameters, episodes) and
+results come back in order, so a run is deterministic for a given seed whatever the
+backend and the number of workers or nodes.
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-import signal
-from multiprocessing import get_context
 
 import numpy as np
 import torch
 
 from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
 from rabbit_policy.runtime.network import HZDPolicyNet
 
 
@@ -56,23 +57,20 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- rollouts (per worker)
-_WORKER: dict = {}
+EnvKey = tuple[int, int, str, float]  # (max_steps, decision_period, distribution, fall_penalty)
+_WORKER: dict[EnvKey, tuple[RabbitHZDEnv, HZDPolicyNet]] = {}
 
 
-def ignore_interrupts() -> None:
-    """For worker processes: Ctrl-C (SIGINT to the whole process group) is the parent's
-    to handle; it then stops the workers itself."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _init_worker(max_steps: int, decision_period: int = 0, distribution: str = "paper",
-                 fall_penalty: float = -10.0) -> None:
-    ignore_interrupts()
-    torch.set_num_threads(1)
-    env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                       fall_penalty=fall_penalty)
-    _WORKER["env"] = env
-    _WORKER["net"] = HZDPolicyNet(env.bounds.low, env.bounds.high)
+def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
+    """This process's environment and network for ``key``, built on first use (each
+    worker process, local or Ray, keeps its own)."""
+    if key not in _WORKER:
+        torch.set_num_threads(1)
+        max_steps, decision_period, distribution, fall_penalty = key
+        env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
+                           fall_penalty=fall_penalty)
+        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high))
+    return _WORKER[key]
 
 
 @dataclass(frozen=True)
@@ -125,9 +123,9 @@ def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, episode: Episode) -> Ro
                 return Rollout(total, steps, abs_error, terminated)
 
 
-def _evaluate(args: tuple[np.ndarray, list[Episode]]) -> list[Rollout]:
-    theta, episodes = args
-    env, net = _WORKER["env"], _WORKER["net"]
+def _evaluate(args: tuple[EnvKey, np.ndarray, list[Episode]]) -> list[Rollout]:
+    key, theta, episodes = args
+    env, net = _worker_env(key)
     set_flat(net, theta)
     return [episode_return(env, net, e) for e in episodes]
 
@@ -165,7 +163,7 @@ class Adam:
 class EvolutionStrategy:
     """Stateful ES optimiser over a policy network's parameters."""
 
-    def __init__(self, net: HZDPolicyNet, config: ESConfig) -> None:
+    def __init__(self, net: HZDPolicyNet, config: ESConfig, backend: Backend | None = None) -> None:
         self.net = net
         self.config = config
         self.theta = get_flat(net)
@@ -173,18 +171,14 @@ class EvolutionStrategy:
         self.adam = Adam(config.lr)
         self.generation = 0
         self.env_steps = 0
-        ctx = get_context("fork")
-        self.pool = ctx.Pool(config.workers, initializer=_init_worker,
-                             initargs=(config.max_steps, config.decision_period, config.distribution,
-                                       config.fall_penalty))
+        self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
+        self._own_backend = backend is None
+        self.backend = backend if backend is not None else LocalBackend(config.workers)
 
     def close(self, terminate: bool = False) -> None:
-        """Stop the worker pool (``terminate``: at once, without joining; after Ctrl-C)."""
-        if terminate:
-            self.pool.terminate()
-            return
-        self.pool.close()
-        self.pool.join()
+        """Stop the workers if this optimiser started them (``terminate``: at once; after Ctrl-C)."""
+        if self._own_backend:
+            self.backend.close(terminate)
 
     def step(self) -> dict[str, float]:
         """One generation; returns statistics: mean/best population return; return, fall
@@ -194,7 +188,8 @@ class EvolutionStrategy:
         seeds = stratified_episodes(self.rng, cfg.episodes, (0.7, 1.5))
         eps = self.rng.standard_normal((cfg.pairs, self.theta.size))
         candidates = [self.theta + cfg.sigma * e for e in eps] + [self.theta - cfg.sigma * e for e in eps]
-        results = self.pool.map(_evaluate, [(c, seeds) for c in candidates] + [(self.theta, seeds)])
+        results = self.backend.map(_evaluate, [(self.env_key, c, seeds) for c in candidates]
+                                   + [(self.env_key, self.theta, seeds)])
         returns = np.array([np.mean([r.total for r in member]) for member in results[:-1]])
         self.env_steps += sum(r.steps for member in results for r in member)
         centre = results[-1]

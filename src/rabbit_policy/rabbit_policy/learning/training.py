@@ -42,6 +42,7 @@ from multiprocessing import active_children
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
+from rabbit_policy.parallel import BackendConfig
 
 
 @dataclass(frozen=True)
@@ -61,6 +62,7 @@ class TrainingConfig:
     warm_start: str = "scheduled"
     no_progress: bool = False
     resume: bool = False
+    backend: BackendConfig = BackendConfig()
 
     def __post_init__(self) -> None:
         if self.algo not in ("es", "ppo"):
@@ -75,12 +77,12 @@ class TrainingConfig:
         return self.trainer.seed
 
 
-def make_trainer(args: TrainingConfig, net):
-    """The ES or PPO trainer for the configured algorithm."""
+def make_trainer(args: TrainingConfig, net, backend=None):
+    """The ES or PPO trainer for the configured algorithm (ES evaluates on ``backend``)."""
     if args.algo == "es":
         from rabbit_policy.learning.es import EvolutionStrategy
 
-        return EvolutionStrategy(net, args.trainer)
+        return EvolutionStrategy(net, args.trainer, backend)
     from rabbit_policy.learning.ppo import PPOTrainer
 
     return PPOTrainer(net, args.trainer)
@@ -108,14 +110,12 @@ def train(args: TrainingConfig) -> int:
         print(f"error: --resume: no {checkpoint_path}", file=sys.stderr)
         return 2
 
-    from multiprocessing import get_context
-
     import torch
     from tqdm import tqdm
 
     from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
     from rabbit_policy.learning.env import ActionBounds
-    from rabbit_policy.learning.es import ignore_interrupts
+    from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
     from rabbit_policy.runtime.policies import NetworkPolicy
@@ -139,8 +139,12 @@ def train(args: TrainingConfig) -> int:
     elif mse is not None:
         print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
               "(normalised action units)", flush=True)
-    eval_pool = get_context("fork").Pool(args.workers, initializer=ignore_interrupts) if args.eval_every else None
-    trainer = make_trainer(args, net)
+    try:
+        backend = make_backend(args.backend)
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    trainer = make_trainer(args, net, backend)
     if state:
         trainer.load_state_dict(state["trainer"])
     elapsed_before = state.get("wall_s", 0.0)
@@ -166,7 +170,7 @@ def train(args: TrainingConfig) -> int:
 
     def evaluate() -> None:
         nonlocal best, first_pass
-        result = acceptance(NetworkPolicy(net, decision_period=args.trainer.decision_period), map_fn=eval_pool.map)
+        result = acceptance(NetworkPolicy(net, decision_period=args.trainer.decision_period), map_fn=backend.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
         baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
@@ -217,18 +221,16 @@ def train(args: TrainingConfig) -> int:
         save_checkpoint()
         if not interrupted:
             trainer.close()
-            if eval_pool is not None:
-                eval_pool.close()
-                eval_pool.join()
+            backend.close()
     print(strict_json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
                       "wall_s": round(wall(), 1), "first_pass": first_pass,
                       "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
     if interrupted:
-        stop_workers(trainer, eval_pool)
+        stop_workers(trainer, backend)
     return 0
 
 
-def stop_workers(trainer, eval_pool) -> None:
+def stop_workers(trainer, backend) -> None:
     """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
     them from starting replacement workers), kill and reap whatever worker is left, and
     leave without multiprocessing's exit handlers. ``Pool.terminate()`` can block on a
@@ -237,8 +239,7 @@ def stop_workers(trainer, eval_pool) -> None:
     depend on it."""
     def terminate() -> None:
         trainer.close(terminate=True)
-        if eval_pool is not None:
-            eval_pool.terminate()
+        backend.close(terminate=True)  # a private Ray instance is shut down with it
 
     stopper = threading.Thread(target=terminate, daemon=True)
     stopper.start()
