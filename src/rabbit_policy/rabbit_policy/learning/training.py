@@ -121,6 +121,11 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.runtime.policies import NetworkPolicy
     from rabbit_policy.learning.warm_start import initial_network
 
+    try:  # before anything slow: a backend that cannot start is a one-line error at once
+        backend = make_backend(args.backend)
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     start = time.perf_counter()  # wall time includes the warm start and the evaluations
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
@@ -134,16 +139,12 @@ def train(args: TrainingConfig) -> int:
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
         if state["algo"] != args.algo:
             print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
+            backend.close()
             return 2
         net.load_state_dict(state["net"])
     elif mse is not None:
         print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
               "(normalised action units)", flush=True)
-    try:
-        backend = make_backend(args.backend)
-    except BackendUnavailable as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
     trainer = make_trainer(args, net, backend)
     if state:
         trainer.load_state_dict(state["trainer"])
