@@ -29,7 +29,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
+from rabbit_policy.parallel import add_backend_arguments, open_backend
 from rabbit_sim.gl_backend import choose_headless_gl
 
 # MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
@@ -113,13 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     log = lambda message: print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr)  # noqa: E731
 
-    try:
-        backend = make_backend(backend_config(args))
-    except ValueError as exc:
-        build_parser().error(str(exc))
-    except BackendUnavailable as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    backend = open_backend(build_parser(), args)
     map_fn = backend.map
     try:
         log("speed tracking")

@@ -31,7 +31,7 @@ import numpy as np
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
+from rabbit_policy.parallel import add_backend_arguments, open_backend
 
 
 def parse_speeds(text: str) -> list[float]:
@@ -61,13 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--refine", action="store_true",
                         help="start each speed from its existing gait in --out")
     args = parser.parse_args(argv)
-    try:
-        backend = make_backend(backend_config(args))
-    except ValueError as exc:
-        parser.error(str(exc))
-    except BackendUnavailable as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    backend = open_backend(parser, args)
     try:
         return _optimize(args, backend)
     finally:

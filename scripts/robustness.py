@@ -20,7 +20,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.parallel import BackendUnavailable, add_backend_arguments, backend_config, make_backend
+from rabbit_policy.parallel import add_backend_arguments, open_backend
 
 PARTS = ("grid", "transitions", "random", "pushes", "models")
 
@@ -60,13 +60,7 @@ def main(argv: list[str] | None = None) -> int:
              "pushes": rb.push_margins, "models": rb.model_errors}
     start = time.perf_counter()
     results: dict = {"config": config.to_dict(), "controllers": {}}
-    try:
-        backend = make_backend(backend_config(args))
-    except ValueError as exc:
-        parser.error(str(exc))
-    except BackendUnavailable as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    backend = open_backend(parser, args)
     try:
         for name, policy in policies.items():
             results["controllers"][name] = {"policy": policy.name}

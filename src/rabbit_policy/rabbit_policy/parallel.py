@@ -146,6 +146,17 @@ def add_backend_arguments(parser) -> None:
                              "instead of starting a private instance")
 
 
+def open_backend(parser, args) -> Backend:
+    """The backend a script's parsed arguments ask for; a bad combination or a backend that
+    cannot start ends the script with one line and exit status 2 (``parser.error``/``exit``)."""
+    try:
+        return make_backend(backend_config(args))
+    except ValueError as exc:
+        parser.error(str(exc))
+    except BackendUnavailable as exc:
+        parser.exit(2, f"error: {exc}\n")
+
+
 def backend_config(args) -> BackendConfig:
     """The :class:`BackendConfig` of parsed ``--backend``/``--ray-address``/``--workers``
     (raises ``ValueError`` with one line)."""
