@@ -271,3 +271,16 @@ def test_lockstep_recording_loses_nothing_on_a_loaded_machine(tmp_path):
     for topic, seen in ticks.items():
         assert seen == set(range(0, 3001)), f"{topic} misses ticks {sorted(set(range(0, 3001)) - seen)[:10]}"
     assert counts["/joint_torques"] >= 3000
+
+
+def test_header_stamp_reads_the_stamp_from_cdr_bytes():
+    """The recorder's ``/recorder/recorded_until`` comes from the serialized state's bytes."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from rabbit_sim.recorder_node import header_stamp
+
+    msg = JointState()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 12, 345_000_000
+    msg.position = [0.1, 0.2]
+    assert header_stamp(serialize_message(msg)) == (12, 345_000_000)

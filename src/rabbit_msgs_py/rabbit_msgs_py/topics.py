@@ -59,6 +59,11 @@ RECORDER_PROGRESS = "/recorder/progress"
 each. In lockstep with ``wait_for_recorder`` sim_node publishes the next state only while
 the recorder is at most a few states behind, so under any load no message is lost."""
 
+RECORDED_UNTIL = "/recorder/recorded_until"
+"""rosgraph_msgs/Clock (transient local): the header stamp (sim time) of the newest
+``/joint_states`` message recorder_node has written. run_stack stops the nodes of a recorded
+run only once it reaches the run's last state, so the bag ends with the run."""
+
 RESET_SERVICE = "/sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
 PAUSE_SERVICE = "/sim/pause"

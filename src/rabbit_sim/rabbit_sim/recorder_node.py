@@ -21,6 +21,7 @@ calls :meth:`RecorderNode.close`).
 
 from __future__ import annotations
 
+import struct
 import sys
 import time
 from pathlib import Path
@@ -47,6 +48,12 @@ from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
 
 LOG_TIMES = ("receive", "sim")
 RECORD_DEPTH = 1000
+
+
+def header_stamp(data: bytes) -> tuple[int, int]:
+    """(sec, nanosec) of a serialized message that starts with a std_msgs/Header, read from
+    the CDR bytes without deserialising (4-byte encapsulation, then the stamp)."""
+    return struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
 
 
 def _subscription_qos(spec: TopicSpec) -> QoSProfile:
@@ -113,6 +120,10 @@ class RecorderNode(Node):
         self.done = False  # run_node stops spinning when true
         self._progress = UInt64()
         self._progress_pub = self.create_publisher(UInt64, topic_names.RECORDER_PROGRESS, qos.STREAM_QOS)
+        # the sim time of the newest state written: run_stack stops the nodes only once it
+        # reaches the run's last state (transient local: the latest value, late joiners too)
+        self._until = Clock()
+        self._until_pub = self.create_publisher(Clock, topic_names.RECORDED_UNTIL, qos.STATUS_QOS)
         for name in names:
             spec = STACK_TOPICS[name]
             self.bag.add_topic(name, spec.type_name, recorded_qos(name))
@@ -146,6 +157,8 @@ class RecorderNode(Node):
             if is_state:  # tell a lockstep simulator how far the recording is
                 self._progress.data = self.bag.counts[topic]
                 self._progress_pub.publish(self._progress)
+                self._until.clock.sec, self._until.clock.nanosec = header_stamp(data)
+                self._until_pub.publish(self._until)
 
         return write
 

@@ -40,6 +40,7 @@ ensure_localhost_discovery()
 
 from rclpy.node import Node  # noqa: E402
 from rclpy.signals import SignalHandlerOptions  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64, Header  # noqa: E402
 from std_srvs.srv import SetBool  # noqa: E402
@@ -214,6 +215,17 @@ class Supervisor(Node):
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE)
+        self.recorded_until = -1.0  # s, sim time of the newest state the recorder has written
+        if config.record:
+            self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
+
+    def _on_recorded(self, msg: Clock) -> None:
+        self.recorded_until = stamp_to_seconds(msg.clock)
+
+    @property
+    def recording_complete(self) -> bool:
+        """The recorder has written the last state this node saw (always true unrecorded)."""
+        return not self.config.record or self.recorded_until >= self.sim_time - 1e-9
 
     def connected(self) -> bool:
         """True once simulator, controller and policy are all visible to this node."""
@@ -356,6 +368,19 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
     return None
 
 
+def _wait_for_recording(executor, supervisor: Supervisor, timeout: float, alive=lambda: None) -> str | None:
+    """After the run: spin until the recorder has written the last state (a node stopped
+    earlier could take states still in flight with it); an error message if it does not
+    within ``timeout`` s."""
+    deadline = time.perf_counter() + timeout
+    while not supervisor.recording_complete:
+        executor.spin_once(timeout_sec=0.02)
+        if alive() or time.perf_counter() > deadline:
+            return (f"the recorder did not write the last state (t = {supervisor.sim_time:.3f} s) within "
+                    f"{timeout:.0f} s; it has up to t = {supervisor.recorded_until:.3f} s")
+    return None
+
+
 def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_kind: str | None = None,
                    observers: Sequence[object] = (), stop=lambda: False) -> tuple[RunReport, dict[str, object]]:
     """Run the stack in this process on one executor; returns the report and the nodes
@@ -391,6 +416,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         freeze_start_up_objects()
         spin_timeout = min(spin_timeout_of(node) for node in nodes.values())
         error = _spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout, stop=stop)
+        error = error or _wait_for_recording(executor, supervisor, stall_timeout)
         drain_until = time.monotonic() + 0.3  # deliver what is in flight (last states, recorder)
         while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=0.005)
@@ -467,6 +493,7 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
             executor = make_executor(context)
             executor.add_node(supervisor)
             error = _spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
+            error = error or _wait_for_recording(executor, supervisor, stall_timeout, alive=procs.dead)
         finally:
             codes = procs.stop()
             supervisor.destroy_node()
