@@ -74,9 +74,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         args.backend_config = backend_config(args)
     except ValueError as exc:
         parser.error(str(exc))
-    if args.algo == "ppo" and args.backend == "ray":
-        parser.error("--backend ray runs ES and the evaluations; PPO's environments still run locally "
-                     "(AsyncVectorEnv): use --backend local with --algo ppo")
     return args
 
 

@@ -32,7 +32,7 @@ KIND = {
 
 SLOW = {
     "tests/test_training.py::test_train_es_logs_checkpoints_and_resumes_exactly",
-    "tests/test_training.py::test_train_ppo_runs_is_deterministic_and_refuses_a_foreign_resume",
+    "tests/test_training.py::test_train_ppo_is_the_same_on_local_and_ray_and_refuses_a_foreign_resume",
     "tests/test_training.py::test_train_stops_cleanly_on_ctrl_c_or_sigterm",
     "tests/test_training.py::test_the_shipped_policy_evaluation_reproduces_its_model_card",
     "tests/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
@@ -45,7 +45,10 @@ SLOW = {
     "tests/test_run_stack_script.py",
     "tests/test_colcon_install.py",
     "tests/test_parallel.py::test_es_on_the_local_backend_is_the_same_for_one_or_two_workers",
-    "tests/test_parallel.py::test_without_ray_installed_the_ray_backend_is_one_line",
+    "tests/test_parallel.py::test_ppo_iteration_on_ray_actors_equals_local",
+    "tests/test_parallel.py::test_an_evaluation_sweep_is_the_same_on_ray_and_local",
+    "tests/test_parallel.py::test_a_worker_killed_mid_generation_is_rerun_not_lost",
+    "tests/test_parallel.py::test_es_on_a_two_node_ray_cluster_equals_local",
 }
 
 

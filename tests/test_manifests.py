@@ -27,7 +27,9 @@ ROSDEP_KEYS = {
 }
 
 
-OPTIONAL = {"ray"}  # rabbit_policy.parallel's --backend ray only, imported when asked: not a dependency
+# pip-only, no rosdep key: pinned in requirements.txt; rabbit_policy.parallel imports it only
+# for --backend ray, so the package runs without it on a ROS install
+OPTIONAL = {"ray"}
 
 
 def imported_modules(package: str) -> set[str]:

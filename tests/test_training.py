@@ -91,7 +91,8 @@ def read_csv(path: Path) -> list[dict]:
 
 def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
-              "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1"]
+              "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1",
+              "--warm-start", "interpolate"]
     straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2")
     assert straight.returncode == 0, straight.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
@@ -112,19 +113,23 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     again = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "2", "--eval-every", "0")
     assert again.returncode == 2 and "not empty" in again.stderr
     resumed = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "2", "--eval-every", "0",
-                         "--resume")
+                         "--resume", "--backend", "ray")  # started on local, resumed on Ray
     assert resumed.returncode == 0, resumed.stderr
     a = PolicyCheckpoint.load(tmp_path / "a" / "policy.pt").state_dict
     b = PolicyCheckpoint.load(tmp_path / "b" / "policy.pt").state_dict
     assert all(torch.equal(a[k], b[k]) for k in a)  # 1 + resumed 1 == 2 straight
+    logs = [read_csv(tmp_path / name / "log.csv") for name in ("a", "b")]
+    drop_wall = [[{k: v for k, v in row.items() if k != "wall_s"} for row in log] for log in logs]
+    assert drop_wall[0] == drop_wall[1]  # the same log, line for line
     assert make_policy("learned", policy_file=tmp_path / "b" / "policy.pt").name == "learned/policy.pt"
 
 
-def test_train_ppo_runs_is_deterministic_and_refuses_a_foreign_resume(tmp_path):
+def test_train_ppo_is_the_same_on_local_and_ray_and_refuses_a_foreign_resume(tmp_path):
     common = ["scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
               "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
-              "--no-progress", "--iterations", "2"]
-    results = [run_script(*common, "--out", str(tmp_path / name)) for name in ("a", "b")]
+              "--no-progress", "--iterations", "2", "--warm-start", "interpolate"]
+    results = [run_script(*common, "--out", str(tmp_path / "a")),  # environments in forked processes
+               run_script(*common, "--out", str(tmp_path / "b"), "--backend", "ray")]  # ... in Ray actors
     assert all(r.returncode == 0 for r in results), results[0].stderr
     log = read_csv(tmp_path / "a" / "log.csv")
     assert [int(r["iteration"]) for r in log] == [1, 2] and int(log[-1]["env_steps"]) == 24
@@ -193,19 +198,39 @@ def test_walk_script_runs_the_learned_policy():
     assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
-@pytest.mark.parametrize("algo, sig", [("es", "SIGINT"), ("ppo", "SIGINT"), ("ppo", "SIGTERM")])
-def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig):
+def _processes_with(marker: str) -> list[int]:
+    """Processes whose environment holds ``marker`` (every process a command started —
+    Ray's too — inherits its environment)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if marker.encode() in (entry / "environ").read_bytes():
+                    found.append(int(entry.name))
+            except OSError:
+                continue
+    return found
+
+
+@pytest.mark.parametrize("algo, sig, backend", [("es", "SIGINT", "local"), ("ppo", "SIGINT", "local"),
+                                                ("ppo", "SIGTERM", "local"), ("es", "SIGINT", "ray"),
+                                                ("ppo", "SIGTERM", "ray")])
+def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     """Ctrl-C reaches the whole process group, SIGTERM only the main process: either way
-    a checkpoint is written, the workers are gone and the exit is clean."""
+    a checkpoint is written, the workers are gone (with Ray: the private instance's
+    raylet, GCS and workers too) and the exit is clean."""
     import os
     import signal
     import time
+    import uuid
 
+    marker = f"RABBIT_TEST_RUN={uuid.uuid4().hex}"
     small = (["--pairs", "2", "--episodes", "1"] if algo == "es" else ["--envs", "2", "--steps", "4"])
     proc = subprocess.Popen(
         [sys.executable, "scripts/train.py", "--algo", algo, "--workers", "2", "--out", str(tmp_path / "run"),
          "--iterations", "100000", "--max-steps", "4", "--eval-every", "3", "--no-progress",
-         "--warm-start", "interpolate", *small],
+         "--warm-start", "interpolate", "--backend", backend, *small],
+        env={**os.environ, marker.split("=")[0]: marker.split("=")[1]},
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         # as from a terminal: a suite started in the background (`cmd &` in a script) has
         # SIGINT ignored, which children inherit, and Python then installs no handler
@@ -230,3 +255,7 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig):
     time.sleep(0.5)
     with pytest.raises(ProcessLookupError):
         os.killpg(proc.pid, 0)  # no worker of the group is left
+    deadline = time.monotonic() + 30  # Ray's processes stop on their own after the driver's shutdown
+    while _processes_with(marker) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    assert not _processes_with(marker)

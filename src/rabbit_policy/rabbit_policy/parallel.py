@@ -4,12 +4,15 @@ items)``, results in the order of ``items``).
 
 * ``local`` (the default): a ``multiprocessing`` fork pool of ``workers`` processes on this
   machine (none with one worker). Needs nothing running.
-* ``ray``: Ray tasks. Without an address a private Ray instance is started on this machine
-  (``workers`` CPUs, listening on 127.0.0.1, no dashboard, usage statistics off) and
-  stopped by :meth:`Backend.close`; with an address (``auto`` or ``host:port``) it joins
-  an existing cluster and leaves it running. A task whose worker or node dies is re-run
-  by Ray (``max_retries``); its result is collected once, so nothing is lost or counted
-  twice.
+* ``ray``: Ray tasks (and, for PPO, Ray actors: :mod:`rabbit_policy.learning.vector`).
+  Without an address a private Ray instance is started on this machine (``workers`` CPUs,
+  bound to and advertising 127.0.0.1 only, no dashboard, usage statistics off) and stopped
+  by :meth:`Backend.close`; with an address (``auto`` or ``host:port``) it joins an
+  existing cluster (checked with a TCP connection first: an unreachable address is a
+  one-line error at once, where Ray itself retries for minutes) and only disconnects. A
+  task whose worker process or node dies is re-run by Ray (``max_retries``); its result is
+  collected once, so nothing is lost or counted twice. docs/cluster.md: a multi-machine
+  cluster, step by step, and what it exposes.
 
 Job functions must be module-level (picklable) and pure functions of their item; state a
 worker keeps between items (a compiled model, an environment) lives in module-level caches
@@ -20,8 +23,10 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from dataclasses import dataclass
 from multiprocessing import get_context
+from pathlib import Path
 from typing import Any, Callable, Iterable
 
 BACKENDS = ("local", "ray")
@@ -80,49 +85,158 @@ class LocalBackend:
         self._pool = None
 
 
+RAY_PIN = "ray==2.60.0"
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1")
+CONNECT_TIMEOUT_S = 5.0
+
+
+def split_address(address: str) -> tuple[str, int]:
+    """``host:port`` -> (host, port); raises ``ValueError`` with one line."""
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ValueError(f"a Ray address is auto or host:port, got {address!r}")
+    return host.strip("[]"), int(port)
+
+
+def resolve_address(address: str) -> str:
+    """The ``host:port`` of the cluster ``address`` names: itself, or for ``auto`` what Ray's
+    own lookup finds, without importing Ray: the ``RAY_ADDRESS`` environment variable, else
+    the cluster ``ray start --head`` last started on this machine (``ray_current_cluster`` in
+    Ray's temporary directory). Raises :class:`BackendUnavailable` with one line."""
+    if address == "auto":
+        found = os.environ.get("RAY_ADDRESS", "")
+        current = Path(os.environ.get("RAY_TMPDIR", "/tmp/ray")) / "ray_current_cluster"
+        if not found and current.is_file():
+            found = current.read_text().strip()
+        if not found:
+            raise BackendUnavailable("--ray-address auto: no running Ray cluster found on this machine "
+                                     "(start one with `ray start --head`, or give host:port)")
+        address = found
+    try:
+        split_address(address)
+    except ValueError as exc:
+        raise BackendUnavailable(str(exc)) from None
+    return address
+
+
+def probe(address: str, timeout: float = CONNECT_TIMEOUT_S) -> None:
+    """Fail fast: a TCP connection to the cluster's GCS port (Ray itself retries for
+    minutes before giving up on an unreachable address)."""
+    import socket
+
+    host, port = split_address(address)
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as exc:
+        raise BackendUnavailable(f"cannot reach the Ray cluster at {address}: {exc.strerror or exc}") from None
+
+
 class RayBackend:
     """Ray tasks, on a private local instance or an existing cluster (see the module docstring)."""
 
     kind = "ray"
 
     def __init__(self, workers: int, address: str | None = None, max_retries: int = 3) -> None:
+        # decided before Ray is imported (it reads these once): no usage statistics sent, and a
+        # private instance (or a cluster on this machine's loopback) binds and advertises
+        # 127.0.0.1 only instead of the machine's network address
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+        self.address = None if address is None else resolve_address(address)
+        if self.address is not None:
+            probe(self.address)
+        if self.address is None or split_address(self.address)[0] in LOOPBACK_HOSTS:
+            os.environ["RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"] = "0"
         try:
             import ray
         except ImportError:
-            raise BackendUnavailable("--backend ray needs the ray package (pip install ray==2.60.0)") from None
-        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # no traffic to Anyscale
+            raise BackendUnavailable(f"--backend ray needs the ray package (pip install {RAY_PIN})") from None
         self._ray = ray
         self.workers = workers
         self.max_retries = max_retries
-        self.started = False
+        self.owns_connection = False  # this backend connected (and disconnects on close)
+        self.started = False  # this backend started a private instance (stopped on close)
+        self.start_s = 0.0
+        begin = time.perf_counter()
         if ray.is_initialized():
-            pass  # already connected (a test's cluster, a caller's session): use it as it is
+            pass  # already connected (a test's cluster, a caller's session): used as it is, left open
         elif address is None:
             try:
-                ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
-                         log_to_driver=False, configure_logging=False)
+                ray.init(address="local", num_cpus=workers, include_dashboard=False,
+                         _node_ip_address="127.0.0.1", log_to_driver=False, configure_logging=False)
             except Exception as exc:  # noqa: BLE001 - Ray raises many kinds at start-up
-                raise BackendUnavailable(f"could not start a local Ray instance: {exc}") from None
-            self.started = True
+                raise BackendUnavailable(f"could not start a local Ray instance: {_first_line(exc)}") from None
+            self.started = self.owns_connection = True
+            self._require_loopback()
         else:
             try:
-                ray.init(address=address, include_dashboard=False, log_to_driver=False, configure_logging=False)
+                ray.init(address=self.address, log_to_driver=False, configure_logging=False)
             except Exception as exc:  # noqa: BLE001
-                first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-                raise BackendUnavailable(f"cannot join the Ray cluster at {address!r}: {first}") from None
+                raise BackendUnavailable(f"cannot join the Ray cluster at {self.address}: {_first_line(exc)}") from None
+            self.owns_connection = True
+        self.start_s = time.perf_counter() - begin
         self._remote: dict[Callable, Any] = {}
 
+    def _require_loopback(self) -> None:
+        """A private instance must be on 127.0.0.1 (Ray imported earlier in this process,
+        before the loopback setting, would have picked the machine's address)."""
+        addresses = {node["NodeManagerAddress"] for node in self._ray.nodes()}
+        if addresses - {"127.0.0.1"}:
+            self._ray.shutdown()
+            raise BackendUnavailable(
+                f"the private Ray instance would listen on {sorted(addresses)}, not 127.0.0.1: set "
+                "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0 before Ray is imported")
+
+    @property
+    def cpus(self) -> int:
+        """CPUs the cluster offers to tasks (all nodes)."""
+        return int(self._ray.cluster_resources().get("CPU", 0))
+
     def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list:
+        """``fn`` on every item as Ray tasks; results in order. A task whose worker process
+        or node dies is re-run (up to ``max_retries``); an exception raised by ``fn`` itself
+        is not retried and is raised here."""
         remote = self._remote.get(fn)
         if remote is None:
             remote = self._remote[fn] = self._ray.remote(max_retries=self.max_retries, num_cpus=1)(fn)
-        return self._ray.get([remote.remote(item) for item in items])
+        refs = [remote.remote(item) for item in items]
+        try:
+            return self._ray.get(refs)
+        except BaseException:
+            for ref in refs:  # Ctrl-C or a failed task: nothing keeps running on our behalf
+                self._ray.cancel(ref, force=True)
+            raise
+
+    def actor(self, cls: type, *args: Any, num_cpus: float = 1.0):
+        """A Ray actor ``cls(*args)`` holding ``num_cpus``, placed to spread over the nodes
+        (not restarted when it dies: its state, an episode in progress, would be lost)."""
+        return self._ray.remote(num_cpus=num_cpus, max_restarts=0, scheduling_strategy="SPREAD")(cls).remote(*args)
+
+    def get(self, refs: list) -> list:
+        """The results of actor calls, in order."""
+        return self._ray.get(refs)
+
+    def kill(self, actor) -> None:
+        self._ray.kill(actor)
+
+    @property
+    def actor_errors(self) -> tuple[type[BaseException], ...]:
+        """What :meth:`get` raises when an actor or its node died."""
+        from ray.exceptions import ActorDiedError, ActorUnavailableError, RayActorError
+
+        return (RayActorError, ActorDiedError, ActorUnavailableError)
 
     def close(self, terminate: bool = False) -> None:
-        """Stop the private instance this backend started (a joined cluster stays up)."""
-        if self.started and self._ray.is_initialized():
+        """Disconnect; a private instance this backend started is stopped with it (a joined
+        cluster stays up, and ends the tasks of this driver)."""
+        if self.owns_connection and self._ray.is_initialized():
             self._ray.shutdown()
-        self.started = False
+        self.owns_connection = self.started = False
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
 
 
 Backend = LocalBackend | RayBackend

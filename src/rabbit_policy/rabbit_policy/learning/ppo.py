@@ -8,7 +8,8 @@
   the mean, so a PPO checkpoint is the same file as an ES one.
 * Critic: a separate 3 -> 64 -> 64 -> 1 tanh network on the same normalised inputs.
 * One iteration: ``steps`` transitions from each of ``envs`` environments (a Gymnasium
-  ``AsyncVectorEnv``, one process per environment, same-step autoreset); generalised
+  ``AsyncVectorEnv``, one process per environment, or one Ray actor per environment on the
+  Ray backend: :mod:`rabbit_policy.learning.vector`; same-step autoreset); generalised
   advantage estimation (gamma, lambda); a truncated episode is bootstrapped with the
   critic's value of its final observation (a time limit is not a terminal state);
   ``epochs`` passes of minibatch updates of the clipped surrogate objective + value loss,
@@ -25,13 +26,13 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from multiprocessing import parent_process
 
-import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 
 from rabbit_policy.learning.env import RabbitHZDEnv
-from rabbit_policy.learning.es import ignore_interrupts
+from rabbit_policy.learning.vector import make_vector_env
+from rabbit_policy.parallel import Backend, ignore_interrupts
 from rabbit_policy.runtime.network import HZDPolicyNet
 
 
@@ -110,9 +111,10 @@ def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "pap
 
 
 class PPOTrainer:
-    """Stateful PPO over ``envs`` parallel environments; :meth:`step` is one iteration."""
+    """Stateful PPO over ``envs`` parallel environments (forked processes, or Ray actors on
+    a Ray ``backend``: the same numbers either way); :meth:`step` is one iteration."""
 
-    def __init__(self, net: HZDPolicyNet, config: PPOConfig) -> None:
+    def __init__(self, net: HZDPolicyNet, config: PPOConfig, backend: Backend | None = None) -> None:
         torch.set_num_threads(1)
         self.config = config
         self.net = net
@@ -123,9 +125,8 @@ class PPOTrainer:
                                           lr=config.lr, eps=1e-5)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
-        self.envs = gym.vector.AsyncVectorEnv([_make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
-                                               for _ in range(config.envs)],
-                                              context="fork", autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+        factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
+        self.envs = make_vector_env([factory] * config.envs, backend)
         self.iteration = 0
         self.env_steps = 0
         self._obs: np.ndarray | None = None

@@ -78,14 +78,14 @@ class TrainingConfig:
 
 
 def make_trainer(args: TrainingConfig, net, backend=None):
-    """The ES or PPO trainer for the configured algorithm (ES evaluates on ``backend``)."""
+    """The ES or PPO trainer for the configured algorithm, running its episodes on ``backend``."""
     if args.algo == "es":
         from rabbit_policy.learning.es import EvolutionStrategy
 
         return EvolutionStrategy(net, args.trainer, backend)
     from rabbit_policy.learning.ppo import PPOTrainer
 
-    return PPOTrainer(net, args.trainer)
+    return PPOTrainer(net, args.trainer, backend)
 
 
 def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) -> dict:
