@@ -2,6 +2,7 @@
 """Benchmark HZD-RL training: environment throughput and wall time to a passing policy.
 
     scripts/bench_train.py [--steps 600] [--workers 2] [--train] [--algo es|ppo] [--max-iterations 60]
+                           [--backend local|ray] [--ray-address ADDRESS|auto] [--no-backends]
 
 Prints one JSON object:
 * ``env_steps_per_s_per_core``: ``RabbitHZD-v0`` steps per second in one process with the
@@ -10,6 +11,14 @@ Prints one JSON object:
   ``per_walking_step`` the same with one env step per walking step (0.4-0.7 s).
 * ``sim_seconds_per_s_per_core``: the same in simulated seconds per wall second.
 * ``pool_env_steps_per_s``: the same with ``--workers`` processes in parallel (all cores).
+* ``backends`` (unless ``--no-backends``): ES generations (the shipped configuration, shorter
+  episodes: :data:`BENCH_ES`) on ``local`` and ``ray`` with 1 and 2 workers — env steps
+  per second (the first generation, which builds each worker's environment, untimed),
+  ``identical`` (the same parameters on every backend), Ray's start-up time (a private
+  instance, or joining ``--ray-address``), ``ray_overhead_2_workers`` (1 - ray/local rate),
+  ``efficiency_2_workers`` (rate ratio over the ideal for the generation's 2 pairs + 1 tasks)
+  and ``projection``: the wall time of the shipped policy's ES generations (its checkpoint's
+  generations and env steps) on N cores, from those figures (ceil(tasks/N) waves each).
 * with ``--train``: runs ``scripts/train.py`` with the shipped configuration (:data:`CONFIGS`)
   for ``--max-iterations`` into a temporary directory, then the acceptance checks 1-6
   (``broad_acceptance``, the full evaluation) on its ``best.pt``; reports the training wall
@@ -23,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import subprocess
 import sys
 import tempfile
@@ -32,6 +42,7 @@ from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_policy.parallel import add_backend_arguments, backend_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -77,6 +88,95 @@ def env_throughput(steps: int, seed: int = 0, decision_period: int = 20) -> tupl
     return steps / wall, (sim_time + episode_start) / wall
 
 
+# Throughput workload: the shipped ES configuration (see the packaged model card) with fewer
+# pairs and shorter episodes, so that each backend's measurement takes seconds.
+BENCH_ES = {"pairs": 4, "episodes": 2, "max_steps": 500, "decision_period": 20, "distribution": "broad",
+            "fall_penalty": -50.0, "seed": 0}
+PROJECTION_CORES = (1, 2, 4, 8, 17, 34, 64)
+
+
+def es_rate(config, generations: int = 2) -> dict:
+    """ES env steps per second on the backend ``config`` (a :class:`BackendConfig`), the
+    backend's start-up time and the final parameters (to compare backends)."""
+    import numpy as np
+    import torch
+
+    from rabbit_policy.learning.env import RabbitHZDEnv
+    from rabbit_policy.learning.es import ESConfig, EvolutionStrategy
+    from rabbit_policy.parallel import make_backend
+    from rabbit_policy.runtime.network import HZDPolicyNet
+
+    start = time.perf_counter()
+    backend = make_backend(config)
+    startup = time.perf_counter() - start
+    try:
+        env = RabbitHZDEnv()
+        torch.manual_seed(0)
+        es = EvolutionStrategy(HZDPolicyNet(env.bounds.low, env.bounds.high),
+                               ESConfig(workers=config.workers, **BENCH_ES), backend)
+        es.step()  # every worker builds its environment: not timed
+        before, start = es.env_steps, time.perf_counter()
+        for _ in range(generations):
+            es.step()
+        wall = time.perf_counter() - start
+        return {"backend": config.kind, "workers": config.workers, "startup_s": round(startup, 2),
+                "env_steps_per_s": round((es.env_steps - before) / wall, 1), "theta": np.asarray(es.theta)}
+    finally:
+        backend.close()
+
+
+def projection(per_core_rate: float, efficiency: float, startup_s: float) -> dict:
+    """Projected wall time (s) of the shipped policy's ES generations on N cores (its
+    checkpoint's generations and env steps; the acceptance evaluations between them not
+    included): each generation ceil(tasks / N) waves of one task's env steps at
+    ``per_core_rate`` x ``efficiency`` (the measured 2-worker efficiency, the waves taken
+    out), plus the backend's start-up."""
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.runtime.policies import packaged_policy_file
+
+    info = PolicyCheckpoint.load(packaged_policy_file()).info
+    tasks = 2 * info["config"]["pairs"] + 1
+    steps_per_task = info["env_steps"] / (info["iteration"] * tasks)
+    task_s = steps_per_task / (per_core_rate * efficiency)
+    return {"generations": info["iteration"], "env_steps": info["env_steps"], "tasks_per_generation": tasks,
+            "measured_wall_s": info["wall_s"], "measured_workers": info["workers"],
+            "wall_s_on_cores": {str(n): round(startup_s + info["iteration"] * math.ceil(tasks / n) * task_s, 1)
+                                for n in PROJECTION_CORES}}
+
+
+def backend_report(ray_address: str | None, repeats: int = 3) -> dict:
+    """Local vs Ray ES throughput with 1 and 2 workers (2 workers ``repeats`` times,
+    alternating, the medians compared: runs on a 2-core machine vary by 10 %), and the
+    projection."""
+    import numpy as np
+
+    from rabbit_policy.parallel import BackendConfig
+
+    def run(kind: str, workers: int) -> dict:
+        return es_rate(BackendConfig(kind, workers, ray_address if kind == "ray" else None))
+
+    runs = [run(kind, 1) for kind in ("local", "ray")]
+    runs += [run(kind, 2) for _ in range(repeats) for kind in ("local", "ray")]
+    identical = all(np.array_equal(r["theta"], runs[0]["theta"]) for r in runs)
+    rate = {(kind, workers): float(np.median([r["env_steps_per_s"] for r in runs
+                                              if r["backend"] == kind and r["workers"] == workers]))
+            for kind in ("local", "ray") for workers in (1, 2)}
+    ray_start = float(np.median([r["startup_s"] for r in runs if r["backend"] == "ray"]))
+    tasks = 2 * BENCH_ES["pairs"] + 1
+    ideal = tasks / math.ceil(tasks / 2)  # the speed-up 2 workers can give on this many tasks
+    efficiency = {kind: rate[(kind, 2)] / rate[(kind, 1)] / ideal for kind in ("local", "ray")}
+    return {
+        "workload": BENCH_ES, "identical": identical,
+        "runs": [{k: v for k, v in r.items() if k != "theta"} for r in runs],
+        "median_env_steps_per_s": {f"{kind}_{workers}": rate[(kind, workers)] for kind, workers in rate},
+        "ray_startup_s": round(ray_start, 2),
+        "ray_overhead_2_workers": round(1 - rate[("ray", 2)] / rate[("local", 2)], 3),
+        "efficiency_2_workers": {kind: round(e, 3) for kind, e in efficiency.items()},
+        "projection": {kind: projection(rate[(kind, 1)], efficiency[kind], ray_start if kind == "ray" else 0.0)
+                       for kind in ("local", "ray")},
+    }
+
+
 def _worker(args: tuple[int, int]) -> tuple[float, float]:
     return env_throughput(*args)
 
@@ -99,7 +199,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--algo", choices=("es", "ppo"), default="es")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--max-iterations", type=int, default=60)
+    parser.add_argument("--no-backends", action="store_true", help="skip the local vs Ray comparison")
+    parser.add_argument("--repeats", type=int, default=3, help="2-worker runs per backend (medians compared)")
+    add_backend_arguments(parser)
     args = parser.parse_args(argv)
+    try:
+        backend_config(args)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.repeats < 1:
+        parser.error("--repeats must be >= 1")
 
     single, sim_rate = env_throughput(args.steps)
     per_step, per_step_sim = env_throughput(max(args.steps // 20, 30), decision_period=0)
@@ -116,13 +225,22 @@ def main(argv: list[str] | None = None) -> int:
         "pool_env_steps_per_s": round(sum(r for r, _ in rates), 1),
         "pool_wall_s": round(pool_wall, 1),
     }
+    if not args.no_backends:
+        from rabbit_policy.parallel import BackendUnavailable
+
+        try:
+            report["backends"] = backend_report(args.ray_address, args.repeats)
+        except BackendUnavailable as exc:
+            parser.exit(2, f"error: {exc}\n")
     if args.train:
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(tmp) / "run"
             config = CONFIGS[args.algo]
             command = [sys.executable, str(ROOT / "scripts" / "train.py"), "--algo", args.algo, "--seed",
                        str(args.seed), "--workers", str(args.workers), "--out", str(out), "--iterations",
-                       str(args.max_iterations), "--no-progress", *config]
+                       str(args.max_iterations), "--no-progress", "--backend", args.backend, *config]
+            if args.ray_address:
+                command += ["--ray-address", args.ray_address]
             start = time.perf_counter()
             result = subprocess.run(command, capture_output=True, text=True)
             trained = time.perf_counter() - start
