@@ -172,7 +172,7 @@ class RayBackend:
             try:
                 ray.init(address=self.address, log_to_driver=False, configure_logging=False)
             except Exception as exc:  # noqa: BLE001
-                raise BackendUnavailable(f"cannot join the Ray cluster at {self.address}: {_first_line(exc)}") from None
+                raise BackendUnavailable(f"cannot join the Ray cluster at {self.address}: {_join_error(exc)}") from None
             self.owns_connection = True
         self.start_s = time.perf_counter() - begin
         self._remote: dict[Callable, Any] = {}
@@ -232,6 +232,17 @@ class RayBackend:
         if self.owns_connection and self._ray.is_initialized():
             self._ray.shutdown()
         self.owns_connection = self.started = False
+
+
+def _join_error(exc: BaseException) -> str:
+    """Why joining failed, in one line: the root cause Ray chains under its ConnectionError."""
+    cause = exc
+    while cause.__cause__ is not None:
+        cause = cause.__cause__
+    if "AuthenticationError" in type(cause).__name__ or "InvalidAuthToken" in str(cause):
+        return ("the cluster requires token authentication: set RAY_AUTH_MODE=token and its token "
+                "(~/.ray/auth_token or RAY_AUTH_TOKEN), see docs/cluster.md")
+    return _first_line(cause)
 
 
 def _first_line(exc: BaseException) -> str:
