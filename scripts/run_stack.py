@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
     parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--viewer", action="store_true", help="sim_node opens MuJoCo's viewer (needs a display)")
+    parser.add_argument("--markers-rate", type=float, default=30.0, metavar="HZ",
+                        help="/rabbit/markers (RViz/Foxglove 3D view) per s of sim time; 0 = off (default 30)")
     return parser
 
 
@@ -98,7 +101,18 @@ def main(argv: list[str] | None = None) -> int:
             decision_period=args.decision_period,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
+            markers_rate=args.markers_rate, viewer=args.viewer,
         )
+        if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
+            raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
+        if args.viewer:
+            from rabbit_sim.viewer import ViewerUnavailable, require_display
+
+            try:
+                require_display()
+            except ViewerUnavailable as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
         if args.record and os.path.exists(args.record):
             from rabbit_sim.bag import is_bag_directory
 

@@ -77,6 +77,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--viewer", action="store_true",
+                        help="watch the walk in MuJoCo's viewer, at real time (needs a display; results unchanged)")
     return parser
 
 
@@ -120,8 +122,26 @@ def main(argv: list[str] | None = None) -> int:
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    viewer = None
+    if args.viewer:
+        from rabbit_sim.viewer import ViewerObserver, ViewerUnavailable
+
+        try:
+            viewer = ViewerObserver(realtime=True)
+        except ViewerUnavailable as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
     start = time.perf_counter()  # the walk, not loading torch and the policy
-    result = walk(policy, scenario, args.duration)
+    try:
+        result = walk(policy, scenario, args.duration, observer=viewer)
+    except Exception as exc:  # noqa: BLE001 - the viewer's window failed to open on the first tick
+        if viewer is None or type(exc).__name__ != "ViewerUnavailable":
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if viewer is not None:
+            viewer.close()
     wall = time.perf_counter() - start
     summary = {"controller": controller, "policy": policy.name, "scenario": scenario.to_dict(),
                **result.summary(args.tolerance),

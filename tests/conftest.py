@@ -27,7 +27,7 @@ KIND = {
     "test_controller": "sim", "test_model": "sim", "test_walking": "sim", "test_experiment": "sim",
     "test_env": "sim", "test_gait_optimization": "sim", "test_evaluation": "sim", "test_training": "sim",
     "test_stack_nodes": "ros", "test_recording": "ros", "test_run_stack_script": "ros",
-    "test_ros_install": "ros", "test_colcon_install": "ros", "test_parallel": "sim",
+    "test_ros_install": "ros", "test_colcon_install": "ros", "test_parallel": "sim", "test_visualization": "ros",
 }
 
 SLOW = {

@@ -11,6 +11,7 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, String, UInt32
+from visualization_msgs.msg import MarkerArray
 
 from . import qos, topics
 
@@ -52,5 +53,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
         TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
         TopicSpec(topics.ANSWER_AGAIN, UInt32, qos.STATUS_QOS),
+        TopicSpec(topics.MARKERS, MarkerArray, qos.MARKERS_QOS),
     )
 }

@@ -36,6 +36,7 @@ STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(10)
+MARKERS_QOS = _reliable(10)
 MONITOR_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,

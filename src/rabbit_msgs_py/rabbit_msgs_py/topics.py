@@ -54,6 +54,12 @@ re-sends next to be answered although the controller answered it before (after i
 replies while two controllers published). The controller forgets the state it answered
 last; unlike ``/sim/resets`` it does not restart."""
 
+MARKERS = "/rabbit/markers"
+"""visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every
+``1 / markers_rate`` s of sim time; frame ``world``, namespace ``rabbit``): torso, femurs and
+tibias as cylinders, feet as spheres (larger and yellow on the ground), a ground plate, the
+push acting now as a red arrow. See ``rabbit_sim.markers``."""
+
 RECORDER_PROGRESS = "/recorder/progress"
 """std_msgs/UInt64: how many ``/joint_states`` messages recorder_node has written, after
 each. In lockstep with ``wait_for_recorder`` sim_node publishes the next state only while

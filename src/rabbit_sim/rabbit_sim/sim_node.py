@@ -55,6 +55,7 @@ from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
 from std_msgs.msg import Bool, Float64MultiArray, UInt32, UInt64  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
+from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import MessageError, joint_state_vectors, torques_from_msg  # noqa: E402
@@ -63,7 +64,10 @@ from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E4
 from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
+from .marker_msgs import marker_array  # noqa: E402
+from .markers import RobotShapes, marker_period_ticks  # noqa: E402
 from .model import load_model  # noqa: E402
+from .viewer import PassiveViewer, ViewerUnavailable  # noqa: E402
 from .simulation import Simulator  # noqa: E402
 from .stepping import (  # noqa: E402
     Lockstep, RealtimeClock, RecorderGate, Reply, SourceProbe, TickStatistics, Verdict, Watchdog, WatchdogEvent)
@@ -100,6 +104,10 @@ class SimSettings:
         :data:`RECORDER_LAG` states behind (the launch script sets it when recording).
     stats_file: write :meth:`SimNode.statistics` as JSON to this path when the node
         closes ('' = don't); the benchmarks read it.
+    markers_rate: ``/rabbit/markers`` messages per second of sim time (0 = none); one also
+        goes out whenever RABBIT is placed (start, reset).
+    viewer: open MuJoCo's viewer (passive, synced to the simulation at most 60 times per
+        wall second); the node does not start without a display.
     """
 
     model: str = "paper"
@@ -114,6 +122,8 @@ class SimSettings:
     start_paused: bool = False
     wait_for_recorder: bool = False
     stats_file: str = ""
+    markers_rate: float = 30.0
+    viewer: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -122,7 +132,7 @@ class SimSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise NodeStartError(f"{name} must be a finite number > 0, got {value}")
-        for name in ("stop_time", "damping"):
+        for name in ("stop_time", "damping", "markers_rate"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise NodeStartError(f"{name} must be a finite number >= 0, got {value}")
@@ -156,6 +166,8 @@ SIM_PARAMS = {
     "wait_for_recorder": Param(False, "lockstep: publish the next state only while the recorder (/recorder/progress) "
                                       "is at most a few states behind, so a recording loses nothing under any load"),
     "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
+    "markers_rate": Param(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off)"),
+    "viewer": Param(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a display)"),
 }
 
 
@@ -206,6 +218,16 @@ class SimNode(Node):
         self._answer_again_pub = self.create_publisher(UInt32, topics.ANSWER_AGAIN, qos.STATUS_QOS)
         self._answer_again = 0
         self._answer_again_pub.publish(UInt32(data=0))  # the count in force: a controller that starts now sees 0
+        self._shapes = RobotShapes(self.sim.model)
+        self._marker_period = marker_period_ticks(self.settings.markers_rate, self.sim.timestep)
+        self._markers_pub = self.create_publisher(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
+        self.markers_published = 0
+        self.viewer = None
+        if self.settings.viewer:
+            try:
+                self.viewer = PassiveViewer(self.sim.model, self.sim.data)
+            except ViewerUnavailable as exc:
+                raise NodeStartError(f"sim_node: {exc}") from None
         self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS,
                                  event_callbacks=SubscriptionEventCallbacks(matched=self._on_torque_sources))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
@@ -257,7 +279,10 @@ class SimNode(Node):
     resends = property(lambda self: self.lockstep.resends)
 
     def close(self) -> None:
-        """Write the statistics file; called before the node is destroyed."""
+        """Close the viewer and write the statistics file; called before the node is destroyed."""
+        if self.viewer is not None:
+            self.viewer.close()
+            self.viewer = None
         if self.settings.stats_file:
             try:
                 Path(self.settings.stats_file).write_text(strict_json.dumps(self.statistics()) + "\n")
@@ -429,6 +454,10 @@ class SimNode(Node):
         if self._fallen:
             self._fallen = False
             self._fallen_pub.publish(Bool(data=False))
+        if self._marker_period:
+            self._publish_markers()  # a viewer shows the robot where it stands, before it walks
+        if self.viewer is not None:
+            self.viewer.sync(force=True)
         if self.settings.mode == "lockstep":
             self._publish_state()
             self.lockstep.published()
@@ -465,10 +494,18 @@ class SimNode(Node):
         msg.wrench.force.x, msg.wrench.force.z, msg.wrench.torque.y = self.sim.push_wrench
         self._push_applied_pub.publish(msg)
 
+    def _publish_markers(self) -> None:
+        self._markers_pub.publish(marker_array(self._shapes.shapes(self.sim.data), stamp_of(self.sim.time)))
+        self.markers_published += 1
+
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
         sim.step(torques)
         self.stats.tick(time.perf_counter())
+        if self._marker_period and round(sim.time / sim.timestep) % self._marker_period == 0:
+            self._publish_markers()
+        if self.viewer is not None:
+            self.viewer.sync()
         if sim.push_changed:  # a scheduled push started, or a push ended
             self._publish_push_applied()
             fx, fz, ty = sim.push_wrench

@@ -67,7 +67,8 @@ class StackConfig:
     """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0.
     ``decision_period``: -1 = the policy's own (classic: every 20 ticks; learned: as
     trained), 0 = once per step, N > 0 = every N ticks, the controller applying each gait at
-    once (told so on ``/hzd/gait_timing``)."""
+    once (told so on ``/hzd/gait_timing``). ``markers_rate``: ``/rabbit/markers`` per s of
+    sim time (0 = off); ``viewer``: sim_node opens MuJoCo's viewer."""
 
     duration: float
     schedule: tuple[tuple[float, float], ...]
@@ -85,6 +86,8 @@ class StackConfig:
     record_compression: str = "none"
     record_overwrite: bool = False
     record_stats_file: str = ""
+    markers_rate: float = 30.0
+    viewer: bool = False
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
 
     def __post_init__(self) -> None:
@@ -117,6 +120,8 @@ class StackConfig:
                 "start_paused": True,
                 "wait_for_recorder": bool(self.record) and self.mode == "lockstep",
                 "stats_file": self.stats_file,
+                "markers_rate": self.markers_rate,
+                "viewer": self.viewer,
             },
         }
         if self.record:

@@ -1,0 +1,38 @@
+""":class:`rabbit_sim.markers.Shape` records as ``visualization_msgs/MarkerArray`` (the
+message side of ``/rabbit/markers``)."""
+
+from __future__ import annotations
+
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point
+from visualization_msgs.msg import Marker, MarkerArray
+
+from .markers import FRAME_ID, NAMESPACE, Shape
+
+MARKER_TYPES = {"arrow": Marker.ARROW, "cube": Marker.CUBE, "sphere": Marker.SPHERE, "cylinder": Marker.CYLINDER}
+
+
+def to_marker(shape: Shape, stamp: Time) -> Marker:
+    """One shape as a Marker in :data:`FRAME_ID` (``delete`` -> a DELETE of its id)."""
+    marker = Marker()
+    marker.header.frame_id = FRAME_ID
+    marker.header.stamp = stamp
+    marker.ns = NAMESPACE
+    marker.id = shape.id
+    if shape.kind == "delete":
+        marker.action = Marker.DELETE
+        return marker
+    marker.type = MARKER_TYPES[shape.kind]
+    marker.action = Marker.ADD
+    p, q = marker.pose.position, marker.pose.orientation
+    p.x, p.y, p.z = shape.position
+    q.w, q.x, q.y, q.z = shape.orientation
+    marker.scale.x, marker.scale.y, marker.scale.z = shape.scale
+    marker.color.r, marker.color.g, marker.color.b, marker.color.a = shape.rgba
+    marker.points = [Point(x=x, y=y, z=z) for x, y, z in shape.points]
+    marker.frame_locked = False
+    return marker
+
+
+def marker_array(shapes: list[Shape], stamp: Time) -> MarkerArray:
+    return MarkerArray(markers=[to_marker(shape, stamp) for shape in shapes])

@@ -1,0 +1,188 @@
+"""Seeing the robot: ``/rabbit/markers`` recorded in a bag and drawn to a PNG that matches
+MuJoCo's bodies at the same ticks; MuJoCo's viewer under Xvfb (a screenshot of its window
+shows the robot; results unchanged; a clear error without a display)."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+from PIL import Image
+
+from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.experiment.scenario import Push
+from rabbit_sim.marker_plot import render_png
+from rabbit_sim.markers import PUSH_ID, RobotShapes, marker_period_ticks
+from rabbit_sim.model import load_model
+from rabbit_sim.simulation import Simulator
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def bag(tmp_path_factory) -> Path:
+    """A recorded 2 s lockstep run with a push at 1.0-1.1 s (markers at the default 30 Hz)."""
+    path = tmp_path_factory.mktemp("viz") / "bag"
+    report, _nodes = run_in_process(StackConfig(duration=2.0, schedule=((0.0, 1.0),), record=str(path),
+                                                pushes=(Push(1.0, 60.0, 0.1),)))
+    assert report.completed and not report.fell
+    return path
+
+
+def _read(bag: Path) -> tuple[list, dict[int, np.ndarray]]:
+    """(marker messages, qpos of /joint_states by stamp in ns)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    markers, states = [], {}
+    with Reader(bag) as reader:
+        for connection, _t, raw in reader.messages():
+            if connection.topic == "/rabbit/markers":
+                markers.append(store.deserialize_cdr(raw, connection.msgtype))
+            elif connection.topic == "/joint_states":
+                msg = store.deserialize_cdr(raw, connection.msgtype)
+                states[msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec] = np.array(msg.position)
+    return markers, states
+
+
+def test_marker_rate_and_shapes_follow_the_model():
+    model = load_model("paper")
+    assert marker_period_ticks(30.0, 0.001) == 33 and marker_period_ticks(0.0, 0.001) == 0
+    with pytest.raises(ValueError):
+        marker_period_ticks(-1.0, 0.001)
+    shapes = RobotShapes(model)
+    assert shapes.names == ["torso", "left_femur", "left_tibia", "left_foot", "right_femur", "right_tibia",
+                            "right_foot"]
+    sim = Simulator(model)
+    sim.push(50.0, 0.1)
+    mujoco.mj_forward(model, sim.data)
+    by_name = {s.name: s for s in shapes.shapes(sim.data)}
+    assert by_name["left_tibia"].kind == "cylinder" and by_name["left_tibia"].scale == pytest.approx((0.04, 0.04, 0.38))
+    assert by_name["push"].kind == "arrow"
+    end = np.array(by_name["push"].points[1])
+    assert np.allclose(end, sim.data.xipos[model.body("torso").id])  # the arrow ends at the torso's CoM
+
+
+def test_recorded_markers_render_to_a_png_matching_mujoco_bodies(bag, tmp_path):
+    markers, states = _read(bag)
+    assert 60 <= len(markers) <= 62  # 2 s at 30 Hz, and one when RABBIT is placed
+    model = load_model("paper")
+    data = mujoco.MjData(model)
+    body = {name: model.body(name).id for name in ("torso", "left_femur", "left_tibia", "right_femur", "right_tibia")}
+    pushes = 0
+    for msg in markers[:: len(markers) // 6]:
+        stamp = msg.markers[0].header.stamp
+        assert msg.markers[0].header.frame_id == "world"
+        data.qpos[:] = states[stamp.sec * 10**9 + stamp.nanosec]  # the state of the same tick
+        mujoco.mj_kinematics(model, data)
+        drawn, to_pixel = render_png(msg.markers, tmp_path / "frame.png")
+        links = {d.id: d for d in drawn if d.kind == "cylinder"}
+        xz = {name: data.xpos[i][[0, 2]] for name, i in body.items()}  # the hip is the torso body's origin
+        def has_end(link, point) -> bool:
+            return any(np.allclose(end, point, atol=1e-6) for end in link.points)
+
+        for leg in ("left", "right"):
+            femur, tibia = links[model.geom(f"{leg}_femur").id], links[model.geom(f"{leg}_tibia").id]
+            assert has_end(femur, xz["torso"]) and has_end(femur, xz[f"{leg}_tibia"])  # hip to knee
+            assert has_end(tibia, xz[f"{leg}_tibia"])  # from the knee
+        assert has_end(links[model.geom("torso").id], xz["torso"])  # from the hip
+        pushes += any(d.kind == "arrow" for d in drawn)
+        # the PNG shows each link in its colour at its midpoint (those not covered by another link)
+        image = np.asarray(Image.open(tmp_path / "frame.png").convert("RGB")) / 255.0
+        matched = 0
+        for d in links.values():
+            col, row = to_pixel(*np.mean(d.points, axis=0))
+            matched += np.allclose(image[row, col], d.rgba[:3], atol=0.02)
+        assert matched >= len(links) - 1, f"{matched} of {len(links)} links drawn where MuJoCo has them"
+    push_frames = [m for m in markers if any(x.id == PUSH_ID and x.action == 0 for x in m.markers)]
+    assert push_frames and all(1.0 <= m.markers[0].header.stamp.sec + m.markers[0].header.stamp.nanosec * 1e-9
+                                <= 1.1 + 1e-6 for m in push_frames)
+
+
+# ------------------------------------------------------------------ MuJoCo's viewer
+@pytest.fixture(scope="module")
+def display():
+    """A virtual X display (Xvfb) for the viewer tests."""
+    if shutil.which("Xvfb") is None:
+        pytest.fail("Xvfb is missing: apt-get install xvfb (.ci/run installs it)")
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as f:
+        number = f.readline().strip()
+    try:
+        yield f":{number}"
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+def test_viewer_window_shows_the_robot(display):
+    """``walk.py --viewer`` (its own process: the test process never holds an X connection
+    that the display's end would break) draws RABBIT: the torso's and the right leg's
+    colours appear in a screenshot of the display, and were not there before."""
+    from PIL import ImageGrab
+
+    def colour_pixels(image: np.ndarray, rgb: tuple[float, float, float]) -> int:
+        return int(np.all(np.abs(image - rgb) < 0.2, axis=2).sum())
+
+    blank = np.asarray(ImageGrab.grab(xdisplay=display).convert("RGB")).astype(float) / 255.0
+    walker = subprocess.Popen([sys.executable, "scripts/walk.py", "--speed", "1.0", "--duration", "60", "--viewer"],
+                              cwd=ROOT, env={**os.environ, "DISPLAY": display}, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120
+        torso = right = 0
+        while time.monotonic() < deadline and walker.poll() is None and not (torso > 200 and right > 200):
+            time.sleep(0.5)  # until the window has drawn the robot (software GL is slow on a loaded machine)
+            image = np.asarray(ImageGrab.grab(xdisplay=display).convert("RGB")).astype(float) / 255.0
+            torso, right = colour_pixels(image, (0.75, 0.6, 0.3)), colour_pixels(image, (0.8, 0.35, 0.3))
+    finally:
+        walker.terminate()
+        _out, err = walker.communicate(timeout=30)
+    assert colour_pixels(blank, (0.75, 0.6, 0.3)) == 0  # nothing of the robot's colour before
+    assert torso > 200 and right > 200, f"torso {torso} px, right leg {right} px in the viewer's window; {err[-500:]}"
+
+
+def _walk(*extra: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "scripts/walk.py", "--speed", "1.1", "--duration", "1.5", "--push",
+                           "0.8:40:0.1", "--json", *extra], capture_output=True, text=True, cwd=ROOT, timeout=300,
+                          env=env)
+
+
+def test_walk_viewer_leaves_results_unchanged_and_needs_a_display(display):
+    plain = json.loads(_walk().stdout)
+    viewed = _walk("--viewer", env={**os.environ, "DISPLAY": display})
+    assert viewed.returncode == 0, viewed.stderr
+    seen = json.loads(viewed.stdout)
+    for result in (plain, seen):
+        result.pop("real_time_factor")
+    assert seen == plain
+    headless = _walk("--viewer", env={k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")})
+    assert headless.returncode == 2 and headless.stderr.strip().startswith("error: the viewer needs a display")
+
+
+def test_sim_node_viewer_leaves_the_lockstep_run_unchanged(display):
+    def run(*extra: str, env: dict) -> subprocess.CompletedProcess:
+        return subprocess.run([sys.executable, "scripts/run_stack.py", "--duration", "1.5", "--in-process", "--json",
+                               "--push", "0.8:40:0.1", *extra], capture_output=True, text=True, cwd=ROOT,
+                              timeout=300, env=env)
+
+    plain = run(env=dict(os.environ))
+    viewed = run("--viewer", env={**os.environ, "DISPLAY": display})
+    assert plain.returncode == 0 and viewed.returncode == 0, viewed.stderr[-2000:]
+    drop = ("rtf", "wall_time")
+    assert ({k: v for k, v in json.loads(viewed.stdout).items() if k not in drop}
+            == {k: v for k, v in json.loads(plain.stdout).items() if k not in drop})
+    headless = run("--viewer", env={k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")})
+    assert headless.returncode == 2 and headless.stderr.strip().startswith("error: the viewer needs a display")
