@@ -27,7 +27,7 @@ KIND = {
     "test_controller": "sim", "test_model": "sim", "test_walking": "sim", "test_experiment": "sim",
     "test_env": "sim", "test_gait_optimization": "sim", "test_evaluation": "sim", "test_training": "sim",
     "test_stack_nodes": "ros", "test_recording": "ros", "test_run_stack_script": "ros",
-    "test_ros_install": "ros", "test_colcon_install": "ros", "test_parallel": "sim", "test_visualization": "ros",
+    "test_ros_install": "ros", "test_colcon_install": "ros", "test_parallel": "sim", "test_visualization": "ros", "test_play": "ros",
 }
 
 SLOW = {
@@ -42,6 +42,9 @@ SLOW = {
     "tests/test_stack_nodes.py::test_realtime_watchdog_damps_while_the_controller_is_gone",
     "tests/test_stack_nodes.py::test_stack_walks_and_cmd_speed_changes_the_speed",
     "tests/test_recording.py",
+    "tests/test_play.py",
+    "tests/test_visualization.py::test_sim_node_viewer_leaves_the_lockstep_run_unchanged",
+    "tests/test_visualization.py::test_walk_viewer_leaves_results_unchanged_and_needs_a_display",
     "tests/test_run_stack_script.py",
     "tests/test_colcon_install.py",
     "tests/test_parallel.py::test_es_on_the_local_backend_is_the_same_for_one_or_two_workers",
