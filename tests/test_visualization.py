@@ -186,3 +186,28 @@ def test_sim_node_viewer_leaves_the_lockstep_run_unchanged(display):
             == {k: v for k, v in json.loads(plain.stdout).items() if k not in drop})
     headless = run("--viewer", env={k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")})
     assert headless.returncode == 2 and headless.stderr.strip().startswith("error: the viewer needs a display")
+
+
+def test_foxglove_layout_uses_only_topics_and_fields_that_exist():
+    """Every message path of docs/foxglove_layout.json names a stack topic and a field of its
+    message type (index into a sequence; header stamps only where the message has one)."""
+    import re
+
+    from rabbit_msgs_py.catalog import STACK_TOPICS
+
+    layout = json.loads((ROOT / "docs" / "foxglove_layout.json").read_text())
+    paths = [p for panel in layout["configById"].values() for p in panel.get("paths", [])]
+    assert len(paths) >= 12
+    for path in paths:
+        topic = next(t for t in sorted(STACK_TOPICS, key=len, reverse=True) if path["value"].startswith(t + "."))
+        value = STACK_TOPICS[topic].msg_class()
+        if path["timestampMethod"] == "headerStamp":
+            assert hasattr(value, "header"), path
+        for field, index in re.findall(r"\.(\w+)(?:\[(\d+)\])?", path["value"][len(topic):]):
+            value = getattr(value, field)
+            if index:
+                assert hasattr(value, "__len__"), path
+                value = 0.0
+    assert layout["configById"]["3D!rabbit"]["topics"] == {"/rabbit/markers": {"visible": True}}
+    panels = json.dumps(layout["layout"])
+    assert all(name in panels for name in layout["configById"])  # every panel is placed

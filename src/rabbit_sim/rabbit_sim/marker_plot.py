@@ -117,3 +117,56 @@ def render_png(markers: Iterable, path: Path, title: str = "", size: tuple[float
     fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return drawn, to_pixel
+
+
+def marker_frames(bag: Path, times: list[float], topic: str = "/rabbit/markers") -> list[tuple[float, list]]:
+    """For each sim time (s), the first marker message of ``bag`` stamped at or after it:
+    (stamp s, markers). Raises ``ValueError`` with one line (no bag, no markers, too late)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    if not (Path(bag) / "metadata.yaml").is_file():
+        raise ValueError(f"{bag} is not a rosbag2 bag directory (no metadata.yaml)")
+    store = get_typestore(Stores.ROS2_JAZZY)
+    wanted = sorted(times)
+    frames: list[tuple[float, list]] = []
+    with Reader(bag) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        if not connections:
+            raise ValueError(f"{bag} has no {topic} (record with markers on: markers_rate > 0)")
+        for connection, _t, raw in reader.messages(connections=connections):
+            msg = store.deserialize_cdr(raw, connection.msgtype)
+            if not msg.markers:
+                continue
+            stamp = msg.markers[0].header.stamp.sec + msg.markers[0].header.stamp.nanosec * 1e-9
+            while wanted and stamp >= wanted[0] - 1e-9:
+                frames.append((stamp, list(msg.markers)))
+                wanted.pop(0)
+            if not wanted:
+                break
+    if wanted:
+        raise ValueError(f"{bag}: no {topic} message at or after t = {wanted[0]} s")
+    return frames
+
+
+def render_strip(frames: list[tuple[float, list]], path: Path, dpi: int = 100) -> None:
+    """Frames side by side (one panel each, titled with its sim time) into a PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(frames), figsize=(4.0 * len(frames), 4.0), dpi=dpi, squeeze=False)
+    for ax, (stamp, markers) in zip(axes[0], frames):
+        drawn = draw(ax, markers)
+        robot = [p for d in drawn if d.kind != "cube" for p in d.points]
+        cx = float(np.mean([x for x, _ in robot])) if robot else 0.0
+        ax.set_xlim(cx - 0.9, cx + 0.9)
+        ax.set_ylim(-0.1, 1.4)
+        ax.set_aspect("equal")
+        ax.set_title(f"t = {stamp:.3f} s")
+        ax.set_xlabel("x (m, world)")
+    axes[0][0].set_ylabel("z (m)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)

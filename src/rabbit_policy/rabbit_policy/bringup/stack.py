@@ -309,9 +309,10 @@ class Supervisor(Node):
 STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
 
 
-def other_stack(wait: float = 1.5) -> list[str]:
+def other_stack(wait: float = 3.0) -> list[str]:
     """Nodes of another rabbit-hzd stack visible in this ROS domain (after ``wait`` s of
-    discovery), or publishers of its topics; empty if none. Two stacks in one domain
+    discovery; found ones end the wait early; 1.5 s missed a running stack once on a loaded
+    machine), or publishers of its topics; empty if none. Two stacks in one domain
     cross-talk (one's /cmd_speed moves the other), so a launch refuses to start beside one."""
     import rclpy
 
