@@ -64,7 +64,7 @@ from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E4
 from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
 from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
 
-from .marker_msgs import marker_array  # noqa: E402
+from .marker_msgs import MarkerArrayBuilder  # noqa: E402
 from .markers import RobotShapes, marker_period_ticks  # noqa: E402
 from .model import load_model  # noqa: E402
 from .viewer import PassiveViewer, ViewerUnavailable  # noqa: E402
@@ -219,6 +219,7 @@ class SimNode(Node):
         self._answer_again = 0
         self._answer_again_pub.publish(UInt32(data=0))  # the count in force: a controller that starts now sees 0
         self._shapes = RobotShapes(self.sim.model)
+        self._marker_builder = MarkerArrayBuilder()
         self._marker_period = marker_period_ticks(self.settings.markers_rate, self.sim.timestep)
         self._markers_pub = self.create_publisher(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
         self.markers_published = 0
@@ -495,7 +496,7 @@ class SimNode(Node):
         self._push_applied_pub.publish(msg)
 
     def _publish_markers(self) -> None:
-        self._markers_pub.publish(marker_array(self._shapes.shapes(self.sim.data), stamp_of(self.sim.time)))
+        self._markers_pub.publish(self._marker_builder.build(self._shapes.shapes(self.sim.data), stamp_of(self.sim.time)))
         self.markers_published += 1
 
     def _step(self, torques: list[float]) -> None:
