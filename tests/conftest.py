@@ -51,6 +51,7 @@ SLOW = {
     "tests/test_parallel.py::test_ppo_iteration_on_ray_actors_equals_local",
     "tests/test_parallel.py::test_an_evaluation_sweep_is_the_same_on_ray_and_local",
     "tests/test_parallel.py::test_a_worker_killed_mid_generation_is_rerun_not_lost",
+    "tests/test_parallel.py::test_a_node_lost_mid_generation_has_its_tasks_rerun",
     "tests/test_parallel.py::test_es_on_a_two_node_ray_cluster_equals_local",
 }
 

@@ -69,7 +69,9 @@ def cluster():
     nodes.add_node(num_cpus=1)
     nodes.wait_for_nodes()
     try:
-        yield RayBackend(2)  # joins the connected cluster, leaves it up
+        backend = RayBackend(2)  # joins the connected cluster, leaves it up
+        backend.nodes = nodes  # for the node-failure test
+        yield backend
     finally:
         ray.shutdown()
         nodes.shutdown()
@@ -113,6 +115,14 @@ def _ray_pids() -> set[int]:
             if any(key in cmdline for key in ("gcs_server", "raylet", "ray::", "/ray/")):
                 pids.add(int(entry.name))
     return pids
+
+
+def _title(pid: int) -> str:
+    """A process's title (Ray names a busy worker ``ray::<task function>``); '' once gone."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+    except OSError:
+        return ""
 
 
 def test_ray_cluster_listens_on_loopback_only(cluster):
@@ -192,11 +202,7 @@ def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster):
         deadline = time.monotonic() + 60
         while not killed and time.monotonic() < deadline:
             for pid in _ray_pids():
-                try:
-                    title = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
-                except OSError:
-                    continue
-                if title.startswith("ray::_evaluate"):  # a worker inside an ES evaluation task
+                if _title(pid).startswith("ray::_evaluate"):  # a worker inside an ES evaluation task
                     os.kill(pid, signal.SIGKILL)
                     killed.append(pid)
                     return
@@ -209,6 +215,42 @@ def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster):
     finally:
         killer.join()
     assert killed, "no running evaluation was found to kill"
+    assert np.array_equal(theta, expected[0]) and stats == expected[1]
+
+
+def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster):
+    """The second node of the cluster removed while an ES generation runs on both: its tasks
+    are re-run on the head node and the parameters are those of an undisturbed run."""
+    import threading
+    import time
+
+    local = LocalBackend(1)
+    try:
+        expected = _es_run(local)
+    finally:
+        local.close()
+    worker_node = cluster.nodes.list_all_nodes()[1]
+    removed: list[bool] = []
+
+    def remove_when_busy() -> None:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if any(_title(pid).startswith("ray::_evaluate") for pid in _ray_pids()):
+                cluster.nodes.remove_node(worker_node)
+                removed.append(True)
+                return
+            time.sleep(0.01)
+
+    remover = threading.Thread(target=remove_when_busy)
+    remover.start()
+    try:
+        theta, stats = _es_run(cluster)
+    finally:
+        remover.join()
+        if removed:
+            cluster.nodes.add_node(num_cpus=1)  # back to two nodes for what follows
+            cluster.nodes.wait_for_nodes()
+    assert removed, "the generation ended before the node could be removed"
     assert np.array_equal(theta, expected[0]) and stats == expected[1]
 
 
