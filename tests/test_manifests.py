@@ -22,7 +22,7 @@ ROSDEP_KEYS = {
     "cma": "python3-cma", "rosbags": "python3-rosbags", "yaml": "python3-yaml", "tqdm": "python3-tqdm", "mcap": "python3-mcap",
     # ROS 2 packages: the key is the package name
     **{name: name for name in ("rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs", "std_srvs",
-                               "rcl_interfaces", "builtin_interfaces")},
+                               "rcl_interfaces", "builtin_interfaces", "visualization_msgs")},
     **{name: name for name in PACKAGES},
 }
 
