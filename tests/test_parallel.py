@@ -184,74 +184,65 @@ def test_an_evaluation_sweep_is_the_same_on_ray_and_local(cluster):
     assert robustness(policy, config, map_fn=cluster.map) == expected
 
 
-def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster):
-    """SIGKILL to a Ray worker while it runs an ES evaluation: Ray re-runs that task, and
-    the generation's parameters and statistics are exactly those of an undisturbed run."""
-    import signal
+@pytest.fixture(scope="module")
+def undisturbed() -> tuple[np.ndarray, list[dict]]:
+    """The ES run of :func:`_es_run` on the local backend (one worker)."""
+    local = LocalBackend(1)
+    try:
+        return _es_run(local)
+    finally:
+        local.close()
+
+
+def _es_run_disturbed(backend, disturb) -> tuple[np.ndarray, list[dict], bool]:
+    """:func:`_es_run` on ``backend`` while a thread calls ``disturb(pid)`` once, as soon as a
+    Ray worker ``pid`` is inside an ES evaluation task; also whether that happened."""
     import threading
     import time
 
-    local = LocalBackend(1)
-    try:
-        expected = _es_run(local)
-    finally:
-        local.close()
-    killed: list[int] = []
+    done: list[bool] = []
 
-    def kill_one_running_evaluation() -> None:
-        deadline = time.monotonic() + 60
-        while not killed and time.monotonic() < deadline:
-            for pid in _ray_pids():
-                if _title(pid).startswith("ray::_evaluate"):  # a worker inside an ES evaluation task
-                    os.kill(pid, signal.SIGKILL)
-                    killed.append(pid)
-                    return
-            time.sleep(0.01)
-
-    killer = threading.Thread(target=kill_one_running_evaluation)
-    killer.start()
-    try:
-        theta, stats = _es_run(cluster)
-    finally:
-        killer.join()
-    assert killed, "no running evaluation was found to kill"
-    assert np.array_equal(theta, expected[0]) and stats == expected[1]
-
-
-def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster):
-    """The second node of the cluster removed while an ES generation runs on both: its tasks
-    are re-run on the head node and the parameters are those of an undisturbed run."""
-    import threading
-    import time
-
-    local = LocalBackend(1)
-    try:
-        expected = _es_run(local)
-    finally:
-        local.close()
-    worker_node = cluster.nodes.list_all_nodes()[1]
-    removed: list[bool] = []
-
-    def remove_when_busy() -> None:
+    def watch() -> None:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline:
-            if any(_title(pid).startswith("ray::_evaluate") for pid in _ray_pids()):
-                cluster.nodes.remove_node(worker_node)
-                removed.append(True)
+            busy = [pid for pid in _ray_pids() if _title(pid).startswith("ray::_evaluate")]
+            if busy:
+                disturb(busy[0])
+                done.append(True)
                 return
             time.sleep(0.01)
 
-    remover = threading.Thread(target=remove_when_busy)
-    remover.start()
+    watcher = threading.Thread(target=watch)
+    watcher.start()
     try:
-        theta, stats = _es_run(cluster)
+        theta, stats = _es_run(backend)
     finally:
-        remover.join()
-        if removed:
+        watcher.join()
+    return theta, stats, bool(done)
+
+
+def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster, undisturbed):
+    """SIGKILL to a Ray worker while it runs an ES evaluation: Ray re-runs that task, and
+    the generation's parameters and statistics are exactly those of an undisturbed run."""
+    import signal
+
+    theta, stats, killed = _es_run_disturbed(cluster, lambda pid: os.kill(pid, signal.SIGKILL))
+    assert killed, "no running evaluation was found to kill"
+    assert np.array_equal(theta, undisturbed[0]) and stats == undisturbed[1]
+
+
+def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster, undisturbed):
+    """The second node of the cluster removed while an ES generation runs on both: its tasks
+    are re-run on the head node and the parameters are those of an undisturbed run."""
+    worker_node = cluster.nodes.list_all_nodes()[1]
+    try:
+        theta, stats, removed = _es_run_disturbed(cluster, lambda _pid: cluster.nodes.remove_node(worker_node))
+    finally:
+        if worker_node not in cluster.nodes.list_all_nodes():
             cluster.nodes.add_node(num_cpus=1)  # back to two nodes for what follows
             cluster.nodes.wait_for_nodes()
     assert removed, "the generation ended before the node could be removed"
-    assert np.array_equal(theta, expected[0]) and stats == expected[1]
+    assert np.array_equal(theta, undisturbed[0]) and stats == undisturbed[1]
 
 
 @pytest.mark.parametrize("address, message", [

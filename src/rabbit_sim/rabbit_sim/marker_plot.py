@@ -85,6 +85,18 @@ def draw(ax, markers: Iterable) -> list[Drawn]:
     return drawn
 
 
+def _frame(ax, drawn: list[Drawn], title: str, half_width: float) -> None:
+    """Axes around the robot: ``half_width`` m either side of its mean x, the floor to 1.4 m."""
+    robot = [p for d in drawn if d.kind != "cube" for p in d.points]
+    cx = float(np.mean([x for x, _ in robot])) if robot else 0.0
+    ax.set_xlim(cx - half_width, cx + half_width)
+    ax.set_ylim(-0.1, 1.4)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m, world)")
+    if title:
+        ax.set_title(title)
+
+
 def render_png(markers: Iterable, path: Path, title: str = "", size: tuple[float, float] = (6.0, 4.5),
                dpi: int = 100) -> tuple[list[Drawn], Callable[[float, float], tuple[int, int]]]:
     """Draw ``markers`` into a PNG around the robot; returns what was drawn and a function
@@ -94,18 +106,10 @@ def render_png(markers: Iterable, path: Path, title: str = "", size: tuple[float
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    items = list(markers)
     fig, ax = plt.subplots(figsize=size, dpi=dpi)
-    drawn = draw(ax, items)
-    robot = [p for d in drawn if d.kind != "cube" for p in d.points]
-    cx = float(np.mean([x for x, _ in robot])) if robot else 0.0
-    ax.set_xlim(cx - 1.0, cx + 1.0)
-    ax.set_ylim(-0.1, 1.4)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m, world)")
+    drawn = draw(ax, markers)
+    _frame(ax, drawn, title, half_width=1.0)
     ax.set_ylabel("z (m)")
-    if title:
-        ax.set_title(title)
     fig.canvas.draw()
     height = fig.canvas.get_width_height()[1]
     transform = ax.transData
@@ -158,14 +162,7 @@ def render_strip(frames: list[tuple[float, list]], path: Path, dpi: int = 100) -
 
     fig, axes = plt.subplots(1, len(frames), figsize=(4.0 * len(frames), 4.0), dpi=dpi, squeeze=False)
     for ax, (stamp, markers) in zip(axes[0], frames):
-        drawn = draw(ax, markers)
-        robot = [p for d in drawn if d.kind != "cube" for p in d.points]
-        cx = float(np.mean([x for x, _ in robot])) if robot else 0.0
-        ax.set_xlim(cx - 0.9, cx + 0.9)
-        ax.set_ylim(-0.1, 1.4)
-        ax.set_aspect("equal")
-        ax.set_title(f"t = {stamp:.3f} s")
-        ax.set_xlabel("x (m, world)")
+        _frame(ax, draw(ax, markers), f"t = {stamp:.3f} s", half_width=0.9)
     axes[0][0].set_ylabel("z (m)")
     fig.tight_layout()
     fig.savefig(path, dpi=dpi)
