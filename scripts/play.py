@@ -47,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    from rabbit_sim.player import BagPlayer, PlaybackError
+    from rabbit_sim.bag import BagError
+    from rabbit_sim.player import BagPlayer
 
     stopping = []
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -59,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             player = BagPlayer(Path(args.bag), args.topics, args.rate, args.clock, context=context,
                                log=lambda line: print(line, file=sys.stderr))
-        except PlaybackError as exc:
+        except BagError as exc:  # not a bag, unreadable, a topic it lacks (PlaybackError)
             print(f"error: {exc}", file=sys.stderr)
             return 2
         deadline = time.perf_counter() + args.delay

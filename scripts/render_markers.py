@@ -31,11 +31,12 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError:
         parser.error(f"--times: numbers separated by commas, got {args.times!r}")
 
+    from rabbit_sim.bag import BagError
     from rabbit_sim.marker_plot import marker_frames, render_strip
 
     try:
         frames = marker_frames(Path(args.bag), times)
-    except (OSError, ValueError) as exc:
+    except (BagError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     render_strip(frames, Path(args.out))

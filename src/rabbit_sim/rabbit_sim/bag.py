@@ -41,7 +41,23 @@ def set_ros_distro(metadata: Path, distro: str) -> None:
 
 
 class BagError(RuntimeError):
-    """The bag cannot be created or written (exists, unwritable path, full disk)."""
+    """The bag cannot be created, written or read (exists, unwritable path, full disk, not a bag)."""
+
+
+def open_bag(path: Path):
+    """An open ``rosbags`` reader of the bag directory ``path`` (the caller closes it; it is
+    open already, so not for a ``with``); :class:`BagError` with one line when it is not a
+    bag or cannot be read."""
+    from rosbags.rosbag2 import Reader
+
+    if not (Path(path) / "metadata.yaml").is_file():
+        raise BagError(f"{path} is not a rosbag2 bag directory (no metadata.yaml)")
+    try:
+        reader = Reader(path)
+        reader.open()
+    except Exception as exc:  # noqa: BLE001 - rosbags raises its own kinds for damaged bags
+        raise BagError(f"cannot read {path}: {exc}") from None
+    return reader
 
 
 @dataclass(frozen=True)

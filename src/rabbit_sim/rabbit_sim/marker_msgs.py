@@ -24,14 +24,18 @@ def to_marker(shape: Shape, stamp: Time) -> Marker:
         return marker
     marker.type = MARKER_TYPES[shape.kind]
     marker.action = Marker.ADD
+    _place(marker, shape)
+    marker.points = [Point(x=x, y=y, z=z) for x, y, z in shape.points]
+    return marker
+
+
+def _place(marker: Marker, shape: Shape) -> None:
+    """The fields of a shape that change from message to message: pose, scale, colour."""
     p, q = marker.pose.position, marker.pose.orientation
     p.x, p.y, p.z = shape.position
     q.w, q.x, q.y, q.z = shape.orientation
     marker.scale.x, marker.scale.y, marker.scale.z = shape.scale
     marker.color.r, marker.color.g, marker.color.b, marker.color.a = shape.rgba
-    marker.points = [Point(x=x, y=y, z=z) for x, y, z in shape.points]
-    marker.frame_locked = False
-    return marker
 
 
 def marker_array(shapes: list[Shape], stamp: Time) -> MarkerArray:
@@ -55,11 +59,7 @@ class MarkerArrayBuilder:
                 marker = self._markers[shape.id] = to_marker(shape, stamp)
             else:
                 marker.header.stamp = stamp
-                p, q = marker.pose.position, marker.pose.orientation
-                p.x, p.y, p.z = shape.position
-                q.w, q.x, q.y, q.z = shape.orientation
-                marker.scale.x, marker.scale.y, marker.scale.z = shape.scale
-                marker.color.r, marker.color.g, marker.color.b, marker.color.a = shape.rgba
+                _place(marker, shape)
             markers.append(marker)
         self._array.markers = markers
         return self._array

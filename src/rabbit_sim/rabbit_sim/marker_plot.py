@@ -125,16 +125,17 @@ def render_png(markers: Iterable, path: Path, title: str = "", size: tuple[float
 
 def marker_frames(bag: Path, times: list[float], topic: str = "/rabbit/markers") -> list[tuple[float, list]]:
     """For each sim time (s), the first marker message of ``bag`` stamped at or after it:
-    (stamp s, markers). Raises ``ValueError`` with one line (no bag, no markers, too late)."""
-    from rosbags.rosbag2 import Reader
+    (stamp s, markers). Raises ``BagError`` (not a bag, unreadable) or ``ValueError`` (no
+    markers, too late) with one line."""
     from rosbags.typesys import Stores, get_typestore
 
-    if not (Path(bag) / "metadata.yaml").is_file():
-        raise ValueError(f"{bag} is not a rosbag2 bag directory (no metadata.yaml)")
+    from .bag import open_bag
+
     store = get_typestore(Stores.ROS2_JAZZY)
     wanted = sorted(times)
     frames: list[tuple[float, list]] = []
-    with Reader(bag) as reader:
+    reader = open_bag(bag)
+    try:
         connections = [c for c in reader.connections if c.topic == topic]
         if not connections:
             raise ValueError(f"{bag} has no {topic} (record with markers on: markers_rate > 0)")
@@ -148,6 +149,8 @@ def marker_frames(bag: Path, times: list[float], topic: str = "/rabbit/markers")
                 wanted.pop(0)
             if not wanted:
                 break
+    finally:
+        reader.close()
     if wanted:
         raise ValueError(f"{bag}: no {topic} message at or after t = {wanted[0]} s")
     return frames

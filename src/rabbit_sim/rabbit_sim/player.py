@@ -22,11 +22,13 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from .bag import BagError, open_bag
+
 MIN_DEPTH = 1000
 CLOCK_TOPIC = "/clock"
 
 
-class PlaybackError(RuntimeError):
+class PlaybackError(BagError):
     """The bag cannot be played (missing, unreadable, no such topic)."""
 
 
@@ -55,19 +57,6 @@ def message_class(type_name: str) -> type:
         return getattr(importlib.import_module(f"{package}.{kind}"), name)
     except (ImportError, AttributeError):
         raise PlaybackError(f"message type {type_name} is not installed") from None
-
-
-def open_reader(bag: Path):
-    from rosbags.rosbag2 import Reader
-
-    if not (bag / "metadata.yaml").is_file():
-        raise PlaybackError(f"{bag} is not a rosbag2 bag directory (no metadata.yaml)")
-    try:
-        reader = Reader(bag)
-        reader.open()
-    except Exception as exc:  # noqa: BLE001 - rosbags raises its own kinds for damaged bags
-        raise PlaybackError(f"cannot read {bag}: {exc}") from None
-    return reader
 
 
 def bag_topics(reader) -> list[BagTopic]:
@@ -107,7 +96,7 @@ class BagPlayer(Node):
         if clock_rate < 0.0:
             raise PlaybackError(f"clock rate must be >= 0 Hz, got {clock_rate}")
         self.bag, self.rate, self.clock_rate = Path(bag), rate, clock_rate
-        reader = open_reader(self.bag)
+        reader = open_bag(self.bag)
         try:
             recorded = {t.name: t for t in bag_topics(reader)}
             self.start_ns, self.end_ns = reader.start_time, reader.end_time
@@ -136,7 +125,7 @@ class BagPlayer(Node):
     def play(self, stop: Callable[[], bool] = lambda: False) -> bool:
         """One pass through the bag in log-time order, paced by ``rate``; False if ``stop()``
         became true before the end."""
-        reader = open_reader(self.bag)
+        reader = open_bag(self.bag)
         try:
             connections = [c for c in reader.connections if c.topic in self.topics]
             clocks = clock_times(self.start_ns, self.end_ns, self.clock_rate) if self._clock_pub else iter(())

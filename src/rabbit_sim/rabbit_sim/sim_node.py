@@ -222,7 +222,6 @@ class SimNode(Node):
         self._marker_builder = MarkerArrayBuilder()
         self._marker_period = marker_period_ticks(self.settings.markers_rate, self.sim.timestep)
         self._markers_pub = self.create_publisher(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
-        self.markers_published = 0
         self.viewer = None
         if self.settings.viewer:
             try:
@@ -496,8 +495,8 @@ class SimNode(Node):
         self._push_applied_pub.publish(msg)
 
     def _publish_markers(self) -> None:
-        self._markers_pub.publish(self._marker_builder.build(self._shapes.shapes(self.sim.data), stamp_of(self.sim.time)))
-        self.markers_published += 1
+        shapes = self._shapes.shapes(self.sim.data)
+        self._markers_pub.publish(self._marker_builder.build(shapes, stamp_of(self.sim.time)))
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim

@@ -44,12 +44,6 @@ class PassiveViewer:
         self.data = data
         self.period = 1.0 / max_rate
         self._last = -1.0
-        self.syncs = 0
-
-    @property
-    def running(self) -> bool:
-        """False once the user closed the window."""
-        return self.handle.is_running()
 
     def sync(self, force: bool = False) -> None:
         """Show the current state if ``1 / max_rate`` s of wall time passed (or ``force``)."""
@@ -60,7 +54,6 @@ class PassiveViewer:
             if not self.handle.perturb.active:  # sync writes the viewer's (mouse) forces over the simulation's
                 self.data.xfrc_applied[:] = pushes
             self._last = now
-            self.syncs += 1
 
     def close(self, timeout: float = 2.0) -> None:
         """Close the window and wait for the viewer's thread to end (an interpreter that
