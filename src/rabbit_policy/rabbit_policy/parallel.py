@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import os
 import signal
-import time
 from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
@@ -154,10 +153,7 @@ class RayBackend:
         self._ray = ray
         self.workers = workers
         self.max_retries = max_retries
-        self.owns_connection = False  # this backend connected (and disconnects on close)
-        self.started = False  # this backend started a private instance (stopped on close)
-        self.start_s = 0.0
-        begin = time.perf_counter()
+        self.owns_connection = False  # this backend connected (and disconnects, or stops its instance, on close)
         if ray.is_initialized():
             pass  # already connected (a test's cluster, a caller's session): used as it is, left open
         elif address is None:
@@ -166,7 +162,7 @@ class RayBackend:
                          _node_ip_address="127.0.0.1", log_to_driver=False, configure_logging=False)
             except Exception as exc:  # noqa: BLE001 - Ray raises many kinds at start-up
                 raise BackendUnavailable(f"could not start a local Ray instance: {_first_line(exc)}") from None
-            self.started = self.owns_connection = True
+            self.owns_connection = True
             self._require_loopback()
         else:
             try:
@@ -174,7 +170,6 @@ class RayBackend:
             except Exception as exc:  # noqa: BLE001
                 raise BackendUnavailable(f"cannot join the Ray cluster at {self.address}: {_join_error(exc)}") from None
             self.owns_connection = True
-        self.start_s = time.perf_counter() - begin
         self._remote: dict[Callable, Any] = {}
 
     def _require_loopback(self) -> None:
@@ -231,7 +226,7 @@ class RayBackend:
         cluster stays up, and ends the tasks of this driver)."""
         if self.owns_connection and self._ray.is_initialized():
             self._ray.shutdown()
-        self.owns_connection = self.started = False
+        self.owns_connection = False
 
 
 def _join_error(exc: BaseException) -> str:
