@@ -3,14 +3,14 @@
 
     scripts/run_stack.py --speed 1.0 --duration 30
     scripts/run_stack.py --speed-schedule "0:0.8,10:1.2,20:1.0" --duration 30
-    scripts/run_stack.py --speed 1.0 --duration 20 --push "5:60:0.1" --mode realtime
+    scripts/run_stack.py --speed 1.0 --duration 20 --push "5:60:0.1" --mode paced
     scripts/run_stack.py --speed 1.0 --duration 10 --in-process --json
     scripts/run_stack.py --speed 1.0 --duration 30 --record runs/walk1   # rosbag2 (MCAP) bag
 
 By default the three nodes start as separate processes (``python -m <package>.<node>
 --ros-args -p ...``, as ``ros2 run`` would) and this script supervises the run: it sends
-the speed schedule on ``/cmd_speed`` and the pushes on ``/push`` at their sim times, and at
-the end prints, per schedule segment, the commanded speed and the mean hip speed over
+the speed schedule on ``/cmd_speed`` at its sim times (the pushes are sim_node's
+``push_schedule``, applied at their exact sim times), and at the end prints, per schedule segment, the commanded speed and the mean hip speed over
 the segment's second half, the steps, whether RABBIT fell, and the real-time factor
 (sim time / wall time). ``--in-process`` runs all nodes in this process on one
 EventsExecutor instead (the fastest choice measured here; see README "Executors").
@@ -43,7 +43,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
     parser.add_argument("--controller", choices=("classic", "learned", "hzd", "rl"), default="classic",
                         help="classic: the classic HZD gait library; learned: the HZD-RL policy (hzd, rl: aliases)")
-    parser.add_argument("--mode", choices=("lockstep", "realtime"), default="lockstep")
+    parser.add_argument("--mode", choices=("lockstep", "paced", "realtime"), default="lockstep",
+                        help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "
+                             "held to the wall clock (--rtf), slower if the machine cannot keep up; realtime: "
+                             "free-running 1 kHz wall clock (latency studies; halts if it falls behind)")
+    parser.add_argument("--rtf", type=float, default=1.0, help="--mode paced: target real-time factor (default 1)")
     parser.add_argument("--speed-schedule", default=None, metavar="T:V,...",
                         help='speed changes at sim times, e.g. "0:0.8,10:1.2,20:1.0"')
     parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
@@ -79,7 +83,11 @@ def print_report(report, config) -> None:
     for seg in report.segments:
         mean = "   n/a" if math.isnan(seg.mean_speed) else f"{seg.mean_speed:6.3f}"
         print(f"{seg.start:6.1f}-{seg.end:6.1f} s  {seg.command:5.2f}     {mean} m/s")
-    print(f"simulated    {report.sim_time:.2f} s in {report.wall_time:.2f} s wall (real-time factor {report.rtf:.2f})")
+    if report.sim_time > 0.0:
+        print(f"simulated    {report.sim_time:.2f} s in {report.wall_time:.2f} s wall "
+              f"(real-time factor {report.rtf:.2f})")
+    else:
+        print("simulated    nothing")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -101,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
             decision_period=args.decision_period,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
-            markers_rate=args.markers_rate, viewer=args.viewer,
+            markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
         )
         if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
             raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")

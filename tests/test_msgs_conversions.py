@@ -11,11 +11,13 @@ from rabbit_msgs_py.conversions import (
     MessageError,
     alpha_from_msg,
     alpha_to_msg,
+    controller_id,
     joint_state_vectors,
+    short,
     torques_from_msg,
     torques_to_msg,
 )
-from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 
@@ -49,14 +51,22 @@ def test_malformed_alpha_is_rejected(data, dims):
         alpha_from_msg(msg)
 
 
-def test_torques_round_trip_and_rejects():
-    msg = torques_to_msg([1.0, -2.0, 3.5, 0.0])
-    assert torques_from_msg(msg) == [1.0, -2.0, 3.5, 0.0]
-    assert msg.layout.dim[0].label == "joint"
-    with pytest.raises(MessageError):
-        torques_from_msg(Float64MultiArray(data=[1.0, 2.0]))
-    with pytest.raises(MessageError):
-        torques_from_msg(Float64MultiArray(data=[1.0, 2.0, math.inf, 0.0]))
+def test_torque_replies_round_trip_in_any_joint_order_and_reject_bad_ones():
+    from builtin_interfaces.msg import Time
+    from sensor_msgs.msg import JointState
+
+    msg = torques_to_msg([1.0, -2.0, 3.5, 0.0], Time(sec=2, nanosec=5_000_000), "hzd_controller_node/abcd")
+    assert list(msg.name) == list(ACTUATED_JOINTS)
+    assert torques_from_msg(msg) == (2_005_000_000, "hzd_controller_node/abcd", [1.0, -2.0, 3.5, 0.0])
+    shuffled = JointState(name=list(reversed(ACTUATED_JOINTS)), effort=[0.0, 3.5, -2.0, 1.0])
+    assert torques_from_msg(shuffled)[2] == [1.0, -2.0, 3.5, 0.0]
+    for bad in (JointState(name=["left_hip"], effort=[1.0, 2.0]),
+                JointState(name=["a", "b", "c", "d"], effort=[0.0] * 4),
+                JointState(name=list(ACTUATED_JOINTS), effort=[1.0, 2.0, math.inf, 0.0])):
+        with pytest.raises(MessageError):
+            torques_from_msg(bad)
+    assert controller_id("hzd_controller_node") != controller_id("hzd_controller_node")
+    assert len(short("x" * 1000)) == 120 and short([1e308]) == "[1e+308]"
 
 
 def test_joint_state_any_order():
@@ -72,7 +82,7 @@ def test_joint_state_any_order():
 
 def test_topic_names_are_absolute_and_unique():
     names = [v for k, v in vars(topics).items() if k.isupper()]
-    assert len(names) == len(set(names)) == 20  # 18 topics, 2 services
+    assert len(names) == len(set(names)) == 18  # 16 topics, 2 services
     assert all(n.startswith("/") for n in names)
     assert topics.ALPHA == "/hzd/alpha" and topics.CMD_SPEED == "/cmd_speed"
 

@@ -214,30 +214,73 @@ def test_resets_never_wedge_lockstep():
         assert not sim.fallen
 
 
-def test_lockstep_applies_no_torque_while_two_controllers_publish():
-    """A rogue publisher on /joint_torques: lockstep applies nothing (the physics waits, an
-    error in the log); once it is gone the one controller is asked again and the walk goes on."""
-    with ros_context() as (context, executor):
+ROGUE_TORQUE = 37.0
+
+
+def _rogue(node, kind: str) -> list:
+    """Make ``node`` a rogue on /joint_torques: ``stale`` sends 37 N m at 1 kHz stamped with
+    the newest state it saw minus 1 ms; ``echo`` answers every state with its exact stamp
+    under a name of its own (a second controller that computes nonsense). Returns a flag
+    list: clear it to silence the rogue."""
+    from rabbit_msgs_py.conversions import torques_to_msg
+
+    active, latest = [True], {}
+    publisher = node.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
+
+    def on_state(m):
+        latest["stamp"] = m.header.stamp
+        if active and kind == "echo":
+            publisher.publish(torques_to_msg([ROGUE_TORQUE] * 4, m.header.stamp, "rogue/0000"))
+
+    def send():
+        if active and kind == "stale" and "stamp" in latest:
+            msg = torques_to_msg([ROGUE_TORQUE] * 4, latest["stamp"])
+            msg.header.stamp.nanosec = max(0, msg.header.stamp.nanosec - 1_000_000)
+            publisher.publish(msg)
+
+    node.create_subscription(JointState, topics.JOINT_STATES, on_state, qos.STREAM_QOS)
+    node.create_timer(0.001, send)
+    return active
+
+
+@pytest.mark.parametrize("kind", ["stale", "echo"])
+def test_a_rogue_that_starts_mid_run_never_gets_a_torque_applied(kind):
+    """A rogue publisher starts on /joint_torques while the stack walks, six times: no state
+    ever shows its torque applied (every applied effort is recorded), the walk goes on.
+    Simulator, rogue and controller each have a context of their own; the controller's is
+    spun only after the others had 5 ms, so an ``echo`` rogue answers states before the
+    controller does: its replies carry the right stamp and are refused for their source,
+    not merely late."""
+    with ros_context() as (context, executor), ros_context() as (ctx_r, ex_r), \
+            ros_context() as (ctx_c, ex_c):
         import rclpy
 
-        nodes = _start_stack(context, executor)
+        nodes = _start_sim_and_policy(context, executor)
+        controller = HZDControllerNode(context=ctx_c)
+        ex_c.add_node(controller)
         sim = nodes["sim"]
-        assert spin_until(executor, lambda: sim.time >= 0.5)
-        rogue = rclpy.create_node("rogue_controller", context=context)
-        executor.add_node(rogue)
-        publisher = rogue.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
-        timer = rogue.create_timer(0.001, lambda: publisher.publish(Float64MultiArray(data=[150.0, -150.0, 150.0, -150.0])))
-        assert spin_until(executor, lambda: sim.probe.active, timeout=10.0)
-        frozen = sim.time
-        spin_for(executor, 1.0)
-        assert sim.time == frozen and not sim.fallen  # no torque applied, from either
-        assert sim.torques_rejected > 0
-        rogue.destroy_timer(timer)
-        rogue.destroy_publisher(publisher)
-        assert spin_until(executor, lambda: sim.time >= frozen + 1.0, timeout=20.0), f"stuck at {sim.time}"
+        efforts: list = []
+        watcher = rclpy.create_node("effort_watcher", context=context)
+        watcher.create_subscription(JointState, topics.JOINT_STATES,
+                                    lambda m: efforts.append(list(m.effort[3:])), qos.STREAM_QOS)
+        executor.add_node(watcher)
+        spun = (executor, ex_r, ex_c)
+        assert spin_until(spun, lambda: sim.time >= 0.2)
+        for attempt in range(6):  # each a new node that starts mid-run, then falls silent
+            rogue = rclpy.create_node(f"rogue_{attempt}", context=ctx_r)
+            active = _rogue(rogue, kind)
+            ex_r.add_node(rogue)
+            start, deadline = sim.time, time.monotonic() + 60.0
+            while sim.time < start + 0.05:
+                assert time.monotonic() < deadline, f"stuck at {sim.time}"
+                spin_for((executor, ex_r), 0.005)  # the rogue's reply reaches the simulator first
+                ex_c.spin_once(timeout_sec=0.002)
+            active.clear()
+        if kind == "echo":
+            assert sim.torques_rejected > 0  # right stamp, wrong controller: refused
         assert not sim.fallen
-        executor.remove_node(rogue)
-        rogue.destroy_node()
+        assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
+        assert sim.controller == controller.source
 
 
 def _start_sim_and_policy(context, executor, **sim_params):
@@ -267,6 +310,7 @@ def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
             assert spin_until((executor, ex_b), lambda: sim.time >= t_stopped + 2.0)
             assert not sim.fallen
             assert new.controller.steps >= 3
+            assert sim.controller == new.source  # the new instance took over from the silent one
 
 
 def test_realtime_watchdog_damps_while_the_controller_is_gone():
@@ -274,7 +318,9 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
     with ros_context() as (context, executor):
         import rclpy
 
-        nodes = _start_sim_and_policy(context, executor, mode="realtime", watchdog_timeout=0.05)
+        # max_late_fraction 1: never halt for lateness here, this test is about the watchdog
+        nodes = _start_sim_and_policy(context, executor, mode="realtime", watchdog_timeout=0.05,
+                                      max_late_fraction=1.0)
         sim = nodes["sim"]
         helper = rclpy.create_node("resetter", context=context)
         executor.add_node(helper)
@@ -365,8 +411,12 @@ def test_realtime_smoke_steps_at_wall_clock_pace_and_reports_its_lateness():
     before = threading.active_count()
     report, nodes = run_in_process(config)
     stats = nodes["sim_node"].statistics()
-    assert report.completed or report.fell
-    assert stats["ticks"] >= 1000 and stats["tick_rate_hz"] is not None and stats["tick_rate_hz"] < 1100
+    if stats["halt_reason"] is not None:  # a machine too busy to keep up: halted, and the run says so
+        assert not report.completed and "halted" in report.error and not report.fell
+    else:
+        assert report.completed or report.fell
+        assert stats["ticks"] >= 1000
+    assert stats["tick_rate_hz"] is not None and stats["tick_rate_hz"] < 1100
     assert 0.0 <= stats["late_fraction"] <= 1.0 and stats["skipped_ticks"] >= 0
     assert stats["latency_max_ms"] >= stats["latency_p99_ms"]
     assert threading.active_count() <= before  # no physics thread left behind

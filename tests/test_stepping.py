@@ -1,5 +1,6 @@
-"""sim_node's stepping rules without ROS (rabbit_sim.stepping): lockstep replies, resets and
-pauses, resends, realtime pacing, the watchdog and the statistics."""
+"""sim_node's stepping rules without ROS (rabbit_sim.stepping): lockstep replies (stamps,
+pairing, takeover), resets and pauses, resends, paced and realtime pacing, the watchdog,
+lateness, the recorder gate and the statistics."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import json
 
 import pytest
 
-from rabbit_sim.stepping import Lockstep, RealtimeClock, Reply, TickStatistics, Watchdog, WatchdogEvent
+from rabbit_sim.stepping import (
+    LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, StreamPairing, TickStatistics, Watchdog,
+    WatchdogEvent)
 
 pytestmark = pytest.mark.unit
 
@@ -22,45 +25,137 @@ class FakeClock:
         return self.now
 
 
-def test_lockstep_applies_exactly_one_reply_per_state():
-    lock = Lockstep(0.2, FakeClock())
-    assert lock.on_reply([1.0] * 4, paused=False) is Reply.IGNORE  # nothing was due
-    lock.published()
-    assert lock.on_reply([1.0] * 4, paused=False) is Reply.STEP
-    assert lock.on_reply([2.0] * 4, paused=False) is Reply.IGNORE  # a duplicate / second controller
+A, B = "hzd_controller_node/aaaa", "hzd_controller_node/bbbb"  # two controller instances
+T = [1.0] * 4
+
+
+def test_lockstep_applies_exactly_one_reply_per_state_and_only_to_that_state():
+    lock = Lockstep(0.2, clock=FakeClock())
+    assert lock.on_reply(0, A, T, hold=False) is Reply.IGNORE  # nothing was due
+    lock.published(5_000_000)
+    assert lock.on_reply(4_000_000, A, T, hold=False) is Reply.IGNORE  # answers an earlier state
+    assert lock.on_reply(0, A, T, hold=False) is Reply.IGNORE  # a made-up stamp
+    assert lock.on_reply(5_000_000, A, T, hold=False) is Reply.STEP
+    assert lock.controller == A  # the first to answer is paired
+    assert lock.on_reply(5_000_000, A, [2.0] * 4, hold=False) is Reply.IGNORE  # a duplicate
+
+
+def test_lockstep_refuses_a_second_controller_even_with_the_right_stamp():
+    lock = Lockstep(0.2, takeover_after=1.0, clock=FakeClock())
+    lock.published(1)
+    assert lock.on_reply(1, A, T, hold=False) is Reply.STEP
+    lock.published(2)
+    assert lock.on_reply(2, B, [37.0] * 4, hold=False) is Reply.FOREIGN  # before A answers: refused
+    assert lock.on_reply(2, A, T, hold=False) is Reply.STEP
+    assert lock.controller == A and lock.offers == {}
+
+
+def test_a_silent_paired_controller_is_replaced_by_the_one_other_that_answers():
+    clock = FakeClock()
+    lock = Lockstep(0.2, takeover_after=1.0, clock=clock)
+    lock.published(1)
+    lock.on_reply(1, A, T, hold=False)
+    lock.published(2)
+    assert lock.on_reply(2, B, [3.0] * 4, hold=False) is Reply.FOREIGN
+    clock.now += 0.5
+    assert lock.takeover(hold=False) is None  # A may still answer
+    clock.now += 0.6
+    assert lock.takeover(hold=False) == (A, B, Reply.STEP, [3.0] * 4)
+    assert lock.controller == B and not lock.awaiting_reply
+    lock.published(3)
+    lock.on_reply(3, B, T, hold=False)
+    lock.published(4)
+    lock.on_reply(4, A, T, hold=False)
+    lock.on_reply(4, "third/cccc", T, hold=False)
+    clock.now += 2.0
+    assert lock.takeover(hold=False) is None  # two others answer: neither is trusted
 
 
 def test_a_reset_requested_while_a_reply_is_due_waits_for_it():
-    lock = Lockstep(0.2, FakeClock())
+    lock = Lockstep(0.2, clock=FakeClock())
     assert lock.request_reset() is False  # nothing due: reset now
-    lock.published()
+    lock.published(7)
     assert lock.request_reset() is True
-    assert lock.on_reply([0.0] * 4, paused=False) is Reply.RESET
+    assert lock.on_reply(7, A, [0.0] * 4, hold=False) is Reply.RESET
     assert not lock.awaiting_reply and not lock.reset_requested
 
 
-def test_a_reply_while_paused_is_held_until_the_simulation_runs():
-    lock = Lockstep(0.2, FakeClock())
-    lock.published()
-    assert lock.on_reply([3.0] * 4, paused=True) is Reply.HOLD
+def test_a_reply_while_the_step_may_not_run_is_held_until_it_may():
+    lock = Lockstep(0.2, clock=FakeClock())
+    lock.published(1)
+    assert lock.on_reply(1, A, [3.0] * 4, hold=True) is Reply.HOLD
     assert lock.take_held() == [3.0] * 4
     assert lock.take_held() is None
-    lock.published()
-    lock.restart()  # a reset drops what was due and held
-    assert not lock.awaiting_reply and lock.held_torques is None
+    lock.published(2)
+    lock.restart()  # a reset drops what was due and held, keeps the pairing
+    assert not lock.awaiting_reply and lock.held_torques is None and lock.controller == A
 
 
 def test_an_overdue_reply_makes_the_state_go_out_again():
     clock = FakeClock()
-    lock = Lockstep(0.2, clock)
+    lock = Lockstep(0.2, clock=clock)
     assert lock.resend_due(paused=False) is None  # nothing due
-    lock.published()
+    lock.published(1)
     clock.now += 0.1
     assert lock.resend_due(paused=False) is None
     clock.now += 0.15
     assert lock.resend_due(paused=True) is None  # paused: nothing is overdue
     assert lock.resend_due(paused=False) == pytest.approx(0.25)
     assert lock.resends == 1
+
+
+def test_realtime_takes_torques_from_one_controller_until_it_falls_silent():
+    pairing = StreamPairing(takeover_after=1.0)
+    assert pairing.accepts(A, 10.0) and pairing.controller == A
+    assert not pairing.accepts(B, 10.5)  # a rogue while A talks
+    assert pairing.accepts(A, 11.0)
+    assert pairing.accepts(B, 12.1) and pairing.controller == B  # A silent for 1.1 s
+
+
+def test_pacer_holds_states_to_the_wall_clock_and_runs_slower_when_behind():
+    clock = FakeClock()
+    pacer = Pacer(rtf=1.0, slack=0.05, window=5.0, clock=clock)
+    pacer.restart(0.0)
+    assert pacer.wait(0.001) == pytest.approx(0.001)  # too early: wait 1 ms
+    clock.now += 0.001
+    assert pacer.wait(0.001) == pytest.approx(0.0)
+    clock.now += 0.5  # the machine stalled: 0.5 s behind
+    assert pacer.wait(0.002) == 0.0 and pacer.behind_count == 1  # no race to catch up: re-anchored
+    assert pacer.wait(0.003) == pytest.approx(0.001)  # paced from the new anchor
+    assert Pacer(rtf=2.0, clock=clock).wait(0.0) == 0.0
+    half = Pacer(rtf=0.5, clock=clock)
+    half.restart(0.0)
+    assert half.wait(0.01) == pytest.approx(0.02)  # rtf 0.5: 10 ms of sim time per 20 ms
+    with pytest.raises(ValueError, match="rtf"):
+        Pacer(rtf=0.0)
+
+
+def test_pacer_reports_the_achieved_real_time_factor_once_per_window():
+    clock = FakeClock()
+    pacer = Pacer(rtf=1.0, window=5.0, clock=clock)
+    pacer.restart(0.0)
+    clock.now += 4.0
+    assert pacer.achieved(2.0) is None
+    clock.now += 1.0
+    assert pacer.achieved(2.5) == pytest.approx(0.5)
+
+
+def test_lateness_monitor_warns_then_stops_a_loop_that_fell_too_far_behind():
+    clock = FakeClock()
+    monitor = LatenessMonitor(max_late_fraction=0.5, clock=clock)
+    stats = TickStatistics()
+    stats.ticks, stats.late_ticks = 1000, 10
+    clock.now += 1.0
+    assert monitor.check(stats, skipped=0) is None  # 1 % late: on time
+    stats.ticks, stats.late_ticks = 2000, 210
+    clock.now += 1.0
+    late = monitor.check(stats, skipped=0)
+    assert late is not None and late.late == 200 and not late.stop
+    stats.ticks, stats.late_ticks = 3000, 900
+    assert monitor.check(stats, skipped=0) is None  # not a second yet
+    clock.now += 1.0
+    late = monitor.check(stats, skipped=3)
+    assert late.stop and late.fraction == pytest.approx(0.69) and late.skipped == 3
 
 
 def test_realtime_clock_runs_due_ticks_catches_up_a_little_and_skips_the_rest():
@@ -103,32 +198,15 @@ def test_statistics_count_late_ticks_and_latencies_and_stay_json():
     assert not stats.unanswered
 
 
-def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit():
-    from rabbit_sim.stepping import RecorderGate
-
-    off = RecorderGate(False)
-    assert not off.missed_start() and not off.lags(100)
-    gate = RecorderGate(True, max_lag=4)
-    assert gate.missed_start()
-    gate.recorded = 1
-    assert not gate.missed_start() and not gate.lags(5) and gate.lags(6)
-
-
-def test_source_probe_counts_replies_for_its_window():
-    from rabbit_sim.stepping import SourceProbe, Verdict
-
-    clock = FakeClock()
-    probe = SourceProbe(window=0.3, clock=clock)
-    probe.start()
-    probe.reply([1.0] * 4)
-    assert probe.verdict() is None  # the window is not over
-    clock.now += 0.31
-    assert probe.verdict() is Verdict.ONE and not probe.active and probe.torques == [1.0] * 4
-    probe.start()
-    probe.reply([1.0] * 4)
-    probe.reply([2.0] * 4)
-    clock.now += 0.31
-    assert probe.verdict() is Verdict.MANY and probe.active  # two live sources: go on probing
-    probe.start()
-    clock.now += 0.31
-    assert probe.verdict() is Verdict.NONE
+def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit_by_stamps():
+    ms = 1_000_000
+    assert not RecorderGate(False).holds(100 * ms)
+    gate = RecorderGate(True, max_lag=4, timestep_ns=ms)
+    assert not gate.holds(None)  # nothing published: nothing to wait for
+    assert gate.holds(0)  # the recorder has no state yet
+    gate.recorded = 0
+    assert not gate.holds(0) and not gate.holds(4 * ms) and gate.holds(5 * ms)
+    gate.recorded = 3 * ms  # the newest report is all that counts: a lost one is harmless
+    assert not gate.holds(7 * ms)
+    assert gate.holds(0)  # a reset: the report from before it holds until t = 0 is recorded
+    assert "t = 0.003 s" in gate.behind(7 * ms)

@@ -138,7 +138,7 @@ def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarr
         column = matrix[:, j]
         if column.min() < lo or column.max() > hi:
             raise ValueError(
-                f"alpha {output} coefficients span [{column.min():.3f}, {column.max():.3f}] rad,"
+                f"alpha {output} coefficients span [{column.min():.4g}, {column.max():.4g}] rad,"
                 f" outside the bounds [{lo}, {hi}] rad"
             )
     violation = impact_violation(arr)

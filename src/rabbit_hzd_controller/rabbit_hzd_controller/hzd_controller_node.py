@@ -2,8 +2,11 @@
 command per state).
 
 Subscribes ``/joint_states`` and the gait (``/hzd/alpha``, ``/hzd/kd``, transient local, so a
-controller started late gets the gait in force); publishes ``/joint_torques`` (4 values,
-``ACTUATED_JOINTS`` order) for every distinct state and ``/hzd/step`` at each touchdown.
+controller started late gets the gait in force); publishes on ``/joint_torques`` one reply
+per distinct state (sensor_msgs/JointState: the four ``ACTUATED_JOINTS`` and their torques
+in ``effort``, ``header.stamp`` = the stamp of the state answered, ``header.frame_id`` = this
+controller instance's id, :attr:`HZDControllerNode.source`) and ``/hzd/step`` at each
+touchdown.
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
 the ROS-free loop runs.
 
@@ -44,7 +47,9 @@ from rabbit_msgs_py import qos, topics  # noqa: E402
 from rabbit_msgs_py.conversions import (  # noqa: E402
     MessageError,
     alpha_from_msg,
+    controller_id,
     joint_state_vectors,
+    short,
     stamp_to_ns,
     torques_to_msg,
 )
@@ -104,7 +109,6 @@ class HZDControllerNode(Node):
         self._last_state: tuple[list[float], list[float]] | None = None
         self._waiting_state: JointState | None = None  # arrived before the gait was complete
         self._resets: int | None = None  # the last count seen on /sim/resets
-        self._answer_again: int | None = None  # ... and on /sim/answer_again
         self._restart = False  # a reset was announced: restart on the next state
         self._dropped: JointState | None = None  # the last state dropped as a re-send
         self.states_received = 0
@@ -112,16 +116,16 @@ class HZDControllerNode(Node):
         self.rejected_gaits = 0
         self.rejected_states = 0
 
-        self._torque_msg = torques_to_msg([0.0] * 4)  # layout built once, data replaced per tick
-        self._torque_pub = self.create_publisher(Float64MultiArray, topics.JOINT_TORQUES, qos.STREAM_QOS)
+        self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
+        self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
+        self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        self.create_subscription(UInt32, topics.ANSWER_AGAIN, self._on_answer_again, qos.STATUS_QOS)
-        self.get_logger().info(f"HZD controller (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
+        self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """``kp``, ``max_kd``, ``blend_phase`` at run time, validated as at start (read-only
@@ -149,7 +153,7 @@ class HZDControllerNode(Node):
             alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
         except (MessageError, ValueError) as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {topics.ALPHA}: {exc}; keeping the last good gait")
+            self.get_logger().error(f"rejected {topics.ALPHA}: {short(str(exc), 200)}; keeping the last good gait")
             return
         self._alpha = alpha
         if self.controller is not None:
@@ -163,7 +167,7 @@ class HZDControllerNode(Node):
         if not self.follow_policy_timing or msg.data == self.gait_timing:
             return
         if msg.data not in GAIT_TIMINGS:
-            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {msg.data!r}: not one of {GAIT_TIMINGS}; "
+            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: not one of {GAIT_TIMINGS}; "
                                     f"keeping {self.gait_timing}")
             return
         self.gait_timing = msg.data
@@ -174,7 +178,7 @@ class HZDControllerNode(Node):
             kd = validate_kd(msg.data, self.config)
         except ValueError as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {topics.KD}: {exc}; keeping the last good value")
+            self.get_logger().error(f"rejected {topics.KD}: {short(str(exc), 200)}; keeping the last good value")
             return
         self._kd = kd
         if self.controller is not None:
@@ -193,14 +197,6 @@ class HZDControllerNode(Node):
             return  # the count in force when this node started: nothing to restart
         self._restart = True
         self._forget_last_state()
-
-    def _on_answer_again(self, msg: UInt32) -> None:
-        first = self._answer_again is None
-        if msg.data == self._answer_again:
-            return
-        self._answer_again = msg.data
-        if not first:
-            self._forget_last_state()
 
     def _forget_last_state(self) -> None:
         """Answer the next state even if it repeats the last one answered; a state dropped
@@ -251,7 +247,8 @@ class HZDControllerNode(Node):
         self._last_stamp = stamp
         self._last_state = (q, dq)
         torque_msg = self._torque_msg
-        torque_msg.data = torques
+        torque_msg.header.stamp = msg.header.stamp
+        torque_msg.effort = torques
         self._torque_pub.publish(torque_msg)
         self.torques_published += 1
         if controller.touchdown:

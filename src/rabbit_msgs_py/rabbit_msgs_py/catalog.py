@@ -42,7 +42,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.HIP_VELOCITY, TwistStamped, qos.HIP_VELOCITY_QOS),
         TopicSpec(topics.CLOCK, Clock, qos.CLOCK_QOS),
         TopicSpec(topics.FALLEN, Bool, qos.STATUS_QOS),
-        TopicSpec(topics.JOINT_TORQUES, Float64MultiArray, qos.STREAM_QOS),
+        TopicSpec(topics.JOINT_TORQUES, JointState, qos.STREAM_QOS),
         TopicSpec(topics.STEP, Header, qos.EVENT_QOS),
         TopicSpec(topics.ALPHA, Float64MultiArray, qos.GAIT_QOS),
         TopicSpec(topics.KD, Float64, qos.GAIT_QOS),
@@ -52,7 +52,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
         TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
-        TopicSpec(topics.ANSWER_AGAIN, UInt32, qos.STATUS_QOS),
         TopicSpec(topics.MARKERS, MarkerArray, qos.MARKERS_QOS),
     )
 }

@@ -7,15 +7,21 @@ alpha travels as std_msgs/Float64MultiArray holding a 4 x 6 matrix, row-major:
 the outputs are (stance hip, stance knee, swing hip, swing knee), rad. The ROS-free core
 keeps the paper's coefficient-major 24-vector (``flat[4 k + j]``, see
 ``rabbit_hzd_controller.alpha``); these functions transpose between the two.
-Joint torques travel as a one-dimensional Float64MultiArray labelled ``joint`` in
-``ACTUATED_JOINTS`` order.
+Joint torques travel as a *reply*: a sensor_msgs/JointState naming the four
+``ACTUATED_JOINTS`` with their torques in ``effort`` (N m), ``header.stamp`` = the stamp of
+the ``/joint_states`` message they answer and ``header.frame_id`` = the id of the
+controller instance that computed them (:func:`controller_id`). The simulator applies a
+reply only to the state it answers and only from the one controller it is paired with.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from typing import Sequence
 
+from builtin_interfaces.msg import Time
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from .joints import ACTUATED_JOINTS, JOINT_NAMES
@@ -24,7 +30,6 @@ ALPHA_OUTPUTS = 4
 ALPHA_COEFFICIENTS = 6
 ALPHA_SIZE = ALPHA_OUTPUTS * ALPHA_COEFFICIENTS
 ALPHA_DIMENSIONS = ("output", "coefficient")
-TORQUE_DIMENSION = "joint"
 
 
 class MessageError(ValueError):
@@ -67,26 +72,49 @@ def alpha_from_msg(msg: Float64MultiArray) -> list[float]:
     return [data[ALPHA_COEFFICIENTS * j + k] for k in range(ALPHA_COEFFICIENTS) for j in range(ALPHA_OUTPUTS)]
 
 
-def torques_to_msg(torques: Sequence[float]) -> Float64MultiArray:
-    """4 joint torques (N m, ``ACTUATED_JOINTS`` order) -> Float64MultiArray."""
+def controller_id(node_name: str) -> str:
+    """A fresh id for one controller instance, ``<node name>/<8 hex digits>``: what it
+    writes in the ``frame_id`` of its torque replies (a restarted controller is another)."""
+    return f"{node_name}/{os.urandom(4).hex()}"
+
+
+def torques_to_msg(torques: Sequence[float], answers: Time | None = None, source: str = "") -> JointState:
+    """4 joint torques (N m, ``ACTUATED_JOINTS`` order) -> the reply to the state stamped
+    ``answers``, from controller ``source``."""
     values = [float(t) for t in torques]
     if len(values) != len(ACTUATED_JOINTS):
         raise MessageError(f"expected {len(ACTUATED_JOINTS)} torques, got {len(values)}")
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=TORQUE_DIMENSION, size=len(values), stride=len(values))],
-        data_offset=0,
-    )
-    return Float64MultiArray(layout=layout, data=values)
+    msg = JointState(name=list(ACTUATED_JOINTS), effort=values)
+    if answers is not None:
+        msg.header.stamp = answers
+    msg.header.frame_id = source
+    return msg
 
 
-def torques_from_msg(msg: Float64MultiArray) -> list[float]:
-    """Float64MultiArray -> 4 torques; raises :class:`MessageError` if malformed."""
-    data = list(msg.data)
-    if len(data) != len(ACTUATED_JOINTS):
-        raise MessageError(f"expected {len(ACTUATED_JOINTS)} torques, got {len(data)}")
+def torques_from_msg(msg: JointState) -> tuple[int, str, list[float]]:
+    """A torque reply -> (stamp answered in ns, controller id, 4 torques in
+    ``ACTUATED_JOINTS`` order, whatever order the message names them in); raises
+    :class:`MessageError` if malformed."""
+    names, effort = list(msg.name), list(msg.effort)
+    if len(effort) != len(names):
+        raise MessageError(f"torque reply needs one effort per name, got {len(names)} names and {len(effort)} efforts")
+    if tuple(names) == ACTUATED_JOINTS:
+        data = effort
+    else:
+        try:
+            data = [effort[names.index(n)] for n in ACTUATED_JOINTS]
+        except ValueError as exc:
+            raise MessageError(f"torque reply lacks a joint ({exc}); expected {list(ACTUATED_JOINTS)}") from None
     if not all(math.isfinite(v) for v in data):
         raise MessageError("torques contain NaN or infinite values")
-    return data
+    return stamp_to_ns(msg.header.stamp), msg.header.frame_id, data
+
+
+def short(value: object, limit: int = 120) -> str:
+    """A string as it is, anything else as ``repr``, cut to ``limit`` characters: for
+    one-line log messages about bad input."""
+    text = value if isinstance(value, str) else repr(value)
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocity: Sequence[float]

@@ -11,7 +11,9 @@ HIP_VELOCITY = "/hip_velocity"
 CLOCK = "/clock"
 """rosgraph_msgs/Clock, simulation time, sim_node."""
 JOINT_TORQUES = "/joint_torques"
-"""std_msgs/Float64MultiArray, 4 torques (N m) in ``ACTUATED_JOINTS`` order."""
+"""sensor_msgs/JointState, the controller's reply to one ``/joint_states`` message: the
+four ``ACTUATED_JOINTS`` with their torques (N m) in ``effort``, ``header.stamp`` = the
+stamp of the state answered, ``header.frame_id`` = the controller instance's id."""
 ALPHA = "/hzd/alpha"
 """std_msgs/Float64MultiArray, 6 x 4 Bezier coefficients (rad), see conversions."""
 KD = "/hzd/kd"
@@ -48,27 +50,18 @@ start, +1 at every reset), published just before the placed state. The controlle
 on it and answers the placed state even when it equals the last state it answered: a
 reset is an event, not inferred from stamps or values."""
 
-ANSWER_AGAIN = "/sim/answer_again"
-"""std_msgs/UInt32 (transient local): a count sim_node raises when it needs the state it
-re-sends next to be answered although the controller answered it before (after it ignored
-replies while two controllers published). The controller forgets the state it answered
-last; unlike ``/sim/resets`` it does not restart."""
-
 MARKERS = "/rabbit/markers"
 """visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every
 ``1 / markers_rate`` s of sim time; frame ``world``, namespace ``rabbit``): torso, femurs and
 tibias as cylinders, feet as spheres (larger and yellow on the ground), a ground plate, the
 push acting now as a red arrow. See ``rabbit_sim.markers``."""
 
-RECORDER_PROGRESS = "/recorder/progress"
-"""std_msgs/UInt64: how many ``/joint_states`` messages recorder_node has written, after
-each. In lockstep with ``wait_for_recorder`` sim_node publishes the next state only while
-the recorder is at most a few states behind, so under any load no message is lost."""
-
 RECORDED_UNTIL = "/recorder/recorded_until"
 """rosgraph_msgs/Clock (transient local): the header stamp (sim time) of the newest
-``/joint_states`` message recorder_node has written. run_stack stops the nodes of a recorded
-run only once it reaches the run's last state, so the bag ends with the run."""
+``/joint_states`` message recorder_node has written, after each. In lockstep and paced
+modes with ``wait_for_recorder`` sim_node steps only while the recorder is at most a few
+states behind, so under any load no message is lost; run_stack stops the nodes of a
+recorded run only once it reaches the run's last state, so the bag ends with the run."""
 
 RESET_SERVICE = "/sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""

@@ -35,7 +35,6 @@ from rclpy.node import Node  # noqa: E402
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from rclpy.serialization import deserialize_message  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
-from std_msgs.msg import UInt64  # noqa: E402
 
 from rabbit_msgs_py import qos  # noqa: E402
 from rabbit_msgs_py import topics as topic_names  # noqa: E402
@@ -48,11 +47,28 @@ from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
 
 LOG_TIMES = ("receive", "sim")
 RECORD_DEPTH = 1000
+RESENT_TOPICS = (topic_names.JOINT_STATES, topic_names.HIP_VELOCITY, topic_names.CLOCK)
+"""Topics sim_node sends again (same stamp) while it waits: written once per stamp."""
+
+
+class ResendFilter:
+    """True for a stamp equal to the previous one on the topic: a state sent again (a
+    lockstep re-send, a held start), not a new one. A reset starts again at t = 0, after a
+    later stamp, so it is new."""
+
+    def __init__(self) -> None:
+        self.last: tuple[int, int] | None = None
+
+    def seen(self, stamp: tuple[int, int]) -> bool:
+        repeated = stamp == self.last
+        self.last = stamp
+        return repeated
 
 
 def header_stamp(data: bytes) -> tuple[int, int]:
-    """(sec, nanosec) of a serialized message that starts with a std_msgs/Header, read from
-    the CDR bytes without deserialising (4-byte encapsulation, then the stamp)."""
+    """(sec, nanosec) of a serialized message that starts with a std_msgs/Header (or, like
+    rosgraph_msgs/Clock, with a builtin_interfaces/Time), read from the CDR bytes without
+    deserialising (4-byte encapsulation, then the stamp)."""
     return struct.unpack_from("<iI" if data[1] == 1 else ">iI", data, 4)
 
 
@@ -118,10 +134,10 @@ class RecorderNode(Node):
         self._sim_now = 0
         self.error: str | None = None
         self.done = False  # run_node stops spinning when true
-        self._progress = UInt64()
-        self._progress_pub = self.create_publisher(UInt64, topic_names.RECORDER_PROGRESS, qos.STREAM_QOS)
-        # the sim time of the newest state written: run_stack stops the nodes only once it
-        # reaches the run's last state (transient local: the latest value, late joiners too)
+        self.resends_skipped = 0  # states a simulator sent again, written once
+        # the sim time of the newest state written: a lockstep simulator steps only while it
+        # is a few states behind, run_stack stops the nodes only once it reaches the run's
+        # last state (transient local: the latest value reaches late joiners too)
         self._until = Clock()
         self._until_pub = self.create_publisher(Clock, topic_names.RECORDED_UNTIL, qos.STATUS_QOS)
         for name in names:
@@ -139,9 +155,15 @@ class RecorderNode(Node):
     def _writer_for(self, topic: str):
         is_clock = topic == topic_names.CLOCK
         is_state = topic == topic_names.JOINT_STATES
+        resent = ResendFilter() if topic in RESENT_TOPICS else None
 
         def write(data: bytes) -> None:
             if self.error is not None:
+                return
+            if resent is not None and resent.seen(header_stamp(data)):
+                self.resends_skipped += 1
+                if is_state:
+                    self._until_pub.publish(self._until)  # tell a simulator re-sending it again
                 return
             if is_clock and self.sim_log_time:
                 clock = deserialize_message(data, Clock).clock
@@ -155,8 +177,6 @@ class RecorderNode(Node):
                 self.get_logger().error(f"recording stopped: {exc}")
                 return
             if is_state:  # tell a lockstep simulator how far the recording is
-                self._progress.data = self.bag.counts[topic]
-                self._progress_pub.publish(self._progress)
                 self._until.clock.sec, self._until.clock.nanosec = header_stamp(data)
                 self._until_pub.publish(self._until)
 
@@ -189,8 +209,8 @@ class RecorderNode(Node):
         if self.stats_file:
             wall = time.perf_counter() - self._start_wall
             cpu = time.process_time() - self._start_cpu
-            stats = {"messages": total, "counts": self.bag.counts, "wall_s": wall, "cpu_s": cpu,
-                     "cpu_share": cpu / wall if wall > 0 else None, "error": self.error}
+            stats = {"messages": total, "counts": self.bag.counts, "resends_skipped": self.resends_skipped,
+                     "wall_s": wall, "cpu_s": cpu, "cpu_share": cpu / wall if wall > 0 else None, "error": self.error}
             Path(self.stats_file).write_text(strict_json.dumps(stats) + "\n")
 
 

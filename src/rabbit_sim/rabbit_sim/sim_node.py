@@ -7,14 +7,22 @@ four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset`` and ``/
 Modes (parameter ``mode``):
 
 * ``lockstep`` (default): after publishing the state of tick n the node waits for one
-  torque message, applies it for one step and publishes tick n+1. Runs as fast as the
+  torque reply, applies it for one step and publishes tick n+1. Runs as fast as the
   loop allows and is deterministic: the same stack gives the same trajectory as the
-  ROS-free ``ClosedLoop`` (``scripts/walk.py``). If no torque arrives within
-  ``resend_timeout`` s (wall) the state is re-sent: a restarted controller picks it up,
-  a live one ignores the duplicate (it answers each distinct state once), so exactly one
-  reply per state is ever applied. A reset or pause requested while a reply is due takes
-  effect when that reply arrives.
-* ``realtime``: the physics steps at 1 kHz of wall-clock time, zero-order hold on the
+  ROS-free ``ClosedLoop`` (``scripts/walk.py``). A reply is applied only if it carries the
+  stamp of the state now due and comes from the controller the node is paired with (the
+  first to answer; ``header.frame_id`` of the reply): a rogue publisher, a second
+  controller or a late duplicate never moves the robot. Another controller takes over
+  only after the paired one has left a state unanswered for 1 s (a restarted controller
+  is a new instance). If no reply arrives within ``resend_timeout`` s (wall) the state
+  is re-sent; a live controller ignores the duplicate (it answers each distinct state
+  once). A reset or pause requested while a reply is due takes effect when it arrives.
+* ``paced``: lockstep held back to the wall clock: a state goes out no earlier than its
+  sim time divided by ``rtf`` (target real-time factor, default 1.0) after the start.
+  The physics never steps without the torque for its state, so the trajectory is
+  lockstep's bit for bit; a machine that cannot keep up runs slower (the achieved
+  real-time factor is logged every 5 s) and never falls or stalls because of it.
+* ``realtime`` (free-running, for latency studies): the physics steps at 1 kHz of wall-clock time, zero-order hold on the
   newest torque, in the thread that spins the node (a 1 ms timer wakes it; the wall clock
   paces it): no second thread, so a tick never waits for the GIL. After a late wake-up it
   catches up by at most two ticks and skips the rest (counted, logged). After start and
@@ -23,7 +31,10 @@ Modes (parameter ``mode``):
   arrived for ``watchdog_timeout`` s (8 ms: the gaits go unstable at about 10 ms of
   delay) and says so in the log; it logs again when commands resume. Ticks whose torque
   (the reply to the previous state) had not arrived when the next step was due are late;
-  once a second the log says when the loop fell behind (late ticks, worst delay).
+  once a second the log says when the loop fell behind (late ticks, worst delay), and
+  when more than ``max_late_fraction`` of a second's ticks were late it halts the physics
+  with a log line that names the cause, instead of walking on stale torques until
+  RABBIT falls (``paced`` is the mode for a slow or busy machine).
 
 The robot starts (and restarts on ``/sim/reset``) in the newest state on
 ``/sim/initial_state`` (transient local; ``policy_node`` publishes the state at phase 0 of
@@ -49,16 +60,17 @@ ensure_localhost_discovery()
 from builtin_interfaces.msg import Time  # noqa: E402
 from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped  # noqa: E402
 from rcl_interfaces.msg import SetParametersResult  # noqa: E402
-from rclpy.event_handler import SubscriptionEventCallbacks  # noqa: E402
 from rclpy.node import Node  # noqa: E402
+from rclpy.qos import QoSProfile  # noqa: E402
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Bool, Float64MultiArray, UInt32, UInt64  # noqa: E402
+from std_msgs.msg import Bool, UInt32  # noqa: E402
 from std_srvs.srv import SetBool, Trigger  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import MessageError, joint_state_vectors, torques_from_msg  # noqa: E402
+from rabbit_msgs_py.conversions import (  # noqa: E402
+    MessageError, joint_state_vectors, short, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E402
 from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
@@ -70,14 +82,22 @@ from .model import load_model  # noqa: E402
 from .viewer import PassiveViewer, ViewerUnavailable  # noqa: E402
 from .simulation import Simulator  # noqa: E402
 from .stepping import (  # noqa: E402
-    Lockstep, RealtimeClock, RecorderGate, Reply, SourceProbe, TickStatistics, Verdict, Watchdog, WatchdogEvent)
+    LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, StreamPairing, TickStatistics, Watchdog,
+    WatchdogEvent)
 
-MODES = ("lockstep", "realtime")
+MODES = ("lockstep", "paced", "realtime")
+REPLY_MODES = ("lockstep", "paced")
+"""Modes that step once per torque reply (never without the torque for the state)."""
 RECORDER_LAG = 4
 """Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
 keep 10: with at most 4 outstanding none is ever overwritten)."""
-PROBE_WINDOW = 0.3
-"""s: lockstep with two publishers on /joint_torques counts the replies to one state this long."""
+RECORDER_RESEND = 0.05
+"""s (wall): while the recorder lacks the state it waits for, the state goes out again this
+often (a recorder that connected late, or a report lost)."""
+TAKEOVER_AFTER = 1.0
+"""s (wall): another controller replaces the paired one after it left a state unanswered this long."""
+SERVICE_QOS = QoSProfile(depth=100)
+"""Reset and pause requests: a deep queue, so many callers at once are each answered."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
@@ -88,7 +108,8 @@ class SimSettings:
     """sim_node parameters (see the README's parameter table).
 
     model: ``paper`` or ``drives`` (see :func:`rabbit_sim.model.load_model`).
-    mode: ``lockstep`` or ``realtime``.
+    mode: ``lockstep``, ``paced`` or ``realtime``.
+    rtf: paced, the target real-time factor (sim s per wall s).
     push_duration: how long a ``/push`` wrench is held (s, sim time).
     push_schedule: scripted pushes the simulator applies itself at exact sim times,
         ``"T:FX:DUR,..."`` (s, N, s; :mod:`rabbit_msgs_py.pushes`), again after a reset;
@@ -98,10 +119,12 @@ class SimSettings:
     resend_timeout: lockstep, wall s without a torque before the state is re-sent.
     watchdog_timeout: realtime, wall s without a torque before damping takes over.
     damping: realtime watchdog damping gain (N m s/rad).
+    max_late_fraction: realtime, halt the physics when more than this share of a
+        second's ticks were late.
     start_paused: start with the physics paused (``/sim/pause`` false starts it); the
         launch script uses it to start the run once every node is connected.
-    wait_for_recorder: lockstep, hold the next state while the recorder is more than
-        :data:`RECORDER_LAG` states behind (the launch script sets it when recording).
+    wait_for_recorder: lockstep and paced, hold the next step while the recorder is more
+        than :data:`RECORDER_LAG` states behind (the launch script sets it when recording).
     stats_file: write :meth:`SimNode.statistics` as JSON to this path when the node
         closes ('' = don't); the benchmarks read it.
     markers_rate: ``/rabbit/markers`` messages per second of sim time (0 = none); one also
@@ -112,6 +135,7 @@ class SimSettings:
 
     model: str = "paper"
     mode: str = "lockstep"
+    rtf: float = 1.0
     push_duration: float = 0.1
     push_schedule: str = ""
     max_push_force: float = 2000.0
@@ -119,6 +143,7 @@ class SimSettings:
     resend_timeout: float = 0.2
     watchdog_timeout: float = 0.008
     damping: float = 20.0
+    max_late_fraction: float = 0.5
     start_paused: bool = False
     wait_for_recorder: bool = False
     stats_file: str = ""
@@ -128,7 +153,7 @@ class SimSettings:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise NodeStartError(f"mode must be one of {MODES}, got {self.mode!r}")
-        for name in ("push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
+        for name in ("rtf", "push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise NodeStartError(f"{name} must be a finite number > 0, got {value}")
@@ -136,6 +161,8 @@ class SimSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise NodeStartError(f"{name} must be a finite number >= 0, got {value}")
+        if not 0.0 < self.max_late_fraction <= 1.0:
+            raise NodeStartError(f"max_late_fraction must be in (0, 1], got {self.max_late_fraction}")
         if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
             raise NodeStartError(f"stats_file {self.stats_file}: its directory does not exist")
         try:
@@ -153,7 +180,9 @@ class SimSettings:
 
 SIM_PARAMS = {
     "model": Param("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)"),
-    "mode": Param("lockstep", "lockstep (one state, one torque reply; deterministic) or realtime (1 kHz wall clock)"),
+    "mode": Param("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), paced "
+                              "(lockstep held to the wall clock times rtf) or realtime (free-running 1 kHz wall clock)"),
+    "rtf": Param(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot keep up)"),
     "push_duration": Param(0.1, "how long a /push wrench is held, s of sim time, > 0", dynamic=True),
     "push_schedule": Param("", "pushes applied at sim times, 'T:FX:DUR,...' (s, N, s); '' = none"),
     "max_push_force": Param(2000.0, "larger push components are rejected, N, > 0"),
@@ -162,9 +191,11 @@ SIM_PARAMS = {
     "watchdog_timeout": Param(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
                                      "(the gaits go unstable at about 10 ms of torque delay)"),
     "damping": Param(20.0, "realtime watchdog damping gain, N m s/rad, >= 0"),
+    "max_late_fraction": Param(0.5, "realtime: halt the physics when more than this share of a second's ticks "
+                                    "ran on a stale torque, in (0, 1]"),
     "start_paused": Param(False, "start with the physics paused (/sim/pause false runs it)"),
-    "wait_for_recorder": Param(False, "lockstep: publish the next state only while the recorder (/recorder/progress) "
-                                      "is at most a few states behind, so a recording loses nothing under any load"),
+    "wait_for_recorder": Param(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) is "
+                                      "at most a few states behind, so a recording loses nothing under any load"),
     "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
     "markers_rate": Param(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off)"),
     "viewer": Param(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a display)"),
@@ -188,20 +219,30 @@ class SimNode(Node):
             self.sim = Simulator(load_model(self.settings.model))
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"sim_node: {exc}") from exc
+        mode = self.settings.mode
+        self.by_replies = mode in REPLY_MODES
 
         self._lock = threading.RLock()
         self._initial_state: tuple[list[float], list[float]] | None = None
         self._started = False
         self._paused = self.settings.start_paused
-        self._halted = False  # fell or reached stop_time
+        self._halted = False  # fell, reached stop_time, or (realtime) fell too far behind
         self._fallen = False
         self.sim.schedule_pushes(self.settings.pushes)  # the Simulator applies them, as on the fast path
         self.pushes_rejected = 0
         self.stats = TickStatistics()  # counters: read by tests, run_stack and the benchmarks
-        self.lockstep = Lockstep(self.settings.resend_timeout)
+        self.lockstep = Lockstep(self.settings.resend_timeout, TAKEOVER_AFTER)
+        self.pacer = Pacer(self.settings.rtf) if mode == "paced" else None
+        self._pace_pending = False  # paced: the newest state waits for its wall time
+        self.pairing = StreamPairing(TAKEOVER_AFTER)  # realtime: torques from one controller
         self.watchdog = Watchdog(self.settings.watchdog_timeout, self.settings.damping)
+        self.lateness = LatenessMonitor(self.settings.max_late_fraction)
         self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
         self._latest_torque_wall = -1.0
+        self._published_stamp: int | None = None  # ns, the newest state published
+        self._recorder_resent = 0.0
+        self.halt_reason = ""
+        self.achieved_rtf: float | None = None  # paced: over the last 5 s
 
         self._joint_msg = JointState(name=list(JOINT_NAMES))
         self._hip_msg = TwistStamped()
@@ -213,11 +254,6 @@ class SimNode(Node):
         self._resets_pub = self.create_publisher(UInt32, topics.RESETS, qos.STATUS_QOS)
         self.placements = 0  # start + resets, published on /sim/resets
         self._push_applied_pub = self.create_publisher(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
-        self._controllers = 0  # publishers matched on /joint_torques
-        self.probe = SourceProbe(PROBE_WINDOW)  # lockstep, two of them: replies counted, not applied
-        self._answer_again_pub = self.create_publisher(UInt32, topics.ANSWER_AGAIN, qos.STATUS_QOS)
-        self._answer_again = 0
-        self._answer_again_pub.publish(UInt32(data=0))  # the count in force: a controller that starts now sees 0
         self._shapes = RobotShapes(self.sim.model)
         self._marker_builder = MarkerArrayBuilder()
         self._marker_period = marker_period_ticks(self.settings.markers_rate, self.sim.timestep)
@@ -228,32 +264,35 @@ class SimNode(Node):
                 self.viewer = PassiveViewer(self.sim.model, self.sim.data)
             except ViewerUnavailable as exc:
                 raise NodeStartError(f"sim_node: {exc}") from None
-        self.create_subscription(Float64MultiArray, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS,
-                                 event_callbacks=SubscriptionEventCallbacks(matched=self._on_torque_sources))
+        self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
-        self.recorder = RecorderGate(self.settings.wait_for_recorder, RECORDER_LAG)
-        if self.settings.wait_for_recorder:
-            self.create_subscription(UInt64, topics.RECORDER_PROGRESS, self._on_recorder_progress, qos.STREAM_QOS)
-        self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset)
-        self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause)
+        self.recorder = RecorderGate(self.settings.wait_for_recorder and self.by_replies, RECORDER_LAG,
+                                     round(self.sim.timestep * 1e9))
+        if self.recorder.enabled:
+            self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
+        self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=SERVICE_QOS)
+        self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause, qos_profile=SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
-        # realtime: the physics steps in the thread that spins this node, woken by a 1 ms
-        # timer and paced by the wall clock (RealtimeClock): no second thread, so a tick
-        # never waits for the GIL; executors spinning it wait at most 1 ms
-        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001
+        # lockstep/paced: a 20 Hz supervisor (re-sends, takeovers, the recorder), paced also
+        # a 1 ms wake-up for states that wait for their wall time; realtime: the physics steps
+        # in the thread that spins this node, woken by a 1 ms timer and paced by the wall
+        # clock (RealtimeClock): no second thread, so a tick never waits for the GIL
+        self.spin_timeout = 0.1 if mode == "lockstep" else 0.001
         self.clock = RealtimeClock(self.sim.timestep)
         self._held_ticks = 0
-        self._late_window = (0, 0, 0, time.perf_counter())  # ticks, late, skipped, start of the window
-        if self.settings.mode == "lockstep":
+        if self.by_replies:
             self.create_timer(0.05, self._lockstep_supervise)
-        else:
+        if mode == "paced":
+            self.create_timer(self.sim.timestep, self._paced_wake)
+        if mode == "realtime":
             self.create_timer(self.sim.timestep, self._realtime_wake)
         self.get_logger().info(
-            f"RABBIT simulation ({self.settings.model} model, {self.settings.mode} mode) waiting for a state on "
-            f"{topics.INITIAL_STATE}"
+            f"RABBIT simulation ({self.settings.model} model, {mode} mode"
+            + (f", rtf {self.settings.rtf:g}" if mode == "paced" else "")
+            + f") waiting for a state on {topics.INITIAL_STATE}"
         )
 
     # ----------------------------------------------------------------- status
@@ -277,6 +316,11 @@ class SimNode(Node):
     torques_rejected = property(lambda self: self.stats.torques_rejected)
     damped_ticks = property(lambda self: self.watchdog.damped_ticks)
     resends = property(lambda self: self.lockstep.resends)
+
+    @property
+    def controller(self) -> str | None:
+        """Id of the controller whose torques are applied (None before the first reply)."""
+        return self.lockstep.controller if self.by_replies else self.pairing.controller
 
     def close(self) -> None:
         """Close the viewer and write the statistics file; called before the node is destroyed."""
@@ -317,83 +361,56 @@ class SimNode(Node):
                     + ("paused" if self._paused else "running")
                 )
 
-    def _on_torques(self, msg: Float64MultiArray) -> None:
+    def _on_torques(self, msg: JointState) -> None:
         now = time.perf_counter()
         try:
-            torques = torques_from_msg(msg)
+            stamp, source, torques = torques_from_msg(msg)
         except MessageError as exc:
             self.stats.torques_rejected += 1
             self.get_logger().error(f"ignoring malformed {topics.JOINT_TORQUES}: {exc}", throttle_duration_sec=1.0)
             return
         with self._lock:
             self.stats.torque_received(now)
-            if self.settings.mode == "realtime":
+            if not self.by_replies:
+                if not self.pairing.accepts(source, now):
+                    self._refuse(source)
+                    return
                 self._latest_torques = torques
                 self._latest_torque_wall = now
                 if self._started and not (self._paused or self._halted) and self.clock.overdue() >= 0.0:
                     self._run_due_ticks()  # the tick waited for this reply
                 return
-            if self.probe.active:
-                self.stats.torques_rejected += 1
-                self.probe.reply(torques)
-                return  # whose? lockstep applies no torque until one controller is known
-            reply = self.lockstep.on_reply(torques, self._paused or self.recorder.missed_start())
-            if reply is Reply.RESET:
-                self._place()
-                self.get_logger().info("robot back in the initial state at t = 0 s")
-            elif reply is Reply.STEP:
-                self._advance(torques)
-            # IGNORE: unsolicited (a second controller?), the supervisor timer warns; HOLD: kept until unpaused
+            self._act(self.lockstep.on_reply(stamp, source, torques, self._must_hold()), torques, source)
 
-    def _on_torque_sources(self, status) -> None:
-        """Publishers on /joint_torques matched or gone (a QoS event, immediate). Lockstep
-        with more than one: apply no reply and probe — ask for the due state to be answered
-        again and count the replies (:meth:`_probe_verdict`). A controller that died may
-        still count as matched for a while (until its lease expires), so the count alone
-        does not stop the loop; two replies to one state do."""
-        with self._lock:
-            self._controllers = status.current_count
-            if self.settings.mode != "lockstep":
-                return
-            if self._controllers > 1 and not self.probe.active:
-                self._start_probe()
-            elif self._controllers <= 1 and self.probe.active:
-                self.probe.active = False
-                self.get_logger().info(f"one publisher on {topics.JOINT_TORQUES} again: the physics goes on")
-                self._ask_again()
+    def _act(self, reply: Reply, torques: list[float], source: str) -> None:
+        """Carry out what :class:`Lockstep` made of a reply (caller holds the lock)."""
+        if reply is Reply.STEP:
+            self._advance(torques)
+        elif reply is Reply.RESET:
+            self._place()
+            self.get_logger().info("robot back in the initial state at t = 0 s")
+        elif reply is Reply.FOREIGN:
+            self._refuse(source)
+        # IGNORE: answers no state now due (a duplicate or stale stamp); HOLD: kept until the step may run
 
-    def _ask_again(self) -> None:
-        """Ask the controller(s) to answer the due state again, and re-send it."""
-        self._answer_again += 1
-        self._answer_again_pub.publish(UInt32(data=self._answer_again))
-        if self._started and self.lockstep.awaiting_reply:
-            self._publish_state()
+    def _refuse(self, source: str) -> None:
+        self.stats.torques_rejected += 1
+        self.get_logger().error(
+            f"ignoring torques from {source or 'an unnamed publisher'} on {topics.JOINT_TORQUES}: this simulator "
+            f"takes them from {self.controller} only (another takes over after {TAKEOVER_AFTER:.0f} s without "
+            "an answer from it)", throttle_duration_sec=5.0)
 
-    def _start_probe(self) -> None:
-        self.probe.start()
-        self._ask_again()
-
-    def _probe_verdict(self) -> None:
-        """One reply to the state asked again: go on with it; none: wait as usual; two or
-        more: two live sources, stay stopped, say so, probe again."""
-        verdict = self.probe.verdict()
-        if verdict is Verdict.MANY:
-            self.get_logger().error(
-                f"{self._controllers} publishers on {topics.JOINT_TORQUES} and {self.probe.replies} replies to one "
-                f"state: lockstep applies torques from exactly one controller; the physics waits at "
-                f"t = {self.sim.time:.3f} s until only one is left", throttle_duration_sec=5.0)
-            self._start_probe()
-        elif verdict is Verdict.ONE:
-            torques = self.probe.torques
-            if self.lockstep.on_reply(torques, self._paused or self.recorder.missed_start()) is Reply.STEP:
-                self._advance(torques)
+    def _must_hold(self) -> bool:
+        """Lockstep/paced: the physics may not step now (paused, or a recorder lags)."""
+        return self._paused or self.recorder.holds(self._published_stamp)
 
     def _on_push(self, msg: Wrench) -> None:
         values = (msg.force.x, msg.force.z, msg.torque.y)
         bad = [v for v in values if not (abs(v) <= self.settings.max_push_force)]
         if bad:
             self.get_logger().error(
-                f"ignoring push {values}: components must be finite and within +-{self.settings.max_push_force} N"
+                f"ignoring push {short(values)}: components must be finite and within "
+                f"+-{self.settings.max_push_force} N"
             )
             self.pushes_rejected += 1
             return
@@ -427,16 +444,31 @@ class SimNode(Node):
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         with self._lock:
             self._paused = bool(request.data)
-            if not self._paused and self.settings.mode == "lockstep":
-                held = None if self.recorder.missed_start() else self.lockstep.take_held()
-                if held is not None:
-                    self._advance(held)
-                elif self.lockstep.awaiting_reply:
-                    self._publish_state()  # the reply is still due: a controller that came late gets the state
+            if not self._paused and self.pacer is not None:
+                self.pacer.restart(self.sim.time)  # pace from now: no rush to make up the pause
+            if not self._paused and self.by_replies:
+                self._resume()
         response.success = True
         response.message = "paused" if request.data else "running"
         self.get_logger().info(f"simulation {response.message} at t = {self.sim.time:.3f} s")
         return response
+
+    def _resume(self) -> None:
+        """Lockstep/paced: step on torques held while the step could not run, or send the
+        due state again for a controller (or recorder) that came late."""
+        if self._must_hold():
+            return
+        held = self.lockstep.take_held()
+        if held is not None:
+            self._advance(held)
+        elif self.lockstep.awaiting_reply:
+            self._publish_state()
+
+    def _on_recorded(self, msg: Clock) -> None:
+        with self._lock:
+            self.recorder.recorded = stamp_to_ns(msg.clock)
+            if not self._paused and self.lockstep.held_torques is not None:
+                self._resume()
 
     # ---------------------------------------------------------------- physics
     def _place(self) -> None:
@@ -448,7 +480,11 @@ class SimNode(Node):
             self._publish_push_applied()
         self._started = True
         self._halted = False
+        self.halt_reason = ""
+        self._pace_pending = False
         self.lockstep.restart()
+        if self.pacer is not None:
+            self.pacer.restart(0.0)
         self.stats.unanswered.clear()
         self._latest_torque_wall = -1.0
         if self._fallen:
@@ -458,33 +494,22 @@ class SimNode(Node):
             self._publish_markers()  # a viewer shows the robot where it stands, before it walks
         if self.viewer is not None:
             self.viewer.sync(force=True)
-        if self.settings.mode == "lockstep":
-            self._publish_state()
-            self.lockstep.published()
+        if self.by_replies:
+            self._send_next_state()
 
     def _advance(self, torques: list[float]) -> None:
-        """Lockstep: apply one reply, step, publish the next state (its reply is then due,
-        unless the physics halted) — held while a recorder we wait for lags behind."""
+        """Lockstep/paced: apply one reply, step, publish the next state (its reply is then
+        due, unless the physics halted); paced, the state waits for its wall time."""
         self._step(torques)
-        if self.recorder.lags(self.stats.states_published):
-            self.recorder.state_held = True
+        if self.pacer is not None and not self._halted and self.pacer.wait(self.sim.time) > 0.0:
+            self._pace_pending = True  # _paced_wake sends it
             return
         self._send_next_state()
 
     def _send_next_state(self) -> None:
-        self._publish_state()
+        stamp = self._publish_state()
         if not self._halted:
-            self.lockstep.published()
-
-    def _on_recorder_progress(self, msg: UInt64) -> None:
-        with self._lock:
-            recorder = self.recorder
-            recorder.recorded = msg.data
-            if not self._paused and self.lockstep.held_torques is not None and not recorder.missed_start():
-                self._advance(self.lockstep.take_held())  # the first state is recorded: go
-            elif recorder.state_held and not recorder.lags(self.stats.states_published):
-                recorder.state_held = False
-                self._send_next_state()
+            self.lockstep.published(stamp)
 
     def _publish_push_applied(self) -> None:
         """``/push_applied``: the push acting from now on (zeros: none)."""
@@ -524,7 +549,8 @@ class SimNode(Node):
             self._halted = True
             self.get_logger().info(f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
 
-    def _publish_state(self, track_latency: bool = False) -> None:
+    def _publish_state(self, track_latency: bool = False) -> int:
+        """Publish the state now (joint states, hip velocity, clock); returns its stamp (ns)."""
         data = self.sim.data
         stamp = stamp_of(data.time)
         msg = self._joint_msg
@@ -541,22 +567,29 @@ class SimNode(Node):
         self._hip_pub.publish(hip)
         self._clock_pub.publish(Clock(clock=stamp))
         self.stats.state_sent(time.perf_counter(), track_latency)
+        self._published_stamp = stamp_to_ns(stamp)
+        return self._published_stamp
 
     def _lockstep_supervise(self) -> None:
-        """Wall-clock timer (20 Hz): re-send the state when its reply is overdue."""
+        """Wall-clock timer (20 Hz), lockstep and paced: a controller taking over, the
+        recorder's first state, and re-sending the state when its reply is overdue."""
         with self._lock:
-            if self.probe.active:
-                self._probe_verdict()
+            if not self._started or self._pace_pending:
                 return
-            if self._started and self.recorder.missed_start():
-                self._publish_state()  # again, until the recorder has it (the controller answers a state once)
-                self.get_logger().info("lockstep: waiting for the recorder to receive the first state",
-                                       throttle_duration_sec=5.0)
+            takeover = self.lockstep.takeover(self._must_hold())
+            if takeover is not None:
+                old, new, reply, torques = takeover
+                self.get_logger().warning(f"controller {new} takes over from {old}, which left the state at "
+                                          f"t = {self.sim.time:.3f} s unanswered for {TAKEOVER_AFTER:.0f} s")
+                self._act(reply, torques, new)
                 return
-            if self.recorder.state_held:
+            now = time.perf_counter()
+            if not self._paused and self.recorder.holds(self._published_stamp):
+                if now - self._recorder_resent >= RECORDER_RESEND:
+                    self._recorder_resent = now
+                    self._publish_state()  # the recorder may never have had it (connected late)
                 self.get_logger().warning(
-                    f"lockstep: waiting for the recorder ({self.stats.states_published - self.recorder.recorded} "
-                    "states behind)",
+                    f"lockstep: waiting for the recorder: {self.recorder.behind(self._published_stamp)}",
                     throttle_duration_sec=5.0)
                 return
             waited = self.lockstep.resend_due(self._paused)
@@ -564,14 +597,30 @@ class SimNode(Node):
                 return
             controllers = self.count_publishers(topics.JOINT_TORQUES)
             why = (f"no node publishes {topics.JOINT_TORQUES}: is hzd_controller_node running?" if controllers == 0
-                   else "the controller has not answered: it waits for a gait on "
-                        f"{topics.ALPHA} and {topics.KD}, or is busy")
+                   else f"controller {self.lockstep.controller or '(none answered yet)'} has not answered: it waits "
+                        f"for a gait on {topics.ALPHA} and {topics.KD}, is busy, or died (a killed node stays "
+                        "listed for up to 20 s)")
             self.get_logger().warning(
                 f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
                 f"re-sending it ({why})",
                 throttle_duration_sec=5.0,
             )
             self._publish_state()
+
+    def _paced_wake(self) -> None:
+        """Paced timer (1 ms): send the state that waits for its wall time; report the
+        achieved real-time factor."""
+        with self._lock:
+            if self._pace_pending and self.pacer.wait(self.sim.time) <= 0.0:
+                self._pace_pending = False
+                self._send_next_state()
+            achieved = self.pacer.achieved(self.sim.time)
+            if achieved is not None and self._started and not (self._paused or self._halted):
+                self.achieved_rtf = achieved
+                self.get_logger().info(
+                    f"paced: real-time factor {achieved:.2f} (target {self.settings.rtf:g}) at t = {self.sim.time:.1f} s"
+                    + ("; this machine cannot keep up, the simulation runs slower" if achieved < 0.95 * self.settings.rtf
+                       else ""))
 
     def _realtime_wake(self) -> None:
         """Realtime timer (1 ms): run the ticks now due by the wall clock, zero-order hold."""
@@ -600,21 +649,21 @@ class SimNode(Node):
         self._report_lateness()
 
     def _report_lateness(self) -> None:
-        """Once a second: say in the log when the control loop fell behind in that second
-        (more than 5 % late ticks, or skipped ticks), with the worst delay."""
-        ticks, late, skipped, since = self._late_window
-        now = time.perf_counter()
-        if now - since < 1.0:
+        """Once a second: say in the log when the control loop fell behind in that second;
+        halt the physics when it fell too far behind to go on."""
+        late = self.lateness.check(self.stats, self.clock.skipped)
+        if late is None:
             return
-        new_ticks, new_late = self.stats.ticks - ticks, self.stats.late_ticks - late
-        new_skipped = self.clock.skipped - skipped
-        if new_ticks and (new_late / new_ticks > 0.05 or new_skipped):
-            worst = max(list(self.stats.latencies_ms)[-new_ticks:] or [0.0])
-            self.get_logger().warning(
-                f"realtime: the control loop fell behind at t = {self.sim.time:.2f} s: {new_late} of {new_ticks} "
-                f"ticks late and {new_skipped} skipped in the last second, worst delay {worst:.1f} ms"
-            )
-        self._late_window = (self.stats.ticks, self.stats.late_ticks, self.clock.skipped, now)
+        what = (f"{late.late} of {late.ticks} ticks ran on a stale torque and {late.skipped} were skipped in the last "
+                f"second, worst delay {late.worst_ms:.1f} ms")
+        if not late.stop:
+            self.get_logger().warning(f"realtime: the control loop fell behind at t = {self.sim.time:.2f} s: {what}")
+            return
+        self._halted = True
+        self.halt_reason = f"the control loop could not keep up with the wall clock ({what})"
+        self.get_logger().error(
+            f"realtime: physics halted at t = {self.sim.time:.2f} s: {self.halt_reason}; walking on stale torques "
+            f"would make RABBIT fall. On a slow or busy machine use mode:=paced (never steps without its torque)")
 
     def _realtime_tick(self) -> None:
         now = time.perf_counter()
@@ -638,8 +687,13 @@ class SimNode(Node):
 
     def statistics(self) -> dict:
         """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
-        return self.stats.summary(self.sim.time, {"damped_ticks": self.damped_ticks, "resends": self.resends,
-                                                  "skipped_ticks": self.clock.skipped})
+        extra = {"damped_ticks": self.damped_ticks, "resends": self.resends, "skipped_ticks": self.clock.skipped,
+                 "halt_reason": self.halt_reason or None}
+        if self.pacer is not None:
+            wall = self.stats.last_tick_wall - (self.stats.first_tick_wall or 0.0)
+            extra["achieved_rtf"] = self.sim.time / wall if self.stats.first_tick_wall is not None and wall > 0 else None
+            extra["paced_fell_behind"] = self.pacer.behind_count
+        return self.stats.summary(self.sim.time, extra)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -1,15 +1,21 @@
-"""How ``sim_node`` steps, without ROS: lockstep bookkeeping, realtime pacing, the torque
-watchdog and the run statistics. The node only wires these to topics, services and a
-thread; every rule here is unit-tested without rclpy.
+"""How ``sim_node`` steps, without ROS: lockstep bookkeeping (and its pacing), realtime
+pacing, the torque watchdog, recorder flow control and the run statistics. The node only
+wires these to topics, services and timers; every rule here is unit-tested without rclpy.
 
-* :class:`Lockstep`: one torque reply per published state. A reply arriving while none is
-  due is ignored; a reset or pause requested while a reply is due takes effect when that
-  reply arrives; an overdue reply makes the state go out again (:meth:`Lockstep.resend_due`).
+* :class:`Lockstep`: one torque reply per published state, taken only if it carries the
+  stamp of the state due and comes from the paired controller. A reset or pause requested
+  while a reply is due takes effect when that reply arrives; an overdue reply makes the
+  state go out again (:meth:`Lockstep.resend_due`).
+* :class:`Pacer`: paced mode, lockstep held back to the wall clock times a real-time
+  factor; slower when the machine cannot keep up, never stepping without its torque.
+* :class:`RecorderGate`: lockstep waits for a recorder that lags (by stamps).
 * :class:`RealtimeClock`: one tick per timestep of wall-clock time, run from the thread
   that spins the node (no second thread waiting for the GIL); after a late wake-up it
   catches up by at most ``max_burst`` ticks and skips the rest.
 * :class:`Watchdog`: in realtime, torques older than ``timeout`` s are replaced by damping
-  ``-damping * joint rate``; it says when it trips and when commands resume.
+  ``-damping * joint rate``; it says when it trips. :class:`LatenessMonitor` says once a
+  second when the loop fell behind, and when it fell too far behind to go on.
+* :class:`StreamPairing`: realtime applies torques from one controller only.
 * :class:`TickStatistics`: counters, late ticks and state->torque latencies; JSON-ready
   (no NaN) for ``stats_file`` and the benchmarks.
 
@@ -18,6 +24,7 @@ Times here are wall-clock seconds (``time.perf_counter``) unless named sim time.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -28,70 +35,171 @@ from typing import Callable, Sequence
 class Reply(Enum):
     """What to do with a torque reply in lockstep."""
 
-    IGNORE = "ignore"  # none was due: a second controller, or a duplicate
+    IGNORE = "ignore"  # it answers no state now due: a late duplicate, a stale or made-up stamp
+    FOREIGN = "foreign"  # it answers the due state, from a controller the simulator is not paired with
     RESET = "reset"  # a reset was requested while the reply was due: reset now
-    HOLD = "hold"  # paused: keep the torques until the simulation runs again
+    HOLD = "hold"  # paused, or a recorder lags: keep the torques until the simulation may step
     STEP = "step"  # apply them, step, publish the next state
 
 
 class Lockstep:
-    """Lockstep bookkeeping (see the module docstring). ``clock``: wall time (s)."""
+    """Lockstep bookkeeping (see the module docstring): one reply applied per published
+    state, and only a reply that (a) carries the stamp of the state now due and (b) comes
+    from the controller the simulator is paired with. The first controller to answer is
+    paired; another that answers the due state is refused (:attr:`Reply.FOREIGN`) unless the
+    paired one has left it unanswered for ``takeover_after`` s (a restarted controller is a
+    new instance: :meth:`takeover`). ``clock``: wall time (s); stamps: ns of sim time."""
 
-    def __init__(self, resend_timeout: float, clock: Callable[[], float] = time.perf_counter) -> None:
-        self.resend_timeout = resend_timeout
-        self.clock = clock
-        self.awaiting_reply = False
+    def __init__(self, resend_timeout: float, takeover_after: float = 1.0,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        self.resend_timeout, self.takeover_after, self.clock = resend_timeout, takeover_after, clock
+        self.due: int | None = None  # stamp of the state whose reply is due
+        self.controller: str | None = None  # id of the paired controller
+        self.offers: dict[str, list[float]] = {}  # replies to the due state from other controllers
         self.reset_requested = False
         self.held_torques: list[float] | None = None
         self.last_publish = 0.0
         self.resends = 0
 
-    def published(self) -> None:
-        """A state went out: its reply is due."""
-        self.awaiting_reply = True
+    @property
+    def awaiting_reply(self) -> bool:
+        return self.due is not None
+
+    def published(self, stamp: int) -> None:
+        """The state stamped ``stamp`` (ns) went out: its reply is due."""
+        self.due = stamp
+        self.offers = {}
         self.last_publish = self.clock()
 
     def restart(self) -> None:
         """The simulation was (re)placed: nothing is due, nothing is held."""
-        self.awaiting_reply = False
+        self.due = None
+        self.offers = {}
         self.reset_requested = False
         self.held_torques = None
 
-    def on_reply(self, torques: list[float], paused: bool) -> Reply:
-        """Classify a torque reply; the caller then resets, holds or steps."""
-        if not self.awaiting_reply:
+    def on_reply(self, stamp: int, source: str, torques: list[float], hold: bool) -> Reply:
+        """Classify a torque reply; the caller then resets, holds or steps. ``hold``: the
+        simulation may not step now (paused, a recorder lags)."""
+        if self.due is None or stamp != self.due:
             return Reply.IGNORE
-        self.awaiting_reply = False
+        if self.controller is None:
+            self.controller = source
+        if source != self.controller:
+            self.offers[source] = torques
+            return Reply.FOREIGN
+        return self._take(torques, hold)
+
+    def takeover(self, hold: bool) -> tuple[str | None, str, Reply, list[float]] | None:
+        """If the paired controller has left the due state unanswered for
+        ``takeover_after`` s and exactly one other controller answered it, pair with that
+        one and take its reply: (old id, new id, what to do, its torques). Otherwise None
+        (two or more others: none is trusted)."""
+        if self.due is None or len(self.offers) != 1 or self.clock() - self.last_publish < self.takeover_after:
+            return None
+        (source, torques), = self.offers.items()
+        old, self.controller = self.controller, source
+        return old, source, self._take(torques, hold), torques
+
+    def _take(self, torques: list[float], hold: bool) -> Reply:
+        self.due = None
+        self.offers = {}
         if self.reset_requested:
             self.reset_requested = False
             return Reply.RESET
-        if paused:
+        if hold:
             self.held_torques = torques
             return Reply.HOLD
         return Reply.STEP
 
     def request_reset(self) -> bool:
         """A reset was asked for; True if it must wait for the reply now due."""
-        if self.awaiting_reply:
+        if self.due is not None:
             self.reset_requested = True
             return True
         return False
 
     def take_held(self) -> list[float] | None:
-        """The torques held while paused (once), if any."""
+        """The torques held while the simulation could not step (once), if any."""
         torques, self.held_torques = self.held_torques, None
         return torques
 
     def resend_due(self, paused: bool) -> float | None:
         """Seconds waited if the due reply is overdue (the state should go out again, and
         this counts a resend), else None."""
-        if not self.awaiting_reply or paused:
+        if self.due is None or paused:
             return None
         waited = self.clock() - self.last_publish
         if waited < self.resend_timeout:
             return None
         self.resends += 1
         return waited
+
+
+class StreamPairing:
+    """Realtime: the newest torque is applied only if it comes from the paired controller
+    (the first heard); another takes over only after the paired one was silent for
+    ``takeover_after`` s (wall)."""
+
+    def __init__(self, takeover_after: float = 1.0) -> None:
+        self.takeover_after = takeover_after
+        self.controller: str | None = None
+        self.last_heard = float("-inf")
+
+    def accepts(self, source: str, now: float) -> bool:
+        if self.controller != source and now - self.last_heard >= self.takeover_after:
+            self.controller = source
+        if source != self.controller:
+            return False
+        self.last_heard = now
+        return True
+
+
+class Pacer:
+    """Paced mode: lockstep (one reply per state) kept from running ahead of the wall
+    clock times ``rtf``. :meth:`wait` says how long the state at a sim time must wait
+    before it goes out. When the machine cannot keep up the loop simply runs slower: after
+    falling more than ``slack`` s (wall) behind it re-anchors instead of racing to catch
+    up. :meth:`achieved` gives the achieved real-time factor once per ``window`` s."""
+
+    def __init__(self, rtf: float, slack: float = 0.05, window: float = 5.0,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        if not (math.isfinite(rtf) and rtf > 0.0):
+            raise ValueError(f"rtf must be a finite number > 0, got {rtf}")
+        self.rtf, self.slack, self.window, self.clock = rtf, slack, window, clock
+        self.anchor: tuple[float, float] | None = None  # (wall s, sim s)
+        self.report_from: tuple[float, float] | None = None
+        self.behind_count = 0  # re-anchorings: times the loop could not keep up
+
+    def restart(self, sim_time: float) -> None:
+        """Pace from now on (start, reset, resume)."""
+        now = self.clock()
+        self.anchor = (now, sim_time)
+        self.report_from = (now, sim_time)
+
+    def wait(self, sim_time: float) -> float:
+        """Wall seconds until the state at ``sim_time`` may go out (<= 0: now)."""
+        if self.anchor is None:
+            self.restart(sim_time)
+        wall0, sim0 = self.anchor
+        now = self.clock()
+        ahead = wall0 + (sim_time - sim0) / self.rtf - now
+        if ahead < -self.slack:
+            self.anchor = (now, sim_time)
+            self.behind_count += 1
+            return 0.0
+        return ahead
+
+    def achieved(self, sim_time: float) -> float | None:
+        """The real-time factor achieved since the last report, once per ``window`` s."""
+        if self.report_from is None:
+            return None
+        wall0, sim0 = self.report_from
+        now = self.clock()
+        if now - wall0 < self.window:
+            return None
+        self.report_from = (now, sim_time)
+        return (sim_time - sim0) / (now - wall0)
 
 
 class RealtimeClock:
@@ -162,6 +270,46 @@ class Watchdog:
         return [-self.damping * rate for rate in joint_rates], event
 
 
+@dataclass(frozen=True)
+class Lateness:
+    """What one second of realtime stepping says: ``ticks`` stepped, ``late`` of them on a
+    torque older than the previous state, ``skipped`` ticks, the worst state->torque
+    delay (ms); ``stop``: too many late ticks to go on (stale torques make RABBIT fall)."""
+
+    ticks: int
+    late: int
+    skipped: int
+    worst_ms: float
+    stop: bool
+
+    @property
+    def fraction(self) -> float:
+        return self.late / self.ticks if self.ticks else 0.0
+
+
+class LatenessMonitor:
+    """Realtime: once per ``period`` s (wall) a :class:`Lateness` when the loop fell
+    behind in that period (more than 5 % late ticks, or skipped ticks), with ``stop`` set
+    above ``max_late_fraction``."""
+
+    def __init__(self, max_late_fraction: float, period: float = 1.0,
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        self.max_late_fraction, self.period, self.clock = max_late_fraction, period, clock
+        self.start = (0, 0, 0, clock())
+
+    def check(self, stats: "TickStatistics", skipped: int) -> Lateness | None:
+        ticks, late, skipped_before, since = self.start
+        now = self.clock()
+        if now - since < self.period:
+            return None
+        self.start = (stats.ticks, stats.late_ticks, skipped, now)
+        new_ticks, new_late, new_skipped = stats.ticks - ticks, stats.late_ticks - late, skipped - skipped_before
+        if not new_ticks or (new_late <= 0.05 * new_ticks and not new_skipped):
+            return None
+        worst = max(list(stats.latencies_ms)[-new_ticks:] or [0.0])
+        return Lateness(new_ticks, new_late, new_skipped, worst, new_late > self.max_late_fraction * new_ticks)
+
+
 def _percentile(values: Sequence[float], q: float) -> float | None:
     if not values:
         return None
@@ -229,57 +377,29 @@ class TickStatistics:
 
 
 class RecorderGate:
-    """Lockstep flow control against a recorder (``/recorder/progress``): the loop does not
-    step until the recorder has the first state, and holds each next state while the
-    recorder is more than ``max_lag`` states behind (its subscriptions keep 10: with at most
-    4 outstanding none is ever overwritten). Disabled: never holds."""
+    """Lockstep flow control against a recorder (``/recorder/recorded_until``: the stamp of
+    the newest ``/joint_states`` it wrote): the simulation steps only while the recorder has
+    one of the last ``max_lag`` + 1 states published (its subscriptions keep 10: none is
+    ever overwritten). Stamps, not counts: a state sent twice or a report lost or late
+    cannot open a gap that never closes; the newest report is all that counts. After a
+    reset, a report from before it (a later stamp) holds until the placed state is
+    recorded. Disabled: never holds. Stamps in ns."""
 
-    def __init__(self, enabled: bool, max_lag: int = 4) -> None:
-        self.enabled, self.max_lag = enabled, max_lag
-        self.recorded = 0  # /joint_states the recorder has written
-        self.state_held = False  # a state waits for the recorder
+    def __init__(self, enabled: bool, max_lag: int = 4, timestep_ns: int = 1_000_000) -> None:
+        self.enabled = enabled
+        self.max_lag_ns = max_lag * timestep_ns + timestep_ns // 2
+        self.recorded: int | None = None  # stamp of the newest state the recorder wrote
 
-    def missed_start(self) -> bool:
-        """The recorder has not written the first state yet."""
-        return self.enabled and self.recorded == 0
+    def holds(self, published: int | None) -> bool:
+        """True while the recorder lacks every state of the last ``max_lag`` + 1 up to the
+        one stamped ``published`` (None: nothing published yet, nothing to wait for)."""
+        if not self.enabled or published is None:
+            return False
+        return self.recorded is None or not (published - self.max_lag_ns <= self.recorded <= published)
 
-    def lags(self, published: int) -> bool:
-        """More than ``max_lag`` of the ``published`` states are not recorded yet."""
-        return self.enabled and published - self.recorded > self.max_lag
-
-
-class Verdict(Enum):
-    """What the replies to a state asked again say about the torque sources."""
-
-    ONE = "one"  # one live controller (another match was a dead one not expired yet)
-    NONE = "none"  # no reply: no controller answering yet
-    MANY = "many"  # two or more live sources: wait, probe again
-
-
-class SourceProbe:
-    """While two publishers match on /joint_torques (lockstep): the due state is asked again
-    and the replies are counted for ``window`` s; a reply is never applied before the
-    verdict."""
-
-    def __init__(self, window: float = 0.3, clock: Callable[[], float] = time.perf_counter) -> None:
-        self.window, self.clock = window, clock
-        self.active = False
-        self.replies = 0
-        self.torques: list[float] | None = None
-        self.since = 0.0
-
-    def start(self) -> None:
-        self.active, self.replies, self.torques, self.since = True, 0, None, self.clock()
-
-    def reply(self, torques: list[float]) -> None:
-        self.replies += 1
-        self.torques = torques
-
-    def verdict(self) -> Verdict | None:
-        """None until the window is over; then ONE, NONE or MANY (the probe ends unless MANY)."""
-        if self.clock() - self.since < self.window:
-            return None
-        if self.replies >= 2:
-            return Verdict.MANY
-        self.active = False
-        return Verdict.ONE if self.replies == 1 else Verdict.NONE
+    def behind(self, published: int | None) -> str:
+        """Where the recorder is, for the log."""
+        if self.recorded is None:
+            return "it has no state yet"
+        return f"it has written up to t = {self.recorded * 1e-9:.3f} s, the simulation is at " \
+               f"t = {(published or 0) * 1e-9:.3f} s"

@@ -24,6 +24,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -74,6 +75,7 @@ class StackConfig:
     schedule: tuple[tuple[float, float], ...]
     controller: str = "classic"
     mode: str = "lockstep"
+    rtf: float = 1.0
     model: str = "paper"
     library_mode: str = "interpolate"
     gait_dir: str = ""
@@ -95,6 +97,8 @@ class StackConfig:
             raise ValueError("duration must be > 0 s")
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
+        if not (math.isfinite(self.rtf) and self.rtf > 0.0):
+            raise ValueError(f"rtf must be a finite number > 0, got {self.rtf}")
         if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
             raise ValueError(f"decision_period must be -1 (the policy's own), 0 or a whole number of ticks, "
                              f"got {self.decision_period!r}")
@@ -114,11 +118,12 @@ class StackConfig:
             "sim_node": {
                 "model": self.model,
                 "mode": self.mode,
+                "rtf": self.rtf,
                 "stop_time": self.duration,
                 "push_duration": self.push_duration,
                 "push_schedule": format_pushes(self.pushes),
                 "start_paused": True,
-                "wait_for_recorder": bool(self.record) and self.mode == "lockstep",
+                "wait_for_recorder": bool(self.record) and self.mode in ("lockstep", "paced"),
                 "stats_file": self.stats_file,
                 "markers_rate": self.markers_rate,
                 "viewer": self.viewer,
@@ -132,6 +137,10 @@ class StackConfig:
                 "stats_file": self.record_stats_file,
             }
         return params
+
+
+SEGMENT_END_SLACK = 0.05
+"""s of sim time: a segment counts as complete when its last sampled state is this close to its end."""
 
 
 @dataclass
@@ -148,8 +157,10 @@ class Segment:
 
     @property
     def mean_speed(self) -> float:
-        """Mean hip speed over the segment's second half (NaN if not reached)."""
-        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end):
+        """Mean hip speed over the segment's second half; NaN unless the run reached the
+        segment's end (within :data:`SEGMENT_END_SLACK`: the supervisor samples states), as
+        on the fast path: a run cut short reports no mean for the segment it was in."""
+        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end) or self.t_end < self.end - SEGMENT_END_SLACK:
             return float("nan")
         return mean_speed_between(self.t_mid, self.x_mid, self.t_end, self.x_end)
 
@@ -215,6 +226,7 @@ class Supervisor(Node):
         self.sim_time = 0.0
         self.first_state_wall: float | None = None
         self.last_state_wall: float | None = None
+        self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
@@ -270,6 +282,8 @@ class Supervisor(Node):
         self.last_state_wall = now
         t = stamp_to_seconds(msg.header.stamp)
         x = msg.position[0]
+        if t != self.sim_time or self.last_progress_wall is None:
+            self.last_progress_wall = now
         self.sim_time = t
         if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
             self.stalled, self.stall_time = True, t
@@ -347,11 +361,20 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
     return args
 
 
+REALTIME_HALT_TIMEOUT = 3.0
+"""s (wall): a realtime simulation whose time stood still this long has halted."""
+RECORDER_TIMEOUT = 10.0
+"""s (wall): a recorded run whose simulation waited this long for a recorder that made no
+progress fails, saying so (a lockstep simulator never steps past a lagging recorder)."""
+
+
 def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
-                     spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
+                     spin_timeout: float = 0.05, stop=lambda: False,
+                     recorder_timeout: float = RECORDER_TIMEOUT) -> str | None:
     """Start the (paused) simulation once every node is connected, then spin until the run
     is over; returns an error message or None. ``stop()`` true (a signal arrived) ends
-    the run as "interrupted"; ``alive()`` returns a message when a node process died."""
+    the run as "interrupted"; ``alive()`` returns a message when a node process died.
+    Progress is sim time moving: a state sent again does not count."""
     from rclpy.executors import ExternalShutdownException
 
     start = time.perf_counter()
@@ -369,8 +392,18 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             started = supervisor.request_start()
         if not running and time.perf_counter() - start > stall_timeout:
             return f"the nodes did not connect within {stall_timeout:.0f} s"
-        if running and time.perf_counter() - (supervisor.last_state_wall or start) > stall_timeout:
-            return f"no simulation progress for {stall_timeout:.0f} s (at t = {supervisor.sim_time:.3f} s)"
+        if running:
+            waited = time.perf_counter() - (supervisor.last_progress_wall or start)
+            if supervisor.config.record and waited > recorder_timeout \
+                    and supervisor.recorded_until < supervisor.sim_time - 1e-9:
+                return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and the "
+                        f"simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
+            if supervisor.config.mode == "realtime" and waited > REALTIME_HALT_TIMEOUT:
+                return (f"the simulation halted at t = {supervisor.sim_time:.3f} s: realtime mode halts when the "
+                        "control loop falls behind the wall clock (sim_node's log says why); --mode paced runs "
+                        "slower instead")
+            if waited > stall_timeout:
+                return f"no simulation progress for {stall_timeout:.0f} s (at t = {supervisor.sim_time:.3f} s)"
     return None
 
 
