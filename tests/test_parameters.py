@@ -35,6 +35,9 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
     (["rabbit_sim.sim_node", "-p", "damping:=nan"], "damping must be a finite number"),
     (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "stop_time must be a finite number"),
     (["rabbit_sim.sim_node", "-p", "stats_file:=/nonexistent/dir/stats.json"], "does not exist"),
+    (["rabbit_sim.sim_node", "-p", "mode:=paced", "-p", "rtf:=0.0"], "rtf must be a finite number > 0"),
+    (["rabbit_policy.policy_node", "-p", "window:=0", "-p", "decision_period:=20"], "window must be >= 1"),
+    (["rabbit_policy.policy_node", "-p", "window:=-5"], "window must be >= 1"),
 ])
 def test_bad_parameters_stop_a_node_with_one_line(args, message):
     module, *params = args
@@ -88,3 +91,19 @@ def test_run_time_changes_are_validated_and_read_only_ones_refused():
             if close:
                 close()
             node.destroy_node()
+
+
+def test_an_unknown_parameter_is_named_in_the_log(capfd):
+    """A parameter the node does not have (``initial_speed`` was removed from sim_node) is
+    not taken silently: one warning names it; the node still starts."""
+    import rclpy
+
+    context = rclpy.Context()
+    rclpy.init(context=context, args=["--ros-args", "-p", "initial_speed:=1.2", "-p", "mode:=lockstep"])
+    try:
+        sim = SimNode(context=context)
+        sim.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    err = capfd.readouterr().err
+    assert "ignoring unknown parameter(s) initial_speed" in err and "mode" not in err.split("ignoring")[1][:40]

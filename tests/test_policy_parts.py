@@ -199,3 +199,20 @@ def test_calibrated_interpolation_picks_the_blend_measured_to_walk_at_the_comman
     assert bare.interpolate(1.05).info["weight"] == pytest.approx((1.05 - 1.0) / 0.1)
     with pytest.raises(ValueError, match="covers"):
         GaitLibrary(library.gaits[:2], calibration)
+
+
+@pytest.mark.parametrize("content", ["{}", "[1, 2]", "not json", '{"speed": "fast"}'])
+def test_a_gait_directory_holding_no_gait_is_one_line_and_exit_2(tmp_path, content):
+    """``--gait-dir`` with a file that is not a gait: one line naming it, exit status 2
+    (bad input), never a traceback or 1 (1 means fell or stalled)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    (tmp_path / "gait_1.00.json").write_text(content)
+    script = Path(__file__).resolve().parents[1] / "scripts" / "walk.py"
+    out = subprocess.run([sys.executable, str(script), "--gait-dir", str(tmp_path), "--duration", "0.1"],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 2, out.stderr
+    lines = [line for line in out.stderr.splitlines() if line.strip()]
+    assert "Traceback" not in out.stderr and "gait_1.00.json" in lines[-1] and "not a gait file" in lines[-1]

@@ -266,11 +266,101 @@ def test_lockstep_recording_loses_nothing_on_a_loaded_machine(tmp_path):
                 msg = typestore.deserialize_cdr(raw, connection.msgtype)
                 stamp = msg.clock if connection.topic == "/clock" else msg.header.stamp
                 ticks[connection.topic].add(round((stamp.sec * 1_000_000_000 + stamp.nanosec) / 1e6))  # ms
-    # every tick on every stream (the state at t = 0 goes out once more when the run starts,
-    # so a stream may hold it twice: compare the ticks, not the counts)
+    # every tick on every stream, once (a state sent again is written once)
     for topic, seen in ticks.items():
         assert seen == set(range(0, 3001)), f"{topic} misses ticks {sorted(set(range(0, 3001)) - seen)[:10]}"
+        assert counts[topic] == 3001, f"{topic}: {counts[topic]} messages for 3001 ticks"
     assert counts["/joint_torques"] >= 3000
+
+
+def _stamps_ms(bag: Path, topic: str) -> list[int]:
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(bag) as reader:
+        connections = [c for c in reader.connections if c.topic == topic]
+        msgs = (typestore.deserialize_cdr(raw, c.msgtype) for c, _t, raw in reader.messages(connections))
+        stamps = (m.clock if topic == "/clock" else m.header.stamp for m in msgs)
+        return [round((stamp.sec * 1_000_000_000 + stamp.nanosec) / 1e6) for stamp in stamps]
+
+
+def test_a_recorder_that_connects_late_never_wedges_lockstep(tmp_path):
+    """The issue's freeze, provoked directly: sim_node waits for a recorder (re-sending the
+    first state every 50 ms, ~30 times) that starts 1.5 s late, in a context of its own
+    standing in for its own process. The run goes on once it connects, and the bag holds
+    every tick exactly once."""
+    import sys as _sys
+
+    _sys.path.insert(0, str(ROOT / "tests"))
+    from ros_helpers import ros_context, spin_for, spin_until
+
+    from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+    from rabbit_policy.policy_node import PolicyNode
+    from rabbit_sim.recorder_node import RecorderNode
+    from rabbit_sim.sim_node import SimNode
+
+    bag = tmp_path / "late"
+    with ros_context() as (context, executor):
+        nodes = [PolicyNode(context=context), HZDControllerNode(context=context),
+                 SimNode(context=context, wait_for_recorder=True)]
+        for node in nodes:
+            executor.add_node(node)
+        sim = nodes[2]
+        spin_for(executor, 1.5)
+        assert sim.time == 0.0 and sim.states_published >= 10  # held at t = 0, re-sending
+        with ros_context() as (ctx_r, ex_r):
+            recorder = RecorderNode(context=ctx_r, output=str(bag), topics=["/joint_states", "/clock"])
+            ex_r.add_node(recorder)
+            assert spin_until((executor, ex_r), lambda: sim.time >= 0.5, timeout=60.0), f"wedged at {sim.time}"
+            sim_end = round(sim.time * 1000)
+            spin_until((executor, ex_r), lambda: recorder.counts.get("/joint_states", 0) > sim_end, timeout=10.0)
+            recorder.close()
+    for topic in ("/joint_states", "/clock"):
+        stamps = _stamps_ms(bag, topic)
+        assert len(stamps) >= sim_end and stamps == list(range(len(stamps))), f"{topic}: {stamps[:10]}..."
+
+
+def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):
+    """The recorder process is frozen (SIGSTOP) mid-run: lockstep waits for it (it never steps
+    past a recording it cannot keep), and run_stack fails with one line naming the
+    recorder within RECORDER_TIMEOUT, then stops every node, the frozen one included."""
+    import os
+    import subprocess
+    import sys
+
+    from rabbit_policy.bringup.stack import RECORDER_TIMEOUT
+
+    bag = tmp_path / "frozen"
+    started = time.monotonic()
+    proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--duration", "60",
+                             "--record", str(bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        recorder = None
+        while recorder is None and time.monotonic() - started < 60:
+            time.sleep(0.2)
+            for pid in filter(str.isdigit, os.listdir("/proc")):
+                try:
+                    cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+                except OSError:
+                    continue
+                if "rabbit_sim.recorder_node" in cmdline and str(bag) in cmdline:
+                    recorder = int(pid)
+        assert recorder is not None
+        deadline = time.monotonic() + 60
+        while not list(bag.glob("*.mcap")) or list(bag.glob("*.mcap"))[0].stat().st_size < 200_000:
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.1)
+        os.kill(recorder, signal.SIGSTOP)
+        frozen_at = time.monotonic()
+        out, err = proc.communicate(timeout=RECORDER_TIMEOUT + 60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 3, err[-2000:]
+    assert "the recorder stopped" in out
+    assert time.monotonic() - frozen_at < RECORDER_TIMEOUT + 30
+    assert not Path(f"/proc/{recorder}").exists() or "zombie" in Path(f"/proc/{recorder}/status").read_text()
 
 
 def test_header_stamp_reads_the_stamp_from_cdr_bytes():

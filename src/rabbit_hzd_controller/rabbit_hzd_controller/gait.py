@@ -78,4 +78,11 @@ class Gait:
 
     @classmethod
     def load(cls, path: str | Path) -> "Gait":
-        return cls.from_dict(json.loads(Path(path).read_text()))
+        """The gait in a JSON file; ``ValueError`` naming the file if it holds no gait."""
+        try:
+            data = json.loads(Path(path).read_text())
+            if not isinstance(data, dict):
+                raise ValueError("a JSON object is needed")
+            return cls.from_dict(data)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ValueError(f"{path} is not a gait file ({str(exc)[:160]})") from None

@@ -63,4 +63,14 @@ def declare(node, params: dict[str, Param], overrides: dict[str, Any]) -> dict[s
             values[name] = coerce(name, node.get_parameter(name).value, spec.default)
         except ValueError as exc:
             raise NodeStartError(f"{node.get_name()}: {exc}") from None
+    unknown = sorted(name for name in overrides_given(node) if not node.has_parameter(name))
+    if unknown:
+        node.get_logger().warning(f"ignoring unknown parameter(s) {', '.join(unknown)}: {node.get_name()} has no such "
+                                  f"parameter (ros2 param list shows those it has)")
     return values
+
+
+def overrides_given(node) -> list[str]:
+    """Names of the parameters set for ``node`` on its command line (``-p name:=value``,
+    parameter files), before anything was declared."""
+    return [name for name in getattr(node, "_parameter_overrides", {}) if "." not in name]

@@ -110,6 +110,8 @@ class PolicyNode(Node):
             if values["decision_period"] < -1:
                 raise ValueError(f"decision_period must be -1 (the policy's own), 0 or N > 0 ticks, "
                                  f"got {values['decision_period']}")
+            if values["window"] < 1:
+                raise ValueError(f"window must be >= 1 tick, got {values['window']}")
             if values["decision_window"] < 1:
                 raise ValueError(f"decision_window must be >= 1 tick, got {values['decision_window']}")
             self.decision_period = decision_period(self.policy)

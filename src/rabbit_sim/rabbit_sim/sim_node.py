@@ -96,8 +96,11 @@ RECORDER_RESEND = 0.05
 often (a recorder that connected late, or a report lost)."""
 TAKEOVER_AFTER = 1.0
 """s (wall): another controller replaces the paired one after it left a state unanswered this long."""
-SERVICE_QOS = QoSProfile(depth=100)
-"""Reset and pause requests: a deep queue, so many callers at once are each answered."""
+SERVICE_QOS = QoSProfile(depth=1000)
+"""Reset and pause requests: a deep queue, so that many callers at once are each served
+(with rclpy's default depth 10, requests beyond 10 arriving together were dropped and their
+callers waited for ever). Replies share one topic: a caller that makes many calls at once
+needs a client depth as deep as the burst to take its own (docs/faults.md)."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""

@@ -497,12 +497,16 @@ class NodeProcesses:
         return None
 
     def stop(self, timeout: float = 5.0) -> dict[str, int]:
+        """SIGINT, then SIGTERM, then SIGKILL, ``timeout`` s apart (each with SIGCONT: a
+        stopped process handles a signal only once it runs); exit statuses by node."""
         for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
             alive = [p for p in self.procs.values() if p.poll() is None]
             if not alive:
                 break
             for proc in alive:
                 proc.send_signal(sig)
+                if sig != signal.SIGKILL:
+                    proc.send_signal(signal.SIGCONT)
             deadline = time.monotonic() + timeout
             for proc in alive:
                 try:

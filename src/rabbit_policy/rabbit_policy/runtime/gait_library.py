@@ -97,7 +97,10 @@ class GaitLibrary:
         calibration_path = directory / CALIBRATION_FILE
         calibration = None
         if calibration_path.is_file():
-            calibration = Calibration.from_dict(json.loads(calibration_path.read_text()))
+            try:
+                calibration = Calibration.from_dict(json.loads(calibration_path.read_text()))
+            except (TypeError, ValueError, KeyError, AttributeError) as exc:
+                raise ValueError(f"{calibration_path} is not a calibration file ({str(exc)[:160]})") from None
         return cls(gaits, calibration)
 
     @classmethod
