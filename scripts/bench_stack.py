@@ -12,6 +12,12 @@
   seen by sim_node), ``realtime_damped_ticks``.
 
 * ``realtime_in_process_*``: the realtime run with all nodes in this process.
+* ``paced_*``: paced mode (lockstep held to the wall clock, ``--rtf`` target), nodes as
+  separate processes: the achieved real-time factor (sim s / wall s over the run), whether
+  it fell, and with ``--record`` (``paced_recording_*``) the states lost: distinct
+  ``/joint_states`` ticks simulated minus those in the bag (0 by design).
+* Realtime runs halt when the loop falls too far behind (``*_halted``: the reason, or None).
+* ``--busy N`` runs N busy loops (``while True: pass``) beside every scenario: a loaded machine.
 * ``recorder_*``: the realtime multi-process run with ``--record``: the recorder process's
   CPU share (CPU s / wall s over its life), messages written per wall second (its life
   includes start-up and shutdown, so this understates the rate during the walk), and
@@ -35,8 +41,8 @@ from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "realtime_multi_process", "realtime_in_process",
-             "realtime_recording")
+SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+             "realtime_multi_process", "realtime_in_process", "realtime_recording")
 
 
 def rounded(value: float | None, digits: int) -> float | None:
@@ -44,11 +50,41 @@ def rounded(value: float | None, digits: int) -> float | None:
     return None if value is None else round(value, digits)
 
 
-def run_scenario(name: str, duration: float, realtime_duration: float, speed: float) -> dict[str, object]:
+def recorded_ticks(bag: Path) -> int:
+    """Distinct /joint_states stamps in a bag."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    stamps = set()
+    with Reader(bag) as reader:
+        connections = [c for c in reader.connections if c.topic == "/joint_states"]
+        for connection, _t, raw in reader.messages(connections):
+            stamp = typestore.deserialize_cdr(raw, connection.msgtype).header.stamp
+            stamps.add((stamp.sec, stamp.nanosec))
+    return len(stamps)
+
+
+def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
+                 rtf: float = 1.0) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 
     schedule = ((0.0, speed),)
+    if name in ("paced_multi_process", "paced_recording"):
+        prefix = "paced" if name == "paced_multi_process" else "paced_recording"
+        with tempfile.TemporaryDirectory() as tmp:
+            sim_stats = Path(tmp) / "sim.json"
+            bag = Path(tmp) / "bag" if name == "paced_recording" else None
+            config = StackConfig(duration=realtime_duration, schedule=schedule, mode="paced", rtf=rtf,
+                                 stats_file=str(sim_stats), record=str(bag) if bag else "")
+            report = run_multi_process(config, log=sys.stderr)
+            sim = json.loads(sim_stats.read_text())
+            out = {f"{prefix}_rtf": round(report.rtf, 3), f"{prefix}_target_rtf": rtf, f"{prefix}_fell": report.fell,
+                   f"{prefix}_completed": report.completed}
+            if bag is not None:
+                out[f"{prefix}_states_lost"] = sim["ticks"] + 1 - recorded_ticks(bag)
+            return out
     if name == "lockstep_in_process":
         report, _ = run_in_process(StackConfig(duration=duration, schedule=schedule))
         return {"lockstep_rtf_in_process": round(report.rtf, 3), "lockstep_in_process_fell": report.fell}
@@ -65,6 +101,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             "realtime_in_process_worst_delay_ms": rounded(stats["latency_max_ms"], 3),
             "realtime_in_process_skipped_ticks": stats["skipped_ticks"],
             "realtime_in_process_fell": report.fell,
+            "realtime_in_process_halted": stats["halt_reason"],
         }
     if name == "realtime_recording":
         with tempfile.TemporaryDirectory() as tmp:
@@ -81,6 +118,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             "recorder_joint_states_published": sim["states_published"],
             "recorder_realtime_late_fraction": rounded(sim["late_fraction"], 5),
             "recorder_run_fell": report.fell,
+            "recorder_realtime_halted": sim["halt_reason"],
         }
     with tempfile.TemporaryDirectory() as tmp:
         stats_path = Path(tmp) / "sim_stats.json"
@@ -98,6 +136,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         "realtime_ticks": stats["ticks"],
         "realtime_damped_ticks": stats["damped_ticks"],
         "realtime_fell": report.fell,
+        "realtime_halted": stats["halt_reason"],
     }
 
 
@@ -107,22 +146,33 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
     parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime runs, s")
     parser.add_argument("--speed", type=float, default=1.0)
-    parser.add_argument("--only", choices=SCENARIOS, help="run one scenario in this process")
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--rtf", type=float, default=1.0, help="paced runs: target real-time factor")
+    parser.add_argument("--busy", type=int, default=0, metavar="N", help="busy loops beside every scenario")
+    parser.add_argument("--only", choices=SCENARIOS, action="append",
+                        help="run only this scenario (repeatable)")
     args = parser.parse_args(argv)
-    if args.only:
-        print(strict_json.dumps(run_scenario(args.only, args.duration, args.realtime_duration, args.speed)))
+    if args.child:
+        print(strict_json.dumps(run_scenario(args.only[0], args.duration, args.realtime_duration, args.speed,
+                                             args.rtf)))
         return 0
     # every scenario in a fresh interpreter: a run must not inherit another's ROS state
     out: dict[str, object] = {}
-    for name in SCENARIOS:
-        cmd = [sys.executable, __file__, "--only", name, "--duration", str(args.duration),
-               "--realtime-duration", str(args.realtime_duration), "--speed", str(args.speed)]
-        result = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
-        if result.returncode != 0:
-            print(f"error: scenario {name} failed with status {result.returncode}", file=sys.stderr)
-            return 1
-        out.update(json.loads(result.stdout.strip().splitlines()[-1]))
-    out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration,
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
+    try:
+        for name in args.only or SCENARIOS:
+            cmd = [sys.executable, __file__, "--child", "--only", name, "--duration", str(args.duration),
+                   "--realtime-duration", str(args.realtime_duration), "--speed", str(args.speed),
+                   "--rtf", str(args.rtf)]
+            result = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+            if result.returncode != 0:
+                print(f"error: scenario {name} failed with status {result.returncode}", file=sys.stderr)
+                return 1
+            out.update(json.loads(result.stdout.strip().splitlines()[-1]))
+    finally:
+        for hog in hogs:
+            hog.kill()
+    out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration, "busy_loops": args.busy,
                 "executor": "EventsExecutor"})
     print(strict_json.dumps(out))
     return 0

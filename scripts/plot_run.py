@@ -50,7 +50,7 @@ def read_run(bag: Path) -> dict[str, np.ndarray]:
                 tv.append(stamp_to_seconds(msg.header.stamp))
                 v.append(msg.twist.linear.x)
             elif conn.topic == "/joint_torques":
-                tau.append(msg.data)
+                tau.append(msg.effort)
             elif conn.topic == "/cmd_speed":
                 cmd.append((last_t, msg.data))
             elif conn.topic == "/push_applied":

@@ -73,6 +73,7 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     report = json.loads(out)
     assert report["error"] == "interrupted" and report["completed"] is False
     assert 0.0 < report["sim_time"] < 600.0
+    assert report["segments"][0]["mean_speed"] is None  # cut short: no mean for the segment it was in
     assert _alive(children) == []
     assert "Traceback" not in err and "FATAL" not in err
 
@@ -93,3 +94,14 @@ def test_a_second_stack_in_the_same_domain_is_refused():
     finally:
         first.send_signal(signal.SIGINT)
         first.communicate(timeout=60)
+
+
+def test_a_run_that_simulated_nothing_prints_no_nan(tmp_path):
+    """A run stopped before the simulation moved (here: its recording cannot be created
+    because --record names a file's child) prints no nan, only what happened."""
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    result = subprocess.run([sys.executable, str(SCRIPT), "--duration", "2", "--record", str(blocker / "bag")],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert "nan" not in result.stdout.lower(), result.stdout

@@ -50,24 +50,36 @@ def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
     return np.array(rows)
 
 
-def test_lockstep_is_reproducible_and_matches_the_ros_free_loop():
+def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
+    """Lockstep, and paced mode (lockstep held to the wall clock, here at 4x real time),
+    publish every state of the ROS-free loop bit for bit; paced takes at least the wall time
+    its target real-time factor asks (a lower bound: a slower machine only takes longer)."""
     # decisions once per step: they apply at the next touchdown, long after they are sent,
     # so lockstep cannot depend on when they arrive (every N ticks it can: see docs)
-    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), decision_period=0)
-    runs = []
-    for _ in range(2):
+    reference = _reference(2.0)
+    for mode in ("lockstep", "paced"):
+        config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), decision_period=0, mode=mode, rtf=4.0)
         states: list = []
         report, nodes = run_in_process(config, observers=[_recorder(states)])
         assert report.completed and not report.fell
         assert nodes["sim_node"].torques_rejected == 0
         # a re-sent state (start-up, see sim_node) shows up twice in a row: keep one
-        unique = [row for i, row in enumerate(states) if i == 0 or row != states[i - 1]]
-        runs.append(np.array(unique))
-    reference = _reference(2.0)
-    # every state the simulator published, t = 0 ... 2 s, bit for bit
-    assert runs[0].shape == reference.shape == runs[1].shape
-    assert np.array_equal(runs[0], runs[1])
-    assert np.array_equal(runs[0], reference)
+        unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+        assert unique.shape == reference.shape and np.array_equal(unique, reference), mode
+        if mode == "paced":
+            assert report.wall_time >= 0.9 * 2.0 / 4.0
+            assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
+
+
+def test_paced_mode_is_lockstep_held_to_the_wall_clock():
+    """Paced at 1x for 1.5 s of sim time in one process: at least ~1.5 s of wall time, the
+    robot walks; on a machine too slow for 1x it only takes longer."""
+    config = StackConfig(duration=1.5, schedule=((0.0, 1.0),), mode="paced")
+    report, nodes = run_in_process(config)
+    assert report.completed and not report.fell
+    assert report.wall_time >= 0.9 * 1.5
+    stats = nodes["sim_node"].statistics()
+    assert stats["ticks"] == 1500 and stats["achieved_rtf"] <= 1.05
 
 
 def test_stack_walks_and_cmd_speed_changes_the_speed():
@@ -117,7 +129,7 @@ def test_bad_speed_commands_are_clamped_or_rejected():
         assert spin_until(executor, lambda: policy.desired_speed == 0.7)
 
 
-def test_malformed_gaits_are_rejected_and_the_last_good_one_kept():
+def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
     gait = GaitLibrary.load().nearest(1.0)
     with ros_context() as (context, executor):
         import rclpy
@@ -147,6 +159,12 @@ def test_malformed_gaits_are_rejected_and_the_last_good_one_kept():
             spin_for(executor, 0.05)
         assert spin_until(executor, lambda: controller.rejected_gaits == 7)
         assert controller._alpha == good_alpha and controller._kd == good_kd
+        huge = alpha_to_msg(gait.alpha)
+        huge.data = [1e308] * 24
+        alpha_pub.publish(huge)
+        assert spin_until(executor, lambda: controller.rejected_gaits == 8)
+    logged = [line for line in capfd.readouterr().err.splitlines() if "rejected /hzd/alpha" in line]
+    assert len(logged) == 5 and all(len(line) < 300 for line in logged)
 
 
 def _start_stack(context, executor, **sim_params):

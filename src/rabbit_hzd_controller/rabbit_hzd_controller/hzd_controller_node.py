@@ -24,8 +24,10 @@ the ROS-free loop runs.
   ``/hzd/gait_timing`` (from the policy node) unless the ``gait_timing`` parameter forces it.
 * Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
   violated) are rejected with a logged error; the last good gait stays in force.
-* A state identical to the last one answered (a lockstep re-send) is not answered twice;
-  a freshly (re)started controller answers it, which is how lockstep resumes after a
+* A state identical to the last one answered (a lockstep re-send) is not computed twice:
+  the reply already sent goes out again, unchanged (the simulator takes one reply per
+  state and ignores the rest, so a reply lost on the way cannot stall lockstep). A freshly
+  (re)started controller answers it as new, which is how lockstep resumes after a
   controller restart.
 """
 
@@ -113,6 +115,7 @@ class HZDControllerNode(Node):
         self._dropped: JointState | None = None  # the last state dropped as a re-send
         self.states_received = 0
         self.torques_published = 0
+        self.replies_repeated = 0  # replies sent again for a state sent again
         self.rejected_gaits = 0
         self.rejected_states = 0
 
@@ -224,7 +227,9 @@ class HZDControllerNode(Node):
         stamp = stamp_to_ns(msg.header.stamp)
         if stamp == self._last_stamp and (q, dq) == self._last_state:
             self._dropped = msg
-            return  # a re-send of the state answered last
+            self._torque_pub.publish(self._torque_msg)  # a re-send: the same reply again
+            self.replies_repeated += 1
+            return
         if self._alpha is None or self._kd is None:
             self._waiting_state = msg
             self.get_logger().warning(
