@@ -1,6 +1,6 @@
 """Every topic of the stack with its message type and QoS (needs rclpy): what the
 recorder subscribes to by default and writes into the bag's metadata (all but the
-recorder's own ``/recorder/progress``)."""
+recorder's own ``/recorder/recorded_until``)."""
 
 from __future__ import annotations
 

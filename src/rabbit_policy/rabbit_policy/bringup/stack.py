@@ -362,7 +362,8 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
 
 
 REALTIME_HALT_TIMEOUT = 3.0
-"""s (wall): a realtime simulation whose time stood still this long has halted."""
+"""s (wall): a realtime simulation whose time stood still this long after it started
+stepping has halted (before the first torque it holds t = 0, however long that takes)."""
 RECORDER_TIMEOUT = 10.0
 """s (wall): a recorded run whose simulation waited this long for a recorder that made no
 progress fails, saying so (a lockstep simulator never steps past a lagging recorder)."""
@@ -398,7 +399,7 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
                     and supervisor.recorded_until < supervisor.sim_time - 1e-9:
                 return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and the "
                         f"simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
-            if supervisor.config.mode == "realtime" and waited > REALTIME_HALT_TIMEOUT:
+            if supervisor.config.mode == "realtime" and supervisor.sim_time > 0.0 and waited > REALTIME_HALT_TIMEOUT:
                 return (f"the simulation halted at t = {supervisor.sim_time:.3f} s: realtime mode halts when the "
                         "control loop falls behind the wall clock (sim_node's log says why); --mode paced runs "
                         "slower instead")
