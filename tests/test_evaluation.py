@@ -60,6 +60,7 @@ def test_convergence_of_a_geometric_sequence_down_to_a_jitter_floor():
 
 
 # ------------------------------------------------------------------ return map on RABBIT
+@pytest.mark.slow
 def test_walk_return_map_fixed_point_and_classic_stability():
     step = WalkReturnMap(CLASSIC, 1.0, feedback=False)
     natural = step.natural_states(6)
@@ -107,7 +108,7 @@ def test_impulse_sweep_largest_survived():
         impulse_sweep(CLASSIC, 1.0, 0, config)
 
 
-@pytest.mark.parametrize("scenario", ["small_backward", "large_backward"])
+@pytest.mark.parametrize("scenario", ["large_backward"])  # the paper's third scenario: one push, one stack run
 def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
     """``run_stack.py --push`` (three node processes, lockstep) and the fast path walk the
     same scenario to the same outcome."""
@@ -127,6 +128,7 @@ def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
 
 
 # ------------------------------------------------------------------ rendering
+@pytest.mark.slow
 def test_render_frames_and_gif(tmp_path):
     code = """
 import sys
@@ -202,6 +204,7 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert bad.returncode == 2 and "does not exist" in bad.stderr
 
 
+@pytest.mark.slow
 def test_robustness_quick_parts_and_their_definitions():
     from rabbit_policy.evaluation import robustness as rb
 
@@ -269,21 +272,3 @@ def test_judge_applies_checks_1_to_6_as_the_issue_states_them():
     # a check without its inputs fails
     assert set(judge({})["failed"]) == {"1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes",
                                         "5_model_errors", "6_still_hzd"}
-
-
-@pytest.mark.slow
-def test_broad_acceptance_quick_runs_every_check_on_the_real_loop():
-    from rabbit_policy.evaluation.acceptance import broad_acceptance
-    from rabbit_policy.evaluation.robustness import RobustnessConfig
-
-    result = broad_acceptance(CLASSIC, make_policy("classic", mode="nearest", decision_period=0),
-                              RobustnessConfig.quick(), stability_samples=30)
-    assert set(result["checks"]) == {"1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes",
-                                     "5_model_errors", "6_still_hzd"}
-    assert result["checks"]["1_speed_grid"]["passed"]  # the calibrated library walks 0.75 and 1.25 m/s
-    scenarios = result["checks"]["4_pushes"]["detail"]["scenarios"]
-    assert len(scenarios) == 3 and all(s["impulse_Ns"] != 0 for s in scenarios)
-    drives = [r for r in result["checks"]["5_model_errors"]["detail"] if r["case"] == "drives"]
-    assert drives and drives[0]["error"] < -0.05  # no speed feedback: the drives model walks too slowly
-    assert not result["passed"]
-    assert result["checks"]["6_still_hzd"]["detail"]["outputs"] == 21

@@ -46,6 +46,7 @@ def test_a_fall_costs_more_than_any_walk(gait):
     assert bad.cost > 1000.0 > evaluate(gait_to_decision(gait), GaitProblem(speed=gait.speed)).cost
 
 
+@pytest.mark.slow
 def test_cma_improves_on_the_kinematic_seed():
     problem = GaitProblem(speed=1.0, horizon=4.0)
     x0 = np.concatenate([seed_free_alpha(SeedPattern(step_length=0.4, hip_height=0.76, torso_pitch=0.05)),
@@ -57,6 +58,7 @@ def test_cma_improves_on_the_kinematic_seed():
     assert result.gait.speed == 1.0
 
 
+@pytest.mark.slow
 def test_approach_term_measures_convergence_as_stored_in_the_shipped_gait():
     """The shipped 1.5 m/s gait was designed with approach_from (its file records from which
     speeds): the term re-measures what its file records, and a candidate that never gets

@@ -125,6 +125,7 @@ def _title(pid: int) -> str:
         return ""
 
 
+@pytest.mark.slow
 def test_ray_cluster_listens_on_loopback_only(cluster):
     import ray
 
@@ -245,6 +246,7 @@ def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster, undisturbed):
     assert np.array_equal(theta, undisturbed[0]) and stats == undisturbed[1]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("address, message", [
     ("127.0.0.1:9", "error: cannot reach the Ray cluster at 127.0.0.1:9: Connection refused"),
     ("nowhere", "error: a Ray address is auto or host:port, got 'nowhere'"),

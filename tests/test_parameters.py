@@ -27,6 +27,7 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
             coerce("x", value, default)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("args, message", [
     (["rabbit_hzd_controller.hzd_controller_node", "-p", "kp:=fast"], "parameter kp must be a number"),
     (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "not a policy checkpoint"),

@@ -50,6 +50,7 @@ def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
     return np.array(rows)
 
 
+@pytest.mark.slow
 def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
     """Lockstep, and paced mode (lockstep held to the wall clock, here at 4x real time),
     publish every state of the ROS-free loop bit for bit; paced takes at least the wall time
@@ -71,6 +72,7 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
             assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
 
 
+@pytest.mark.slow
 def test_paced_mode_is_lockstep_held_to_the_wall_clock():
     """Paced at 1x for 1.5 s of sim time in one process: at least ~1.5 s of wall time, the
     robot walks; on a machine too slow for 1x it only takes longer."""
@@ -96,6 +98,7 @@ def test_stack_walks_and_cmd_speed_changes_the_speed():
     assert nodes["policy_node"].decisions == pytest.approx(12.0 / 0.020 + 1, abs=3)
 
 
+@pytest.mark.slow
 def test_decisions_every_n_ticks_walk_through_the_stack_with_gaits_applied_at_once():
     config = StackConfig(duration=6.0, schedule=((0.0, 1.0), (3.0, 1.2)), decision_period=50)
     report, nodes = run_in_process(config)
@@ -178,6 +181,7 @@ def _start_stack(context, executor, **sim_params):
     return nodes
 
 
+@pytest.mark.slow
 def test_reset_service_puts_the_robot_back_on_the_gait():
     with ros_context() as (context, executor):
         import rclpy
@@ -261,6 +265,7 @@ def _rogue(node, kind: str) -> list:
     return active
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["stale", "echo"])
 def test_a_rogue_that_starts_mid_run_never_gets_a_torque_applied(kind):
     """A rogue publisher starts on /joint_torques while the stack walks, six times: no state
@@ -365,6 +370,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
                 assert not sim.fallen and not sim.watchdog.active
 
 
+@pytest.mark.slow
 def test_scheduled_pushes_reach_the_torso_at_their_sim_time():
     from rabbit_policy.experiment.scenario import Push
 
@@ -396,6 +402,7 @@ def test_scheduled_pushes_reach_the_torso_at_their_sim_time():
     assert x_pushed < x_plain - 0.02  # pushed backwards: less distance covered
 
 
+@pytest.mark.slow
 def test_push_topic_applies_good_wrenches_and_rejects_bad_ones():
     from geometry_msgs.msg import Wrench
 
@@ -419,6 +426,7 @@ def test_push_topic_applies_good_wrenches_and_rejects_bad_ones():
         assert not sim.fallen  # a small push: the robot walks on
 
 
+@pytest.mark.slow
 def test_realtime_smoke_steps_at_wall_clock_pace_and_reports_its_lateness():
     """Realtime in one process for 2 s: the physics runs in the spinning thread (no physics
     thread), about 1000 ticks per wall second, and the statistics say how late it was.
@@ -440,6 +448,7 @@ def test_realtime_smoke_steps_at_wall_clock_pace_and_reports_its_lateness():
     assert threading.active_count() <= before  # no physics thread left behind
 
 
+@pytest.mark.slow
 def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
     """Four clients call /sim/reset ten times each and four call /sim/pause (false), all at
     the same moment, from a context of their own: every call is served and answered, and the

@@ -182,20 +182,26 @@ def test_watchdog_damps_stale_torques_and_says_when():
     assert torques == [1.0] * 4 and event is WatchdogEvent.RESUMED and not dog.active
 
 
-def test_statistics_count_late_ticks_and_latencies_and_stay_json():
+def test_statistics_count_late_ticks_and_exact_latencies_by_stamp_and_stay_json():
     stats = TickStatistics()
     assert json.loads(json.dumps(stats.summary(0.0), allow_nan=False))["late_fraction"] is None
-    stats.state_sent(1.000, track_latency=True)
+    stats.state_sent(1.000, 0, track_latency=True)
     stats.tick(1.000)
-    stats.torque_received(1.0005)
-    stats.state_sent(1.001, track_latency=True)
+    stats.torque_received(1.0005, 0)
+    stats.state_sent(1.001, 1_000_000, track_latency=True)
     stats.realtime_tick_due(1.002)  # the reply to the state at 1.001 has not come: late
     stats.tick(1.002)
     summary = stats.summary(0.002)
     assert summary["late_ticks"] == 1 and summary["late_fraction"] == pytest.approx(0.5)
     assert summary["latency_p50_ms"] == pytest.approx(0.5)
-    stats.realtime_tick_due(1.1)  # unanswered for 99 ms: lost, dropped
-    assert not stats.unanswered
+    stats.state_sent(1.002, 2_000_000, track_latency=True)
+    stats.torque_received(1.0025, 2_000_000)  # the newest answered first: its own latency, not FIFO
+    assert stats.latencies_ms[-1] == pytest.approx(0.5) and not stats.awaiting_reply
+    stats.torque_received(1.003, 1_000_000)  # the late one, 2 ms after its state
+    assert stats.latencies_ms[-1] == pytest.approx(2.0)
+    stats.state_sent(1.003, 3_000_000, track_latency=True)
+    stats.realtime_tick_due(1.1)  # unanswered for 97 ms: lost, dropped from the wait
+    assert not stats.sent and not stats.awaiting_reply
 
 
 def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit_by_stamps():

@@ -72,6 +72,7 @@ def test_marker_rate_and_shapes_follow_the_model():
     assert np.allclose(end, sim.data.xipos[model.body("torso").id])  # the arrow ends at the torso's CoM
 
 
+@pytest.mark.slow
 def test_recorded_markers_render_to_a_png_matching_mujoco_bodies(bag, tmp_path):
     markers, states = _read(bag)
     assert 60 <= len(markers) <= 62  # 2 s at 30 Hz, and one when RABBIT is placed
@@ -127,6 +128,7 @@ def display():
         server.wait(timeout=10)
 
 
+@pytest.mark.slow
 def test_viewer_window_shows_the_robot(display):
     """``walk.py --viewer`` (its own process: the test process never holds an X connection
     that the display's end would break) draws RABBIT: the torso's and the right leg's

@@ -91,6 +91,7 @@ def test_exactly_one_stance_switch_per_step(trace):
     assert landings == len(switches)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("gait", LIBRARY.gaits, ids=lambda g: f"{g.speed:.2f}")
 def test_every_shipped_gait_walks_sixty_seconds_at_its_speed(gait):
     result = walk_gait(gait, 60.0)
@@ -117,6 +118,7 @@ def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:
                           capture_output=True, text=True, timeout=180, check=check)
 
 
+@pytest.mark.slow
 def test_walk_script_json_has_the_same_keys_with_and_without_a_schedule():
     constant = json.loads(_walk_script("--controller", "classic", "--speed", "0.9", "--duration", "5", "--json").stdout)
     scheduled = json.loads(_walk_script("--controller", "hzd", "--schedule", "0:0.9,2:1.0", "--duration", "5",
@@ -155,6 +157,7 @@ def test_walk_script_bad_arguments_are_one_line_and_exit_2(args, word):
     assert len(out.stderr.strip().splitlines()) == 1 and word in out.stderr
 
 
+@pytest.mark.slow
 def test_walk_script_model_errors_reach_the_scenario():
     out = _walk_script("--controller", "rl", "--speed", "1.0", "--duration", "3", "--model", "drives",
                        "--friction", "0.6", "--torso-mass-scale", "1.1", "--torque-delay", "0.002",

@@ -373,7 +373,7 @@ class SimNode(Node):
             self.get_logger().error(f"ignoring malformed {topics.JOINT_TORQUES}: {exc}", throttle_duration_sec=1.0)
             return
         with self._lock:
-            self.stats.torque_received(now)
+            self.stats.torque_received(now, stamp)
             if not self.by_replies:
                 if not self.pairing.accepts(source, now):
                     self._refuse(source)
@@ -488,7 +488,7 @@ class SimNode(Node):
         self.lockstep.restart()
         if self.pacer is not None:
             self.pacer.restart(0.0)
-        self.stats.unanswered.clear()
+        self.stats.forget()
         self._latest_torque_wall = -1.0
         if self._fallen:
             self._fallen = False
@@ -569,8 +569,8 @@ class SimNode(Node):
         self._state_pub.publish(msg)
         self._hip_pub.publish(hip)
         self._clock_pub.publish(Clock(clock=stamp))
-        self.stats.state_sent(time.perf_counter(), track_latency)
         self._published_stamp = stamp_to_ns(stamp)
+        self.stats.state_sent(time.perf_counter(), self._published_stamp, track_latency)
         return self._published_stamp
 
     def _lockstep_supervise(self) -> None:
@@ -629,10 +629,10 @@ class SimNode(Node):
         """Realtime timer (1 ms): run the ticks now due by the wall clock, zero-order hold."""
         with self._lock:
             if not self._started or self._paused or self._halted:
-                self.stats.unanswered.clear()
+                self.stats.forget()
                 self.clock.restart()
                 return
-            if self.stats.unanswered and self.clock.overdue() < REPLY_GRACE:
+            if self.stats.awaiting_reply and self.clock.overdue() < REPLY_GRACE:
                 return  # the reply is on its way (queued behind this timer): it runs the tick
             self._run_due_ticks()
 

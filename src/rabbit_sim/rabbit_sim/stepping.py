@@ -329,7 +329,8 @@ class TickStatistics:
     first_tick_wall: float | None = None
     last_tick_wall: float = 0.0
     latencies_ms: deque = field(default_factory=lambda: deque(maxlen=600_000))
-    unanswered: deque = field(default_factory=deque)  # realtime: wall times of states awaiting a torque
+    sent: dict = field(default_factory=dict)  # realtime: stamp (ns) -> wall time of states awaiting a torque
+    last_sent: int | None = None  # stamp of the newest state sent (realtime)
 
     def tick(self, now: float) -> None:
         """One physics step happened at wall time ``now``."""
@@ -338,23 +339,37 @@ class TickStatistics:
         if self.first_tick_wall is None:
             self.first_tick_wall = now
 
-    def state_sent(self, now: float, track_latency: bool) -> None:
+    def state_sent(self, now: float, stamp: int, track_latency: bool) -> None:
         self.states_published += 1
         if track_latency:
-            self.unanswered.append(now)
+            self.sent[stamp] = now
+            self.last_sent = stamp
 
-    def torque_received(self, now: float) -> None:
+    def torque_received(self, now: float, stamp: int) -> None:
+        """A reply to the state stamped ``stamp`` (ns) arrived: its latency is exact, whatever
+        was lost or reordered in between."""
         self.torques_received += 1
-        if self.unanswered:
-            self.latencies_ms.append((now - self.unanswered.popleft()) * 1e3)
+        sent = self.sent.pop(stamp, None)
+        if sent is not None:
+            self.latencies_ms.append((now - sent) * 1e3)
+
+    @property
+    def awaiting_reply(self) -> bool:
+        """Realtime: the newest state sent has no reply yet."""
+        return self.last_sent is not None and self.last_sent in self.sent
+
+    def forget(self) -> None:
+        """The simulation was placed again: no reply is awaited."""
+        self.sent.clear()
+        self.last_sent = None
 
     def realtime_tick_due(self, now: float, lost_after: float = 0.02) -> None:
         """A realtime tick is due: late if the reply to the previous state has not come;
-        states unanswered for ``lost_after`` s count as lost."""
-        if self.unanswered:
+        states unanswered for ``lost_after`` s count as lost (dropped from the wait)."""
+        if self.awaiting_reply:
             self.late_ticks += 1
-            while self.unanswered and now - self.unanswered[0] > lost_after:
-                self.unanswered.popleft()
+        if self.sent and now - next(iter(self.sent.values())) > lost_after:
+            self.sent = {stamp: t for stamp, t in self.sent.items() if now - t <= lost_after}
 
     def summary(self, sim_time: float, extra: dict | None = None) -> dict:
         """JSON-ready counters (None where a rate or percentile has no data)."""
