@@ -110,7 +110,7 @@ def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
             ok = sum(r["outcome"] == "walked" and (r["error"] is None or abs(r["error"]) <= 0.05) for r in judged)
             return f"{ok}/{len(judged)} judged cases"
         largest = [v for v in detail["largest_moduli"].values() if v is not None]
-        return f"max |λ| {max(largest):.2f}" if largest else "no cycle found"
+        return f"max \\|λ\\| {max(largest):.2f}" if largest else "no cycle found"  # pipes escaped: a table cell
 
     checks = list(broad[0][1]["checks"])
     lines = ["| check | " + " | ".join(name for name, _ in broad) + " |", "|---|" + "---|" * len(broad)]
