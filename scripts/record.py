@@ -13,8 +13,9 @@ Equivalent to ``ros2 run rabbit_sim recorder_node --ros-args -p output:=runs/wal
 mcap and ``ros2 bag``) from a bag cut short by SIGKILL, a full disk or a power loss, into a
 new directory (default ``<bag>.recovered``), as ``ros2 bag reindex`` does; the damaged bag
 is left as it is. What a crash can lose: the recorder writes the MCAP file in chunks of
-1 MiB (rosbags' writer), so at most the chunk in progress (about 0.3-0.5 s of a lockstep
-run's topics), plus, on a power loss, what the operating system had not written to disk.
+1 MiB (rosbags' writer), so at most the chunk in progress: about 1.2 s of sim time with
+every stack topic and 30 Hz markers (a 3 s run measured 2.57 MB, 0.86 MB per sim second),
+plus, on a power loss, what the operating system had not written to disk.
 Exit status: 0 bag closed (or recovered) cleanly, 1 the bag could not be created or
 recovered (exists, bad path, no MCAP file).
 """
