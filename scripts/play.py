@@ -34,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--clock", type=float, nargs="?", const=40.0, default=0.0, metavar="HZ",
                         help="publish /clock from the log time at HZ (default 40) instead of the bag's /clock")
     parser.add_argument("--delay", type=float, default=1.0, help="s to wait for subscribers before playing (>= 0)")
+    parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="S",
+                        help="after --delay, wait up to S s until every played topic has a subscriber, and at the "
+                             "end up to S s until every subscriber acknowledged every reliable message (0 = don't)")
     return parser
 
 
@@ -41,8 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = build_parser()
     args = parser.parse_args(argv)
-    if not args.rate > 0.0 or args.clock < 0.0 or args.delay < 0.0:
-        parser.error("--rate must be > 0, --clock and --delay >= 0")
+    if not args.rate > 0.0 or args.clock < 0.0 or args.delay < 0.0 or args.wait_for_subscribers < 0.0:
+        parser.error("--rate must be > 0, --clock, --delay and --wait-for-subscribers >= 0")
 
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -66,6 +69,9 @@ def main(argv: list[str] | None = None) -> int:
         deadline = time.perf_counter() + args.delay
         while time.perf_counter() < deadline and not stopping:
             time.sleep(0.02)
+        if args.wait_for_subscribers and not player.wait_for_subscribers(args.wait_for_subscribers):
+            print(f"warning: not every topic had a subscriber after {args.wait_for_subscribers:g} s; playing anyway",
+                  file=sys.stderr)
         print(f"playing {args.bag}: {len(player.topics)} topics at rate {args.rate}"
               + (f", /clock at {args.clock:g} Hz" if args.clock else ""), file=sys.stderr)
         finished = True
@@ -73,6 +79,8 @@ def main(argv: list[str] | None = None) -> int:
             finished = player.play(stop=lambda: bool(stopping))
             if not args.loop:
                 break
+        if args.wait_for_subscribers and not player.wait_for_acknowledgements(args.wait_for_subscribers):
+            print("warning: not every reliable message was acknowledged by its subscribers", file=sys.stderr)
         print(f"published {sum(player.published.values())} messages"
               + (f" and {player.clocks_published} clocks" if args.clock else ""), file=sys.stderr)
         return 0 if finished and not stopping else 1

@@ -12,10 +12,11 @@ from rabbit_msgs_py.runtime import make_executor
 
 
 @contextmanager
-def ros_context(executor_kind: str = "events") -> Iterator[tuple[object, object]]:
-    """A fresh rclpy context and executor; nodes added to it are destroyed afterwards."""
+def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> Iterator[tuple[object, object]]:
+    """A fresh rclpy context and executor (in ``domain_id``, default the session's); nodes
+    added to it are destroyed afterwards."""
     context = rclpy.Context()
-    rclpy.init(context=context)
+    rclpy.init(context=context, domain_id=domain_id)
     executor = make_executor(context, executor_kind)
     try:
         yield context, executor

@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from collections import defaultdict
 from pathlib import Path
 
@@ -49,9 +48,12 @@ def _replay_and_record(bag: Path, out: Path, play_args: list[str], record_args: 
         for line in recorder.stdout:  # the recorder has created its subscriptions
             if "recording" in line:
                 break
-        played = subprocess.run([sys.executable, "scripts/play.py", str(bag), "--delay", "1.5", *play_args],
+        # play waits for the recorder's subscriptions and, at the end, for every reliable
+        # message to be acknowledged; the recorder drains its queue before closing: no sleep
+        # decides whether a loaded machine loses a message
+        played = subprocess.run([sys.executable, "scripts/play.py", str(bag), "--delay", "0",
+                                 "--wait-for-subscribers", "60", *play_args],
                                 cwd=ROOT, capture_output=True, text=True, timeout=300)
-        time.sleep(1.0)  # the last messages in flight
     finally:
         recorder.send_signal(signal.SIGINT)
         recorder.communicate(timeout=60)
@@ -85,7 +87,7 @@ def test_replay_of_chosen_topics_with_a_clock(bag, tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["/nonexistent"], "error: /nonexistent is not a rosbag2 bag directory (no metadata.yaml)"),
     (["BAG", "--topics", "/nope"], "error: not in BAG: /nope"),
-    (["BAG", "--rate", "0"], "play.py: error: --rate must be > 0, --clock and --delay >= 0"),
+    (["BAG", "--rate", "0"], "play.py: error: --rate must be > 0, --clock, --delay and --wait-for-subscribers >= 0"),
 ])
 def test_bad_input_is_one_line(bag, args, message):
     args = [str(bag) if a == "BAG" else a for a in args]

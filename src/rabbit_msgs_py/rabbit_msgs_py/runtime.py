@@ -96,10 +96,7 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         timeout = spin_timeout_of(node)
         while not stop and context.ok() and not getattr(node, "done", False):
             executor.spin_once(timeout_sec=timeout)
-        # a node that must not lose what is queued (the recorder) spins on a little
-        drain_until = time.monotonic() + float(getattr(node, "drain_on_exit", 0.0))
-        while context.ok() and time.monotonic() < drain_until:
-            executor.spin_once(timeout_sec=0.01)
+        drain(executor, node, context)
     except NodeStartError as exc:
         print(f"error: {exc}", flush=True)
         status = 1
@@ -116,6 +113,30 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     return status
+
+
+DRAIN_QUIET = 0.3
+"""s: a draining node is done once it did nothing new for this long."""
+
+
+def drain(executor, node, context) -> None:
+    """A node that must not lose what is queued (the recorder) spins on after a stop signal
+    until its ``activity()`` count (messages handled) stood still for :data:`DRAIN_QUIET`
+    s, at most ``drain_on_exit`` s: a loaded machine gets the time it needs, an idle one
+    stops at once."""
+    limit = float(getattr(node, "drain_on_exit", 0.0))
+    activity = getattr(node, "activity", None)
+    start = time.monotonic()
+    last, quiet_since = (activity() if activity else None), start
+    while context.ok() and time.monotonic() - start < limit:
+        executor.spin_once(timeout_sec=0.01)
+        now = time.monotonic()
+        if activity is not None:
+            current = activity()
+            if current != last:
+                last, quiet_since = current, now
+            elif now - quiet_since > DRAIN_QUIET:
+                break
 
 
 def one_line(text: str, limit: int = 300) -> str:

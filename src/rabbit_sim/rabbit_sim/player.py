@@ -149,6 +149,27 @@ class BagPlayer(Node):
         finally:
             reader.close()
 
+    def _played_publishers(self) -> list:
+        return list(self._topic_pubs.values()) + ([self._clock_pub] if self._clock_pub is not None else [])
+
+    def wait_for_subscribers(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s (wall) until every publisher has a subscriber matched."""
+        deadline = time.monotonic() + timeout
+        while not all(pub.get_subscription_count() > 0 for pub in self._played_publishers()):
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.02)
+        return True
+
+    def wait_for_acknowledgements(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s until every reliable message was acknowledged by every
+        subscriber (in its reader's queue: what it does with it is up to it)."""
+        from rclpy.duration import Duration
+
+        deadline = time.monotonic() + timeout
+        return all(pub.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
+                   for pub in self._played_publishers())
+
     def _publish_clock(self, log_ns: int) -> None:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(log_ns, 1_000_000_000)

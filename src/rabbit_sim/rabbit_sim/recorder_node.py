@@ -105,8 +105,13 @@ RECORDER_PARAMS = {
 class RecorderNode(Node):
     """Bag recorder. ``counts`` holds messages written per topic."""
 
-    # run_node keeps spinning this long after a stop signal so queued messages are written
-    drain_on_exit = 0.5
+    # after a stop signal run_node spins on until nothing new was written for 0.3 s (at most
+    # this long), so queued messages are written however loaded the machine is
+    drain_on_exit = 10.0
+
+    def activity(self) -> int:
+        """Messages handled so far (written, or skipped as sent again): run_node's drain."""
+        return sum(self.bag.counts.values()) + self.resends_skipped
 
     def __init__(self, context=None, **overrides) -> None:
         super().__init__("recorder_node", context=context)
