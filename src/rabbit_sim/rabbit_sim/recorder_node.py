@@ -145,12 +145,15 @@ class RecorderNode(Node):
         # last state (transient local: the latest value reaches late joiners too)
         self._until = Clock()
         self._until_pub = self.create_publisher(Clock, topic_names.RECORDED_UNTIL, qos.STATUS_QOS)
+        self._torque_sub = None  # recorded torque replies: no progress is reported before it matched
         for name in names:
             spec = STACK_TOPICS[name]
             self.bag.add_topic(name, spec.type_name, recorded_qos(name))
-            self.create_subscription(
+            sub = self.create_subscription(
                 spec.msg_class, name, self._writer_for(name), _subscription_qos(spec), raw=True
             )
+            if name == topic_names.JOINT_TORQUES:
+                self._torque_sub = sub
         self.get_logger().info(f"recording {len(names)} topics to {self.bag.path}")
 
     @property
@@ -168,7 +171,7 @@ class RecorderNode(Node):
             if resent is not None and resent.seen(header_stamp(data)):
                 self.resends_skipped += 1
                 if is_state:
-                    self._until_pub.publish(self._until)  # tell a simulator re-sending it again
+                    self._report(data)  # tell a simulator re-sending it again
                 return
             if is_clock and self.sim_log_time:
                 clock = deserialize_message(data, Clock).clock
@@ -182,10 +185,19 @@ class RecorderNode(Node):
                 self.get_logger().error(f"recording stopped: {exc}")
                 return
             if is_state:  # tell a lockstep simulator how far the recording is
-                self._until.clock.sec, self._until.clock.nanosec = header_stamp(data)
-                self._until_pub.publish(self._until)
+                self._report(data)
 
         return write
+
+    def _report(self, state: bytes) -> None:
+        """Publish the stamp of the state just written (or seen again) on
+        ``/recorder/recorded_until`` — once the torque replies' subscription has matched a
+        controller, if they are recorded: a lockstep simulator holds its first state (sending
+        it again, and the controller its reply) until then, so no reply is lost to discovery."""
+        if self._torque_sub is not None and self._torque_sub.get_publisher_count() == 0:
+            return
+        self._until.clock.sec, self._until.clock.nanosec = header_stamp(state)
+        self._until_pub.publish(self._until)
 
     @property
     def failed(self) -> bool:
