@@ -25,6 +25,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
 from .joints import ACTUATED_JOINTS, JOINT_NAMES
+from .runtime import one_line
 
 ALPHA_OUTPUTS = 4
 ALPHA_COEFFICIENTS = 6
@@ -111,10 +112,9 @@ def torques_from_msg(msg: JointState) -> tuple[int, str, list[float]]:
 
 
 def short(value: object, limit: int = 120) -> str:
-    """A string as it is, anything else as ``repr``, cut to ``limit`` characters: for
-    one-line log messages about bad input."""
-    text = value if isinstance(value, str) else repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."
+    """A string as it is, anything else as ``repr``, on one line cut to ``limit`` characters:
+    for log messages about bad input (:func:`rabbit_msgs_py.runtime.one_line`)."""
+    return one_line(value if isinstance(value, str) else repr(value), limit)
 
 
 def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocity: Sequence[float]

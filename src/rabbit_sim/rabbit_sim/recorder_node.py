@@ -194,8 +194,10 @@ class RecorderNode(Node):
         ``/recorder/recorded_until`` — once the torque replies' subscription has matched a
         controller, if they are recorded: a lockstep simulator holds its first state (sending
         it again, and the controller its reply) until then, so no reply is lost to discovery."""
-        if self._torque_sub is not None and self._torque_sub.get_publisher_count() == 0:
-            return
+        if self._torque_sub is not None:
+            if self._torque_sub.get_publisher_count() == 0:
+                return
+            self._torque_sub = None  # matched: once is enough (this runs for every state)
         self._until.clock.sec, self._until.clock.nanosec = header_stamp(state)
         self._until_pub.publish(self._until)
 
