@@ -38,19 +38,21 @@ def fmt(value, digits: int = 3) -> str:
     return "—" if value is None else f"{value:.{digits}f}"
 
 
-def evaluation_table(results: list[tuple[str, dict]]) -> list[str]:
-    """Markdown rows: per controller, the constant-speed errors and the schedule reach times."""
+def evaluation_table(results: list[tuple[str, dict]], criteria) -> list[str]:
+    """Markdown rows: per controller, the constant-speed errors and the schedule reach times
+    (``criteria``: the :class:`~rabbit_policy.evaluation.acceptance.Criteria` they ran with)."""
     speeds = [c["speed"] for c in results[0][1]["constant"]]
-    lines = ["Constant speed, 30 s (mean hip speed over the last 15 s minus the command, m/s; "
-             "`fell` if it fell):", "",
+    lines = [f"Constant speed, {criteria.constant_duration:g} s (mean hip speed over the last "
+             f"{criteria.average_over:g} s minus the command, m/s; `fell` if it fell):", "",
              "| controller | " + " | ".join(f"{v:.1f}" for v in speeds) + " |",
              "|---|" + "---|" * len(speeds)]
     for name, result in results:
         cells = ["fell" if c["fell"] else f"{c['error']:+.3f}" for c in result["constant"]]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     schedule = results[0][1]["schedule"]["segments"]
-    lines += ["", "Speed schedule 0.8 → 1.2 → 0.9 → 1.5 → 0.7 m/s, 10 s each (seconds to the first "
-              "one-step average within 0.05 m/s; goal ≤ 4 s):", "",
+    sequence = " → ".join(f"{s['command']:.1f}" for s in schedule)
+    lines += ["", f"Speed schedule {sequence} m/s, {criteria.segment_duration:g} s each (seconds to the first "
+              f"one-step average within {criteria.speed_tolerance:g} m/s; goal ≤ {criteria.reach_within:g} s):", "",
               "| controller | " + " | ".join(f"{s['command']:.1f}" for s in schedule) + " | fell | passed |",
               "|---|" + "---|" * (len(schedule) + 2)]
     for name, result in results:
@@ -124,7 +126,11 @@ def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
 
 
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,
-               command: str = "") -> str:
+               command: str = "", criteria=None) -> str:
+    """The card's markdown; ``criteria``: the tracking checks' (default: the full ones)."""
+    from rabbit_policy.evaluation.acceptance import Criteria
+
+    criteria = criteria or Criteria()
     cfg = info.get("config", {})
     lines = [
         "# HZD-RL policy shipped with rabbit_policy", "",
@@ -155,7 +161,7 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
          f"**Fails {', '.join(broad[0][1]['failed'])}**: shipped with `--allow-failing` as the best policy "
          "measured so far; see docs/evaluation.md for the numbers and what was tried.") if broad else "",
         "", "## Tracking checks (9 speeds and the speed schedule)", "",
-        *evaluation_table(results), "",
+        *evaluation_table(results, criteria), "",
         f"Decisions: every {cfg.get('decision_period')} ticks (1 ms), the gait blended in at once"
         if cfg.get("decision_period") else "Decisions: once per step, for the next step", "",
     ]
@@ -194,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from multiprocessing import get_context
 
-    from rabbit_policy.evaluation.acceptance import acceptance, broad_acceptance
+    from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_acceptance
     from rabbit_policy.evaluation.robustness import RobustnessConfig
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
@@ -207,31 +213,32 @@ def main(argv: list[str] | None = None) -> int:
     info = policy.checkpoint.info
     classic = make_policy("classic")  # its best variant: the calibrated library, every 20 ticks
     config = RobustnessConfig.quick() if args.quick else RobustnessConfig()
+    criteria = Criteria.quick() if args.quick else Criteria()
+    samples = 30 if args.quick else 400
     with get_context("fork").Pool(args.workers) as pool:
         def log(message: str) -> None:
             print(message, file=sys.stderr, flush=True)
 
-        broad = [(f"HZD-RL ({info.get('algorithm')})", broad_acceptance(policy, classic, config, map_fn=pool.map,
-                                                                         stability_samples=30 if args.quick else 400,
-                                                                         log=log)),
-                 ("classic HZD (calibrated library, every 20 ticks)",
-                  broad_acceptance(classic, classic, config, map_fn=pool.map,
-                                   stability_samples=30 if args.quick else 400, log=log))]
+        reference = broad_acceptance(classic, classic, config, map_fn=pool.map, stability_samples=samples, log=log)
+        learned = broad_acceptance(policy, classic, config, map_fn=pool.map, stability_samples=samples, log=log,
+                                   classic_margins=reference["classic_push_margins"])
+        broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
+                 ("classic HZD (calibrated library, every 20 ticks)", reference)]
         log("tracking checks")
-        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, map_fn=pool.map))]
+        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=pool.map))]
         if not args.quick:  # the fast subset: the policy's own tracking table only
             for other in others:
                 results.append((f"HZD-RL ({other.checkpoint.info.get('algorithm')})",
-                                acceptance(other, map_fn=pool.map)))
+                                acceptance(other, criteria, map_fn=pool.map)))
             start = warm_start_policy(policy.checkpoint)
             if start is not None:
                 results.append((f"warm start only ({info.get('warm_start')}, untrained)",
-                                acceptance(start, map_fn=pool.map)))
+                                acceptance(start, criteria, map_fn=pool.map)))
             for mode in ("nearest", "interpolate"):
-                results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode),
+                results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode), criteria,
                                                                     map_fn=pool.map)))
     command = "scripts/ship_policy.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    card = model_card(info, results, broad, command)
+    card = model_card(info, results, broad, command, criteria)
     print(card)
     if not broad[0][1]["passed"] and not args.allow_failing:
         print(f"error: the policy fails acceptance checks {', '.join(broad[0][1]['failed'])}; not shipped "

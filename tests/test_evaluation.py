@@ -224,6 +224,22 @@ def test_robustness_quick_parts_and_their_definitions():
     assert [r["speed"] for r in grid["rows"]] == [0.75, 1.25]
 
 
+def test_a_walk_that_ends_early_fails_every_schedule_segment_it_never_began():
+    """Acceptance counts the segments a walk never reached as failed (a policy that goes
+    down at once ranks below one that goes down late), and training's eval row of such a
+    result has no reach time (a random start network used to crash ``train.py`` here)."""
+    from rabbit_policy.evaluation.acceptance import Criteria, acceptance
+    from rabbit_policy.learning.training import evaluation_row
+    from rabbit_sim.model import ModelOptions
+
+    criteria = Criteria.quick()
+    result = acceptance(CLASSIC, criteria, model=ModelOptions(friction=0.05), speeds=(1.0,))  # it slips at once
+    assert len(result["schedule"]["segments"]) < len(criteria.schedule())
+    assert result["failures"] == 1 + len(criteria.schedule()) + int(result["schedule"]["fell"])
+    row = evaluation_row(0, 0.0, 0, result)
+    assert row["slowest_reach_s"] is None and row["failures"] == result["failures"] and not row["passed"]
+
+
 # ------------------------------------------------------------------ broad acceptance (checks 1-6)
 def _robust(grid_ok=True, changes_ok=True, sequences_ok=True, drives_error=0.01, delay_outcome="walked",
             margins=((1.0, "forward", 20), (1.0, "backward", 12))) -> dict:

@@ -182,7 +182,7 @@ def test_a_recording_that_fails_fails_the_run(tmp_path):
     limit = 300_000  # bytes: the bag outgrows it within a second of simulation
     code = ("import resource, runpy, signal, sys; signal.signal(signal.SIGXFSZ, signal.SIG_IGN); "
             f"resource.setrlimit(resource.RLIMIT_FSIZE, ({limit}, {limit})); "
-            f"sys.argv = ['run_stack.py', '--duration', '4', '--record', {str(tmp_path / 'bag')!r}, '--json']; "
+            f"sys.argv = ['run_stack.py', '--duration', '1.5', '--record', {str(tmp_path / 'bag')!r}, '--json']; "
             f"runpy.run_path({str(ROOT / 'scripts' / 'run_stack.py')!r}, run_name='__main__')")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=180)
     assert out.returncode == 3, out.stderr[-2000:]

@@ -92,7 +92,7 @@ def read_csv(path: Path) -> list[dict]:
 def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
               "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1",
-              "--warm-start", "interpolate"]
+              "--warm-start", "none"]  # the warm start has tests of its own (test_env); here it only costs time
     straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2")
     assert straight.returncode == 0, straight.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
@@ -100,10 +100,10 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     for key in ("episode_return", "mean_abs_error", "fall_fraction", "env_steps", "wall_s"):
         assert key in log[0]
     evals = read_csv(tmp_path / "a" / "eval.csv")
-    assert [int(r["iteration"]) for r in evals] == [0, 2]  # the warm start, then every 2
-    # the warm start's acceptance row: failures counted over the 9 speeds + 5 segments + the fall
+    assert [int(r["iteration"]) for r in evals] == [0, 2]  # the starting network, then every 2
+    # the starting network's acceptance row: failures counted over the 9 speeds + 5 segments + the fall
     assert 0 <= int(evals[0]["failures"]) <= 15 and evals[0]["passed"] in ("True", "False")
-    best = PolicyCheckpoint.load(tmp_path / "a" / "best.pt").info  # the warm start is only a baseline
+    best = PolicyCheckpoint.load(tmp_path / "a" / "best.pt").info  # the starting network is only a baseline
     assert best["iteration"] == 2 and best["acceptance"]["failures"] == int(evals[1]["failures"])
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["info"]["algorithm"] == "es" and summary["info"]["parameters"] == 633
@@ -127,7 +127,7 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
 def test_train_ppo_is_the_same_on_local_and_ray_and_refuses_a_foreign_resume(tmp_path):
     common = ["scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
               "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
-              "--no-progress", "--iterations", "2", "--warm-start", "interpolate"]
+              "--no-progress", "--iterations", "2", "--warm-start", "none"]
     results = [run_script(*common, "--out", str(tmp_path / "a")),  # environments in forked processes
                run_script(*common, "--out", str(tmp_path / "b"), "--backend", "ray")]  # ... in Ray actors
     assert all(r.returncode == 0 for r in results), results[0].stderr
@@ -195,6 +195,7 @@ def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(t
         cells = re.split(r"(?<!\\)\|", row.strip("|"))[1:]  # a markdown row: escaped pipes stay in the cell
         assert len(cells) == 2 and not any("not measured" in c for c in cells), row
     assert "shipped with: `scripts/ship_policy.py" in refused.stdout
+    assert "Constant speed, 10 s (mean hip speed over the last 5 s" in refused.stdout  # --quick: Criteria.quick()
     assert target.read_bytes() == before
     missing = run_script("scripts/ship_policy.py", str(tmp_path / "none.pt"), "--quick", "--dry-run")
     assert missing.returncode == 2 and "does not exist" in missing.stderr
@@ -244,7 +245,7 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     proc = subprocess.Popen(
         [sys.executable, "scripts/train.py", "--algo", algo, "--workers", "2", "--out", str(tmp_path / "run"),
          "--iterations", "100000", "--max-steps", "4", "--eval-every", "3", "--no-progress",
-         "--warm-start", "interpolate", "--backend", backend, *small],
+         "--warm-start", "none", "--backend", backend, *small],
         env={**os.environ, marker.split("=")[0]: marker.split("=")[1]},
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         # as from a terminal: a suite started in the background (`cmd &` in a script) has

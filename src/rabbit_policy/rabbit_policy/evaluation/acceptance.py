@@ -22,7 +22,7 @@ from rabbit_policy.runtime.policies import Policy
 from rabbit_sim.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
-ACCEPTANCE_SCHEDULE = ((0.0, 0.8), (10.0, 1.2), (20.0, 0.9), (30.0, 1.5), (40.0, 0.7))
+ACCEPTANCE_SEQUENCE = (0.8, 1.2, 0.9, 1.5, 0.7)  # m/s, one segment each
 
 
 @dataclass(frozen=True)
@@ -34,6 +34,17 @@ class Criteria:
     speed_tolerance: float = 0.05
     segment_duration: float = 10.0
     reach_within: float = 4.0
+
+    @classmethod
+    def quick(cls) -> "Criteria":
+        """Shorter walks (10 s, mean over the last 5 s; 6 s segments) for tests and a first
+        look: the same checks, less settled, so not a substitute for the full ones."""
+        return cls(constant_duration=10.0, average_over=5.0, segment_duration=6.0)
+
+    def schedule(self) -> tuple[tuple[float, float], ...]:
+        """The speed-change schedule: :data:`ACCEPTANCE_SEQUENCE`, one ``segment_duration`` each
+        (s, m/s)."""
+        return tuple((i * self.segment_duration, v) for i, v in enumerate(ACCEPTANCE_SEQUENCE))
 
 
 def constant_speed_check(policy: Policy, speed: float, criteria: Criteria = Criteria(),
@@ -54,9 +65,11 @@ def constant_speed_check(policy: Policy, speed: float, criteria: Criteria = Crit
     }
 
 
-def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] = ACCEPTANCE_SCHEDULE,
+def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] | None = None,
                    criteria: Criteria = Criteria(), model: ModelOptions = ModelOptions()) -> dict:
-    """Walk the speed schedule; per segment: time to reach, mean over its second half."""
+    """Walk the speed schedule (default: ``criteria.schedule()``); per segment: time to reach,
+    mean over its second half."""
+    schedule = schedule or criteria.schedule()
     duration = schedule[-1][0] + criteria.segment_duration
     result = walk(policy, Scenario(schedule=schedule, model=model), duration)
     segments = result.segments(criteria.speed_tolerance)
@@ -88,13 +101,14 @@ def acceptance(policy: Policy, criteria: Criteria = Criteria(), model: ModelOpti
     "total_error"}``. ``map_fn`` runs the independent walks (e.g. a process pool's
     ``map``; the policy must then pickle)."""
     jobs = [("constant", policy, v, criteria, model) for v in speeds]
-    jobs.append(("schedule", policy, ACCEPTANCE_SCHEDULE, criteria, model))
+    jobs.append(("schedule", policy, criteria.schedule(), criteria, model))
     *constant, schedule = list(map_fn(_check, jobs))
-    checks = [c["passed"] for c in constant] + [s["passed"] for s in schedule["segments"]]
+    never_begun = len(criteria.schedule()) - len(schedule["segments"])  # the walk ended before them
+    checks = [c["passed"] for c in constant] + [s["passed"] for s in schedule["segments"]] + [False] * never_begun
     failures = sum(not ok for ok in checks) + int(schedule["fell"])
     total_error = sum(abs(c["error"]) if c["error"] is not None else 1.0 for c in constant) + sum(
         s["reach_time"] / criteria.segment_duration if s["reach_time"] is not None else 1.0
-        for s in schedule["segments"])
+        for s in schedule["segments"]) + never_begun
     return {"policy": policy.name, "constant": constant, "schedule": schedule,
             "passed": failures == 0, "failures": failures, "total_error": total_error}
 
@@ -232,17 +246,24 @@ def policy_outputs(policy: Policy) -> int:
 
 def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: BroadCriteria = BroadCriteria(),
                      stability_samples: int = 400, map_fn: Callable[[Callable, Iterable], Iterable] = map,
-                     log: Callable[[str], None] = lambda _message: None) -> dict:
+                     log: Callable[[str], None] = lambda _message: None,
+                     classic_margins: list[dict] | None = None) -> dict:
     """Run everything checks 1-6 need for ``policy`` (with ``classic`` as the push
     reference) and :func:`judge` it. ``config``: a :class:`.robustness.RobustnessConfig`
-    (default: the full one; ``RobustnessConfig.quick()`` for the fast subset)."""
+    (default: the full one; ``RobustnessConfig.quick()`` for the fast subset).
+    ``classic_margins``: the reference's push margins under the same ``config`` when already
+    measured (e.g. ``broad_acceptance(classic, classic, ...)["classic_push_margins"]``); by
+    default they are measured here, or taken from ``policy``'s own when it is ``classic``."""
     from rabbit_policy.evaluation.experiments import _stability_job
     from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
 
     config = config or RobustnessConfig()
     robust = robustness(policy, config, map_fn, log)
-    log(f"{classic.name}: push margins (the reference)")
-    classic_margins = push_margins(classic, config, map_fn)
+    if classic_margins is None and policy is classic:
+        classic_margins = robust["push_margins"]
+    elif classic_margins is None:
+        log(f"{classic.name}: push margins (the reference)")
+        classic_margins = push_margins(classic, config, map_fn)
     speed = 1.0 if 1.0 in config.push_speeds else config.push_speeds[0]
     scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
     log(f"{policy.name}: Poincaré analysis")

@@ -100,7 +100,8 @@ class RobustnessConfig:
         """A small version for the test suite and a first look (seconds)."""
         return cls(grid_speeds=(0.75, 1.25), grid_duration=8.0, transition_speeds=(0.8, 1.4),
                    change_phases=(0.0, 0.5), transition_settle=3.0, random_episodes=2, random_duration=10.0,
-                   push_speeds=(1.0,), push_phases=(0.0, 0.5), max_impulse=6, model_speeds=(1.0,),
+                   push_speeds=(1.0,), push_phases=(0.0, 0.5), max_impulse=4, push_settle=2.0,
+                   push_horizon=3.0, model_speeds=(1.0,),
                    model_duration=8.0, model_errors=(MODEL_ERRORS[1], MODEL_ERRORS[3], MODEL_ERRORS[9]))
 
     def to_dict(self) -> dict:

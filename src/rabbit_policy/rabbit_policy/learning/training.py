@@ -96,7 +96,7 @@ def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) ->
             "failures": result["failures"], "total_error": round(result["total_error"], 4),
             "worst_speed_error": round(max(errors), 4) if errors else None,
             "falls": sum(c["fell"] for c in result["constant"]) + int(result["schedule"]["fell"]),
-            "slowest_reach_s": None if None in reaches else round(max(reaches), 2)}
+            "slowest_reach_s": None if not reaches or None in reaches else round(max(reaches), 2)}
 
 
 def train(args: TrainingConfig) -> int:
