@@ -63,6 +63,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
+    parser.add_argument("--recorder-timeout", type=float, default=10.0, metavar="S",
+                        help="--record: fail the run when the simulation waited this long (wall s) for a recorder "
+                             "that wrote nothing (default 10)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
     parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -110,6 +113,7 @@ def main(argv: list[str] | None = None) -> int:
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.record_compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
+            recorder_timeout=args.recorder_timeout,
         )
         if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
             raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")

@@ -34,7 +34,7 @@ KIND = {
 
 SLOW = {
     "tests/test_training.py::test_train_es_logs_checkpoints_and_resumes_exactly",
-    "tests/test_training.py::test_train_ppo_is_the_same_on_local_and_ray_and_refuses_a_foreign_resume",
+    "tests/test_training.py::test_train_ppo_logs_its_losses_and_refuses_a_foreign_resume",
     "tests/test_training.py::test_train_stops_cleanly_on_ctrl_c_or_sigterm",
     "tests/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
     "tests/test_evaluation.py::test_ros_stack_push_outcome_matches_the_fast_path",

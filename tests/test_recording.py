@@ -325,17 +325,17 @@ def test_a_recorder_that_connects_late_never_wedges_lockstep(tmp_path):
 def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):
     """The recorder process is frozen (SIGSTOP) mid-run: lockstep waits for it (it never steps
     past a recording it cannot keep), and run_stack fails with one line naming the
-    recorder within RECORDER_TIMEOUT, then stops every node, the frozen one included."""
+    recorder within ``--recorder-timeout``, then stops every node, the frozen one included."""
     import os
     import subprocess
     import sys
 
-    from rabbit_policy.bringup.stack import RECORDER_TIMEOUT
-
+    timeout = 3.0  # s: --recorder-timeout (default 10)
     bag = tmp_path / "frozen"
     started = time.monotonic()
     proc = subprocess.Popen([sys.executable, str(ROOT / "scripts" / "run_stack.py"), "--duration", "60",
-                             "--record", str(bag)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                             "--record", str(bag), "--recorder-timeout", str(timeout)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         recorder = None
         while recorder is None and time.monotonic() - started < 60:
@@ -354,13 +354,13 @@ def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):
             time.sleep(0.1)
         os.kill(recorder, signal.SIGSTOP)
         frozen_at = time.monotonic()
-        out, err = proc.communicate(timeout=RECORDER_TIMEOUT + 60)
+        out, err = proc.communicate(timeout=timeout + 60)
     finally:
         if proc.poll() is None:
             proc.kill()
     assert proc.returncode == 3, err[-2000:]
     assert "the recorder stopped" in out
-    assert time.monotonic() - frozen_at < RECORDER_TIMEOUT + 30
+    assert time.monotonic() - frozen_at < timeout + 30
     assert not Path(f"/proc/{recorder}").exists() or "zombie" in Path(f"/proc/{recorder}/status").read_text()
 
 

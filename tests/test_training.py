@@ -124,20 +124,18 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     assert make_policy("learned", policy_file=tmp_path / "b" / "policy.pt").name == "learned/policy.pt"
 
 
-def test_train_ppo_is_the_same_on_local_and_ray_and_refuses_a_foreign_resume(tmp_path):
-    common = ["scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
-              "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
-              "--no-progress", "--iterations", "2", "--warm-start", "none"]
-    results = [run_script(*common, "--out", str(tmp_path / "a")),  # environments in forked processes
-               run_script(*common, "--out", str(tmp_path / "b"), "--backend", "ray")]  # ... in Ray actors
-    assert all(r.returncode == 0 for r in results), results[0].stderr
+def test_train_ppo_logs_its_losses_and_refuses_a_foreign_resume(tmp_path):
+    """PPO through the script (its environments in forked processes; on Ray actors the same
+    iteration is tested in test_parallel, and train.py --backend ray by the ES resume)."""
+    result = run_script("scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
+                        "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
+                        "--no-progress", "--iterations", "2", "--warm-start", "none", "--out", str(tmp_path / "a"))
+    assert result.returncode == 0, result.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
     assert [int(r["iteration"]) for r in log] == [1, 2] and int(log[-1]["env_steps"]) == 24
     for key in ("policy_loss", "value_loss", "clip_fraction", "mean_abs_error"):
         assert np.isfinite(float(log[-1][key]))
     a = PolicyCheckpoint.load(tmp_path / "a" / "policy.pt")
-    b = PolicyCheckpoint.load(tmp_path / "b" / "policy.pt")
-    assert all(torch.equal(a.state_dict[k], b.state_dict[k]) for k in a.state_dict)
     assert a.info["algorithm"] == "ppo"
     wrong = run_script("scripts/train.py", "--algo", "es", "--out", str(tmp_path / "a"), "--resume")
     assert wrong.returncode == 2 and "is an ppo run" in wrong.stderr

@@ -90,6 +90,7 @@ class StackConfig:
     record_stats_file: str = ""
     markers_rate: float = 30.0
     viewer: bool = False
+    recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
 
     def __post_init__(self) -> None:
@@ -97,6 +98,8 @@ class StackConfig:
             raise ValueError("duration must be > 0 s")
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
+        if not (math.isfinite(self.recorder_timeout) and self.recorder_timeout > 0.0):
+            raise ValueError(f"recorder_timeout must be a finite number > 0 s, got {self.recorder_timeout}")
         if not (math.isfinite(self.rtf) and self.rtf > 0.0):
             raise ValueError(f"rtf must be a finite number > 0, got {self.rtf}")
         if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
@@ -364,14 +367,10 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
 REALTIME_HALT_TIMEOUT = 3.0
 """s (wall): a realtime simulation whose time stood still this long after it started
 stepping has halted (before the first torque it holds t = 0, however long that takes)."""
-RECORDER_TIMEOUT = 10.0
-"""s (wall): a recorded run whose simulation waited this long for a recorder that made no
-progress fails, saying so (a lockstep simulator never steps past a lagging recorder)."""
 
 
 def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
-                     spin_timeout: float = 0.05, stop=lambda: False,
-                     recorder_timeout: float = RECORDER_TIMEOUT) -> str | None:
+                     spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
     """Start the (paused) simulation once every node is connected, then spin until the run
     is over; returns an error message or None. ``stop()`` true (a signal arrived) ends
     the run as "interrupted"; ``alive()`` returns a message when a node process died.
@@ -395,7 +394,7 @@ def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, ali
             return f"the nodes did not connect within {stall_timeout:.0f} s"
         if running:
             waited = time.perf_counter() - (supervisor.last_progress_wall or start)
-            if supervisor.config.record and waited > recorder_timeout \
+            if supervisor.config.record and waited > supervisor.config.recorder_timeout \
                     and supervisor.recorded_until < supervisor.sim_time - 1e-9:
                 return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and the "
                         f"simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
