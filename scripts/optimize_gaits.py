@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Regenerate the classic HZD gait library (the paper's FROST baseline, in Python).
 
-    scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--generations 100]
+    scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--iterations 100]
                               [--workers 2] [--out DIR] [--validate 60] [--resume]
                               [--approach-from 0.9,1.2] [--approach-weight 5] [--refine]
 
@@ -46,7 +46,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speeds", type=parse_speeds, default=parse_speeds("0.7,0.8,0.9,1.0,1.1,1.2,1.3,1.4,1.5"))
     parser.add_argument("--start", type=float, default=1.0, help="speed solved first (m/s)")
-    parser.add_argument("--generations", type=int, default=100)
+    parser.add_argument("--iterations", "--generations", type=int, default=100, dest="iterations",
+                        help="CMA-ES generations per gait (as train.py's --iterations)")
     parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     parser.add_argument("--seed", type=int, default=1)
@@ -107,7 +108,7 @@ def _optimize(args, backend) -> int:
             origin = "kinematic seed"
         print(f"[{speed:.2f} m/s] optimising ({origin})", flush=True)
         gait, check, attempts, wall = None, None, 0, 0.0
-        for generations in (args.generations, 2 * args.generations):
+        for generations in (args.iterations, 2 * args.iterations):
             attempts += 1
             result = optimize_gait(problem, x0, max_generations=generations, backend=backend,
                                    seed=args.seed, log=lambda s: print(s, flush=True))

@@ -62,7 +62,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
-    parser.add_argument("--record-compression", choices=("none", "zstd"), default="none")
+    parser.add_argument("--compression", "--record-compression", choices=("none", "zstd"), default="none",
+                        help="--record: chunk compression (as record.py's)")
     parser.add_argument("--recorder-timeout", type=float, default=10.0, metavar="S",
                         help="--record: fail the run when the simulation waited this long (wall s) for a recorder "
                              "that wrote nothing (default 10)")
@@ -111,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
             decision_period=args.decision_period,
             record=os.path.abspath(args.record) if args.record else "",
-            record_compression=args.record_compression, record_overwrite=args.overwrite,
+            record_compression=args.compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
             recorder_timeout=args.recorder_timeout,
         )

@@ -2,7 +2,7 @@
 """Walk RABBIT in MuJoCo without ROS: the one experiment command.
 
     scripts/walk.py --controller classic --speed 1.0 --duration 60
-    scripts/walk.py --controller learned --schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
+    scripts/walk.py --controller learned --speed-schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
     scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
     scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
 
@@ -59,7 +59,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="classic HZD or the learned HZD-RL policy (hzd, rl: aliases)")
     command = parser.add_mutually_exclusive_group()
     command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
-    command.add_argument("--schedule", default=None, metavar="T:V,...", help='speed schedule "0:0.8,8:1.2" (s:m/s)')
+    command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",
+                         help='speed schedule "0:0.8,8:1.2" (s:m/s)')
     parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
     parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
     parser.add_argument("--model", choices=("paper", "drives"), default="paper", help="model variant")
@@ -110,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_sim.model import ModelOptions
 
     try:
-        schedule = parse_schedule(args.schedule) if args.schedule else ((0.0, args.speed),)
+        schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
         scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
                             model=ModelOptions(args.model, args.friction, args.torso_mass_scale))
     except ValueError as exc:

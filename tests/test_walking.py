@@ -121,7 +121,7 @@ def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:
 @pytest.mark.slow
 def test_walk_script_json_has_the_same_keys_with_and_without_a_schedule():
     constant = json.loads(_walk_script("--controller", "classic", "--speed", "0.9", "--duration", "5", "--json").stdout)
-    scheduled = json.loads(_walk_script("--controller", "hzd", "--schedule", "0:0.9,2:1.0", "--duration", "5",
+    scheduled = json.loads(_walk_script("--controller", "hzd", "--speed-schedule", "0:0.9,2:1.0", "--duration", "5",
                                         "--json").stdout)
     assert set(constant) == set(scheduled) == WALK_KEYS
     assert constant["controller"] == scheduled["controller"] == "classic"
