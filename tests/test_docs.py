@@ -17,8 +17,6 @@ import pytest
 
 from rabbit_msgs_py.cli import ArgumentParser
 
-pytestmark = pytest.mark.unit
-
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted(p.stem for p in (ROOT / "scripts").glob("*.py"))
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -85,6 +83,7 @@ def documented_calls() -> list[tuple[str, int, str, str]]:
     return calls
 
 
+@pytest.mark.unit
 def test_the_docs_name_scripts_that_exist_and_show_command_lines():
     calls = documented_calls()
     assert len(calls) > 60 and {c[2] for c in calls} >= {"run_stack", "walk", "train", "evaluate", "record"}
@@ -93,6 +92,7 @@ def test_the_docs_name_scripts_that_exist_and_show_command_lines():
             assert name in SCRIPTS, f"{doc.name} names scripts/{name}.py, which does not exist"
 
 
+@pytest.mark.unit
 def test_every_documented_command_line_parses_with_its_scripts_one_spelling():
     """Each flag exists and is the script's one spelling; a whole command line (no
     synopsis such as ``[--flag]`` or ``...``) parses as the script would parse it, a value
@@ -118,6 +118,7 @@ def test_every_documented_command_line_parses_with_its_scripts_one_spelling():
     assert not wrong, "\n".join(wrong)
 
 
+@pytest.mark.unit
 def test_one_spelling_per_flag_across_scripts():
     """A value that two scripts take has one primary flag in both, and no script's alias is
     another's primary flag for something else."""
@@ -137,3 +138,63 @@ def test_one_spelling_per_flag_across_scripts():
     for name, alias, dest in aliases:
         for other, other_dest in dest_of.get(alias, {}).items():
             assert other_dest == dest, f"{name}.py's alias {alias} is {other}.py's flag for {other_dest}"
+
+
+@pytest.mark.sim
+def test_the_documented_gymnasium_ids_make_an_environment():
+    import gymnasium
+
+    ids = {m for doc in DOCS for m in re.findall(r'gymnasium\.make\("([^"]+)"\)', doc.read_text())}
+    assert ids
+    for env_id in ids:
+        env = gymnasium.make(env_id)
+        env.reset(seed=0)
+        env.close()
+
+
+# ------------------------------------------------------------------ docs/architecture.md
+def _architecture_section(start: str, end: str) -> str:
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    return text[text.index(start):text.index(end, text.index(start))]
+
+
+@pytest.mark.unit
+def test_architecture_lists_every_topic_with_its_type_and_qos():
+    from rclpy.qos import DurabilityPolicy
+
+    from rabbit_msgs_py import qos, topics
+    from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec
+    from rosgraph_msgs.msg import Clock
+
+    specs = {**STACK_TOPICS, topics.RECORDED_UNTIL: TopicSpec(topics.RECORDED_UNTIL, Clock, qos.STATUS_QOS)}
+    table = _architecture_section("| topic | type | who | QoS |", "\nServices")
+    rows = [[cell.strip() for cell in re.split(r"(?<!\\)\|", line)[1:-1]]
+            for line in table.splitlines()[2:] if line.startswith("| `/")]
+    assert sorted(r[0].strip("`") for r in rows) == sorted(specs)
+    for name, kind, _who, qos_text in rows:
+        spec = specs[name.strip("`")]
+        assert kind.startswith(spec.type_name.replace("/msg/", "/")), (name, kind)
+        depth = re.search(r"keep last (\d+)", qos_text)
+        transient = spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+        assert ("transient local" in qos_text) == transient, (name, qos_text)
+        assert (depth is None and transient) or int(depth.group(1)) == spec.qos.depth, (name, qos_text)
+
+
+@pytest.mark.unit
+def test_architecture_names_the_services_and_every_node_parameter():
+    from rabbit_hzd_controller.hzd_controller_node import CONTROLLER_PARAMS, NODE_PARAMS
+    from rabbit_msgs_py import topics
+    from rabbit_policy.policy_node import POLICY_PARAMS
+    from rabbit_sim.recorder_node import RECORDER_PARAMS
+    from rabbit_sim.sim_node import SIM_PARAMS
+
+    services = _architecture_section("Services (sim_node)", "\n\n")
+    assert sorted(re.findall(r"`(/[\w/]+)`", services)) == sorted([topics.RESET_SERVICE, topics.PAUSE_SERVICE])
+    declared = {"sim_node": SIM_PARAMS, "hzd_controller_node": {**CONTROLLER_PARAMS, **NODE_PARAMS},
+                "policy_node": POLICY_PARAMS, "recorder_node": RECORDER_PARAMS}
+    table = _architecture_section("| node (", "\n\n")
+    documented = {}
+    for line in table.splitlines()[2:]:
+        node, parameters = [cell.strip() for cell in re.split(r"(?<!\\)\|", line)[1:-1]]
+        documented[re.search(r"(\w+_node)`", node).group(1)] = set(re.findall(r"`(\w+)` \(", parameters))
+    assert {k: sorted(v) for k, v in documented.items()} == {k: sorted(v) for k, v in declared.items()}
