@@ -13,7 +13,7 @@ Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
   impulse sweep, and a GIF of each controller under the pushes;
 
 and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
-the PNG/GIF files. ``--quick`` is a short version (about a minute) for tests. The
+the PNG/GIF files. ``--quick`` is a short version (about 25 s) for tests. The
 committed report in ``docs/results/`` was made with ``scripts/evaluate.py --out docs/results``.
 Exit status: 0 written, 2 bad arguments or no policy.
 """

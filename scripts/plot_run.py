@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Plot a recorded run (a rosbag2 bag from ``run_stack.py --record`` or ``record.py``).
 
-    scripts/plot_run.py runs/walk1            # writes PNGs into runs/walk1/plots/
+    scripts/plot_run.py runs/walk1            # writes PNGs into runs/walk1_plots/ (the bag stays a bag)
     scripts/plot_run.py runs/walk1 --out figs --show
 
 Figures (PNG): ``speed.png`` commanded speed vs hip speed filtered over 200 samples, with
@@ -152,7 +152,7 @@ def _save(fig, path: Path) -> Path:
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("bag", type=Path, help="bag directory")
-    parser.add_argument("--out", type=Path, default=None, help="figure directory (default: BAG/plots)")
+    parser.add_argument("--out", type=Path, default=None, help="figure directory (default: BAG_plots beside the bag)")
     parser.add_argument("--show", action="store_true", help="also open the figures")
     args = parser.parse_args(argv)
     try:
@@ -160,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # rosbags raises several reader errors; all mean "cannot read"
         print(f"error: cannot read {args.bag}: {exc}", file=sys.stderr)
         return 1
-    for path in plot(run, args.out or args.bag / "plots", args.show):
+    for path in plot(run, args.out or args.bag.parent / f"{args.bag.name}_plots", args.show):
         print(path)
     return 0
 

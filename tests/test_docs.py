@@ -198,3 +198,70 @@ def test_architecture_names_the_services_and_every_node_parameter():
         node, parameters = [cell.strip() for cell in re.split(r"(?<!\\)\|", line)[1:-1]]
         documented[re.search(r"(\w+_node)`", node).group(1)] = set(re.findall(r"`(\w+)` \(", parameters))
     assert {k: sorted(v) for k, v in documented.items()} == {k: sorted(v) for k, v in declared.items()}
+
+
+@pytest.mark.sim
+def test_architecture_names_walk_json_keys_as_walk_prints_them(capsys):
+    import json
+
+    text = _architecture_section("`--json`: one object, always the same keys (", ").")
+    documented = re.findall(r"`(\w+)`", text)
+    saved = sys.argv
+    sys.argv = ["walk.py", "--speed", "1.0", "--duration", "0.3", "--json"]
+    try:
+        runpy.run_path(str(ROOT / "scripts" / "walk.py"), run_name="__main__")
+    except SystemExit as exc:
+        assert exc.code == 0
+    finally:
+        sys.argv = saved
+    assert documented == list(json.loads(capsys.readouterr().out))
+
+
+@pytest.mark.unit
+def test_every_relative_link_in_the_docs_reaches_a_file():
+    broken = []
+    for doc in DOCS:
+        for target in re.findall(r"\]\(([^)\s]+)\)", doc.read_text()):
+            if re.match(r"[a-z]+://|#|mailto:", target):
+                continue
+            if not (doc.parent / target.split("#")[0]).exists():
+                broken.append(f"{doc.name}: {target}")
+    assert not broken, broken
+
+
+# what the README's "Running it" commands become in the test: short, into a temporary directory;
+# the long ones are covered by their own tests (named here) and only parsed above
+README_SHORTENED = {"--duration": "1.5"}
+README_NOT_RUN = {
+    "--viewer": "tests/test_visualization.py (needs a display)",
+    "evaluate.py": "tests/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
+    "train.py": "tests/test_training.py (the trainers, resume, signals)",
+}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_readme_running_it_commands_run(tmp_path):
+    import os
+    import subprocess
+
+    text = (ROOT / "README.md").read_text()
+    block = FENCED.search(text, text.index("## Running it")).group(1)
+    ran = []
+    for line in block.splitlines():
+        command = shlex.split(line.split("  #")[0])
+        if any(key in part for part in command for key in README_NOT_RUN):
+            continue
+        assert command[0] == ".venv/bin/python", line
+        command = [sys.executable] + [part.replace("runs/", f"{tmp_path}/runs/") for part in command[1:]]
+        for flag, value in README_SHORTENED.items():
+            if flag in command:
+                command[command.index(flag) + 1] = value
+        if "--loop" in command:  # play.py: once through, not for ever
+            command.remove("--loop")
+        out = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=180,
+                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        assert out.returncode == 0, f"{line}\n{out.stderr[-2000:]}"
+        assert "nan" not in out.stdout.lower().split(), line
+        ran.append(command[1])
+    assert ran.count("scripts/run_stack.py") == 3 and "scripts/play.py" in ran and "scripts/walk.py" in ran

@@ -20,7 +20,7 @@ from rabbit_msgs_py.catalog import STACK_TOPICS
 from rabbit_msgs_py.runtime import NodeStartError
 from rabbit_policy.experiment.scenario import Push
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
-from rabbit_sim.bag import BagError, BagWriter, QosSpec
+from rabbit_sim.bag import BagError, BagWriter, QosSpec, is_bag_directory
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -102,11 +102,12 @@ def test_metadata_yaml_matches_the_mcap(recorded):
 
 def test_plot_run_writes_the_figures(recorded, tmp_path):
     bag, _nodes, _compression = recorded  # both bags: the reader handles zstd chunks too
-    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "plot_run.py"), str(bag), "--out", str(tmp_path)],
+    result = subprocess.run([sys.executable, str(ROOT / "scripts" / "plot_run.py"), str(bag)],
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr
+    assert is_bag_directory(bag)  # the figures go beside it: the bag can still be overwritten
     for name in ("speed.png", "joints.png", "limit_cycle.png", "pitch.png"):
-        png = tmp_path / name
+        png = bag.parent / f"{bag.name}_plots" / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     import importlib.util
 
@@ -134,8 +135,10 @@ def test_existing_or_impossible_outputs_are_refused(tmp_path):
         with pytest.raises(BagError, match="not a bag directory"):
             BagWriter(not_a_bag, overwrite=True)
     assert (precious / "chapter1.tex").read_text() == "years of work"
-    with pytest.raises(BagError, match="does not exist"):
-        BagWriter(tmp_path / "missing" / "bag")
+    BagWriter(tmp_path / "missing" / "parents" / "bag").close()  # its parent directories are made
+    assert is_bag_directory(tmp_path / "missing" / "parents" / "bag")
+    with pytest.raises(BagError, match="cannot create"):
+        BagWriter(tmp_path / "thesis" / "chapter1.tex" / "bag")  # a parent that is a file
     with pytest.raises(BagError):
         BagWriter("/proc/rabbit_bag")  # not writable
     import rclpy

@@ -11,8 +11,9 @@ the previous touchdown up to this touchdown's stamp, at most ``window``; see
 :mod:`rabbit_policy.runtime.speed_window`); the decision takes effect at the
 next touchdown (the controller queues it). Parameters:
 
-* ``policy``: ``learned`` (the HZD-RL network, default: the shipped one) or ``classic``
-  (classic HZD gait library, the paper's baseline); ``library`` is an alias of classic.
+* ``policy``: ``classic`` (classic HZD gait library, the paper's baseline; the default, as
+  in every script) or ``learned`` (the HZD-RL network: the shipped one unless
+  ``policy_file``); ``library`` is an alias of classic.
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
 * ``policy_file``: learned policy checkpoint ('' = the packaged one).
@@ -22,8 +23,8 @@ next touchdown (the controller queues it). Parameters:
 * ``window``: longest averaging window (ticks, 1000).
 * ``max_command_step``: command rate limit, m/s per step (0.0 = none, the default): the
   policy sees a command that follows ``/cmd_speed`` by at most this much per step.
-* ``decision_period``: 0 (default) decides as the policy was made to: once per step as
-  above, or every N ticks for a learned policy trained so; N > 0 decides every N ticks of
+* ``decision_period``: -1 (default) decides as the policy was made to: classic every 20
+  ticks, a learned policy as it was trained; 0 decides once per step as above; N > 0 every N ticks of
   sim time (hip-speed stamps) on the moving average over the last step's duration (at most
   ``decision_window`` ticks), as the paper evaluates its network. ``/hzd/gait_timing``
   tells the controller which (``at_once`` for periodic decisions).
@@ -71,7 +72,7 @@ def clamp_speed(value: float, low: float, high: float) -> float:
 
 
 POLICY_PARAMS = {
-    "policy": Param("learned", "learned (the HZD-RL network) or classic (the HZD gait library; alias library)"),
+    "policy": Param("classic", "classic (the HZD gait library; alias library) or learned (the HZD-RL network)"),
     "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) or nearest gait"),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),

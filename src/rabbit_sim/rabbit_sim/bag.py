@@ -98,8 +98,10 @@ class BagWriter:
                 raise BagError(f"{path} is not a bag directory (only metadata.yaml and *.mcap/*.db3 files); "
                                "refusing to overwrite it")
             shutil.rmtree(path)
-        if not path.parent.exists():
-            raise BagError(f"cannot create {path}: the directory {path.parent} does not exist")
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)  # runs/walk1 on a fresh clone: runs/ is made
+        except OSError as exc:
+            raise BagError(f"cannot create {path}: {exc}") from exc
         self.path = path
         self._typestore = get_typestore(Stores.ROS2_JAZZY)
         self._writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)

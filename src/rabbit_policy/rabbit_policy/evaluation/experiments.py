@@ -66,7 +66,7 @@ class EvaluationConfig:
 
     @classmethod
     def quick(cls) -> EvaluationConfig:
-        """A short version (about 15 s on two cores) for tests and a first look."""
+        """A short version (about 25 s on two cores) for tests and a first look."""
         return cls(tracking_schedule=((0.0, 0.9), (4.0, 1.2)), tracking_duration=8.0,
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
