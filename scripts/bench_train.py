@@ -37,12 +37,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from multiprocessing import get_context
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
-from rabbit_policy.parallel import add_backend_arguments, backend_config
+from rabbit_policy.parallel import LocalBackend, add_backend_arguments, backend_config
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -186,9 +185,12 @@ def acceptance_1_6(policy_file: Path, workers: int) -> dict:
     from rabbit_policy.evaluation.acceptance import broad_acceptance
     from rabbit_policy.runtime.policies import make_policy
 
-    with get_context("fork").Pool(workers) as pool:
+    backend = LocalBackend(workers)
+    try:
         return broad_acceptance(make_policy("learned", policy_file=policy_file), make_policy("classic"),
-                                map_fn=pool.map)
+                                map_fn=backend.map)
+    finally:
+        backend.close()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -213,8 +215,11 @@ def main(argv: list[str] | None = None) -> int:
     single, sim_rate = env_throughput(args.steps)
     per_step, per_step_sim = env_throughput(max(args.steps // 20, 30), decision_period=0)
     start = time.perf_counter()
-    with get_context("fork").Pool(args.workers) as pool:
+    pool = LocalBackend(args.workers)
+    try:
         rates = pool.map(_worker, [(args.steps, i) for i in range(args.workers)])
+    finally:
+        pool.close()
     pool_wall = time.perf_counter() - start  # includes the warm starts: use the per-process rates
     report = {
         "env_steps_per_s_per_core": round(single, 1),

@@ -13,11 +13,11 @@ from __future__ import annotations
 
 import argparse
 import sys
-from multiprocessing import get_context
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_policy.parallel import add_backend_arguments, open_backend
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -26,6 +26,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--weights", type=int, default=11, help="blend weights per pair (>= 2)")
     parser.add_argument("--duration", type=float, default=20.0, help="walk per blend, s of sim time")
     parser.add_argument("--workers", type=int, default=2)
+    add_backend_arguments(parser)
     args = parser.parse_args(argv)
     from rabbit_policy.gait_design.calibration import CalibrationConfig, calibrate
     from rabbit_policy.runtime.gait_library import CALIBRATION_FILE, GaitLibrary, packaged_gait_dir
@@ -38,8 +39,11 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-    with get_context("fork").Pool(args.workers) as pool:
-        calibration = calibrate(library, config, pool.map)
+    backend = open_backend(parser, args)
+    try:
+        calibration = calibrate(library, config, backend.map)
+    finally:
+        backend.close()
     (directory / CALIBRATION_FILE).write_text(strict_json.dumps(calibration.to_dict(), indent=1) + "\n")
     for speeds, rows in zip(zip(library.speeds, library.speeds[1:]), calibration.pairs):
         cells = " ".join("fail" if v is None else f"{v:.2f}" for _, v in rows)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_policy.parallel import add_backend_arguments, open_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = ROOT / "src" / "rabbit_policy" / "rabbit_policy" / "trained"
@@ -194,11 +195,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
     parser.add_argument("--workers", type=int, default=2)
+    add_backend_arguments(parser)
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-
-    from multiprocessing import get_context
 
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_acceptance
     from rabbit_policy.evaluation.robustness import RobustnessConfig
@@ -215,28 +215,31 @@ def main(argv: list[str] | None = None) -> int:
     config = RobustnessConfig.quick() if args.quick else RobustnessConfig()
     criteria = Criteria.quick() if args.quick else Criteria()
     samples = 30 if args.quick else 400
-    with get_context("fork").Pool(args.workers) as pool:
-        def log(message: str) -> None:
-            print(message, file=sys.stderr, flush=True)
+    def log(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
 
-        reference = broad_acceptance(classic, classic, config, map_fn=pool.map, stability_samples=samples, log=log)
-        learned = broad_acceptance(policy, classic, config, map_fn=pool.map, stability_samples=samples, log=log,
+    backend = open_backend(parser, args)
+    try:
+        reference = broad_acceptance(classic, classic, config, map_fn=backend.map, stability_samples=samples, log=log)
+        learned = broad_acceptance(policy, classic, config, map_fn=backend.map, stability_samples=samples, log=log,
                                    classic_margins=reference["classic_push_margins"])
         broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
                  ("classic HZD (calibrated library, every 20 ticks)", reference)]
         log("tracking checks")
-        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=pool.map))]
+        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=backend.map))]
         if not args.quick:  # the fast subset: the policy's own tracking table only
             for other in others:
                 results.append((f"HZD-RL ({other.checkpoint.info.get('algorithm')})",
-                                acceptance(other, criteria, map_fn=pool.map)))
+                                acceptance(other, criteria, map_fn=backend.map)))
             start = warm_start_policy(policy.checkpoint)
             if start is not None:
                 results.append((f"warm start only ({info.get('warm_start')}, untrained)",
-                                acceptance(start, criteria, map_fn=pool.map)))
+                                acceptance(start, criteria, map_fn=backend.map)))
             for mode in ("nearest", "interpolate"):
                 results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode), criteria,
-                                                                    map_fn=pool.map)))
+                                                                    map_fn=backend.map)))
+    finally:
+        backend.close()
     command = "scripts/ship_policy.py " + " ".join(argv if argv is not None else sys.argv[1:])
     card = model_card(info, results, broad, command, criteria)
     print(card)

@@ -265,3 +265,16 @@ def test_the_readme_running_it_commands_run(tmp_path):
         assert "nan" not in out.stdout.lower().split(), line
         ran.append(command[1])
     assert ran.count("scripts/run_stack.py") == 3 and "scripts/play.py" in ran and "scripts/walk.py" in ran
+
+
+@pytest.mark.unit
+def test_parallel_jobs_go_through_the_execution_backend():
+    """README: ``rabbit_policy/parallel.py`` is the execution backend of every parallel job; no
+    script starts a pool of its own, and each that takes ``--workers`` for walks takes
+    ``--backend`` too (the benchmarks of other things aside)."""
+    for name in SCRIPTS:
+        source = (ROOT / "scripts" / f"{name}.py").read_text()
+        assert "get_context(" not in source and "Pool(" not in source, f"{name}.py starts its own pool"
+        every, _ = script_options(name)
+        if "--workers" in every and not name.startswith("bench_stack"):
+            assert "--backend" in every, f"{name}.py takes --workers but not --backend"
