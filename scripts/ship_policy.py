@@ -63,17 +63,6 @@ def evaluation_table(results: list[tuple[str, dict]], criteria) -> list[str]:
     return lines
 
 
-CLI_FLAGS = {  # training configuration key -> scripts/train.py flag
-    "es": {"pairs": "--pairs", "sigma": "--sigma", "lr": "--lr", "episodes": "--episodes",
-           "max_steps": "--max-steps", "decision_period": "--decision-period", "distribution": "--distribution",
-           "fall_penalty": "--fall-penalty"},
-    "ppo": {"envs": "--envs", "steps": "--steps", "epochs": "--epochs", "minibatches": "--minibatches",
-            "lr": "--ppo-lr", "gamma": "--gamma", "gae_lambda": "--gae-lambda", "target_kl": "--target-kl",
-            "init_log_std": "--init-log-std", "max_steps": "--max-steps", "decision_period": "--decision-period",
-            "distribution": "--distribution", "fall_penalty": "--fall-penalty"},
-}
-
-
 def train_command(info: dict) -> str:
     """The ``scripts/train.py`` command line that reproduces a checkpoint (deterministic
     for the seed and worker count; ``best.pt`` also depends on ``--eval-every``)."""
@@ -83,10 +72,16 @@ def train_command(info: dict) -> str:
              str(info.get("iteration"))]
     if info.get("eval_every") is not None:
         parts += ["--eval-every", str(info["eval_every"])]
-    for key, flag in CLI_FLAGS.get(algo, {}).items():
-        value = info.get("config", {}).get(key)
-        if value is not None:
-            parts += [flag, str(value)]
+    from dataclasses import fields
+
+    from rabbit_msgs_py.cli import config_flag
+    from rabbit_policy.learning.es import ESConfig
+    from rabbit_policy.learning.ppo import PPOConfig
+
+    for field in fields({"es": ESConfig, "ppo": PPOConfig}.get(algo, ESConfig)):
+        value = info.get("config", {}).get(field.name)
+        if field.metadata.get("cli", True) and field.name != "seed" and value is not None:
+            parts += [config_flag(field), str(value)]
     return " ".join(parts + ["--out", "runs/X"])
 
 

@@ -92,7 +92,8 @@ def read_csv(path: Path) -> list[dict]:
 def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
               "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1",
-              "--warm-start", "none"]  # the warm start has tests of its own (test_env); here it only costs time
+              "--warm-start", "none", "--decision-period", "0", "--distribution", "paper"]
+    # the warm start has tests of its own (test_env); here it only costs time
     straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2")
     assert straight.returncode == 0, straight.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
@@ -129,7 +130,8 @@ def test_train_ppo_logs_its_losses_and_refuses_a_foreign_resume(tmp_path):
     iteration is tested in test_parallel, and train.py --backend ray by the ES resume)."""
     result = run_script("scripts/train.py", "--algo", "ppo", "--seed", "1", "--workers", "1", "--envs", "2",
                         "--steps", "6", "--epochs", "2", "--minibatches", "2", "--max-steps", "5", "--eval-every", "0",
-                        "--no-progress", "--iterations", "2", "--warm-start", "none", "--out", str(tmp_path / "a"))
+                        "--no-progress", "--iterations", "2", "--warm-start", "none", "--decision-period", "0",
+                        "--distribution", "paper", "--out", str(tmp_path / "a"))
     assert result.returncode == 0, result.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
     assert [int(r["iteration"]) for r in log] == [1, 2] and int(log[-1]["env_steps"]) == 24
@@ -243,7 +245,7 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     proc = subprocess.Popen(
         [sys.executable, "scripts/train.py", "--algo", algo, "--workers", "2", "--out", str(tmp_path / "run"),
          "--iterations", "100000", "--max-steps", "4", "--eval-every", "3", "--no-progress",
-         "--warm-start", "none", "--backend", backend, *small],
+         "--warm-start", "none", "--decision-period", "0", "--distribution", "paper", "--backend", backend, *small],
         env={**os.environ, marker.split("=")[0]: marker.split("=")[1]},
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         # as from a terminal: a suite started in the background (`cmd &` in a script) has
@@ -273,3 +275,24 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     while _processes_with(marker) and time.monotonic() < deadline:
         time.sleep(0.5)
     assert not _processes_with(marker)
+
+
+@pytest.mark.unit
+def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_configuration():
+    """CleanRL-style configuration: train.py's options come from the config dataclasses, so
+    its defaults are the shipped run's, and the model card's regenerate command parses back
+    to the shipped checkpoint's trainer configuration."""
+    import importlib.util
+    import shlex
+
+    spec = importlib.util.spec_from_file_location("train", ROOT / "scripts" / "train.py")
+    train = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(train)
+    info = PolicyCheckpoint.load(packaged_policy_file()).info
+    defaults = train.parse_config(["--algo", info["algorithm"], "--out", "runs/X"])
+    assert defaults.trainer.to_dict() == info["config"]
+    assert (defaults.workers, defaults.warm_start, defaults.eval_every) == (info["workers"], info["warm_start"],
+                                                                           info["eval_every"])
+    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
+    assert train.parse_config(shlex.split(command)).trainer.to_dict() == info["config"]

@@ -4,7 +4,12 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
+
+
+class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
+    """The description as written (a script's docstring) and every option's default."""
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -13,3 +18,56 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"{self.prog}: error: {message}", file=sys.stderr)
         sys.exit(2)
+
+
+# ------------------------------------------------------------------ a command line from a dataclass
+def option(default, help: str, *, flag: str | None = None, aliases: tuple[str, ...] = (),
+           choices: tuple | None = None, type=None, cli: bool = True):
+    """A configuration dataclass field that documents itself and becomes one command-line
+    option (CleanRL's ``Args`` style: one place for each default): ``help`` says what it is
+    and its unit; ``flag`` overrides ``--field-name``; ``aliases`` are older spellings;
+    ``cli=False`` keeps it off the command line."""
+    return dataclasses.field(default=default, metadata={"help": help, "flag": flag, "aliases": aliases,
+                                                        "choices": choices, "type": type, "cli": cli})
+
+
+def config_flag(field: dataclasses.Field) -> str:
+    """The command-line flag of a configuration field."""
+    return field.metadata.get("flag") or "--" + field.name.replace("_", "-")
+
+
+def _dest(field: dataclasses.Field) -> str:
+    return config_flag(field)[2:].replace("-", "_")
+
+
+def add_config_arguments(parser, cls, exclude: tuple[str, ...] = ()) -> None:
+    """One option per field of the dataclass ``cls`` (made with :func:`option`) on ``parser``
+    (or an argument group), its default the field's. A field whose flag the parser has
+    already (one shared with another configuration) is left to that option; the two
+    defaults must agree."""
+    existing = {o: a for a in getattr(parser, "_actions", []) for o in a.option_strings}
+    for field in dataclasses.fields(cls):
+        if field.name in exclude or not field.metadata.get("cli", True) or "help" not in field.metadata:
+            continue
+        flag = config_flag(field)
+        if flag in existing:
+            if existing[flag].default != field.default:
+                raise ValueError(f"{cls.__name__}.{field.name}: {flag} is shared with a default of "
+                                 f"{existing[flag].default!r}, not {field.default!r}")
+            continue
+        kwargs = {"dest": _dest(field), "default": field.default, "help": field.metadata["help"]}
+        if isinstance(field.default, bool):
+            kwargs["action"] = "store_true" if field.default is False else argparse.BooleanOptionalAction
+        else:
+            kwargs["type"] = field.metadata.get("type") or type(field.default)
+            if field.metadata.get("choices"):
+                kwargs["choices"] = field.metadata["choices"]
+        parser.add_argument(flag, *field.metadata.get("aliases", ()), **kwargs)
+
+
+def config_from_args(cls, args: argparse.Namespace, **given):
+    """An instance of ``cls`` from the options :func:`add_config_arguments` added (``given``:
+    the fields set otherwise)."""
+    values = {f.name: getattr(args, _dest(f)) for f in dataclasses.fields(cls)
+              if f.name not in given and hasattr(args, _dest(f)) and f.metadata.get("cli", True)}
+    return cls(**values, **given)

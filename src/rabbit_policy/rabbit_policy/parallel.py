@@ -259,7 +259,7 @@ def add_backend_arguments(parser) -> None:
     """``--backend`` and ``--ray-address`` for a script's argument parser (``--workers`` is
     the script's own)."""
     parser.add_argument("--backend", choices=BACKENDS, default="local",
-                        help="local: a process pool on this machine (default); ray: Ray tasks (a private local "
+                        help="local: a process pool on this machine; ray: Ray tasks (a private local "
                              "instance, or the cluster at --ray-address)")
     parser.add_argument("--ray-address", default=None, metavar="ADDRESS",
                         help="--backend ray: join this cluster (auto, or host:port of `ray start --head`) "

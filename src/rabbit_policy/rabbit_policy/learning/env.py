@@ -43,6 +43,7 @@ import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_msgs_py.cli import option
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -101,6 +102,32 @@ DISTRIBUTIONS = {
                                  variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.002, 0.003)),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """What one training episode is, shared by ES and PPO (each field one ``scripts/train.py``
+    option; the defaults are the shipped policy's run)."""
+
+    max_steps: int = option(500, "env steps per training episode (each decision_period ticks; 0 ticks: one "
+                                 "walking step)")
+    decision_period: int = option(20, "ticks (1 ms) per env step, the gait applied at once; 0: one env step per "
+                                      "walking step, the gait for the next step")
+    distribution: str = option("broad", "episodes: paper (one command change) or broad (commands every 2-5 s, "
+                                        "pushes, model errors, torque delays); DISTRIBUTIONS",
+                               choices=tuple(DISTRIBUTIONS))
+    fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
+    seed: int = option(0, "seed of the episodes, the perturbations and the network")
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_steps, int) and self.max_steps >= 1):
+            raise ValueError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
+        if not (isinstance(self.decision_period, int) and self.decision_period >= 0):
+            raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {self.decision_period!r}")
+        if self.distribution not in DISTRIBUTIONS:
+            raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
+        if not self.fall_penalty <= 0.0:
+            raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
 
 
 class RabbitHZDEnv(gym.Env):

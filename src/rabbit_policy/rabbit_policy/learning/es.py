@@ -23,26 +23,29 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import torch
 
-from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_msgs_py.cli import option
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
 from rabbit_policy.runtime.network import HZDPolicyNet
 
 
 @dataclass(frozen=True)
-class ESConfig:
-    """ES hyper-parameters. sigma: perturbation std in parameter units; lr: Adam step."""
+class ESConfig(EpisodeConfig):
+    """ES hyper-parameters, one ``scripts/train.py`` option each (defaults: the shipped run's)."""
 
-    pairs: int = 16
-    sigma: float = 0.02
-    lr: float = 0.01
-    weight_decay: float = 0.005
-    episodes: int = 8
-    max_steps: int = 40
-    seed: int = 0
-    workers: int = 1
-    decision_period: int = 0
-    distribution: str = "paper"
-    fall_penalty: float = -10.0
+    pairs: int = option(8, "antithetic pairs per generation (the population is 2 x pairs)")
+    sigma: float = option(0.005, "perturbation std, parameter units")
+    lr: float = option(0.001, "Adam step size, parameter units")
+    weight_decay: float = option(0.005, "L2 weight decay added to the gradient estimate")
+    episodes: int = option(6, "episodes per population member (the same for every member)")
+    workers: int = option(1, "processes or Ray CPUs for the rollouts (the run's --workers)", cli=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if min(self.pairs, self.episodes, self.workers) < 1:
+            raise ValueError("pairs, episodes and workers must be >= 1")
+        if not (self.sigma > 0.0 and self.lr > 0.0 and self.weight_decay >= 0.0):
+            raise ValueError("sigma and lr must be > 0, weight_decay >= 0")
 
     def to_dict(self) -> dict:
         return asdict(self)

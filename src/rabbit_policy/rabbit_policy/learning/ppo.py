@@ -30,33 +30,36 @@ import numpy as np
 import torch
 from torch import nn
 
-from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_msgs_py.cli import option
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.learning.vector import make_vector_env
 from rabbit_policy.parallel import Backend, ignore_interrupts
 from rabbit_policy.runtime.network import HZDPolicyNet
 
 
 @dataclass(frozen=True)
-class PPOConfig:
-    """PPO hyper-parameters (CleanRL's names; ``init_log_std`` in normalised action units)."""
+class PPOConfig(EpisodeConfig):
+    """PPO hyper-parameters (CleanRL's names), one ``scripts/train.py`` option each."""
 
-    envs: int = 4
-    steps: int = 128
-    epochs: int = 10
-    minibatches: int = 4
-    lr: float = 1e-4
-    gamma: float = 0.99
-    gae_lambda: float = 0.95
-    clip: float = 0.2
-    value_coef: float = 0.5
-    max_grad_norm: float = 0.5
-    target_kl: float | None = 0.02
-    init_log_std: float = -3.5
-    max_steps: int = 40
-    seed: int = 0
-    decision_period: int = 0
-    distribution: str = "paper"
-    fall_penalty: float = -10.0
+    envs: int = option(4, "parallel environments")
+    steps: int = option(128, "steps per environment per iteration (the rollout is envs x steps)")
+    epochs: int = option(10, "optimisation epochs per iteration")
+    minibatches: int = option(4, "minibatches per epoch")
+    lr: float = option(1e-4, "Adam step size", flag="--ppo-lr")
+    gamma: float = option(0.99, "discount (the paper: 0.99)")
+    gae_lambda: float = option(0.95, "GAE lambda")
+    clip: float = option(0.2, "PPO's ratio clip")
+    value_coef: float = option(0.5, "value-loss weight")
+    max_grad_norm: float = option(0.5, "gradient-norm clip")
+    target_kl: float = option(0.02, "stop an iteration's epochs once the approximate KL passes it (0: never)")
+    init_log_std: float = option(-3.5, "initial log std of the Gaussian policy, normalised action units")
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if min(self.envs, self.steps, self.epochs, self.minibatches) < 1:
+            raise ValueError("envs, steps, epochs and minibatches must be >= 1")
+        if self.envs * self.steps < self.minibatches:
+            raise ValueError("envs x steps must be at least minibatches")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -239,7 +242,7 @@ class PPOTrainer:
                 clip_fractions.append(((ratio - 1).abs() > cfg.clip).float().mean().item())
                 policy_losses.append(policy_loss.item())
                 value_losses.append(value_loss.item())
-            if cfg.target_kl is not None and approx_kl > cfg.target_kl:
+            if cfg.target_kl and approx_kl > cfg.target_kl:
                 break
         self.iteration += 1
         finished = batch["finished"]

@@ -42,26 +42,30 @@ from multiprocessing import active_children
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import option
 from rabbit_policy.parallel import BackendConfig
 
 
 @dataclass(frozen=True)
 class TrainingConfig:
-    """One training run (``scripts/train.py``'s options; see its help for each). ``trainer``
-    holds the algorithm's own hyper-parameters: an ``ESConfig`` or a ``PPOConfig`` (their
-    ``seed``, ``workers`` and ``max_steps`` are the run's)."""
+    """One training run: ``scripts/train.py`` builds its command line from these fields (and
+    from the trainer's: an :class:`~.es.ESConfig` or a :class:`~.ppo.PPOConfig`, whose
+    ``seed`` and ``max_steps`` are the run's). The defaults are the shipped policy's run."""
 
     algo: str
     out: Path
     trainer: Any
-    workers: int = 2
-    iterations: int = 60
-    checkpoint_every: int = 5
-    eval_every: int = 2
-    stop_when_passed: bool = False
-    warm_start: str = "scheduled"
-    no_progress: bool = False
-    resume: bool = False
+    workers: int = option(2, "processes (or Ray CPUs) for rollouts and evaluations")
+    iterations: int = option(30, "ES generations / PPO iterations in all, resumed ones included",
+                             aliases=("--generations",))
+    checkpoint_every: int = option(5, "write checkpoint.pt every N iterations (and on Ctrl-C/SIGTERM)")
+    eval_every: int = option(5, "acceptance evaluation every N iterations, and of the start (0: never)")
+    stop_when_passed: bool = option(False, "stop at the first trained policy that passes the evaluation")
+    warm_start: str = option("feedback", "fit the network to the classic library first "
+                                         "(rabbit_policy.learning.warm_start; none: random weights)",
+                             choices=("scheduled", "nearest", "interpolate", "feedback", "none"))
+    no_progress: bool = option(False, "plain lines instead of a progress bar")
+    resume: bool = option(False, "continue from OUT/checkpoint.pt (give the same options)")
     backend: BackendConfig = BackendConfig()
 
     def __post_init__(self) -> None:
