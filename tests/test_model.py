@@ -14,9 +14,16 @@ def model():
     return load_model()
 
 
-def test_model_file_is_package_data():
-    assert model_path().is_file()
-    assert model_path().name == "rabbit.xml"
+def test_model_file_is_package_data_a_scene_around_the_robot():
+    """Menagerie's layout: scene.xml (floor, light, keyframe) includes the robot's rabbit.xml,
+    which has none of them and no sensor nothing reads."""
+    assert model_path().is_file() and model_path().name == "scene.xml"
+    robot = (model_path().parent / "rabbit.xml").read_text()
+    assert '<include file="rabbit.xml"/>' in model_path().read_text()
+    for scene_only in ('name="floor"', "<light", "<keyframe", "<visual"):
+        assert scene_only not in robot
+    model = load_model()
+    assert [model.sensor(i).name for i in range(model.nsensor)] == ["left_foot_touch", "right_foot_touch"]
 
 
 def test_timestep_is_one_millisecond(model):

@@ -74,8 +74,9 @@ class ModelOptions:
 
 
 def model_path() -> Path:
-    """Path of the packaged MJCF file."""
-    with as_file(files("rabbit_sim") / "models" / "rabbit.xml") as path:
+    """Path of the packaged MJCF scene (``models/scene.xml``: the floor, light and keyframe
+    around the robot's own ``models/rabbit.xml``, as MuJoCo Menagerie lays out a model)."""
+    with as_file(files("rabbit_sim") / "models" / "scene.xml") as path:
         return Path(path)
 
 
