@@ -108,3 +108,22 @@ def test_an_unknown_parameter_is_named_in_the_log(capfd):
         rclpy.shutdown(context=context)
     err = capfd.readouterr().err
     assert "ignoring unknown parameter(s) initial_speed" in err and "mode" not in err.split("ignoring")[1][:40]
+
+
+def test_importing_a_node_sets_nothing_and_starting_ros_sets_the_discovery_default():
+    """No import-time side effects: the localhost discovery default is set where a process
+    starts ROS (``init_context``, ``run_node``, the scripts' ``main``), not on import."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import os, rabbit_sim.sim_node, rabbit_sim.recorder_node, rabbit_policy.policy_node, "
+            "rabbit_hzd_controller.hzd_controller_node, rabbit_policy.bringup.stack\n"
+            "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'))\n"
+            "from rabbit_msgs_py.runtime import init_context\n"
+            "init_context().try_shutdown()\n"
+            "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'))\n")
+    env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["None", "LOCALHOST"]

@@ -36,17 +36,13 @@ from __future__ import annotations
 import sys
 from dataclasses import replace
 
-from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
-ensure_localhost_discovery()
-
-from rcl_interfaces.msg import SetParametersResult  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32  # noqa: E402
-
-from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import (  # noqa: E402
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import (
     MessageError,
     alpha_from_msg,
     controller_id,
@@ -55,10 +51,10 @@ from rabbit_msgs_py.conversions import (  # noqa: E402
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.parameters import Param, coerce, declare  # noqa: E402
-from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+from rabbit_msgs_py.parameters import Param, coerce, declare
+from rabbit_msgs_py.runtime import NodeStartError, run_node
 
-from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd  # noqa: E402
+from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
 
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 

@@ -63,6 +63,18 @@ def freeze_start_up_objects() -> None:
     gc.freeze()
 
 
+def init_context():
+    """A new, initialised rclpy context with the discovery default in force (set here, where
+    a process starts using ROS, not when a module is imported)."""
+    ensure_localhost_discovery()
+    import rclpy
+    from rclpy.signals import SignalHandlerOptions
+
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    return context
+
+
 def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) -> int:
     """Initialise rclpy with ``args`` (``--ros-args ...`` included), build the node with
     ``factory(context=...)``, spin it until SIGINT (Ctrl-C) or SIGTERM, then clean up.

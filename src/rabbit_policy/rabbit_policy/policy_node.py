@@ -37,31 +37,27 @@ from __future__ import annotations
 import math
 import sys
 
-from rabbit_msgs_py.environment import ensure_localhost_discovery
+from geometry_msgs.msg import TwistStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64, Float64MultiArray, Header, String
 
-ensure_localhost_discovery()
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns
+from rabbit_msgs_py.runtime import NodeStartError, run_node
 
-from geometry_msgs.msg import TwistStamped  # noqa: E402
-from rcl_interfaces.msg import SetParametersResult  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Float64, Float64MultiArray, Header, String  # noqa: E402
-
-from rabbit_hzd_controller.gait_state import state_on_gait  # noqa: E402
-from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.joints import JOINT_NAMES  # noqa: E402
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E402
-from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns  # noqa: E402
-from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
-
-from rabbit_policy.runtime.policies import (  # noqa: E402
+from rabbit_policy.runtime.policies import (
     DEFAULT_DECISION_WINDOW,
     GaitCommand,
     PolicyUnavailable,
     decision_period,
     make_policy,
 )
-from rabbit_policy.runtime.speed_window import Observation, SpeedWindow  # noqa: E402
+from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
 
 
 def clamp_speed(value: float, low: float, high: float) -> float:

@@ -27,23 +27,19 @@ import time
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
 
-ensure_localhost_discovery()
+from rabbit_msgs_py import qos
+from rabbit_msgs_py import topics as topic_names
+from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec
+from rabbit_msgs_py.conversions import stamp_to_ns
+from rabbit_msgs_py.parameters import Param, declare
+from rabbit_msgs_py.runtime import NodeStartError, run_node
 
-from rclpy.node import Node  # noqa: E402
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from rclpy.serialization import deserialize_message  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-
-from rabbit_msgs_py import qos  # noqa: E402
-from rabbit_msgs_py import topics as topic_names  # noqa: E402
-from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec  # noqa: E402
-from rabbit_msgs_py.conversions import stamp_to_ns  # noqa: E402
-from rabbit_msgs_py.parameters import Param, declare  # noqa: E402
-from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
-
-from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec  # noqa: E402
+from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec
 
 LOG_TIMES = ("receive", "sim")
 RECORD_DEPTH = 1000

@@ -53,35 +53,31 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.environment import ensure_localhost_discovery
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, UInt32
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
 
-ensure_localhost_discovery()
-
-from builtin_interfaces.msg import Time  # noqa: E402
-from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped  # noqa: E402
-from rcl_interfaces.msg import SetParametersResult  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.qos import QoSProfile  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Bool, UInt32  # noqa: E402
-from std_srvs.srv import SetBool, Trigger  # noqa: E402
-from visualization_msgs.msg import MarkerArray  # noqa: E402
-
-from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import (  # noqa: E402
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import (
     MessageError, joint_state_vectors, short, stamp_to_ns, torques_from_msg)
-from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED  # noqa: E402
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite  # noqa: E402
-from rabbit_msgs_py.pushes import Push, parse_pushes  # noqa: E402
-from rabbit_msgs_py.runtime import NodeStartError, run_node  # noqa: E402
+from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.pushes import Push, parse_pushes
+from rabbit_msgs_py.runtime import NodeStartError, run_node
 
-from .marker_msgs import MarkerArrayBuilder  # noqa: E402
-from .markers import RobotShapes, marker_period_ticks  # noqa: E402
-from .model import load_model  # noqa: E402
-from .viewer import PassiveViewer, ViewerUnavailable  # noqa: E402
-from .simulation import Simulator  # noqa: E402
-from .stepping import (  # noqa: E402
+from .marker_msgs import MarkerArrayBuilder
+from .markers import RobotShapes, marker_period_ticks
+from .model import load_model
+from .viewer import PassiveViewer, ViewerUnavailable
+from .simulation import Simulator
+from .stepping import (
     LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, StreamPairing, TickStatistics, Watchdog,
     WatchdogEvent)
 

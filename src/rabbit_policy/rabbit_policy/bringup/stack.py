@@ -35,25 +35,20 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Sequence
 
-from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64, Header
+from std_srvs.srv import SetBool
 
-ensure_localhost_discovery()
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import stamp_to_seconds
+from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, spin_timeout_of
 
-from rclpy.node import Node  # noqa: E402
-from rclpy.signals import SignalHandlerOptions  # noqa: E402
-from rosgraph_msgs.msg import Clock  # noqa: E402
-from sensor_msgs.msg import JointState  # noqa: E402
-from std_msgs.msg import Bool, Float64, Header  # noqa: E402
-from std_srvs.srv import SetBool  # noqa: E402
-
-from rabbit_msgs_py import qos, topics  # noqa: E402
-from rabbit_msgs_py.conversions import stamp_to_seconds  # noqa: E402
-from rabbit_msgs_py.runtime import freeze_start_up_objects, spin_timeout_of  # noqa: E402
-
-from rabbit_policy.experiment.result import json_number, mean_speed_between  # noqa: E402
-from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule  # noqa: E402
-from rabbit_policy.runtime.policies import controller_name  # noqa: E402
-from rabbit_sim.simulation import StopRules  # noqa: E402
+from rabbit_policy.experiment.result import json_number, mean_speed_between
+from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
+from rabbit_policy.runtime.policies import controller_name
+from rabbit_sim.simulation import StopRules
 
 NODE_MODULES = {
     "policy_node": "rabbit_policy.policy_node",
@@ -333,8 +328,7 @@ def other_stack(wait: float = 3.0) -> list[str]:
     cross-talk (one's /cmd_speed moves the other), so a launch refuses to start beside one."""
     import rclpy
 
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    context = init_context()
     try:
         node = rclpy.create_node("run_stack_probe", context=context)
         deadline = time.monotonic() + wait
@@ -433,8 +427,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
 
     from rabbit_policy.policy_node import PolicyNode
 
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    context = init_context()
     nodes: dict[str, object] = {}
     executor = None
     try:
@@ -527,8 +520,7 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
     with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
         if config.record and not config.record_stats_file:  # where the recorder says how it ended
             config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
-        context = rclpy.Context()
-        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+        context = init_context()
         procs = NodeProcesses(config, log=log)
         supervisor = Supervisor(config, context=context)
         error = None
