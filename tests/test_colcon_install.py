@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("rabbit_msgs_py", "rabbit_sim", "rabbit_hzd_controller", "rabbit_policy")
 NODES = (

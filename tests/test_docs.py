@@ -233,9 +233,9 @@ def test_every_relative_link_in_the_docs_reaches_a_file():
 # the long ones are covered by their own tests (named here) and only parsed above
 README_SHORTENED = {"--duration": "1.5"}
 README_NOT_RUN = {
-    "--viewer": "tests/test_visualization.py (needs a display)",
-    "evaluate.py": "tests/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
-    "train.py": "tests/test_training.py (the trainers, resume, signals)",
+    "--viewer": "tests/rabbit_sim/test_visualization.py (needs a display)",
+    "evaluate.py": "tests/rabbit_policy/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
+    "train.py": "tests/rabbit_policy/test_training.py (the trainers, resume, signals)",
 }
 
 
@@ -278,3 +278,16 @@ def test_parallel_jobs_go_through_the_execution_backend():
         every, _ = script_options(name)
         if "--workers" in every and not name.startswith("bench_stack"):
             assert "--backend" in every, f"{name}.py takes --workers but not --backend"
+
+
+@pytest.mark.unit
+def test_every_test_the_docs_name_exists():
+    """docs/faults.md and the others cite tests by file and by name: both exist."""
+    defined = {m for p in (ROOT / "tests").rglob("test_*.py")
+               for m in re.findall(r"^def (test_\w+)\(", p.read_text(), re.M)}
+    missing = []
+    for doc in DOCS:
+        text = doc.read_text()
+        missing += [f"{doc.name}: {p}" for p in re.findall(r"\btests/[\w/]+\.py", text) if not (ROOT / p).is_file()]
+        missing += [f"{doc.name}: {name}" for name in re.findall(r"`(test_\w+)`", text) if name not in defined]
+    assert not missing, missing

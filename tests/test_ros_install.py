@@ -3,7 +3,11 @@ Fast DDS in one process, discovery limited to localhost (set in conftest.py)."""
 
 import os
 
+import pytest
+
 import rclpy
+
+pytestmark = pytest.mark.ros
 
 
 def test_discovery_is_limited_to_localhost():

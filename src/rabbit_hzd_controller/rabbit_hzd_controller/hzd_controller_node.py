@@ -147,6 +147,13 @@ class HZDControllerNode(Node):
         return SetParametersResult(successful=True)
 
     # --------------------------------------------------------------- gait
+    @property
+    def gait(self) -> tuple[list[float], float] | None:
+        """The last good gait received: (alpha, 24 rad; Kd, N m s/rad), or None before both."""
+        if self._alpha is None or self._kd is None:
+            return None
+        return list(self._alpha), self._kd
+
     def _on_alpha(self, msg: Float64MultiArray) -> None:
         try:
             alpha = list(validate_alpha(alpha_from_msg(msg), self.config))

@@ -161,6 +161,11 @@ class RabbitHZDEnv(gym.Env):
         self._model = self._models[self.model_options]
         self._loop: ClosedLoop | None = None
 
+    @property
+    def loop(self) -> ClosedLoop | None:
+        """The closed loop of the episode in progress (None before the first reset)."""
+        return self._loop
+
     # ------------------------------------------------------------------ helpers
     def _observation(self) -> np.ndarray:
         obs = self._loop.observation(moving=bool(self.decision_period))

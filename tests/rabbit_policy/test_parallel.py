@@ -21,7 +21,9 @@ from rabbit_policy.learning.es import ESConfig, EvolutionStrategy
 from rabbit_policy.parallel import BackendConfig, LocalBackend, RayBackend, make_backend
 from rabbit_policy.runtime.network import HZDPolicyNet
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.sim
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_backend_config_rejects_bad_input():
@@ -42,6 +44,7 @@ def _es_run(backend) -> tuple[np.ndarray, list[dict]]:
     return es.theta.copy(), stats
 
 
+@pytest.mark.slow
 def test_es_on_the_local_backend_is_the_same_for_one_or_two_workers():
     one, two = LocalBackend(1), LocalBackend(2)
     try:
@@ -135,6 +138,7 @@ def test_ray_cluster_listens_on_loopback_only(cluster):
     assert addresses and all(address.is_loopback for address in addresses), addresses
 
 
+@pytest.mark.slow
 def test_es_on_a_two_node_ray_cluster_equals_local(cluster):
     local = LocalBackend(2)
     try:
@@ -145,6 +149,7 @@ def test_es_on_a_two_node_ray_cluster_equals_local(cluster):
     assert np.array_equal(theta_local, theta_ray) and stats_local == stats_ray
 
 
+@pytest.mark.slow
 def test_ppo_iteration_on_ray_actors_equals_local(cluster):
     from rabbit_policy.learning.ppo import PPOConfig, PPOTrainer
 
@@ -167,6 +172,7 @@ def test_ppo_iteration_on_ray_actors_equals_local(cluster):
     assert all(torch.equal(params_local[k], params_ray[k]) for k in params_local)
 
 
+@pytest.mark.slow
 def test_an_evaluation_sweep_is_the_same_on_ray_and_local(cluster):
     from rabbit_policy.evaluation.robustness import MODEL_ERRORS, RobustnessConfig, robustness
     from rabbit_policy.runtime.policies import make_policy
@@ -222,6 +228,7 @@ def _es_run_disturbed(backend, disturb) -> tuple[np.ndarray, list[dict], bool]:
     return theta, stats, bool(done)
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster, undisturbed):
     """SIGKILL to a Ray worker while it runs an ES evaluation: Ray re-runs that task, and
     the generation's parameters and statistics are exactly those of an undisturbed run."""
@@ -232,6 +239,7 @@ def test_a_worker_killed_mid_generation_is_rerun_not_lost(cluster, undisturbed):
     assert np.array_equal(theta, undisturbed[0]) and stats == undisturbed[1]
 
 
+@pytest.mark.slow
 def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster, undisturbed):
     """The second node of the cluster removed while an ES generation runs on both: its tasks
     are re-run on the head node and the parameters are those of an undisturbed run."""

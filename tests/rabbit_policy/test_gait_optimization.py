@@ -16,6 +16,8 @@ from rabbit_policy.gait_design.optimization import (
 )
 from rabbit_policy.gait_design.seed import SeedPattern, seed_free_alpha
 
+pytestmark = pytest.mark.sim
+
 
 @pytest.fixture(scope="module")
 def gait() -> Gait:

@@ -12,6 +12,8 @@ import rabbit_policy.learning.env  # noqa: F401  (registers RabbitHZD-v0)
 from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
+pytestmark = pytest.mark.sim
+
 
 @pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # physical units by design
 def test_env_passes_the_gymnasium_checker():
@@ -66,6 +68,7 @@ def test_determinism_for_a_seed():
     assert all(np.array_equal(x[0], y[0]) and x[1] == y[1] for x, y in zip(a, b))
 
 
+@pytest.mark.slow
 def test_warm_started_network_reproduces_the_library_and_walks():
     from rabbit_policy.runtime.network import HZDPolicyNet, act
     from rabbit_policy.runtime.speed_window import Observation
@@ -117,12 +120,12 @@ def test_decisions_every_n_ticks_step_the_env_by_n_ticks_and_apply_at_once():
     env.reset(seed=0, options={"desired_speed": 1.0, "next_speed": 1.0})
     gait = env.library.nearest(1.0)
     other = env.library.nearest(1.2)
-    start = env._loop.ticks
+    start = env.loop.ticks
     obs, _, terminated, _, info = env.step(np.append(gait.free, gait.kd))
-    assert env._loop.ticks - start == 20 and not terminated
+    assert env.loop.ticks - start == 20 and not terminated
     obs, _, _, _, info = env.step(np.append(other.free, other.kd))
-    assert env._loop.controller.alpha == tuple(other.alpha)  # at once, not at the next touchdown
-    assert env._loop.controller.pending_alpha is None
+    assert env.loop.controller.alpha == tuple(other.alpha)  # at once, not at the next touchdown
+    assert env.loop.controller.pending_alpha is None
     with pytest.raises(ValueError):
         RabbitHZDEnv(decision_period=-1)
 
@@ -132,7 +135,7 @@ def test_broad_episodes_draw_commands_pushes_models_and_delays():
     drawn = []
     for seed in range(12):
         env.reset(seed=seed)
-        drawn.append(env._loop.scenario)
+        drawn.append(env.loop.scenario)
     for scenario in drawn:
         times = [t for t, _ in scenario.schedule]
         assert all(2.0 - 1e-9 <= b - a <= 5.0 + 1e-9 for a, b in zip(times, times[1:]))
@@ -143,4 +146,4 @@ def test_broad_episodes_draw_commands_pushes_models_and_delays():
     assert len({s.torque_delay for s in drawn}) > 1 and len({s.model.friction for s in drawn}) > 1
     again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
     again.reset(seed=3)
-    assert again._loop.scenario == drawn[3]  # seeded
+    assert again.loop.scenario == drawn[3]  # seeded

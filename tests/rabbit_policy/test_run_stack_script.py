@@ -13,7 +13,9 @@ from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "run_stack.py"
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "run_stack.py"
 
 
 def _node_processes(parent: int) -> list[str]:
@@ -98,7 +100,6 @@ def test_a_second_stack_in_the_same_domain_is_refused():
         first.communicate(timeout=60)
 
 
-@pytest.mark.unit
 def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
     """The report of a run stopped before the simulation moved (a node that never came up,
     Ctrl-C at once) says what happened and prints no nan: no real-time factor, no mean."""

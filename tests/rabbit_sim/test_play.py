@@ -15,7 +15,9 @@ import pytest
 
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")

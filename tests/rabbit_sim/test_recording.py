@@ -22,7 +22,9 @@ from rabbit_policy.experiment.scenario import Push
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
 from rabbit_sim.bag import BagError, BagWriter, QosSpec, is_bag_directory
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module", params=["none", "zstd"])

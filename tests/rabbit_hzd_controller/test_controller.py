@@ -12,6 +12,8 @@ from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip, foot_ve
 from rabbit_hzd_controller.phase import PhaseBounds, phase_bounds_from_alpha, stance_hip_position
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
+pytestmark = pytest.mark.sim
+
 
 @pytest.fixture(scope="module")
 def gait():

@@ -17,7 +17,9 @@ from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
 from rabbit_policy.runtime.policies import make_policy
 from rabbit_policy.evaluation.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.sim
+
+ROOT = Path(__file__).resolve().parents[2]
 CLASSIC = make_policy("classic")
 SCENARIOS = {s.name: s for s in PUSH_SCENARIOS}
 
@@ -108,6 +110,7 @@ def test_impulse_sweep_largest_survived():
         impulse_sweep(CLASSIC, 1.0, 0, config)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["large_backward"])  # the paper's third scenario: one push, one stack run
 def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
     """``run_stack.py --push`` (three node processes, lockstep) and the fast path walk the
@@ -171,6 +174,7 @@ except RenderingUnavailable as exc:
 
 
 # ------------------------------------------------------------------ the script
+@pytest.mark.slow
 def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     out = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]

@@ -14,7 +14,9 @@ from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.sim
+
+ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = GaitLibrary.load()
 
 

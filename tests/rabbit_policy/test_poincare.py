@@ -14,6 +14,8 @@ from rabbit_policy.evaluation.poincare import (
     section_crossing,
 )
 
+pytestmark = pytest.mark.unit
+
 
 def test_linear_map_with_a_complex_pair_and_a_real_eigenvalue():
     # P(x) = c + A (x - c), A = R diag-blocks: eigenvalues 0.6 e^{+-0.5i} and -0.3

@@ -20,6 +20,8 @@ from rabbit_hzd_controller.phase import (
 )
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
+pytestmark = pytest.mark.unit
+
 GEOM = LegGeometry()
 
 

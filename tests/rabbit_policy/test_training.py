@@ -22,7 +22,9 @@ from rabbit_policy.experiment.loop import walk, walk_gait
 from rabbit_policy.experiment.result import Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.sim
+
+ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = GaitLibrary.load()
 
 
@@ -89,6 +91,7 @@ def read_csv(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
               "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1",
@@ -125,6 +128,7 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     assert make_policy("learned", policy_file=tmp_path / "b" / "policy.pt").name == "learned/policy.pt"
 
 
+@pytest.mark.slow
 def test_train_ppo_logs_its_losses_and_refuses_a_foreign_resume(tmp_path):
     """PPO through the script (its environments in forked processes; on Ray actors the same
     iteration is tested in test_parallel, and train.py --backend ray by the ES resume)."""
@@ -231,6 +235,7 @@ def _processes_with(marker: str) -> list[int]:
 # environment actors): three runs cover every path; the other combinations repeat them
 @pytest.mark.parametrize("algo, sig, backend", [("ppo", "SIGINT", "local"), ("es", "SIGINT", "ray"),
                                                 ("ppo", "SIGTERM", "ray")])
+@pytest.mark.slow
 def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     """Ctrl-C reaches the whole process group, SIGTERM only the main process: either way
     a checkpoint is written, the workers are gone (with Ray: the private instance's
@@ -277,7 +282,6 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     assert not _processes_with(marker)
 
 
-@pytest.mark.unit
 def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_configuration():
     """CleanRL-style configuration: train.py's options come from the config dataclasses, so
     its defaults are the shipped run's, and the model card's regenerate command parses back

@@ -20,6 +20,8 @@ from rabbit_msgs_py.conversions import (
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
+pytestmark = pytest.mark.unit
+
 
 def test_alpha_round_trip_and_layout():
     alpha = GaitLibrary.load().nearest(1.0).alpha

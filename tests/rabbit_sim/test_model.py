@@ -8,6 +8,8 @@ from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
 from rabbit_sim.model import DriveParameters, load_model, model_path
 
+pytestmark = pytest.mark.sim
+
 
 @pytest.fixture(scope="module")
 def model():

@@ -17,12 +17,13 @@ from rabbit_policy.runtime.policies import LibraryPolicy
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import FallLimits, Simulator, StopRules
 
+pytestmark = pytest.mark.sim
+
 LIBRARY = GaitLibrary.load()
 CLASSIC = LibraryPolicy(LIBRARY)
 
 
 # ------------------------------------------------------------------ unit
-@pytest.mark.unit
 @pytest.mark.parametrize("kwargs, message", [
     ({"schedule": ((1.0, 1.0),)}, "start at t = 0"),
     ({"schedule": ((0.0, 1.0), (0.0, 1.2))}, "increase"),
@@ -35,7 +36,6 @@ def test_scenario_rejects_bad_input(kwargs, message):
         Scenario(**kwargs)
 
 
-@pytest.mark.unit
 @pytest.mark.parametrize("kwargs", [{"variant": "moon"}, {"friction": 0.0}, {"friction": math.inf},
                                     {"torso_mass_scale": -1.0}])
 def test_model_options_reject_bad_values(kwargs):
@@ -43,7 +43,6 @@ def test_model_options_reject_bad_values(kwargs):
         ModelOptions(**kwargs)
 
 
-@pytest.mark.unit
 def test_stop_rules():
     rules = StopRules(stall_after=2.0)
     assert not rules.stalled(3.9, 2.0) and rules.stalled(4.01, 2.0)
@@ -170,3 +169,22 @@ def test_a_periodic_policy_decides_every_n_ticks_on_a_one_step_moving_average():
     assert abs(late[-1] - steps[-1][2]) < 0.03
     with pytest.raises(ValueError):
         PeriodicPolicy(Spy(), 0)
+
+
+def test_queued_kd_and_alpha_take_effect_at_touchdown():
+    from rabbit_policy.experiment.loop import ClosedLoop
+    from rabbit_policy.experiment.scenario import Scenario
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.policies import GaitCommand
+
+    lib = GaitLibrary.load()
+    slow, fast = lib.nearest(0.8), lib.nearest(1.2)
+    loop = ClosedLoop(Scenario.constant(0.8), start=GaitCommand(slow.alpha, slow.kd))
+    controller = loop.controller
+    assert loop.set_gait(GaitCommand(fast.alpha, fast.kd))
+    loop.run(duration=0.3)  # within the first step: still the gait in force
+    assert controller.kd == slow.kd and controller.alpha == tuple(slow.alpha)
+    assert controller.pending_alpha is not None and controller.pending_kd == fast.kd
+    assert not loop.run(duration=2.0, until_touchdown=True) and loop.touchdowns
+    assert controller.kd == fast.kd and controller.alpha == tuple(fast.alpha)
+    assert controller.pending_kd is None and controller.pending_alpha is None

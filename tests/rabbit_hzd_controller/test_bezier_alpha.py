@@ -14,6 +14,8 @@ from rabbit_hzd_controller.alpha import (
 )
 from rabbit_hzd_controller.bezier import bernstein, bezier, bezier_derivative, bezier_matrix
 
+pytestmark = pytest.mark.unit
+
 rng = np.random.default_rng(42)
 
 

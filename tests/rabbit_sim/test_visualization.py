@@ -24,7 +24,9 @@ from rabbit_sim.markers import PUSH_ID, RobotShapes, marker_period_ticks
 from rabbit_sim.model import load_model
 from rabbit_sim.simulation import Simulator
 
-ROOT = Path(__file__).resolve().parents[1]
+pytestmark = pytest.mark.ros
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
@@ -162,6 +164,7 @@ def _walk(*extra: str, env: dict | None = None) -> subprocess.CompletedProcess:
                           env=env)
 
 
+@pytest.mark.slow
 def test_walk_viewer_leaves_results_unchanged_and_needs_a_display(display):
     plain = json.loads(_walk().stdout)
     viewed = _walk("--viewer", env={**os.environ, "DISPLAY": display})
@@ -174,6 +177,7 @@ def test_walk_viewer_leaves_results_unchanged_and_needs_a_display(display):
     assert headless.returncode == 2 and headless.stderr.strip().startswith("error: the viewer needs a display")
 
 
+@pytest.mark.slow
 def test_sim_node_viewer_leaves_the_lockstep_run_unchanged(display):
     def run(*extra: str, env: dict) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "scripts/run_stack.py", "--duration", "1.5", "--in-process", "--json",
