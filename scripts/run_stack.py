@@ -16,8 +16,10 @@ the segment's second half, the steps, whether RABBIT fell, and the real-time fac
 EventsExecutor instead (the fastest choice measured here; see README "Executors").
 Ctrl-C stops the nodes cleanly and prints what was measured so far.
 
-With ``--json``: one object with ``fell``, ``rtf``, ``segments`` (``command``,
-``mean_speed``, ``start``, ``end``) and more; node logs go to stderr.
+With ``--json``: one object, the same keys as ``walk.py --json`` for the same scenario
+(``rabbit_policy.experiment.result.run_summary``: ``fell``, ``steps``, ``segments`` with
+``mean_speed`` and ``reach_time``, ``real_time_factor``, ``completed``, ``error``, ...);
+node logs go to stderr.
 Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments or another
 stack already running in this ROS_DOMAIN_ID (they would cross-talk), 3 the run did not complete
 (a node died, no progress, interrupted).
@@ -83,10 +85,11 @@ def print_report(report, config) -> None:
     if report.stalled:
         print(f"stalled      at t = {report.stall_time:.3f} s (no touchdown for {config.rules.stall_after} s)")
     print(f"steps        {report.steps}")
-    print("segment         command   mean speed (2nd half)")
+    print("segment         command   mean speed (2nd half)   reached in")
     for seg in report.segments:
-        mean = "   n/a" if math.isnan(seg.mean_speed) else f"{seg.mean_speed:6.3f}"
-        print(f"{seg.start:6.1f}-{seg.end:6.1f} s  {seg.command:5.2f}     {mean} m/s")
+        mean = "   n/a" if seg["mean_speed"] is None else f"{seg['mean_speed']:6.3f}"
+        reach = "never" if seg["reach_time"] is None else f"{seg['reach_time']:.2f} s"
+        print(f"{seg['start']:6.1f}-{seg['end']:6.1f} s  {seg['command']:5.2f}     {mean} m/s              {reach}")
     if report.sim_time > 0.0:
         print(f"simulated    {report.sim_time:.2f} s in {report.wall_time:.2f} s wall "
               f"(real-time factor {report.rtf:.2f})")

@@ -106,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Scenario, parse_pushes, parse_schedule
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
     from rabbit_sim.model import ModelOptions
@@ -144,9 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         if viewer is not None:
             viewer.close()
     wall = time.perf_counter() - start
-    summary = {"controller": controller, "policy": policy.name, "scenario": scenario.to_dict(),
-               **result.summary(args.tolerance),
-               "real_time_factor": round(result.duration / wall, 1) if wall > 0 else None}
+    summary = run_summary(controller, policy.name, result, wall, tolerance=args.tolerance)
     if args.json:
         print(strict_json.dumps(summary))
     else:

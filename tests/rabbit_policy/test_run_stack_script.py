@@ -38,7 +38,7 @@ def test_multi_process_run_reports_json():
     assert result.returncode == 0, result.stderr[-2000:]
     report = json.loads(result.stdout)
     assert report["fell"] is False and report["completed"] is True
-    assert report["rtf"] > 0.0  # a number; how fast depends on the machine (scripts/bench_stack.py)
+    assert report["real_time_factor"] > 0.0  # a number; how fast depends on the machine (scripts/bench_stack.py)
     assert report["segments"][0]["command"] == 1.0
     assert abs(report["segments"][0]["mean_speed"] - 1.0) < 0.1
 
@@ -76,7 +76,7 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     assert proc.returncode == 3, err[-2000:]
     report = json.loads(out)
     assert report["error"] == "interrupted" and report["completed"] is False
-    assert 0.0 < report["sim_time"] < 600.0
+    assert 0.0 < report["duration"] < 600.0
     assert report["segments"][0]["mean_speed"] is None  # cut short: no mean for the segment it was in
     assert _alive(children) == []
     assert "Traceback" not in err and "FATAL" not in err
@@ -105,13 +105,18 @@ def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
     Ctrl-C at once) says what happened and prints no nan: no real-time factor, no mean."""
     import importlib.util
 
-    from rabbit_policy.bringup.stack import RunReport, Segment, StackConfig
+    import numpy as np
+
+    from rabbit_policy.bringup.stack import RunReport, StackConfig
+    from rabbit_policy.experiment.result import WalkResult
+    from rabbit_policy.experiment.scenario import Scenario
 
     spec = importlib.util.spec_from_file_location("run_stack", SCRIPT)
     run_stack = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(run_stack)
-    report = RunReport(fell=False, fall_time=None, sim_time=0.0, wall_time=0.0, steps=0,
-                       segments=[Segment(1.0, 0.0, 2.0)], completed=False, error="interrupted")
+    nothing = WalkResult(Scenario.constant(1.0), fell=False, fall_time=None, stalled=False, stall_time=None,
+                         start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]))
+    report = RunReport("classic", None, nothing, wall_time=0.0, completed=False, error="interrupted")
     run_stack.print_report(report, StackConfig(duration=2.0, schedule=((0.0, 1.0),)))
     out = capsys.readouterr().out
     assert "nan" not in out.lower() and "simulated    nothing" in out and "interrupted" in out

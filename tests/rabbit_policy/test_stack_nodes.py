@@ -21,7 +21,7 @@ from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import LibraryPolicy
+from rabbit_policy.runtime.policies import LibraryPolicy, make_policy
 from rabbit_sim.sim_node import SimNode
 
 from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
@@ -91,11 +91,11 @@ def test_stack_walks_and_cmd_speed_changes_the_speed():
     config = StackConfig(duration=12.0, schedule=((0.0, 0.8), (6.0, 1.3)))
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell
-    slow, fast = report.segments
-    assert slow.mean_speed == pytest.approx(0.8, abs=0.05)
+    slow, fast = (segment["mean_speed"] for segment in report.segments)
+    assert slow == pytest.approx(0.8, abs=0.05)
     # the classic controller switches gait at once but settles slowly (measured 1.16 m/s
     # over 9-12 s for the 1.3 m/s gait); the command clearly takes effect
-    assert fast.mean_speed > slow.mean_speed + 0.25
+    assert fast > slow + 0.25
     assert report.steps >= 18
     # the policy (classic's default) decided once at start and every 20 ticks of sim time
     assert nodes["policy_node"].decisions == pytest.approx(12.0 / 0.020 + 1, abs=3)
@@ -519,3 +519,33 @@ def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
         assert all(f.result().success for f in futures)
         start = sim.time
         assert spin_until(executor, lambda: sim.time >= start + 0.3) and not sim.fallen
+
+
+def test_run_stack_and_walk_report_the_same_keys_and_numbers():
+    """One bookkeeping: the lockstep stack's report (run_stack.py --json) and the fast
+    path's (walk.py --json) for one scenario have the same keys and the same numbers
+    (decisions once per step: bit for bit; times to the nanosecond of the stamps)."""
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.result import run_summary
+    from rabbit_policy.experiment.scenario import Push, Scenario
+
+    schedule, pushes = ((0.0, 0.9), (1.5, 1.2)), (Push(2.2, -40.0, 0.1),)
+    report, _nodes = run_in_process(StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=0))
+    policy = make_policy("classic", decision_period=0)
+    result = walk(policy, Scenario(schedule=schedule, pushes=pushes), 3.5)
+    stack, fast = report.summary(), run_summary("classic", policy.name, result, 1.0)
+    assert list(stack) == list(fast)
+
+    def same(a, b) -> bool:  # floats to 1e-9 (the stamps carry nanoseconds), all else exactly
+        if isinstance(a, dict):
+            return isinstance(b, dict) and list(a) == list(b) and all(same(a[k], b[k]) for k in a)
+        if isinstance(a, list):
+            return isinstance(b, list) and len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+        if isinstance(a, float) and isinstance(b, float):
+            return a == pytest.approx(b, rel=1e-9, abs=1e-9)
+        return a == b
+
+    for key in set(fast) - {"wall_time", "real_time_factor"}:
+        assert same(stack[key], fast[key]), (key, stack[key], fast[key])
+    assert any(s["reach_time"] is not None for s in stack["segments"])
+

@@ -31,10 +31,11 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Sequence
 
+import numpy as np
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -45,9 +46,10 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import stamp_to_seconds
 from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, spin_timeout_of
 
-from rabbit_policy.experiment.result import json_number, mean_speed_between
-from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
+from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
+from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, validate_schedule
 from rabbit_policy.runtime.policies import controller_name
+from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
 
 NODE_MODULES = {
@@ -137,71 +139,42 @@ class StackConfig:
         return params
 
 
-SEGMENT_END_SLACK = 0.05
-"""s of sim time: a segment counts as complete when its last sampled state is this close to its end."""
-
-
-@dataclass
-class Segment:
-    """One constant-command stretch of a run; speeds in m/s, times in s."""
-
-    command: float
-    start: float
-    end: float
-    x_mid: float | None = None
-    t_mid: float | None = None
-    x_end: float | None = None
-    t_end: float | None = None
-
-    @property
-    def mean_speed(self) -> float:
-        """Mean hip speed over the segment's second half; NaN unless the run reached the
-        segment's end (within :data:`SEGMENT_END_SLACK`: the supervisor samples states), as
-        on the fast path: a run cut short reports no mean for the segment it was in."""
-        if None in (self.x_mid, self.t_mid, self.x_end, self.t_end) or self.t_end < self.end - SEGMENT_END_SLACK:
-            return float("nan")
-        return mean_speed_between(self.t_mid, self.x_mid, self.t_end, self.x_end)
-
-    def summary(self) -> dict[str, float | None]:
-        return {"command": self.command, "start": self.start, "end": self.end,
-                "mean_speed": json_number(self.mean_speed)}
-
-
 @dataclass
 class RunReport:
-    """What a run did: the JSON printed by ``run_stack.py --json``. ``stalled``: no
-    touchdown for ``StackConfig.rules.stall_after`` s (the robot stopped upright), the rule
-    of every experiment (:class:`~rabbit_sim.simulation.StopRules`); the run ends there."""
+    """What a run of the stack did. ``result``: the walk as the fast path reports one (a
+    :class:`~rabbit_policy.experiment.result.WalkResult` built from the states and touchdowns
+    the supervisor saw), so ``run_stack.py --json`` and ``walk.py --json`` are the same
+    report (:func:`~rabbit_policy.experiment.result.run_summary`). ``stalled``: no touchdown
+    for ``StackConfig.rules.stall_after`` s, the rule of every experiment."""
 
-    fell: bool
-    fall_time: float | None
-    sim_time: float
+    controller: str
+    policy: str | None
+    result: WalkResult
     wall_time: float
-    steps: int
-    segments: list[Segment] = field(default_factory=list)
     completed: bool = True
     error: str | None = None
-    stalled: bool = False
-    stall_time: float | None = None
+    rejected: int | None = None  # gaits the controller rejected (None: not known, its process is apart)
+
+    fell = property(lambda self: self.result.fell)
+    fall_time = property(lambda self: self.result.fall_time)
+    stalled = property(lambda self: self.result.stalled)
+    stall_time = property(lambda self: self.result.stall_time)
+    steps = property(lambda self: self.result.steps)
+    sim_time = property(lambda self: self.result.end_time)
+
+    @property
+    def segments(self) -> list[dict]:
+        """Per schedule segment: ``command``, ``start``, ``end``, ``mean_speed`` (second half;
+        None unless the run reached its end), ``reach_time``."""
+        return self.result.segments()
 
     @property
     def rtf(self) -> float:
         return self.sim_time / self.wall_time if self.wall_time > 0 else float("nan")
 
     def summary(self) -> dict[str, object]:
-        return {
-            "fell": self.fell,
-            "fall_time": self.fall_time,
-            "stalled": self.stalled,
-            "stall_time": self.stall_time,
-            "completed": self.completed,
-            "error": self.error,
-            "sim_time": self.sim_time,
-            "wall_time": self.wall_time,
-            "rtf": json_number(self.rtf),
-            "steps": self.steps,
-            "segments": [s.summary() for s in self.segments],
-        }
+        return {**run_summary(self.controller, self.policy, self.result, self.wall_time, self.completed, self.error),
+                "rejected": self.rejected}
 
 
 class Supervisor(Node):
@@ -210,12 +183,13 @@ class Supervisor(Node):
     def __init__(self, config: StackConfig, context=None) -> None:
         super().__init__("run_stack_supervisor", context=context)
         self.config = config
-        bounds = [t for t, _ in config.schedule[1:]] + [config.duration]
-        self.segments = [
-            Segment(v, t, end) for (t, v), end in zip(config.schedule, bounds) if t < config.duration
-        ]
-        self._next_segment = 1
-        self.steps = 0
+        self._changes = list(config.schedule[1:])  # (t, v) still to command
+        self._times: list[float] = []  # every distinct state's sim time (s) and hip x (m)
+        self._xs: list[float] = []
+        self._start: tuple[float, float] | None = None  # the placed state (t, x)
+        self._pending_step: float | None = None  # a touchdown stamp whose next state has not come yet
+        self._touchdown_times: list[float] = []
+        self.peak_torque = 0.0
         self.fell = False
         self.fall_time: float | None = None
         self.stalled = False
@@ -254,10 +228,14 @@ class Supervisor(Node):
             and self.count_subscribers(topics.JOINT_TORQUES) >= (2 if self.config.record else 1)
         )
 
+    @property
+    def steps(self) -> int:
+        return len(self._touchdown_times)
+
     def request_start(self):
         """Send the first commanded speed (so a recording holds the whole command history)
         and ask the (paused) simulator to run; returns the service future."""
-        self._speed_pub.publish(Float64(data=self.segments[0].command))
+        self._speed_pub.publish(Float64(data=self.config.schedule[0][1]))
         return self._pause_client.call_async(SetBool.Request(data=False))
 
     @property
@@ -265,8 +243,12 @@ class Supervisor(Node):
         return self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9
 
     def _count_step(self, msg: Header) -> None:
-        self.steps += 1
-        self._last_step_time = max(self._last_step_time, stamp_to_seconds(msg.stamp))  # the touchdown's sim time
+        t = stamp_to_seconds(msg.stamp)  # the sim time of the state on which the stance switched
+        self._touchdown_times.append(t)
+        if t < self.sim_time:  # the state after it is here already: the touchdown's time (see result())
+            self._last_step_time = max(self._last_step_time, self._times[int(np.searchsorted(self._times, t + 1e-9))])
+        else:
+            self._pending_step = t
 
     def _on_fallen(self, msg: Bool) -> None:
         if msg.data and not self.fell:
@@ -283,39 +265,49 @@ class Supervisor(Node):
         if t != self.sim_time or self.last_progress_wall is None:
             self.last_progress_wall = now
         self.sim_time = t
+        if self._start is None:
+            self._start = (t, x)
+        elif t > (self._times[-1] if self._times else self._start[0]):  # a state sent again is one state
+            self._times.append(t)
+            self._xs.append(x)
+            self.peak_torque = max(self.peak_torque, *(abs(e) for e in msg.effort[3:]))
+        if self._pending_step is not None and t > self._pending_step:
+            self._last_step_time, self._pending_step = t, None
         if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
             self.stalled, self.stall_time = True, t
             self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
-        while self._next_segment < len(self.segments) and t >= self.segments[self._next_segment].start - 1e-9:
-            segment = self.segments[self._next_segment]
-            self._speed_pub.publish(Float64(data=segment.command))
-            self.get_logger().info(f"t = {t:.2f} s: commanding {segment.command:.2f} m/s")
-            self._next_segment += 1
-        for segment in self.segments:
-            mid = 0.5 * (segment.start + segment.end)
-            if segment.x_mid is None and t >= mid - 1e-9:
-                segment.x_mid, segment.t_mid = x, t
-            if segment.start <= t <= segment.end + 1e-9 and segment.x_mid is not None:
-                segment.x_end, segment.t_end = x, t
+        while self._changes and t >= self._changes[0][0] - 1e-9:  # the schedule, as ClosedLoop steps it
+            _, speed = self._changes.pop(0)
+            self._speed_pub.publish(Float64(data=speed))
+            self.get_logger().info(f"t = {t:.2f} s: commanding {speed:.2f} m/s")
 
-    def report(self, error: str | None = None) -> RunReport:
+    def result(self) -> WalkResult:
+        """The walk so far, as the fast path reports one. A touchdown is dated as
+        :class:`~rabbit_policy.experiment.loop.ClosedLoop` dates it: the state after the
+        tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
+        with that state's hip x; the foot's x is on no topic (NaN)."""
+        config = self.config
+        scenario = Scenario(schedule=config.schedule, pushes=config.pushes, model=ModelOptions(config.model),
+                            rules=config.rules)
+        t0, x0 = self._start or (0.0, 0.0)
+        times, xs = np.array(self._times), np.array(self._xs)
+        touchdowns = []
+        for stamp in sorted(self._touchdown_times):
+            i = int(np.searchsorted(times, stamp + 1e-9, side="right"))  # the first state after it
+            if i < len(times):  # (a switch on the last state: that tick was never simulated)
+                touchdowns.append(Touchdown(float(times[i]), float("nan"), float(xs[i])))
+        return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
+                          stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
+                          touchdowns=touchdowns, peak_torque=self.peak_torque, planned_duration=config.duration)
+
+    def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
         wall = (
             self.last_state_wall - self.first_state_wall
             if self.first_state_wall is not None and self.last_state_wall is not None
             else 0.0
         )
-        return RunReport(
-            fell=self.fell,
-            fall_time=self.fall_time,
-            sim_time=self.sim_time,
-            wall_time=wall,
-            steps=self.steps,
-            segments=self.segments,
-            completed=self.done and error is None,
-            error=error,
-            stalled=self.stalled,
-            stall_time=self.stall_time,
-        )
+        return RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
+                         completed=self.done and error is None, error=error)
 
 
 STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
@@ -361,6 +353,18 @@ def ros_arguments(parameters: dict[str, object]) -> list[str]:
 REALTIME_HALT_TIMEOUT = 3.0
 """s (wall): a realtime simulation whose time stood still this long after it started
 stepping has halted (before the first torque it holds t = 0, however long that takes)."""
+
+
+def policy_name(config: StackConfig) -> str | None:
+    """The name of the policy policy_node runs for ``config`` (as the fast path names it);
+    None if it cannot be built here (policy_node then said why)."""
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+
+    try:
+        return make_policy(config.controller, config.gait_dir or None, config.library_mode, config.policy_file or None,
+                           decision_period=None if config.decision_period == -1 else config.decision_period).name
+    except (PolicyUnavailable, ValueError, OSError):
+        return None
 
 
 def _spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
@@ -457,7 +461,9 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
             recorder.close()  # finish the bag now: a failure to is the run's failure
             if recorder.error and not error:
                 error = f"recording failed: {recorder.error}"
-        report = supervisor.report(error)
+        policy, controller = nodes.get("policy_node"), nodes.get("hzd_controller_node")
+        report = supervisor.report(error, policy.policy.name if policy is not None else None)
+        report.rejected = controller.rejected_gaits if controller is not None else None
         return report, nodes
     finally:
         if executor is not None:
@@ -536,7 +542,7 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
                 rclpy.shutdown(context=context)
         if config.record:  # a failed recording is the cause whatever else it led to
             error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
-        return supervisor.report(error)
+        return supervisor.report(error, policy_name(config))
 
 
 def recording_error(exit_status: int, stats_file: str) -> str | None:

@@ -292,7 +292,7 @@ def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: G
     loop = ClosedLoop(scenario, policy, start, start_speed=start_speed, kp=kp, controller=controller, model=model,
                       observer=observer, record_state=record_state)
     loop.run(duration, stop_on_fall=stop_on_fall)
-    return loop.result()
+    return replace(loop.result(), planned_duration=duration)
 
 
 def walk_gait(gait: Gait, duration: float, model: ModelOptions = ModelOptions()) -> WalkResult:

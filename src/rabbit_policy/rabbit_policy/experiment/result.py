@@ -85,6 +85,7 @@ class WalkResult:
     qpos: np.ndarray | None = None
     qvel: np.ndarray | None = None
     stance: np.ndarray | None = None
+    planned_duration: float | None = None  # s: how long the walk was to last (None: as long as it did)
 
     # ------------------------------------------------------------------ basics
     @property
@@ -148,7 +149,8 @@ class WalkResult:
     def segment_bounds(self) -> list[tuple[float, float, float]]:
         """(start s, end s, command m/s) of every schedule segment that began during the walk."""
         schedule = self.scenario.schedule
-        ends = [t for t, _ in schedule[1:]] + [max(self.end_time, schedule[-1][0])]
+        planned = self.end_time if self.planned_duration is None else self.start_time + self.planned_duration
+        ends = [t for t, _ in schedule[1:]] + [max(planned, schedule[-1][0])]
         return [(t, end, v) for (t, v), end in zip(schedule, ends) if t <= self.end_time + 1e-9]
 
     def reach_time(self, start: float, end: float, command: float, tolerance: float = REACH_TOLERANCE) -> float | None:
@@ -193,3 +195,18 @@ class WalkResult:
         result = "fell" if self.fell else "stalled" if self.stalled else "walked"
         return {"outcome": result, "fell": self.fell, "fall_time": self.fall_time, "stalled": self.stalled,
                 "stall_time": self.stall_time}
+
+
+def run_summary(controller: str, policy: str | None, result: WalkResult, wall_time: float,
+                completed: bool = True, error: str | None = None,
+                tolerance: float = REACH_TOLERANCE) -> dict:
+    """The one JSON report of a walk, the same keys from ``walk.py --json`` (the fast path)
+    and ``run_stack.py --json`` (the node stack): the controller and policy, the scenario,
+    :meth:`WalkResult.summary`, the real-time factor (sim s per wall s; None if no time
+    passed), whether the run completed and its error (None)."""
+    return {"controller": controller, "policy": policy, "scenario": result.scenario.to_dict(),
+            **result.summary(tolerance),
+            "real_time_factor": round(result.duration / wall_time, 2) if wall_time > 0 and result.duration > 0
+            else None,
+            "wall_time": round(wall_time, 3), "completed": completed, "error": error}
+
