@@ -1,0 +1,123 @@
+"""What a run of the stack is: :class:`StackConfig` (one run, as ``scripts/run_stack.py``'s
+options give it) and the node parameters and command lines it makes."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
+from rabbit_policy.runtime.policies import controller_name
+from rabbit_sim.simulation import StopRules
+
+
+NODE_MODULES = {
+    "policy_node": "rabbit_policy.policy_node",
+    "hzd_controller_node": "rabbit_hzd_controller.hzd_controller_node",
+    "sim_node": "rabbit_sim.sim_node",
+    "recorder_node": "rabbit_sim.recorder_node",
+}
+
+
+@dataclass(frozen=True)
+class StackConfig:
+    """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0.
+    ``decision_period``: -1 = the policy's own (classic: every 20 ticks; learned: as
+    trained), 0 = once per step, N > 0 = every N ticks, the controller applying each gait at
+    once (told so on ``/hzd/gait_timing``). ``markers_rate``: ``/rabbit/markers`` per s of
+    sim time (0 = off); ``viewer``: sim_node opens MuJoCo's viewer."""
+
+    duration: float
+    schedule: tuple[tuple[float, float], ...]
+    controller: str = "classic"
+    mode: str = "lockstep"
+    rtf: float = 1.0
+    model: str = "paper"
+    library_mode: str = "interpolate"
+    gait_dir: str = ""
+    policy_file: str = ""
+    decision_period: int = -1
+    pushes: tuple[Push, ...] = ()
+    push_duration: float = 0.1
+    stats_file: str = ""
+    record: str = ""
+    record_compression: str = "none"
+    record_overwrite: bool = False
+    record_stats_file: str = ""
+    markers_rate: float = 30.0
+    viewer: bool = False
+    recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
+    rules: StopRules = StopRules()  # the fall and stall rules of every experiment
+
+    def __post_init__(self) -> None:
+        if not self.duration > 0.0:
+            raise ValueError("duration must be > 0 s")
+        object.__setattr__(self, "controller", controller_name(self.controller))
+        validate_schedule(self.schedule)
+        if not (math.isfinite(self.recorder_timeout) and self.recorder_timeout > 0.0):
+            raise ValueError(f"recorder_timeout must be a finite number > 0 s, got {self.recorder_timeout}")
+        if not (math.isfinite(self.rtf) and self.rtf > 0.0):
+            raise ValueError(f"rtf must be a finite number > 0, got {self.rtf}")
+        if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
+            raise ValueError(f"decision_period must be -1 (the policy's own), 0 or a whole number of ticks, "
+                             f"got {self.decision_period!r}")
+
+    def node_parameters(self) -> dict[str, dict[str, object]]:
+        """The ROS parameters of each node for this run (the recorder only if recording)."""
+        params: dict[str, dict[str, object]] = {
+            "policy_node": {
+                "policy": self.controller,
+                "library_mode": self.library_mode,
+                "gait_dir": self.gait_dir,
+                "policy_file": self.policy_file,
+                "initial_speed": self.schedule[0][1],
+                "decision_period": self.decision_period,
+            },
+            "hzd_controller_node": {},
+            "sim_node": {
+                "model": self.model,
+                "mode": self.mode,
+                "rtf": self.rtf,
+                "stop_time": self.duration,
+                "push_duration": self.push_duration,
+                "push_schedule": format_pushes(self.pushes),
+                "start_paused": True,
+                "wait_for_recorder": bool(self.record) and self.mode in ("lockstep", "paced"),
+                "stats_file": self.stats_file,
+                "markers_rate": self.markers_rate,
+                "viewer": self.viewer,
+            },
+        }
+        if self.record:
+            params["recorder_node"] = {
+                "output": self.record,
+                "compression": self.record_compression,
+                "overwrite": self.record_overwrite,
+                "stats_file": self.record_stats_file,
+            }
+        return params
+
+
+def ros_arguments(parameters: dict[str, object]) -> list[str]:
+    """``{"mode": "lockstep", "stop_time": 5.0}`` ->
+    ``["--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0"]``; empty strings are
+    left out (the node's default applies)."""
+    args = ["--ros-args"]
+    for name, value in parameters.items():
+        if value == "":
+            continue
+        text = str(value).lower() if isinstance(value, bool) else repr(value) if isinstance(value, float) else str(value)
+        args += ["-p", f"{name}:={text}"]
+    return args
+
+
+def policy_name(config: StackConfig) -> str | None:
+    """The name of the policy policy_node runs for ``config`` (as the fast path names it);
+    None if it cannot be built here (policy_node then said why)."""
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+
+    try:
+        return make_policy(config.controller, config.gait_dir or None, config.library_mode, config.policy_file or None,
+                           decision_period=None if config.decision_period == -1 else config.decision_period).name
+    except (PolicyUnavailable, ValueError, OSError):
+        return None

@@ -1,0 +1,103 @@
+"""A run with the nodes as child processes (``python -m <module> --ros-args ...``, what
+``ros2 run`` executes), supervised from this process."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from rabbit_msgs_py.runtime import init_context
+
+from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
+from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recording
+
+
+class NodeProcesses:
+    """The three nodes as child processes, each in its own session so that Ctrl-C at the
+    terminal reaches only run_stack, which then stops them in order (SIGINT, then SIGTERM,
+    then SIGKILL)."""
+
+    def __init__(self, config: StackConfig, log=sys.stderr) -> None:
+        self.procs: dict[str, subprocess.Popen] = {}
+        env = dict(os.environ)
+        for name, params in config.node_parameters().items():
+            cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params)]
+            self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True)
+
+    def dead(self) -> str | None:
+        for name, proc in self.procs.items():
+            if proc.poll() is not None:
+                return f"{name} exited early with status {proc.returncode}"
+        return None
+
+    def stop(self, timeout: float = 5.0) -> dict[str, int]:
+        """SIGINT, then SIGTERM, then SIGKILL, ``timeout`` s apart (each with SIGCONT: a
+        stopped process handles a signal only once it runs); exit statuses by node."""
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+            alive = [p for p in self.procs.values() if p.poll() is None]
+            if not alive:
+                break
+            for proc in alive:
+                proc.send_signal(sig)
+                if sig != signal.SIGKILL:
+                    proc.send_signal(signal.SIGCONT)
+            deadline = time.monotonic() + timeout
+            for proc in alive:
+                try:
+                    proc.wait(max(0.0, deadline - time.monotonic()))
+                except subprocess.TimeoutExpired:
+                    pass
+        return {name: proc.wait() for name, proc in self.procs.items()}
+
+
+def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr,
+                      stop=lambda: False) -> RunReport:
+    """Start the nodes as processes, supervise the run here, stop them; returns the report.
+    ``stop()``: polled, true ends the run early."""
+    import rclpy
+
+    from rabbit_msgs_py.runtime import make_executor
+
+    with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
+        if config.record and not config.record_stats_file:  # where the recorder says how it ended
+            config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
+        context = init_context()
+        procs = NodeProcesses(config, log=log)
+        supervisor = Supervisor(config, context=context)
+        error = None
+        try:
+            executor = make_executor(context)
+            executor.add_node(supervisor)
+            error = spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
+            error = error or wait_for_recording(executor, supervisor, stall_timeout, alive=procs.dead)
+        finally:
+            codes = procs.stop()
+            supervisor.destroy_node()
+            if context.ok():
+                rclpy.shutdown(context=context)
+        if config.record:  # a failed recording is the cause whatever else it led to
+            error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
+        return supervisor.report(error, policy_name(config))
+
+
+def recording_error(exit_status: int, stats_file: str) -> str | None:
+    """Why a recording failed (None if it did not): the recorder's own message from its
+    stats file, else its exit status."""
+    try:
+        message = json.loads(Path(stats_file).read_text()).get("error")
+    except (OSError, ValueError):
+        message = None
+    if message:
+        return f"recording failed: {message}"
+    if exit_status != 0:
+        return f"recording failed: recorder_node exited with status {exit_status} (see its log)"
+    if not Path(stats_file).is_file():
+        return "recording failed: recorder_node did not finish its bag (no stats written)"
+    return None

@@ -1,0 +1,251 @@
+"""The experiment node of a run (:class:`Supervisor`: the speed schedule, what the walk did,
+falls and stalls, the end of the run), its :class:`RunReport`, and the loop that spins it
+until the run is over."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool, Float64, Header
+from std_srvs.srv import SetBool
+
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import stamp_to_seconds
+
+from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
+from rabbit_policy.experiment.scenario import Scenario
+from rabbit_sim.model import ModelOptions
+
+from .config import StackConfig
+
+
+@dataclass
+class RunReport:
+    """What a run of the stack did. ``result``: the walk as the fast path reports one (a
+    :class:`~rabbit_policy.experiment.result.WalkResult` built from the states and touchdowns
+    the supervisor saw), so ``run_stack.py --json`` and ``walk.py --json`` are the same
+    report (:func:`~rabbit_policy.experiment.result.run_summary`). ``stalled``: no touchdown
+    for ``StackConfig.rules.stall_after`` s, the rule of every experiment."""
+
+    controller: str
+    policy: str | None
+    result: WalkResult
+    wall_time: float
+    completed: bool = True
+    error: str | None = None
+    rejected: int | None = None  # gaits the controller rejected (None: not known, its process is apart)
+
+    fell = property(lambda self: self.result.fell)
+    fall_time = property(lambda self: self.result.fall_time)
+    stalled = property(lambda self: self.result.stalled)
+    stall_time = property(lambda self: self.result.stall_time)
+    steps = property(lambda self: self.result.steps)
+    sim_time = property(lambda self: self.result.end_time)
+
+    @property
+    def segments(self) -> list[dict]:
+        """Per schedule segment: ``command``, ``start``, ``end``, ``mean_speed`` (second half;
+        None unless the run reached its end), ``reach_time``."""
+        return self.result.segments()
+
+    @property
+    def rtf(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else float("nan")
+
+    def summary(self) -> dict[str, object]:
+        return {**run_summary(self.controller, self.policy, self.result, self.wall_time, self.completed, self.error),
+                "rejected": self.rejected}
+
+
+class Supervisor(Node):
+    """Runs the experiment: speed schedule, segment statistics, falls and stalls, end of run."""
+
+    def __init__(self, config: StackConfig, context=None) -> None:
+        super().__init__("run_stack_supervisor", context=context)
+        self.config = config
+        self._changes = list(config.schedule[1:])  # (t, v) still to command
+        self._times: list[float] = []  # every distinct state's sim time (s) and hip x (m)
+        self._xs: list[float] = []
+        self._start: tuple[float, float] | None = None  # the placed state (t, x)
+        self._pending_step: float | None = None  # a touchdown stamp whose next state has not come yet
+        self._touchdown_times: list[float] = []
+        self.peak_torque = 0.0
+        self.fell = False
+        self.fall_time: float | None = None
+        self.stalled = False
+        self.stall_time: float | None = None
+        self._last_step_time = 0.0
+        self.sim_time = 0.0
+        self.first_state_wall: float | None = None
+        self.last_state_wall: float | None = None
+        self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
+        self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
+        self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
+        self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
+        self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE)
+        self.recorded_until = -1.0  # s, sim time of the newest state the recorder has written
+        if config.record:
+            self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
+
+    def _on_recorded(self, msg: Clock) -> None:
+        self.recorded_until = stamp_to_seconds(msg.clock)
+
+    @property
+    def recording_complete(self) -> bool:
+        """The recorder has written the last state this node saw (always true unrecorded)."""
+        return not self.config.record or self.recorded_until >= self.sim_time - 1e-9
+
+    def connected(self) -> bool:
+        """True once simulator, controller and policy are all visible to this node."""
+        return (
+            self._pause_client.service_is_ready()
+            and self.count_publishers(topics.JOINT_STATES) > 0
+            and self.count_publishers(topics.JOINT_TORQUES) > 0
+            and self.count_publishers(topics.ALPHA) > 0
+            and self.count_subscribers(topics.CMD_SPEED) > 0
+            # sim_node and, when recording, the recorder take the torques
+            and self.count_subscribers(topics.JOINT_TORQUES) >= (2 if self.config.record else 1)
+        )
+
+    @property
+    def steps(self) -> int:
+        return len(self._touchdown_times)
+
+    def request_start(self):
+        """Send the first commanded speed (so a recording holds the whole command history)
+        and ask the (paused) simulator to run; returns the service future."""
+        self._speed_pub.publish(Float64(data=self.config.schedule[0][1]))
+        return self._pause_client.call_async(SetBool.Request(data=False))
+
+    @property
+    def done(self) -> bool:
+        return self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9
+
+    def _count_step(self, msg: Header) -> None:
+        t = stamp_to_seconds(msg.stamp)  # the sim time of the state on which the stance switched
+        self._touchdown_times.append(t)
+        if t < self.sim_time:  # the state after it is here already: the touchdown's time (see result())
+            self._last_step_time = max(self._last_step_time, self._times[int(np.searchsorted(self._times, t + 1e-9))])
+        else:
+            self._pending_step = t
+
+    def _on_fallen(self, msg: Bool) -> None:
+        if msg.data and not self.fell:
+            self.fell = True
+            self.fall_time = self.sim_time
+
+    def _on_state(self, msg: JointState) -> None:
+        now = time.perf_counter()
+        if self.first_state_wall is None:
+            self.first_state_wall = now
+        self.last_state_wall = now
+        t = stamp_to_seconds(msg.header.stamp)
+        x = msg.position[0]
+        if t != self.sim_time or self.last_progress_wall is None:
+            self.last_progress_wall = now
+        self.sim_time = t
+        if self._start is None:
+            self._start = (t, x)
+        elif t > (self._times[-1] if self._times else self._start[0]):  # a state sent again is one state
+            self._times.append(t)
+            self._xs.append(x)
+            self.peak_torque = max(self.peak_torque, *(abs(e) for e in msg.effort[3:]))
+        if self._pending_step is not None and t > self._pending_step:
+            self._last_step_time, self._pending_step = t, None
+        if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
+            self.stalled, self.stall_time = True, t
+            self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
+        while self._changes and t >= self._changes[0][0] - 1e-9:  # the schedule, as ClosedLoop steps it
+            _, speed = self._changes.pop(0)
+            self._speed_pub.publish(Float64(data=speed))
+            self.get_logger().info(f"t = {t:.2f} s: commanding {speed:.2f} m/s")
+
+    def result(self) -> WalkResult:
+        """The walk so far, as the fast path reports one. A touchdown is dated as
+        :class:`~rabbit_policy.experiment.loop.ClosedLoop` dates it: the state after the
+        tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
+        with that state's hip x; the foot's x is on no topic (NaN)."""
+        config = self.config
+        scenario = Scenario(schedule=config.schedule, pushes=config.pushes, model=ModelOptions(config.model),
+                            rules=config.rules)
+        t0, x0 = self._start or (0.0, 0.0)
+        times, xs = np.array(self._times), np.array(self._xs)
+        touchdowns = []
+        for stamp in sorted(self._touchdown_times):
+            i = int(np.searchsorted(times, stamp + 1e-9, side="right"))  # the first state after it
+            if i < len(times):  # (a switch on the last state: that tick was never simulated)
+                touchdowns.append(Touchdown(float(times[i]), float("nan"), float(xs[i])))
+        return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
+                          stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
+                          touchdowns=touchdowns, peak_torque=self.peak_torque, planned_duration=config.duration)
+
+    def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
+        wall = (
+            self.last_state_wall - self.first_state_wall
+            if self.first_state_wall is not None and self.last_state_wall is not None
+            else 0.0
+        )
+        return RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
+                         completed=self.done and error is None, error=error)
+
+
+REALTIME_HALT_TIMEOUT = 3.0
+"""s (wall): a realtime simulation whose time stood still this long after it started
+stepping has halted (before the first torque it holds t = 0, however long that takes)."""
+
+
+def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
+                     spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
+    """Start the (paused) simulation once every node is connected, then spin until the run
+    is over; returns an error message or None. ``stop()`` true (a signal arrived) ends
+    the run as "interrupted"; ``alive()`` returns a message when a node process died.
+    Progress is sim time moving: a state sent again does not count."""
+    from rclpy.executors import ExternalShutdownException
+
+    start = time.perf_counter()
+    started = None
+    while not supervisor.done:
+        running = started is not None and started.done()
+        try:
+            executor.spin_once(timeout_sec=spin_timeout if running else 0.02)
+        except (KeyboardInterrupt, ExternalShutdownException):
+            return "interrupted"
+        problem = "interrupted" if stop() else alive()
+        if problem:
+            return problem
+        if started is None and supervisor.connected():
+            started = supervisor.request_start()
+        if not running and time.perf_counter() - start > stall_timeout:
+            return f"the nodes did not connect within {stall_timeout:.0f} s"
+        if running:
+            waited = time.perf_counter() - (supervisor.last_progress_wall or start)
+            if supervisor.config.record and waited > supervisor.config.recorder_timeout \
+                    and supervisor.recorded_until < supervisor.sim_time - 1e-9:
+                return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and the "
+                        f"simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
+            if supervisor.config.mode == "realtime" and supervisor.sim_time > 0.0 and waited > REALTIME_HALT_TIMEOUT:
+                return (f"the simulation halted at t = {supervisor.sim_time:.3f} s: realtime mode halts when the "
+                        "control loop falls behind the wall clock (sim_node's log says why); --mode paced runs "
+                        "slower instead")
+            if waited > stall_timeout:
+                return f"no simulation progress for {stall_timeout:.0f} s (at t = {supervisor.sim_time:.3f} s)"
+    return None
+
+
+def wait_for_recording(executor, supervisor: Supervisor, timeout: float, alive=lambda: None) -> str | None:
+    """After the run: spin until the recorder has written the last state (a node stopped
+    earlier could take states still in flight with it); an error message if it does not
+    within ``timeout`` s."""
+    deadline = time.perf_counter() + timeout
+    while not supervisor.recording_complete:
+        executor.spin_once(timeout_sec=0.02)
+        if alive() or time.perf_counter() > deadline:
+            return (f"the recorder did not write the last state (t = {supervisor.sim_time:.3f} s) within "
+                    f"{timeout:.0f} s; it has up to t = {supervisor.recorded_until:.3f} s")
+    return None
