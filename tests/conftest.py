@@ -4,7 +4,8 @@ Every ROS process in the tests discovers on localhost only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set) and uses a domain ID of its own, so
 concurrent runs do not cross-talk.
 
-Layout: ``tests/<package>/`` holds the tests of that package's modules; ``tests/`` itself
+Layout: ``tests/{msgs,hzd_controller,sim,policy}/`` hold the tests of the ``rabbit_*`` package of
+that name (without the prefix: ``tests/rabbit_sim`` on the path would shadow the package); ``tests/`` itself
 the project-wide ones (manifests, the colcon build, the ROS wheels, the docs).
 
 Tiers (markers, declared in pytest.ini), each set where the test is defined: a module's

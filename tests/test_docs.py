@@ -233,9 +233,9 @@ def test_every_relative_link_in_the_docs_reaches_a_file():
 # the long ones are covered by their own tests (named here) and only parsed above
 README_SHORTENED = {"--duration": "1.5"}
 README_NOT_RUN = {
-    "--viewer": "tests/rabbit_sim/test_visualization.py (needs a display)",
-    "evaluate.py": "tests/rabbit_policy/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
-    "train.py": "tests/rabbit_policy/test_training.py (the trainers, resume, signals)",
+    "--viewer": "tests/sim/test_visualization.py (needs a display)",
+    "evaluate.py": "tests/policy/test_evaluation.py::test_evaluate_quick_writes_report_results_figures_and_videos",
+    "train.py": "tests/policy/test_training.py (the trainers, resume, signals)",
 }
 
 
