@@ -48,10 +48,11 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
 
     try:
-        policies = {controller_name(c): make_policy(c, mode=args.library_mode, policy_file=args.policy_file,
-                                                            max_command_step=args.max_command_step,
-                                                            decision_period=args.decision_period)
-                    for c in args.controller}
+        names = [controller_name(c) for c in args.controller]
+        policies = {name: make_policy(name, mode=args.library_mode,
+                                      policy_file=args.policy_file if name == "learned" else None,
+                                      max_command_step=args.max_command_step, decision_period=args.decision_period)
+                    for name in names}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -63,3 +63,13 @@ def test_package_xml_declares_what_the_code_imports(package):
 def test_the_shared_layer_and_the_simulator_import_no_controller_or_policy():
     assert not imported_modules("rabbit_msgs_py") & {"rabbit_sim", "rabbit_hzd_controller", "rabbit_policy"}
     assert not imported_modules("rabbit_sim") & {"rabbit_hzd_controller", "rabbit_policy"}
+
+
+def test_the_tests_import_the_packages_from_src():
+    """No test directory on the path shadows a package (a tests/rabbit_policy did: the
+    package then resolved to a namespace without its data)."""
+    import importlib
+
+    for name in PACKAGES:
+        module = importlib.import_module(name)
+        assert module.__file__ and Path(module.__file__).resolve().is_relative_to(SRC / name), module

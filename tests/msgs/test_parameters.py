@@ -30,7 +30,9 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
 @pytest.mark.slow
 @pytest.mark.parametrize("args, message", [
     (["rabbit_hzd_controller.hzd_controller_node", "-p", "kp:=fast"], "parameter kp must be a number"),
-    (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "not a policy checkpoint"),
+    (["rabbit_policy.policy_node", "-p", "policy:=learned", "-p", "policy_file:=/etc/passwd"],
+     "not a policy checkpoint"),
+    (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "it is for the learned controller"),
     (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "initial_speed must be a finite number"),
     (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
     (["rabbit_sim.sim_node", "-p", "damping:=nan"], "damping must be a finite number"),

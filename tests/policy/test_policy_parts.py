@@ -206,3 +206,12 @@ def test_a_gait_directory_holding_no_gait_is_one_line_and_exit_2(tmp_path, conte
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if line.strip()]
     assert "Traceback" not in out.stderr and "gait_1.00.json" in lines[-1] and "not a gait file" in lines[-1]
+
+
+def test_a_file_for_the_other_controller_is_refused_not_ignored():
+    """--policy-file with classic, or a gait directory with learned, would be silently
+    unused: each is a one-line error instead (every entry point builds policies here)."""
+    with pytest.raises(ValueError, match="for the learned controller"):
+        make_policy("classic", policy_file="runs/es0/best.pt")
+    with pytest.raises(ValueError, match="the learned one takes a policy file"):
+        make_policy("learned", gait_dir="my_gaits")

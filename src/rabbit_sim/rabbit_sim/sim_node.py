@@ -49,7 +49,7 @@ import math
 import sys
 import threading
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
@@ -65,6 +65,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.conversions import (
     MessageError, joint_state_vectors, short, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES, N_ACTUATED
@@ -104,50 +105,37 @@ callback then runs the tick) before stepping on the previous torque."""
 
 @dataclass(frozen=True)
 class SimSettings:
-    """sim_node parameters (see the README's parameter table).
+    """sim_node's parameters, one field each, its help the parameter's description (the one
+    table :data:`SIM_PARAMS` is made from; ``ros2 param describe`` shows it). Units: s of sim
+    time unless said wall, N, N m s/rad."""
 
-    model: ``paper`` or ``drives`` (see :func:`rabbit_sim.model.load_model`).
-    mode: ``lockstep``, ``paced`` or ``realtime``.
-    rtf: paced, the target real-time factor (sim s per wall s).
-    push_duration: how long a ``/push`` wrench is held (s, sim time).
-    push_schedule: scripted pushes the simulator applies itself at exact sim times,
-        ``"T:FX:DUR,..."`` (s, N, s; :mod:`rabbit_msgs_py.pushes`), again after a reset;
-        ``/push`` messages act when they arrive, these do not depend on message timing.
-    max_push_force: larger pushes (N, each component) are rejected.
-    stop_time: pause the physics at this sim time (s); 0 = run until stopped.
-    resend_timeout: lockstep, wall s without a torque before the state is re-sent.
-    watchdog_timeout: realtime, wall s without a torque before damping takes over.
-    damping: realtime watchdog damping gain (N m s/rad).
-    max_late_fraction: realtime, halt the physics when more than this share of a
-        second's ticks were late.
-    start_paused: start with the physics paused (``/sim/pause`` false starts it); the
-        launch script uses it to start the run once every node is connected.
-    wait_for_recorder: lockstep and paced, hold the next step while the recorder is more
-        than :data:`RECORDER_LAG` states behind (the launch script sets it when recording).
-    stats_file: write :meth:`SimNode.statistics` as JSON to this path when the node
-        closes ('' = don't); the benchmarks read it.
-    markers_rate: ``/rabbit/markers`` messages per second of sim time (0 = none); one also
-        goes out whenever RABBIT is placed (start, reset).
-    viewer: open MuJoCo's viewer (passive, synced to the simulation at most 60 times per
-        wall second); the node does not start without a display.
-    """
-
-    model: str = "paper"
-    mode: str = "lockstep"
-    rtf: float = 1.0
-    push_duration: float = 0.1
-    push_schedule: str = ""
-    max_push_force: float = 2000.0
-    stop_time: float = 0.0
-    resend_timeout: float = 0.2
-    watchdog_timeout: float = 0.008
-    damping: float = 20.0
-    max_late_fraction: float = 0.5
-    start_paused: bool = False
-    wait_for_recorder: bool = False
-    stats_file: str = ""
-    markers_rate: float = 30.0
-    viewer: bool = False
+    model: str = option("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)")
+    mode: str = option("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), "
+                                   "paced (lockstep held to the wall clock times rtf) or realtime (free-running "
+                                   "1 kHz wall clock)")
+    rtf: float = option(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot "
+                             "keep up)")
+    push_duration: float = option(0.1, "how long a /push wrench is held, s of sim time, > 0 (may change at run time)")
+    push_schedule: str = option("", "pushes the simulator applies itself at exact sim times, again after a reset, "
+                                    "'T:FX:DUR,...' (s, N, s); '' = none")
+    max_push_force: float = option(2000.0, "larger push components are rejected, N, > 0")
+    stop_time: float = option(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)")
+    resend_timeout: float = option(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0")
+    watchdog_timeout: float = option(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
+                                            "(the gaits go unstable at about 10 ms of torque delay)")
+    damping: float = option(20.0, "realtime watchdog damping gain, N m s/rad, >= 0")
+    max_late_fraction: float = option(0.5, "realtime: halt the physics when more than this share of a second's "
+                                           "ticks ran on a stale torque, in (0, 1]")
+    start_paused: bool = option(False, "start with the physics paused (/sim/pause false runs it; run_stack starts "
+                                       "the run so once every node is connected)")
+    wait_for_recorder: bool = option(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) "
+                                            "is at most a few states behind, so a recording loses nothing under any "
+                                            "load (run_stack sets it when recording)")
+    stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
+    markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
+                                       "one also goes out whenever RABBIT is placed")
+    viewer: bool = option(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a "
+                                 "display)")
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -177,28 +165,11 @@ class SimSettings:
         return parse_pushes(self.push_schedule)
 
 
-SIM_PARAMS = {
-    "model": Param("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)"),
-    "mode": Param("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), paced "
-                              "(lockstep held to the wall clock times rtf) or realtime (free-running 1 kHz wall clock)"),
-    "rtf": Param(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot keep up)"),
-    "push_duration": Param(0.1, "how long a /push wrench is held, s of sim time, > 0", dynamic=True),
-    "push_schedule": Param("", "pushes applied at sim times, 'T:FX:DUR,...' (s, N, s); '' = none"),
-    "max_push_force": Param(2000.0, "larger push components are rejected, N, > 0"),
-    "stop_time": Param(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)"),
-    "resend_timeout": Param(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0"),
-    "watchdog_timeout": Param(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
-                                     "(the gaits go unstable at about 10 ms of torque delay)"),
-    "damping": Param(20.0, "realtime watchdog damping gain, N m s/rad, >= 0"),
-    "max_late_fraction": Param(0.5, "realtime: halt the physics when more than this share of a second's ticks "
-                                    "ran on a stale torque, in (0, 1]"),
-    "start_paused": Param(False, "start with the physics paused (/sim/pause false runs it)"),
-    "wait_for_recorder": Param(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) is "
-                                      "at most a few states behind, so a recording loses nothing under any load"),
-    "stats_file": Param("", "write the run statistics as JSON here when the node closes ('' = don't)"),
-    "markers_rate": Param(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off)"),
-    "viewer": Param(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a display)"),
-}
+RUN_TIME_PARAMS = ("push_duration",)
+"""Parameters that may change while the node runs (``ros2 param set``); the rest are fixed."""
+SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS)
+              for f in fields(SimSettings)}
+"""sim_node's parameters, declared from :class:`SimSettings` (one place for each default)."""
 
 
 def stamp_of(seconds: float) -> Time:

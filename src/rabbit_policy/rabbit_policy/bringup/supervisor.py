@@ -183,7 +183,8 @@ class Supervisor(Node):
                 touchdowns.append(Touchdown(float(times[i]), float("nan"), float(xs[i])))
         return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
                           stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
-                          touchdowns=touchdowns, peak_torque=self.peak_torque, planned_duration=config.duration)
+                          touchdowns=touchdowns, peak_torque=self.peak_torque,
+                          planned_duration=config.duration - t0)  # t0: the first state seen (0 unless missed)
 
     def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
         wall = (

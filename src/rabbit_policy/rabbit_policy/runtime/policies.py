@@ -196,6 +196,12 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
                                         or decision_period < 0):
         raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {decision_period!r}")
     kind = controller_name(kind)
+    if kind == "classic" and policy_file:
+        raise ValueError("a policy file is a learned policy's checkpoint: it is for the learned controller "
+                         "(policy:=learned, --controller learned); the classic one uses gait_dir")
+    if kind == "learned" and gait_dir:
+        raise ValueError("a gait directory is the classic controller's library: the learned one takes a policy "
+                         "file (policy_file, --policy-file)")
     period = None
     if kind == "classic":
         try:
