@@ -5,6 +5,7 @@ lateness, the recorder gate and the statistics."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -216,3 +217,15 @@ def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit_by_stamps():
     assert not gate.holds(7 * ms)
     assert gate.holds(0)  # a reset: the report from before it holds until t = 0 is recorded
     assert "t = 0.003 s" in gate.behind(7 * ms)
+
+
+def test_sim_settings_are_checked_without_ros():
+    """sim_node's settings are a ROS-free dataclass: bad values are one-line ValueErrors
+    (the node turns them into its start-up error)."""
+    from rabbit_sim.settings import SimSettings
+
+    assert SimSettings().mode == "lockstep"
+    for bad, message in (({"mode": "fast"}, "mode must be one of"), ({"rtf": 0.0}, "rtf must be"),
+                         ({"push_schedule": "1:5e6:0.1"}, "within"), ({"max_late_fraction": 2.0}, "(0, 1]")):
+        with pytest.raises(ValueError, match=re.escape(message)):
+            SimSettings(**bad)

@@ -32,6 +32,20 @@ from enum import Enum
 from typing import Callable, Sequence
 
 
+RECORDER_LAG = 4
+"""Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
+keep 10: with at most 4 outstanding none is ever overwritten)."""
+RECORDER_RESEND = 0.05
+"""s (wall): while the recorder lacks the state it waits for, the state goes out again this
+often (a recorder that connected late, or a report lost)."""
+TAKEOVER_AFTER = 1.0
+"""s (wall): another controller replaces the paired one after it left a state unanswered this long."""
+REPLY_GRACE = 0.0006
+"""s: a realtime tick whose reply is still on its way waits this long for it (the reply's
+callback then runs the tick) before stepping on the previous torque."""
+
+
+
 class Reply(Enum):
     """What to do with a torque reply in lockstep."""
 

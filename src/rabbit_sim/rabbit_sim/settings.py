@@ -1,0 +1,81 @@
+"""sim_node's settings, ROS-free: :class:`SimSettings` (one field per node parameter, its
+help the parameter's description) and the modes."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+from rabbit_msgs_py.cli import option
+from rabbit_msgs_py.pushes import Push, parse_pushes
+
+MODES = ("lockstep", "paced", "realtime")
+REPLY_MODES = ("lockstep", "paced")
+"""Modes that step once per torque reply (never without the torque for the state)."""
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    """sim_node's parameters, one field each, its help the parameter's description (the one
+    table :data:`SIM_PARAMS` is made from; ``ros2 param describe`` shows it). Units: s of sim
+    time unless said wall, N, N m s/rad."""
+
+    model: str = option("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)")
+    mode: str = option("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), "
+                                   "paced (lockstep held to the wall clock times rtf) or realtime (free-running "
+                                   "1 kHz wall clock)")
+    rtf: float = option(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot "
+                             "keep up)")
+    push_duration: float = option(0.1, "how long a /push wrench is held, s of sim time, > 0 (may change at run time)")
+    push_schedule: str = option("", "pushes the simulator applies itself at exact sim times, again after a reset, "
+                                    "'T:FX:DUR,...' (s, N, s); '' = none")
+    max_push_force: float = option(2000.0, "larger push components are rejected, N, > 0")
+    stop_time: float = option(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)")
+    resend_timeout: float = option(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0")
+    watchdog_timeout: float = option(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
+                                            "(the gaits go unstable at about 10 ms of torque delay)")
+    damping: float = option(20.0, "realtime watchdog damping gain, N m s/rad, >= 0")
+    max_late_fraction: float = option(0.5, "realtime: halt the physics when more than this share of a second's "
+                                           "ticks ran on a stale torque, in (0, 1]")
+    start_paused: bool = option(False, "start with the physics paused (/sim/pause false runs it; run_stack starts "
+                                       "the run so once every node is connected)")
+    wait_for_recorder: bool = option(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) "
+                                            "is at most a few states behind, so a recording loses nothing under any "
+                                            "load (run_stack sets it when recording)")
+    stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
+    markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
+                                       "one also goes out whenever RABBIT is placed")
+    viewer: bool = option(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a "
+                                 "display)")
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"mode must be one of {MODES}, got {self.mode!r}")
+        for name in ("rtf", "push_duration", "max_push_force", "resend_timeout", "watchdog_timeout"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a finite number > 0, got {value}")
+        for name in ("stop_time", "damping", "markers_rate"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        if not 0.0 < self.max_late_fraction <= 1.0:
+            raise ValueError(f"max_late_fraction must be in (0, 1], got {self.max_late_fraction}")
+        if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
+            raise ValueError(f"stats_file {self.stats_file}: its directory does not exist")
+        try:
+            pushes = parse_pushes(self.push_schedule)
+        except ValueError as exc:
+            raise ValueError(f"push_schedule: {exc}") from None
+        if any(abs(p.force_x) > self.max_push_force for p in pushes):
+            raise ValueError(f"push_schedule: forces must be within +-{self.max_push_force} N")
+
+    @property
+    def pushes(self) -> tuple[Push, ...]:
+        """``push_schedule`` parsed, by time."""
+        return parse_pushes(self.push_schedule)
+
+
+RUN_TIME_PARAMS = ("push_duration",)
+"""Parameters that may change while the node runs (``ros2 param set``); the rest are fixed."""
