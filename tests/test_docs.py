@@ -65,8 +65,8 @@ def script_options(name: str) -> tuple[set[str], set[str]]:
 def code_spans(text: str):
     """(line, code) of every fenced block and inline code span of a markdown text; an
     inline span's line breaks are spaces."""
-    for block in FENCED.finditer(text):
-        yield text.count("\n", 0, block.start()) + 2, block.group(1)
+    for block in FENCED.finditer(text):  # shell comments are prose, not commands
+        yield text.count("\n", 0, block.start()) + 2, re.sub(r"(^|\s)#.*", "", block.group(1), flags=re.M)
     outside = FENCED.sub(lambda m: "\n" * m.group(0).count("\n"), text)
     for span in INLINE.finditer(outside):
         yield outside.count("\n", 0, span.start()) + 1, span.group(1).replace("\n", " ")
