@@ -215,3 +215,26 @@ def test_a_file_for_the_other_controller_is_refused_not_ignored():
         make_policy("classic", policy_file="runs/es0/best.pt")
     with pytest.raises(ValueError, match="the learned one takes a policy file"):
         make_policy("learned", gait_dir="my_gaits")
+
+
+def test_decision_clock_once_per_step_and_every_n_ticks():
+    """The rule policy_node and ClosedLoop share (stamps: sim time in ticks here)."""
+    from rabbit_policy.runtime.decision_clock import DecisionClock
+
+    clock = DecisionClock(0, window=1000)
+    assert clock.sample(0, 5.0, 1.0) == []  # the placed state is no sample
+    for stamp in range(1, 11):
+        assert clock.sample(stamp, 1.0 if stamp <= 5 else 2.0, 1.5) == []
+    assert clock.switch(4, 1.5)[0].mean_speed == pytest.approx(1.0)  # samples 1..5: the state after the switch
+    assert clock.switch(12, 1.5) == []  # its next sample (13) is not in yet
+    (due,) = clock.sample(13, 2.0, 1.5)
+    assert due.mean_speed == 2.0 and due.mean_error == pytest.approx(-0.5)  # samples 6..13
+    periodic = DecisionClock(5, window=1000)
+    decided = [stamp for stamp in range(1, 31) for _ in periodic.sample(stamp, 1.0, 1.0)]
+    assert decided == [5, 10, 15, 20, 25, 30]  # multiples of the period since the placement
+    periodic.switch(30, 1.0)
+    periodic.switch(40, 1.0)
+    for stamp in range(31, 45):
+        due = periodic.sample(stamp, float(stamp), 1.0)
+    assert due == [] and periodic.sample(45, 45.0, 1.0)[0].mean_speed == pytest.approx(sum(range(36, 46)) / 10)
+    assert periodic.sample(3, 1.0, 1.0) == [] and periodic.window.newest_stamp == 3  # a reset: afresh

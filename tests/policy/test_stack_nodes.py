@@ -521,19 +521,24 @@ def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
         assert spin_until(executor, lambda: sim.time >= start + 0.3) and not sim.fallen
 
 
-def test_run_stack_and_walk_report_the_same_keys_and_numbers():
+@pytest.mark.parametrize("controller", ["classic", "learned"])
+def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller):
     """One bookkeeping: the lockstep stack's report (run_stack.py --json) and the fast
-    path's (walk.py --json) for one scenario have the same keys and the same numbers
-    (decisions once per step: bit for bit; times to the nanosecond of the stamps)."""
+    path's (walk.py --json) for one scenario have the same keys and the same numbers:
+    policy_node and the loop decide on the same observations (one DecisionClock), the
+    schedule's commands reach both at the same state (decisions once per step; floats to
+    1e-9: the stamps carry nanoseconds). The learned policy's observations are where a
+    window off by one sample showed."""
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Push, Scenario
 
     schedule, pushes = ((0.0, 0.9), (1.5, 1.2)), (Push(2.2, -40.0, 0.1),)
-    report, _nodes = run_in_process(StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=0))
-    policy = make_policy("classic", decision_period=0)
+    report, _nodes = run_in_process(StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=0,
+                                                controller=controller))
+    policy = make_policy(controller, decision_period=0)
     result = walk(policy, Scenario(schedule=schedule, pushes=pushes), 3.5)
-    stack, fast = report.summary(), run_summary("classic", policy.name, result, 1.0)
+    stack, fast = report.summary(), run_summary(controller, policy.name, result, 1.0)
     assert list(stack) == list(fast)
 
     def same(a, b) -> bool:  # floats to 1e-9 (the stamps carry nanoseconds), all else exactly
@@ -547,5 +552,5 @@ def test_run_stack_and_walk_report_the_same_keys_and_numbers():
 
     for key in set(fast) - {"wall_time", "real_time_factor"}:
         assert same(stack[key], fast[key]), (key, stack[key], fast[key])
-    assert any(s["reach_time"] is not None for s in stack["segments"])
+    assert stack["steps"] >= 5 and (controller == "learned" or any(s["reach_time"] for s in stack["segments"]))
 

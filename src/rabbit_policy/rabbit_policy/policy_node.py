@@ -6,10 +6,12 @@ from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local)
 start and then at every step, and with each gait ``/sim/initial_state`` (transient local):
 the state at phase 0 of that gait with the hip moving at ``initial_speed``, where the
 simulator starts and resets (it knows no gait itself). The policy's inputs are the paper's: the commanded speed v_d,
-the mean hip speed and the mean of (v_d - hip speed) over the last step (the samples after
-the previous touchdown up to this touchdown's stamp, at most ``window``; see
-:mod:`rabbit_policy.runtime.speed_window`); the decision takes effect at the
-next touchdown (the controller queues it). Parameters:
+the mean hip speed and the mean of (v_d - hip speed) over the last step (at most
+``window`` samples). When it decides and over which samples is
+:class:`rabbit_policy.runtime.decision_clock.DecisionClock`, the rule the ROS-free closed
+loop runs too (a sample is the state after a step; a step's decision comes with the first
+state of the next one); the decision takes effect at the next touchdown (the controller
+queues it). Parameters:
 
 * ``policy``: ``classic`` (classic HZD gait library, the paper's baseline; the default, as
   in every script) or ``learned`` (the HZD-RL network: the shipped one unless
@@ -57,7 +59,12 @@ from rabbit_policy.runtime.policies import (
     decision_period,
     make_policy,
 )
-from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
+from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.speed_window import Observation
+
+
+TICK_NS = 1_000_000
+"""The simulation's step (ns of sim time): the model's 1 ms timestep, one control tick."""
 
 
 def clamp_speed(value: float, low: float, high: float) -> float:
@@ -112,7 +119,10 @@ class PolicyNode(Node):
             if values["decision_window"] < 1:
                 raise ValueError(f"decision_window must be >= 1 tick, got {values['decision_window']}")
             self.decision_period = decision_period(self.policy)
-            self.window = SpeedWindow(values["decision_window"] if self.decision_period else values["window"])
+            # when to decide and over which samples: the closed loop's rule (stamps in ns)
+            self.clock = DecisionClock(self.decision_period,
+                                       values["decision_window"] if self.decision_period else values["window"],
+                                       tick=TICK_NS)
             self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
         except (PolicyUnavailable, ValueError) as exc:
@@ -122,11 +132,6 @@ class PolicyNode(Node):
         self.decisions = 0
         self.rejected_commands = 0
         self.last_observation: Observation | None = None
-        self._pending_steps: list[int] = []
-        self._previous_step: int | None = None  # stamp (ns) of the last touchdown decided on
-        self._next_decision: int | None = None  # decision_period > 0: stamp (ns) of the next decision
-        self._last_step: int | None = None  # ... the last touchdown's stamp (ns)
-        self._step_duration: int | None = None  # ... and the last whole step's duration (ns): the average's span
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
@@ -135,7 +140,7 @@ class PolicyNode(Node):
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
-        self._decide(self.window.observation(self.desired_speed))
+        self._decide(Observation(self.desired_speed, self.desired_speed, 0.0))  # the start: on the command
         self.get_logger().info(
             f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; send speeds on {topics.CMD_SPEED}"
         )
@@ -172,46 +177,17 @@ class PolicyNode(Node):
         self.desired_speed = speed
 
     def _on_hip_velocity(self, msg: TwistStamped) -> None:
-        stamp = stamp_to_ns(msg.header.stamp)
-        newest = self.window.newest_stamp
-        if newest is not None and stamp < newest:
-            self._pending_steps.clear()  # simulation reset: old step events are void
-            self._previous_step = self._next_decision = self._last_step = self._step_duration = None
         try:
-            self.window.add(stamp, msg.twist.linear.x, self.desired_speed)
+            due = self.clock.sample(stamp_to_ns(msg.header.stamp), msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
             self.get_logger().error(f"ignoring {topics.HIP_VELOCITY}: {exc}", throttle_duration_sec=1.0)
             return
-        if self.decision_period:
-            if self._next_decision is None:
-                self._next_decision = stamp + self.decision_period * 1_000_000
-            elif stamp >= self._next_decision:
-                since = None if self._step_duration is None else stamp - self._step_duration
-                self._decide(self.window.observation(self.desired_speed, stamp, since))
-                self._next_decision += self.decision_period * 1_000_000 * (
-                    1 + (stamp - self._next_decision) // (self.decision_period * 1_000_000))
-        elif self._pending_steps and stamp >= self._pending_steps[0]:
-            self._flush_steps(stamp)
+        for observation in due:
+            self._decide(observation)
 
     def _on_step(self, msg: Header) -> None:
-        if self.decision_period:  # decisions come by sim time; the steps set the averaging span
-            stamp = stamp_to_ns(msg.stamp)
-            if self._last_step is not None and stamp > self._last_step:
-                self._step_duration = stamp - self._last_step
-            self._last_step = stamp
-            return
-        stamp = stamp_to_ns(msg.stamp)
-        self._pending_steps.append(stamp)
-        newest = self.window.newest_stamp
-        if newest is not None and newest >= stamp:
-            self._flush_steps(newest)
-
-    def _flush_steps(self, newest: int) -> None:
-        """Decide for every step event whose window is complete (samples up to its stamp)."""
-        while self._pending_steps and self._pending_steps[0] <= newest:
-            stamp = self._pending_steps.pop(0)
-            self._decide(self.window.observation(self.desired_speed, stamp, self._previous_step))
-            self._previous_step = stamp
+        for observation in self.clock.switch(stamp_to_ns(msg.stamp), self.desired_speed):
+            self._decide(observation)
 
     def _decide(self, observation: Observation) -> None:
         command: GaitCommand = self.policy.act(observation)

@@ -161,7 +161,11 @@ class Supervisor(Node):
         if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
             self.stalled, self.stall_time = True, t
             self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
-        while self._changes and t >= self._changes[0][0] - 1e-9:  # the schedule, as ClosedLoop steps it
+        # the schedule, as ClosedLoop steps it: there the state after the step that reaches a
+        # change is the first sample under the new command, so the command goes out one state
+        # ahead (then, in one process, it is in before that state's hip speed)
+        tick = self._times[-1] - self._times[-2] if len(self._times) >= 2 else 0.0
+        while self._changes and t + tick >= self._changes[0][0] - 1e-9:
             _, speed = self._changes.pop(0)
             self._speed_pub.publish(Float64(data=speed))
             self.get_logger().info(f"t = {t:.2f} s: commanding {speed:.2f} m/s")

@@ -39,7 +39,8 @@ from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period
-from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
+from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import Simulator
 
@@ -60,14 +61,16 @@ class ClosedLoop:
     overrides its proportional gain (None: keep it). ``model``:
     a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
-    keep the speed window without a policy (the learning environment).
+    keep the speed window without a policy (the learning environment), observed as a policy
+    deciding every ``observe_period`` ticks (0: once per step) would see it.
     """
 
     def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
                  *, start_speed: float | None = None, kp: float | None = None,
                  controller: ControllerConfig | None = None,
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
-                 record_state: bool = False, observe_speed: bool = False) -> None:
+                 record_state: bool = False, observe_speed: bool = False,
+                 observe_period: int = 0) -> None:
         if start is None:
             if policy is None:
                 raise ValueError("a closed loop needs a policy or a starting gait")
@@ -87,10 +90,12 @@ class ClosedLoop:
         self.sim.schedule_pushes(scenario.pushes)
         self.observer = observer
         self.record_state = record_state
-        self._period = decision_period(policy)
-        window = policy.decision_window if self._period else scenario.window
-        self.window = SpeedWindow(window) if (policy is not None or observe_speed) else None
-        self._add_speed = None if self.window is None else self.window.add
+        self._period = decision_period(policy) if policy is not None else observe_period
+        window = policy.decision_window if (policy is not None and self._period) else scenario.window
+        # when the policy decides and what it sees: the rule policy_node runs too (stamps: sim
+        # time in ticks, a sample being the state after a step)
+        self.clock = DecisionClock(self._period, window) if (policy is not None or observe_speed) else None
+        self.window = None if self.clock is None else self.clock.window
         self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._stall_after = scenario.rules.stall_after
         fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
@@ -122,8 +127,6 @@ class ClosedLoop:
         self.fall_time: float | None = None
         self.stall_time: float | None = None
         self._last_touchdown_time = self.start_time
-        self._last_touchdown_tick: int | None = None
-        self._previous_touchdown_tick: int | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -140,23 +143,14 @@ class ClosedLoop:
         self.desired_speed = float(speed)
 
     def observation(self, moving: bool = False) -> Observation:
-        """The policy's observation over the last whole step (touchdown to touchdown; since
-        the start before the first), or with ``moving`` the moving average over the last
-        step's duration up to now (a policy deciding every N ticks; at most the window)."""
-        if self.window is None:
+        """What the policy would see now (:meth:`DecisionClock.observe`): over the last whole
+        step (touchdown to touchdown; since the start before the first), or with ``moving``
+        (a loop deciding every N ticks) the moving average over the last step's duration."""
+        if self.clock is None:
             raise RuntimeError("this loop keeps no speed window (no policy, observe_speed=False)")
-        if moving:
-            return self.window.observation(self.desired_speed, since_ns=self._one_step_back())
-        return self.window.observation(self.desired_speed, since_ns=self._previous_touchdown_tick)
-
-    def _one_step_back(self) -> int | None:
-        """For the moving average: the tick one step duration (the last whole step's)
-        before the newest sample, so the average spans one step whatever the phase (a
-        whole period of the walking cycle filters its within-step swing); None (the
-        whole window) before the first whole step."""
-        if self._previous_touchdown_tick is None or self._last_touchdown_tick is None:
-            return None
-        return self.ticks - 1 - (self._last_touchdown_tick - self._previous_touchdown_tick)
+        if moving != bool(self._period):
+            raise ValueError("observation(moving) must match the decision period the loop was built with")
+        return self.clock.observe(self.desired_speed)
 
     def set_gait(self, command: GaitCommand) -> bool:
         """Queue a gait for the next touchdown; False (and the gait in force stays) if the
@@ -208,12 +202,11 @@ class ClosedLoop:
             self._qpos_rows.append(qpos.copy())
             self._qvel_rows.append(qvel.copy())
             self._stance.append(int(controller.stance))
-        if self._add_speed is not None:
-            self._add_speed(i, qvel[0], self.desired_speed)
         if self.observer is not None:
             self.observer(self, torques)
-        if self._period and (i + 1) % self._period == 0:
-            self._decide_now(t)
+        if self.clock is not None:
+            for observation in self.clock.sample(i + 1, qvel[0], self.desired_speed):  # every N ticks
+                self._decide(observation, t)
         stop = False
         if not (self._min_height < height < self._max_height and -self._max_pitch < pitch < self._max_pitch):
             if not self.fell:
@@ -232,18 +225,18 @@ class ClosedLoop:
         foot = data.site_xpos[self._feet[int(self.controller.stance)]]
         self.touchdowns.append(Touchdown(t, float(foot[0]), float(data.qpos[0])))
         self._last_touchdown_time = t
-        self._previous_touchdown_tick, self._last_touchdown_tick = self._last_touchdown_tick, i
-        if self.policy is not None and not self._period:
-            observation = self.observation()
-            command = self.policy.act(observation)
-            accepted = self.set_gait(command)
-            self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))
+        if self.clock is not None:
+            for observation in self.clock.switch(i, self.desired_speed):  # once per step
+                self._decide(observation, t)
 
-    def _decide_now(self, t: float) -> None:
-        """A periodic policy's decision: the moving average, the gait applied at once."""
-        observation = self.observation(moving=True)
+    def _decide(self, observation: Observation, t: float) -> None:
+        """The policy's decision on ``observation``: the gait for the next step (once per step)
+        or applied at once, blended in (every N ticks); nothing without a policy (the
+        learning environment decides itself)."""
+        if self.policy is None:
+            return
         command = self.policy.act(observation)
-        accepted = self.apply_gait(command)
+        accepted = self.apply_gait(command) if self._period else self.set_gait(command)
         self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))
 
     # -------------------------------------------------------------------- run

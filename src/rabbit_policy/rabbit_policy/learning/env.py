@@ -208,7 +208,8 @@ class RabbitHZDEnv(gym.Env):
         self._model = self._models.get(scenario.model) or self._models.setdefault(scenario.model,
                                                                                    load_model(scenario.model))
         self._loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd), start_speed=gait.speed,
-                                kp=gait.kp, model=self._model, observe_speed=True)
+                                kp=gait.kp, model=self._model, observe_speed=True,
+                                observe_period=self.decision_period)
         self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
         self._steps = 0
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
