@@ -225,6 +225,7 @@ def test_decision_clock_once_per_step_and_every_n_ticks():
     assert clock.sample(0, 5.0, 1.0) == []  # the placed state is no sample
     for stamp in range(1, 11):
         assert clock.sample(stamp, 1.0 if stamp <= 5 else 2.0, 1.5) == []
+        assert clock.sample(stamp, 9.0, 1.5) == []  # a state sent again (lockstep re-send) is one sample
     assert clock.switch(4, 1.5)[0].mean_speed == pytest.approx(1.0)  # samples 1..5: the state after the switch
     assert clock.switch(12, 1.5) == []  # its next sample (13) is not in yet
     (due,) = clock.sample(13, 2.0, 1.5)

@@ -52,9 +52,12 @@ class DecisionClock:
         """Add the hip speed (m/s) of the state at ``stamp`` under the command ``desired_speed``
         (m/s); returns the decisions now due (at most one every N ticks; once per step, one
         per switch whose next sample this is). A stamp older than the newest (a reset) starts
-        afresh; the placed state (stamp 0) is no sample. Raises ``ValueError`` for a
+        afresh; the newest again (a state re-sent) counts once; the placed state (stamp 0) is
+        no sample. Raises ``ValueError`` for a
         non-finite speed."""
         newest = self.window.newest_stamp
+        if newest is not None and stamp == newest:
+            return []  # the same state sent again (a lockstep re-send): one sample
         if stamp <= 0 or (newest is not None and stamp < newest):
             self.reset()
             if stamp <= 0:
