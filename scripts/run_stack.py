@@ -68,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="--record: chunk compression (as record.py's)")
     parser.add_argument("--recorder-timeout", type=float, default=10.0, metavar="S",
                         help="--record: fail the run when the simulation waited this long (wall s) for a recorder "
-                             "that wrote nothing (default 10)")
+                             "that has stopped writing (default 10; its first state may take up to 30 s)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
     parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
     parser.add_argument("--json", action="store_true", help="print one JSON object")

@@ -255,6 +255,27 @@ def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster, undisturbed):
 
 
 @pytest.mark.slow
+def test_a_failed_task_raises_and_stops_its_siblings(cluster):
+    """One task of a map raises: map raises that error, and the map's other tasks are
+    cancelled rather than left running on the cluster (the driver stays connected)."""
+    import time
+
+    def _fail_first(item: int) -> int:  # defined here, so that Ray ships it by value
+        if item == 0:
+            raise ValueError("task 0 failed")
+        time.sleep(300)  # would run 5 minutes
+        return item
+
+    with pytest.raises(ValueError, match="task 0 failed"):
+        cluster.map(_fail_first, range(3))
+    deadline = time.monotonic() + 60
+    while any(_title(pid).startswith("ray::_fail_first") for pid in _ray_pids()):
+        assert time.monotonic() < deadline, "the failed map's other tasks kept running"
+        time.sleep(0.2)
+    assert cluster.map(lambda x: -x, [-1, -2]) == [1, 2]  # the backend is still usable
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("address, message", [
     ("127.0.0.1:9", "error: cannot reach the Ray cluster at 127.0.0.1:9: Connection refused"),
     ("nowhere", "error: a Ray address is auto or host:port, got 'nowhere'"),

@@ -330,7 +330,9 @@ def test_a_recorder_that_connects_late_never_wedges_lockstep(tmp_path):
 def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):
     """The recorder process is frozen (SIGSTOP) mid-run: lockstep waits for it (it never steps
     past a recording it cannot keep), and run_stack fails with one line naming the
-    recorder within ``--recorder-timeout``, then stops every node, the frozen one included."""
+    recorder within ``--recorder-timeout``, then stops every node, the frozen one included.
+    Frozen before it wrote anything (as a recorder slow to start on a busy machine), for
+    longer than that timeout, it is waited for: the run goes on once it resumes."""
     import os
     import subprocess
     import sys
@@ -353,9 +355,12 @@ def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):
                 if "rabbit_sim.recorder_node" in cmdline and str(bag) in cmdline:
                     recorder = int(pid)
         assert recorder is not None
+        os.kill(recorder, signal.SIGSTOP)  # late to start: waited for, longer than the timeout
+        time.sleep(timeout + 2.0)
+        os.kill(recorder, signal.SIGCONT)
         deadline = time.monotonic() + 60
         while not list(bag.glob("*.mcap")) or list(bag.glob("*.mcap"))[0].stat().st_size < 200_000:
-            assert time.monotonic() < deadline and proc.poll() is None
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()[0] if proc.poll() is not None else "bag did not grow"
             time.sleep(0.1)
         os.kill(recorder, signal.SIGSTOP)
         frozen_at = time.monotonic()

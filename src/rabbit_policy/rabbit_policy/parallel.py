@@ -141,6 +141,10 @@ class RayBackend:
         # private instance (or a cluster on this machine's loopback) binds and advertises
         # 127.0.0.1 only instead of the machine's network address
         os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+        if address is None:
+            # a private instance authenticates its clients (Ray's default, said explicitly so
+            # that Ray does not warn about it on every start)
+            os.environ.setdefault("RAY_AUTH_MODE", "token")
         self.address = None if address is None else resolve_address(address)
         if self.address is not None:
             probe(self.address)
@@ -197,8 +201,13 @@ class RayBackend:
         refs = [remote.remote(item) for item in items]
         try:
             return self._ray.get(refs)
-        except BaseException:
-            for ref in refs:  # Ctrl-C or a failed task: nothing keeps running on our behalf
+        except Exception:
+            # a failed task: the others stop too, nothing keeps running on our behalf. Not on
+            # Ctrl-C: the workers got the signal as well, and cancelling a task whose worker is
+            # dying at that moment aborts the driver (Ray 2.60: "Tried to complete task that
+            # was not pending"); close() ends them with the instance or the job
+            _ready, pending = self._ray.wait(refs, num_returns=len(refs), timeout=0)
+            for ref in pending:
                 self._ray.cancel(ref, force=True)
             raise
 

@@ -111,6 +111,7 @@ class Supervisor(Node):
             and self.count_subscribers(topics.CMD_SPEED) > 0
             # sim_node and, when recording, the recorder take the torques
             and self.count_subscribers(topics.JOINT_TORQUES) >= (2 if self.config.record else 1)
+            and (not self.config.record or self.count_publishers(topics.RECORDED_UNTIL) > 0)
         )
 
     @property
@@ -215,8 +216,11 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
 
     start = time.perf_counter()
     started = None
+    running_since = None  # wall time the simulation was started (progress is waited for from then)
     while not supervisor.done:
         running = started is not None and started.done()
+        if running and running_since is None:
+            running_since = time.perf_counter()
         try:
             executor.spin_once(timeout_sec=spin_timeout if running else 0.02)
         except (KeyboardInterrupt, ExternalShutdownException):
@@ -229,11 +233,17 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
         if not running and time.perf_counter() - start > stall_timeout:
             return f"the nodes did not connect within {stall_timeout:.0f} s"
         if running:
-            waited = time.perf_counter() - (supervisor.last_progress_wall or start)
-            if supervisor.config.record and waited > supervisor.config.recorder_timeout \
-                    and supervisor.recorded_until < supervisor.sim_time - 1e-9:
-                return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and the "
-                        f"simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
+            waited = time.perf_counter() - max(supervisor.last_progress_wall or running_since, running_since)
+            if supervisor.config.record and supervisor.recorded_until < supervisor.sim_time - 1e-9:
+                # a recorder that has written something and then stops fails the run within
+                # recorder_timeout; its first state (discovery on a busy machine) may take up
+                # to stall_timeout
+                if supervisor.recorded_until < 0.0 and waited > max(stall_timeout, supervisor.config.recorder_timeout):
+                    return (f"the recorder did not write the first state within {waited:.0f} s of the start: is it "
+                            "subscribed to /joint_states (sim_node's log says what it waits for)?")
+                if supervisor.recorded_until >= 0.0 and waited > supervisor.config.recorder_timeout:
+                    return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and "
+                            f"the simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
             if supervisor.config.mode == "realtime" and supervisor.sim_time > 0.0 and waited > REALTIME_HALT_TIMEOUT:
                 return (f"the simulation halted at t = {supervisor.sim_time:.3f} s: realtime mode halts when the "
                         "control loop falls behind the wall clock (sim_node's log says why); --mode paced runs "
