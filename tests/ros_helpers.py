@@ -21,14 +21,18 @@ def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> 
     try:
         yield context, executor
     finally:
-        for node in list(executor.get_nodes()):
-            close = getattr(node, "close", None)
-            if close:
-                close()
-            executor.remove_node(node)
-            node.destroy_node()
-        if context.ok():
-            rclpy.shutdown(context=context)
+        try:
+            for node in list(executor.get_nodes()):
+                try:
+                    close = getattr(node, "close", None)
+                    if close:
+                        close()
+                finally:
+                    executor.remove_node(node)
+                    node.destroy_node()
+        finally:  # whatever happened above: no node of this test outlives it in the domain
+            if context.ok():
+                rclpy.shutdown(context=context)
 
 
 def _executors(executor) -> tuple:

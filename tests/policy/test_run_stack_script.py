@@ -100,6 +100,32 @@ def test_a_second_stack_in_the_same_domain_is_refused():
         first.communicate(timeout=60)
 
 
+def test_a_run_stack_killed_outright_takes_its_nodes_with_it():
+    """SIGKILL to run_stack (no chance to stop its nodes, as a test's timeout or the OOM
+    killer does): its node processes end too, so no stack is left running in the domain."""
+    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    nodes: list[str] = []
+    while len(nodes) < 3 and time.monotonic() < deadline:
+        time.sleep(0.2)
+        nodes = _node_processes(first.pid)
+    assert len(nodes) == 3
+    first.kill()
+    first.wait()
+
+    def running(pid: str) -> bool:  # alive and not a zombie waiting to be reaped
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
+    deadline = time.monotonic() + 30
+    while any(running(pid) for pid in nodes) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not any(running(pid) for pid in nodes), [pid for pid in nodes if running(pid)]
+
+
 def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
     """The report of a run stopped before the simulation moved (a node that never came up,
     Ctrl-C at once) says what happened and prints no nan: no real-time factor, no mean."""

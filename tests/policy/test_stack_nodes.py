@@ -18,10 +18,10 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import alpha_to_msg
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
-from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import LibraryPolicy, make_policy
+from rabbit_policy.runtime.policies import make_policy
 from rabbit_sim.sim_node import SimNode
 
 from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
@@ -43,7 +43,7 @@ def _recorder(store: list):
 
 
 def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
-    loop = ClosedLoop(Scenario.constant(speed), LibraryPolicy(GaitLibrary.load(), "interpolate"))
+    loop = ClosedLoop(Scenario.constant(speed), make_policy("classic"))  # every 20 ticks, as policy_node
     data = loop.data
     rows = [data.qpos.tolist() + data.qvel.tolist()]
     for _ in range(int(round(duration / 0.001))):
@@ -57,11 +57,11 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
     """Lockstep, and paced mode (lockstep held to the wall clock, here at 4x real time),
     publish every state of the ROS-free loop bit for bit; paced takes at least the wall time
     its target real-time factor asks (a lower bound: a slower machine only takes longer)."""
-    # decisions once per step: they apply at the next touchdown, long after they are sent,
-    # so lockstep cannot depend on when they arrive (every N ticks it can: see docs)
+    # classic's own decisions, every 20 ticks, applied at once: the controller holds the
+    # reply to each due state until its decision is in (decision_sync)
     reference = _reference(2.0)
     for mode in ("lockstep", "paced"):
-        config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), decision_period=0, mode=mode, rtf=4.0)
+        config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), mode=mode, rtf=4.0)
         states: list = []
         report, nodes = run_in_process(config, observers=[_recorder(states)])
         assert report.completed and not report.fell
@@ -69,6 +69,8 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
         # a re-sent state (start-up, see sim_node) shows up twice in a row: keep one
         unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
         assert unique.shape == reference.shape and np.array_equal(unique, reference), mode
+        controller = nodes["hzd_controller_node"]
+        assert controller.decisions_waited == 2000 // 20 and controller.decisions_timed_out == 0
         if mode == "paced":
             assert report.wall_time >= 0.9 * 2.0 / 4.0
             assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
@@ -317,6 +319,25 @@ def _start_sim_and_policy(context, executor, **sim_params):
 
 
 @pytest.mark.slow
+def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
+    """Lockstep with decision_sync: the policy node goes away mid-walk, so the decision
+    due on the next 20th tick never comes. The controller gives it up after
+    decision_timeout, answers with the gait in force (once: later due states do not
+    wait) and the walk goes on."""
+    with ros_context() as (context, executor):
+        nodes = _start_sim_and_policy(context, executor)
+        sim, policy = nodes["sim"], nodes["policy"]
+        controller = HZDControllerNode(context=context, decision_sync=True, decision_timeout=0.3)
+        executor.add_node(controller)
+        assert spin_until(executor, lambda: sim.time >= 0.5)
+        assert controller.decisions_waited >= 20 and controller.decisions_timed_out == 0
+        executor.remove_node(policy)  # no longer spun: it decides nothing more
+        stopped = sim.time
+        assert spin_until(executor, lambda: sim.time >= stopped + 1.0)
+        assert controller.decisions_timed_out == 1 and not sim.fallen
+
+
+@pytest.mark.slow
 def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
     # the controller lives in a context of its own, standing in for its own process
     with ros_context() as (context, executor):
@@ -398,7 +419,8 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
             # controller the underactuated robot may still collapse (the physics then halts)
             damped_before = sim.damped_ticks
             time.sleep(0.3)
-            assert sim.damped_ticks - damped_before > 20
+            # damping took over (and holds unless the robot went down: the physics halts)
+            assert sim.damped_ticks > 0 and (sim.damped_ticks - damped_before > 20 or sim.fallen)
             assert sim.watchdog.active or sim.fallen
             with ros_context() as (ctx_b, ex_b), spinning(ex_b):
                 ex_b.add_node(HZDControllerNode(context=ctx_b))
@@ -521,22 +543,24 @@ def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
         assert spin_until(executor, lambda: sim.time >= start + 0.3) and not sim.fallen
 
 
-@pytest.mark.parametrize("controller", ["classic", "learned"])
-def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller):
+@pytest.mark.parametrize("controller, period", [("classic", -1), ("learned", -1), ("learned", 0)])
+def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller, period):
     """One bookkeeping: the lockstep stack's report (run_stack.py --json) and the fast
     path's (walk.py --json) for one scenario have the same keys and the same numbers:
     policy_node and the loop decide on the same observations (one DecisionClock), the
-    schedule's commands reach both at the same state (decisions once per step; floats to
-    1e-9: the stamps carry nanoseconds). The learned policy's observations are where a
-    window off by one sample showed."""
+    schedule's commands reach both at the same state (floats to 1e-9: the stamps carry
+    nanoseconds). With decisions every 20 ticks (the policies' own) the controller holds
+    each due state for its decision (decision_sync); once per step too. (Across processes:
+    the next test.) The learned policy's observations are where a window off by one
+    sample showed."""
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Push, Scenario
 
     schedule, pushes = ((0.0, 0.9), (1.5, 1.2)), (Push(2.2, -40.0, 0.1),)
-    report, _nodes = run_in_process(StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=0,
-                                                controller=controller))
-    policy = make_policy(controller, decision_period=0)
+    config = StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=period, controller=controller)
+    report = run_in_process(config)[0]
+    policy = make_policy(controller, decision_period=None if period == -1 else period)
     result = walk(policy, Scenario(schedule=schedule, pushes=pushes), 3.5)
     stack, fast = report.summary(), run_summary(controller, policy.name, result, 1.0)
     assert list(stack) == list(fast)
@@ -554,3 +578,38 @@ def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller):
         assert same(stack[key], fast[key]), (key, stack[key], fast[key])
     assert stack["steps"] >= 5 and (controller == "learned" or any(s["reach_time"] for s in stack["segments"]))
 
+
+
+@pytest.mark.slow
+def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_path):
+    """The nodes as processes (run_stack.py's way), the learned policy deciding every 20
+    ticks, pushed: the lockstep trajectory recorded (the recorder is flow-controlled, so
+    every state is in the bag) is the fast path's bit for bit, each due state held by the
+    controller for its decision. One command: across processes a speed change reaches
+    policy_node when the supervisor's message does, not at a given state (the simulator
+    does not wait for the supervisor), and the supervisor's own report is computed from the
+    states it received, which it may miss (docs/architecture.md)."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from rabbit_policy.experiment.scenario import Push
+
+    schedule, pushes = ((0.0, 0.9),), (Push(1.2, -40.0, 0.1),)
+    report = run_multi_process(StackConfig(duration=2.0, schedule=schedule, pushes=pushes, controller="learned",
+                                           record=str(tmp_path / "bag")))
+    assert report.completed and not report.fell
+    loop = ClosedLoop(Scenario(schedule=schedule, pushes=pushes), make_policy("learned"))
+    reference = [loop.data.qpos.tolist() + loop.data.qvel.tolist()]
+    for _ in range(2000):
+        loop.tick()
+        reference.append(loop.data.qpos.tolist() + loop.data.qvel.tolist())
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    states = {}
+    with Reader(tmp_path / "bag") as reader:
+        connections = [c for c in reader.connections if c.topic == topics.JOINT_STATES]
+        for connection, _t, raw in reader.messages(connections):
+            msg = typestore.deserialize_cdr(raw, connection.msgtype)
+            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
+    assert sorted(states) == list(range(2001))
+    assert np.array_equal(np.array([states[i] for i in range(2001)]), np.array(reference))

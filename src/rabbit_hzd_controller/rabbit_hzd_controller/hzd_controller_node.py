@@ -22,6 +22,14 @@ the ROS-free loop runs.
   trained so) they apply when they arrive instead, alpha blended in from the outputs in
   force (``HZDController.apply_now``: continuous outputs). Which of the two follows
   ``/hzd/gait_timing`` (from the policy node) unless the ``gait_timing`` parameter forces it.
+* ``decision_sync`` (lockstep and paced runs; run_stack sets it): when the policy decides
+  every N ticks (``/hzd/gait_timing`` = ``at_once:N``), the reply to a state the policy
+  decides on (:class:`rabbit_msgs_py.decision_ticks.PeriodicDecisions`) waits until that
+  decision's alpha and Kd are in, and they apply to that very state, as in the ROS-free
+  loop: the stack then runs the fast path bit for bit. Gaits are taken in the order they
+  come, one alpha and one Kd per due state (a rejected one counts). No decision within
+  ``decision_timeout`` s (wall): the state is answered with the gait in force, logged, and
+  gaits apply on arrival until the policy's next alpha and Kd are in.
 * Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
   violated) are rejected with a logged error; the last good gait stays in force.
 * A state identical to the last one answered (a lockstep re-send) is not computed twice:
@@ -34,6 +42,8 @@ the ROS-free loop runs.
 from __future__ import annotations
 
 import sys
+import time
+from collections import deque
 from dataclasses import replace
 
 from rcl_interfaces.msg import SetParametersResult
@@ -51,7 +61,8 @@ from rabbit_msgs_py.conversions import (
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.parameters import Param, coerce, declare
+from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.runtime import NodeStartError, run_node
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
@@ -79,6 +90,11 @@ NODE_PARAMS = {
     "gait_timing": Param("policy", "when a new gait applies: policy (as /hzd/gait_timing says; next_step until "
                                    "it does), next_step (queued to the next touchdown) or at_once (blended in "
                                    "within the step)"),
+    "decision_sync": Param(False, "lockstep/paced: hold the reply to a state the policy decides on (every N ticks, "
+                                  "/hzd/gait_timing at_once:N) until that decision's gait is in (the ROS-free loop "
+                                  "bit for bit); not for realtime"),
+    "decision_timeout": Param(2.0, "decision_sync: wall s to wait for a due decision before answering with the "
+                                   "gait in force, finite > 0"),
 }
 
 
@@ -92,7 +108,9 @@ class HZDControllerNode(Node):
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
         self.follow_policy_timing = values.pop("gait_timing") == "policy"
         self.gait_timing = "next_step" if self.follow_policy_timing else self.get_parameter("gait_timing").value
+        self.decision_sync = bool(values.pop("decision_sync"))
         try:
+            self.decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
             if self.gait_timing not in GAIT_TIMINGS:
                 raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
             self.config = ControllerConfig(**values)
@@ -114,6 +132,15 @@ class HZDControllerNode(Node):
         self.replies_repeated = 0  # replies sent again for a state sent again
         self.rejected_gaits = 0
         self.rejected_states = 0
+        # decision_sync: the due states (None: not holding for decisions), the gaits not yet
+        # taken (None for a rejected one), the state waiting for its decision
+        self._due: PeriodicDecisions | None = None
+        self._gaits: dict[str, deque] = {"alpha": deque(), "kd": deque()}
+        self._held: tuple[JointState, list[float], list[float], int, float] | None = None
+        self._timing_known = False  # /hzd/gait_timing received
+        self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
+        self.decisions_waited = 0  # due states answered with their decision
+        self.decisions_timed_out = 0
 
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
@@ -124,6 +151,7 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
+        self.create_timer(0.05, self._check_held)  # wall clock: decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
@@ -160,24 +188,11 @@ class HZDControllerNode(Node):
         except (MessageError, ValueError) as exc:
             self.rejected_gaits += 1
             self.get_logger().error(f"rejected {topics.ALPHA}: {short(str(exc), 200)}; keeping the last good gait")
+            self._take("alpha", None)
             return
         self._alpha = alpha
-        if self.controller is not None:
-            if self.gait_timing == "at_once":
-                self.controller.apply_now(tuple(alpha))
-            else:
-                self.controller.set_alpha(alpha)
+        self._take("alpha", alpha)
         self._answer_waiting_state()
-
-    def _on_gait_timing(self, msg: String) -> None:
-        if not self.follow_policy_timing or msg.data == self.gait_timing:
-            return
-        if msg.data not in GAIT_TIMINGS:
-            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: not one of {GAIT_TIMINGS}; "
-                                    f"keeping {self.gait_timing}")
-            return
-        self.gait_timing = msg.data
-        self.get_logger().info(f"gaits apply {'when they arrive, blended in' if msg.data == 'at_once' else 'at the next touchdown'}")
 
     def _on_kd(self, msg: Float64) -> None:
         try:
@@ -185,13 +200,63 @@ class HZDControllerNode(Node):
         except ValueError as exc:
             self.rejected_gaits += 1
             self.get_logger().error(f"rejected {topics.KD}: {short(str(exc), 200)}; keeping the last good value")
+            self._take("kd", None)
             return
         self._kd = kd
-        if self.controller is not None:
-            if self.gait_timing == "at_once":
-                self.controller.set_kd(kd)
-            else:
-                self.controller.queue_kd(kd)
+        self._take("kd", kd)
+        self._answer_waiting_state()
+
+    def _take(self, part: str, value) -> None:
+        """A gait part (``alpha`` or ``kd``; None: rejected) that arrived: kept for the next
+        due state while holding for decisions, else applied as ``gait_timing`` says (the
+        first gait, before any state, becomes the controller's start gait instead)."""
+        if self.controller is None:
+            return
+        if self._syncing:
+            self._gaits[part].append(value)
+            self._answer_held()
+            return
+        if self._sync_paused:
+            self._gaits[part].append(value)  # counted: sync resumes once alpha and Kd came again
+            if self._gaits["alpha"] and self._gaits["kd"]:
+                self._sync_paused = False
+                self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+        if value is not None:
+            self._apply(part, value, self.gait_timing == "at_once")
+
+    def _apply(self, part: str, value, at_once: bool) -> None:
+        if part == "alpha":
+            self.controller.apply_now(tuple(value)) if at_once else self.controller.set_alpha(value)
+        else:
+            self.controller.set_kd(value) if at_once else self.controller.queue_kd(value)
+
+    @property
+    def _syncing(self) -> bool:
+        """Holding due states for their decision now."""
+        return self._due is not None and not self._sync_paused and self.gait_timing == "at_once"
+
+    def _on_gait_timing(self, msg: String) -> None:
+        if not self.follow_policy_timing:
+            return
+        timing, _, period = msg.data.partition(":")
+        try:
+            if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit()
+                                                           or int(period) < 1)):
+                raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
+        except ValueError as exc:
+            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: {exc}; "
+                                    f"keeping {self.gait_timing}")
+            return
+        if timing != self.gait_timing:
+            self.get_logger().info(f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
+        self.gait_timing = timing
+        self._timing_known = True
+        due = PeriodicDecisions(int(period), TICK_NS) if period and self.decision_sync else None
+        if due is not None and self._last_stamp >= 0:
+            due.join(self._last_stamp)  # mid-run: the policy's clock has followed since the placement
+        if (due is None) != (self._due is None) or (due is not None and due.period != self._due.period):
+            self._due = due
+            self._release_held("the policy's timing changed")
         self._answer_waiting_state()
 
     def _on_resets(self, msg: UInt32) -> None:
@@ -202,6 +267,8 @@ class HZDControllerNode(Node):
         if first:
             return  # the count in force when this node started: nothing to restart
         self._restart = True
+        self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+        self._held = None  # the placed state comes next; its answer is due, not this one's
         self._forget_last_state()
 
     def _forget_last_state(self) -> None:
@@ -212,9 +279,16 @@ class HZDControllerNode(Node):
             msg_state, self._dropped = self._dropped, None
             self._on_state(msg_state)
 
+    @property
+    def _timing_unknown(self) -> bool:
+        """decision_sync, following the policy's timing, before the policy has said it: the
+        first state waits for it as for the gait (a decision due on it would be missed)."""
+        return self.decision_sync and self.follow_policy_timing and not self._timing_known
+
     def _answer_waiting_state(self) -> None:
         """Answer the state that arrived before the first complete gait, if any."""
-        if self._waiting_state is not None and self._alpha is not None and self._kd is not None:
+        if self._waiting_state is not None and self._alpha is not None and self._kd is not None \
+                and not self._timing_unknown:
             msg, self._waiting_state = self._waiting_state, None
             self._on_state(msg)
 
@@ -228,16 +302,19 @@ class HZDControllerNode(Node):
             return
         self.states_received += 1
         stamp = stamp_to_ns(msg.header.stamp)
+        if self._held is not None and stamp == self._held[3]:
+            return  # re-sent while it waits for its decision: answered once it is in
         if stamp == self._last_stamp and (q, dq) == self._last_state:
             self._dropped = msg
             self._torque_pub.publish(self._torque_msg)  # a re-send: the same reply again
             self.replies_repeated += 1
             return
-        if self._alpha is None or self._kd is None:
+        if self._alpha is None or self._kd is None or self._timing_unknown:
             self._waiting_state = msg
             self.get_logger().warning(
-                f"no gait yet (waiting for {topics.ALPHA} and {topics.KD}); the state will be answered once it is "
-                "complete",
+                f"no gait yet (waiting for {topics.ALPHA} and {topics.KD}"
+                f"{f' and {topics.GAIT_TIMING}' if self._timing_unknown else ''}); the state will be answered once "
+                "it is complete",
                 throttle_duration_sec=2.0,
             )
             return
@@ -251,16 +328,59 @@ class HZDControllerNode(Node):
                 self.get_logger().info("simulation reset: controller restarted on the gait")
             self._restart = False
         self._dropped = None
+        if self._due is not None and self._due.due(stamp) and self._syncing:
+            if self._held is not None:  # a newer state while one waits (its reply was given up): drop the old
+                self._held = None
+            self._held = (msg, q, dq, stamp, time.monotonic())
+            self._answer_held()
+            return
+        self._answer(msg, q, dq, stamp)
+
+    def _answer_held(self) -> None:
+        """Answer the state waiting for its decision once that decision's alpha and Kd are in."""
+        if self._held is None or not (self._gaits["alpha"] and self._gaits["kd"]):
+            return
+        msg, q, dq, stamp, _since = self._held
+        self._held = None
+        alpha, kd = self._gaits["alpha"].popleft(), self._gaits["kd"].popleft()
+        if alpha is not None:
+            self.controller.apply_now(tuple(alpha), kd)  # as the ROS-free loop applies a decision
+        elif kd is not None:
+            self._apply("kd", kd, at_once=True)
+        self.decisions_waited += 1
+        self._answer(msg, q, dq, stamp)
+
+    def _check_held(self) -> None:
+        """Timer: a due decision that did not come within ``decision_timeout`` s."""
+        if self._held is not None and time.monotonic() - self._held[4] > self.decision_timeout:
+            self.decisions_timed_out += 1
+            self._sync_paused = True
+            self._release_held(f"no decision from the policy within {self.decision_timeout:g} s")
+
+    def _release_held(self, why: str) -> None:
+        """Answer a held state with the gait in force (sync paused until the policy's next gait)."""
+        if self._held is None:
+            return
+        msg, q, dq, stamp, _since = self._held
+        self._held = None
+        self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+        self.get_logger().warning(f"{why}: answering t = {stamp / 1e9:.3f} s with the gait in force; gaits apply "
+                                  "on arrival until the policy's next one")
+        self._answer(msg, q, dq, stamp)
+
+    def _answer(self, msg: JointState, q: list[float], dq: list[float], stamp: int) -> None:
+        """Compute and publish the torques for the state (and ``/hzd/step`` at a touchdown)."""
+        controller = self.controller
         torques = controller.compute(q, dq)
         self._last_stamp = stamp
         self._last_state = (q, dq)
+        if controller.touchdown:  # before the reply: the policy has it before the states that follow
+            self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))
         torque_msg = self._torque_msg
         torque_msg.header.stamp = msg.header.stamp
         torque_msg.effort = torques
         self._torque_pub.publish(torque_msg)
         self.torques_published += 1
-        if controller.touchdown:
-            self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))
 
 
 def main(args: list[str] | None = None) -> int:

@@ -20,9 +20,10 @@ KD = "/hzd/kd"
 """std_msgs/Float64, derivative gain (N m s/rad)."""
 GAIT_TIMING = "/hzd/gait_timing"
 """std_msgs/String (transient local), published by the policy node: how its gaits are
-meant to apply, ``next_step`` (decided once per step, for the next one) or ``at_once``
-(decided every N ticks, applied when they arrive, blended in). The controller follows it
-unless its ``gait_timing`` parameter says otherwise."""
+meant to apply, ``next_step`` (decided once per step, for the next one) or ``at_once:N``
+(decided every N ticks, applied when they arrive, blended in; a ``decision_sync``
+controller holds its reply to each due state for that state's decision). The controller
+follows it unless its ``gait_timing`` parameter says otherwise."""
 CMD_SPEED = "/cmd_speed"
 """std_msgs/Float64, desired forward speed (m/s)."""
 PUSH = "/push"

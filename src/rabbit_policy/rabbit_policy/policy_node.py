@@ -50,6 +50,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns
+from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.runtime import NodeStartError, run_node
 
 from rabbit_policy.runtime.policies import (
@@ -61,10 +62,6 @@ from rabbit_policy.runtime.policies import (
 )
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
-
-
-TICK_NS = 1_000_000
-"""The simulation's step (ns of sim time): the model's 1 ms timestep, one control tick."""
 
 
 def clamp_speed(value: float, low: float, high: float) -> float:
@@ -89,6 +86,13 @@ POLICY_PARAMS = {
                                  "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied at once"),
     "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1"),
 }
+
+
+def gait_timing(period: int) -> str:
+    """``/hzd/gait_timing`` for a policy deciding every ``period`` ticks (0: once per step):
+    ``next_step``, or ``at_once:N``, which also tells a controller holding its reply for a
+    due decision (``decision_sync``) which states are due."""
+    return f"at_once:{period}" if period else "next_step"
 
 
 def clamp_message(value: float, low: float, high: float, clamped: float) -> str:
@@ -136,7 +140,7 @@ class PolicyNode(Node):
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
         self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
-        self._timing_pub.publish(String(data="at_once" if self.decision_period else "next_step"))
+        self._timing_pub.publish(String(data=gait_timing(self.decision_period)))
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)

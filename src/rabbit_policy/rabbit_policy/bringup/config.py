@@ -73,7 +73,8 @@ class StackConfig:
                 "initial_speed": self.schedule[0][1],
                 "decision_period": self.decision_period,
             },
-            "hzd_controller_node": {},
+            # lockstep/paced: the reply to a state the policy decides on waits for that decision
+            "hzd_controller_node": {"decision_sync": self.mode != "realtime"},
             "sim_node": {
                 "model": self.model,
                 "mode": self.mode,

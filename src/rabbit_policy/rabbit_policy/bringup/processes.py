@@ -19,17 +19,30 @@ from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
 from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recording
 
 
+def _die_with_parent() -> None:
+    """In a node's process before it starts (Linux): SIGTERM when run_stack's thread that
+    started it ends, so a run_stack killed outright (SIGKILL, a test's timeout) leaves no
+    stack running in the domain. Elsewhere nothing."""
+    import ctypes
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
 class NodeProcesses:
     """The three nodes as child processes, each in its own session so that Ctrl-C at the
     terminal reaches only run_stack, which then stops them in order (SIGINT, then SIGTERM,
-    then SIGKILL)."""
+    then SIGKILL); a run_stack killed outright takes them with it (SIGTERM)."""
 
     def __init__(self, config: StackConfig, log=sys.stderr) -> None:
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
         for name, params in config.node_parameters().items():
             cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params)]
-            self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True)
+            self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
+                                                preexec_fn=_die_with_parent)
 
     def dead(self) -> str | None:
         for name, proc in self.procs.items():

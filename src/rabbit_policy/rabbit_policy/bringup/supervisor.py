@@ -16,6 +16,7 @@ from std_srvs.srv import SetBool
 
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import stamp_to_seconds
+from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
 from rabbit_policy.experiment.scenario import Scenario
@@ -183,9 +184,11 @@ class Supervisor(Node):
         times, xs = np.array(self._times), np.array(self._xs)
         touchdowns = []
         for stamp in sorted(self._touchdown_times):
-            i = int(np.searchsorted(times, stamp + 1e-9, side="right"))  # the first state after it
+            # at the state after the switch, one tick later (the fast path's time); its hip x
+            # from the first state seen from then on (this subscriber may miss states)
+            i = int(np.searchsorted(times, stamp + 1e-9, side="right"))
             if i < len(times):  # (a switch on the last state: that tick was never simulated)
-                touchdowns.append(Touchdown(float(times[i]), float("nan"), float(xs[i])))
+                touchdowns.append(Touchdown(round(stamp + TICK_NS * 1e-9, 9), float("nan"), float(xs[i])))
         return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
                           stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,

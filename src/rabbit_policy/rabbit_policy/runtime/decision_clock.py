@@ -12,13 +12,15 @@ which the controller switched stance (``/hzd/step``'s stamp).
   samples after the previous decision's up to that one (the whole step just ended). The
   gait applies at the next touchdown.
 * Every ``period`` ticks: at each sample whose stamp reaches the next multiple of
-  ``period`` ticks since the placement, over the last whole step's duration (the stance
+  ``period`` ticks since the placement (:class:`rabbit_msgs_py.decision_ticks.PeriodicDecisions`,
+  the rule a controller holding its reply for the decision follows too), over the last whole step's duration (the stance
   switches known by the sample before: a switch on the state just before this sample is
   the loop's in the same tick, counted after its decision). The gait applies at once.
 """
 
 from __future__ import annotations
 
+from rabbit_msgs_py.decision_ticks import PeriodicDecisions
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
 
 
@@ -33,6 +35,7 @@ class DecisionClock:
         self.period = period
         self.tick = tick
         self.window = SpeedWindow(window)
+        self._ticks = PeriodicDecisions(period, tick) if period else None
         self.reset()
 
     def reset(self) -> None:
@@ -42,7 +45,8 @@ class DecisionClock:
         self._pending: list[int] = []  # once per step: switches waiting for the sample after them
         self._since: int | None = None  # once per step: the newest sample of the last decision's window
         self._window_start: int | None = None  # ... and where that window began (exclusive)
-        self._next = self.period * self.tick  # every N ticks: the stamp of the next decision
+        if self._ticks is not None:
+            self._ticks.reset()
 
     @property
     def newest(self) -> int | None:
@@ -63,14 +67,11 @@ class DecisionClock:
             if stamp <= 0:
                 return []
         self.window.add(stamp, speed, desired_speed)
-        if self.period:
-            if stamp < self._next:
+        if self._ticks is not None:
+            if not self._ticks.due(stamp):
                 return []
             step = self._step_duration(stamp)
-            due = self.window.observation(desired_speed, stamp, None if step is None else stamp - step)
-            period = self.period * self.tick
-            self._next += period * (1 + (stamp - self._next) // period)
-            return [due]
+            return [self.window.observation(desired_speed, stamp, None if step is None else stamp - step)]
         return self._due(desired_speed)
 
     def switch(self, stamp: int, desired_speed: float) -> list[Observation]:
