@@ -1,0 +1,45 @@
+"""The due-state rule of decisions every N ticks (rabbit_msgs_py.decision_ticks), which the
+policy's DecisionClock and a decision_sync controller both follow."""
+
+from __future__ import annotations
+
+import pytest
+
+from rabbit_msgs_py.decision_ticks import PeriodicDecisions
+
+pytestmark = pytest.mark.unit
+
+
+def test_every_nth_tick_is_due_and_the_placed_state_never():
+    ticks = PeriodicDecisions(20)
+    assert [t for t in range(0, 101) if ticks.due(t)] == [20, 40, 60, 80, 100]
+
+
+def test_a_state_sent_again_is_due_once_and_a_missed_one_moves_the_next():
+    ticks = PeriodicDecisions(20, tick=1000)  # stamps in a finer unit (ns in the nodes)
+    assert ticks.due(20_000) and not ticks.due(20_000)  # a re-send
+    assert not ticks.due(39_000)
+    assert ticks.due(45_000)  # 40 ms missed: decided at the first state past it, once
+    assert not ticks.due(59_000) and ticks.due(60_000)
+
+
+def test_an_older_stamp_or_zero_is_a_new_placement():
+    ticks = PeriodicDecisions(20)
+    assert ticks.due(20) and ticks.due(40)
+    assert not ticks.due(5)  # older: placed again, counted from there
+    assert ticks.due(20)
+    assert not ticks.due(0) and not ticks.due(19) and ticks.due(20)
+
+
+def test_joining_mid_run_follows_the_clock_that_started_at_the_placement():
+    ticks = PeriodicDecisions(20)
+    ticks.join(35)
+    assert [t for t in range(36, 81) if ticks.due(t)] == [40, 60, 80]
+    ticks.join(40)  # on a due state already seen: the next one is due
+    assert not ticks.due(41) and ticks.due(60)
+
+
+@pytest.mark.parametrize("period, tick", [(0, 1), (-1, 1), (2.5, 1), (20, 0)])
+def test_bad_periods_are_refused(period, tick):
+    with pytest.raises(ValueError):
+        PeriodicDecisions(period, tick)
