@@ -1,6 +1,7 @@
-"""How ``sim_node`` steps, without ROS: lockstep bookkeeping (and its pacing), realtime
-pacing, the torque watchdog, recorder flow control and the run statistics. The node only
-wires these to topics, services and timers; every rule here is unit-tested without rclpy.
+"""The rules ``sim_node`` steps by, without ROS: lockstep bookkeeping (and its pacing),
+realtime pacing, the torque watchdog, recorder flow control and the run statistics.
+:class:`~.driver.SimDriver` runs them on the simulator; the node only wires the driver to
+topics, services and timers. Every rule here is unit-tested without rclpy.
 
 * :class:`Lockstep`: one torque reply per published state, taken only if it carries the
   stamp of the state due and comes from the paired controller. A reset or pause requested

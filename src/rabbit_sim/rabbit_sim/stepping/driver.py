@@ -1,0 +1,456 @@
+"""The simulator driven by sim_node's stepping rules, without ROS: :class:`SimDriver` takes
+the node's events (an initial state, a torque reply, a push, reset and pause requests,
+the recorder's progress, the wall-clock timers) and returns the actions they call for, in
+order (:class:`State` to publish, :class:`PushApplied`, :class:`Fallen`, :class:`Placed`,
+:class:`Markers`, a viewer :class:`Frame`, :class:`Log` lines). ``sim_node`` turns those
+into messages and log calls; the tests run it with a fake wall clock and no rclpy.
+
+Modes (``SimSettings.mode``), as docs/architecture.md describes them: ``lockstep`` (one
+torque reply per state, :class:`~.rules.Lockstep`), ``paced`` (lockstep held to the wall
+clock, :class:`~.rules.Pacer`) and ``realtime`` (1 kHz of wall clock, zero-order hold,
+:class:`~.rules.RealtimeClock`, :class:`~.rules.Watchdog`, :class:`~.rules.LatenessMonitor`).
+
+Stamps are ns of sim time; wall times are seconds of ``clock`` (``time.perf_counter``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+from rabbit_msgs_py import topics
+from rabbit_msgs_py.joints import N_ACTUATED
+
+from ..markers import RobotShapes, marker_period_ticks
+from ..settings import REPLY_MODES, SimSettings
+from ..simulation import Simulator
+from .rules import (
+    RECORDER_LAG,
+    RECORDER_RESEND,
+    REPLY_GRACE,
+    TAKEOVER_AFTER,
+    LatenessMonitor,
+    Lockstep,
+    Pacer,
+    RealtimeClock,
+    RecorderGate,
+    Reply,
+    StreamPairing,
+    TickStatistics,
+    Watchdog,
+    WatchdogEvent,
+)
+
+
+# ------------------------------------------------------------------ actions
+@dataclass(frozen=True)
+class State:
+    """Publish the state at ``stamp`` (ns): positions (m, rad), velocities (m/s, rad/s) of
+    the 7 joints and the applied actuator efforts (N m), world frame for the base."""
+
+    stamp: int
+    qpos: list[float]
+    qvel: list[float]
+    effort: list[float]
+
+
+@dataclass(frozen=True)
+class PushApplied:
+    """The push on the torso from ``stamp`` on: (fx N, fz N, ty N m), world frame; zeros: none."""
+
+    stamp: int
+    wrench: tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Fallen:
+    value: bool
+
+
+@dataclass(frozen=True)
+class Placed:
+    """The robot was placed (start or reset) for the ``count``-th time."""
+
+    count: int
+
+
+@dataclass(frozen=True)
+class Markers:
+    """Publish the robot's shapes (``RobotShapes.shapes``) at ``stamp``."""
+
+    stamp: int
+    shapes: object
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Sync the viewer window (``force``: now, whatever its frame rate)."""
+
+    force: bool = False
+
+
+@dataclass(frozen=True)
+class Log:
+    level: str  # "info", "warning" or "error"
+    text: str
+    throttle: float = 0.0  # s (wall): at most one line of this ``key`` this often
+    key: str = ""
+
+
+Action = State | PushApplied | Fallen | Placed | Markers | Frame | Log
+
+
+def seconds_to_ns(seconds: float) -> int:
+    return int(round(seconds * 1e9))
+
+
+class SimDriver:
+    """The simulation and its stepping rules for one ``SimSettings``; see the module
+    docstring. Not thread-safe: the node calls it under one lock."""
+
+    def __init__(self, settings: SimSettings, sim: Simulator, clock: Callable[[], float] = time.perf_counter,
+                 shapes: bool = True) -> None:
+        self.settings, self.sim, self.clock = settings, sim, clock
+        mode = settings.mode
+        self.by_replies = mode in REPLY_MODES
+        self.initial_state: tuple[list[float], list[float]] | None = None
+        self.started = False
+        self.paused = settings.start_paused
+        self.halted = False  # fell, reached stop_time, or (realtime) fell too far behind
+        self.fallen = False
+        self.halt_reason = ""
+        self.placements = 0
+        self.pushes_rejected = 0
+        self.achieved_rtf: float | None = None  # paced: over the last 5 s
+        sim.schedule_pushes(settings.pushes)  # the Simulator applies them, as on the fast path
+        self.stats = TickStatistics()
+        self.lockstep = Lockstep(settings.resend_timeout, TAKEOVER_AFTER, clock)
+        self.pacer = Pacer(settings.rtf, clock=clock) if mode == "paced" else None
+        self.pace_pending = False  # paced: the newest state waits for its wall time
+        self.recorder = RecorderGate(settings.wait_for_recorder and self.by_replies, RECORDER_LAG,
+                                     seconds_to_ns(sim.timestep))
+        self.pairing = StreamPairing(TAKEOVER_AFTER)  # realtime: torques from one controller
+        self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
+        self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
+        self.realtime = RealtimeClock(sim.timestep, clock=clock)
+        self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
+        self._latest_torque_wall = -1.0
+        self._held_ticks = 0
+        self.published_stamp: int | None = None  # ns, the newest state sent
+        self._recorder_resent = -RECORDER_RESEND
+        self._shapes = RobotShapes(sim.model) if shapes else None
+        self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
+        self._out: list[Action] = []
+
+    # ---------------------------------------------------------------- events
+    def on_initial_state(self, qpos: list[float], qvel: list[float]) -> list[Action]:
+        """The newest state to start and reset from; the first one places the robot."""
+        self._out = []
+        self.initial_state = (qpos, qvel)
+        if not self.started:
+            self._place()
+            self._log("info", f"robot placed in the initial state (hip at {qvel[0]:.2f} m/s); simulation "
+                              + ("paused" if self.paused else "running"))
+        return self._out
+
+    def on_torques(self, stamp: int, source: str, torques: list[float], now: float) -> list[Action]:
+        """A torque reply (``now``: when it arrived, wall s)."""
+        self._out = []
+        self.stats.torque_received(now, stamp)
+        if not self.by_replies:
+            if not self.pairing.accepts(source, now):
+                self._refuse(source)
+                return self._out
+            self._latest_torques = torques
+            self._latest_torque_wall = now
+            if self.started and not (self.paused or self.halted) and self.realtime.overdue() >= 0.0:
+                self._run_due_ticks()  # the tick waited for this reply
+            return self._out
+        self._act(self.lockstep.on_reply(stamp, source, torques, self._must_hold()), torques, source)
+        return self._out
+
+    def on_malformed_torques(self) -> None:
+        self.stats.torques_rejected += 1
+
+    def on_push(self, fx: float, fz: float, ty: float, ignored: bool = False) -> list[Action]:
+        """A push on the torso (N, N, N m; ``ignored``: components the planar model drops)."""
+        self._out = []
+        values = (fx, fz, ty)
+        if not all(abs(v) <= self.settings.max_push_force for v in values):
+            self.pushes_rejected += 1
+            self._log("error", f"ignoring push {tuple(round(v, 6) for v in values)}: components must be finite and "
+                               f"within +-{self.settings.max_push_force} N")
+            return self._out
+        if ignored:
+            self._log("warning", "push: the model is planar; force.y, torque.x and torque.z are ignored")
+        self.sim.push(fx, self.settings.push_duration, fz, ty)
+        self._push_applied()
+        self._log("info", f"push at t = {self.sim.time:.3f} s: fx = {fx:.1f} N, fz = {fz:.1f} N, "
+                          f"ty = {ty:.1f} N m for {self.settings.push_duration:.3f} s")
+        return self._out
+
+    def on_reset(self, initial_state_topic: str) -> tuple[bool, str, list[Action]]:
+        """``/sim/reset``: (success, message, actions)."""
+        self._out = []
+        if self.initial_state is None:
+            return False, f"no initial state received on {initial_state_topic} yet", self._out
+        if self.lockstep.request_reset():
+            return True, "reset at the next tick", self._out  # the reply to the state in flight comes first
+        self._place()
+        message = "robot back in the initial state at t = 0 s"
+        self._log("info", message)
+        return True, message, self._out
+
+    def on_pause(self, paused: bool) -> tuple[str, list[Action]]:
+        """``/sim/pause``: (message, actions)."""
+        self._out = []
+        self.paused = paused
+        if not paused and self.pacer is not None:
+            self.pacer.restart(self.sim.time)  # pace from now: no rush to make up the pause
+        if not paused and self.by_replies:
+            self._resume()
+        message = "paused" if paused else "running"
+        self._log("info", f"simulation {message} at t = {self.sim.time:.3f} s")
+        return message, self._out
+
+    def on_recorded(self, stamp: int) -> list[Action]:
+        """The recorder has written the state at ``stamp`` (ns)."""
+        self._out = []
+        self.recorder.recorded = stamp
+        if not self.paused and self.lockstep.held_torques is not None:
+            self._resume()
+        return self._out
+
+    def supervise(self, torque_publishers: Callable[[], int]) -> list[Action]:
+        """Lockstep/paced, a 20 Hz wall-clock timer: a controller taking over, the recorder's
+        first state, and the state sent again when its reply is overdue
+        (``torque_publishers()``: how many nodes publish torques, for the log line)."""
+        self._out = []
+        if not self.started or self.pace_pending:
+            return self._out
+        takeover = self.lockstep.takeover(self._must_hold())
+        if takeover is not None:
+            old, new, reply, torques = takeover
+            self._log("warning", f"controller {new} takes over from {old}, which left the state at "
+                                 f"t = {self.sim.time:.3f} s unanswered for {TAKEOVER_AFTER:.0f} s")
+            self._act(reply, torques, new)
+            return self._out
+        now = self.clock()
+        if not self.paused and self.recorder.holds(self.published_stamp):
+            if now - self._recorder_resent >= RECORDER_RESEND:
+                self._recorder_resent = now
+                self._send_state()  # the recorder may never have had it (connected late)
+            self._log("warning", f"lockstep: waiting for the recorder: {self.recorder.behind(self.published_stamp)}",
+                      5.0, "recorder")
+            return self._out
+        waited = self.lockstep.resend_due(self.paused)
+        if waited is None:
+            return self._out
+        why = (f"no node publishes {topics.JOINT_TORQUES}: is hzd_controller_node running?" if torque_publishers() == 0
+               else f"controller {self.lockstep.controller or '(none answered yet)'} has not answered: it waits "
+                    f"for a gait on {topics.ALPHA} and {topics.KD}, is busy, or died (a killed node stays listed for "
+                    "up to 20 s)")
+        self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
+                             f"re-sending it ({why})", 5.0, "resend")
+        self._send_state()
+        return self._out
+
+    def paced_wake(self) -> list[Action]:
+        """Paced, a 1 ms timer: send the state that waits for its wall time; report the
+        achieved real-time factor."""
+        self._out = []
+        if self.pace_pending and self.pacer.wait(self.sim.time) <= 0.0:
+            self.pace_pending = False
+            self._send_next_state()
+        achieved = self.pacer.achieved(self.sim.time)
+        if achieved is not None and self.started and not (self.paused or self.halted):
+            self.achieved_rtf = achieved
+            slow = achieved < 0.95 * self.settings.rtf
+            self._log("info", f"paced: real-time factor {achieved:.2f} (target {self.settings.rtf:g}) at "
+                              f"t = {self.sim.time:.1f} s"
+                              + ("; this machine cannot keep up, the simulation runs slower" if slow else ""))
+        return self._out
+
+    def realtime_wake(self) -> list[Action]:
+        """Realtime, a 1 ms timer: the ticks now due by the wall clock, zero-order hold."""
+        self._out = []
+        if not self.started or self.paused or self.halted:
+            self.stats.forget()
+            self.realtime.restart()
+        elif not (self.stats.awaiting_reply and self.realtime.overdue() < REPLY_GRACE):
+            self._run_due_ticks()  # (else the reply is on its way, queued behind this timer: it runs the tick)
+        return self._out
+
+    # ---------------------------------------------------------------- status
+    @property
+    def controller(self) -> str | None:
+        """Id of the controller whose torques are applied (None before the first reply)."""
+        return self.lockstep.controller if self.by_replies else self.pairing.controller
+
+    def statistics(self) -> dict:
+        """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
+        extra = {"damped_ticks": self.watchdog.damped_ticks, "resends": self.lockstep.resends,
+                 "skipped_ticks": self.realtime.skipped, "halt_reason": self.halt_reason or None}
+        if self.pacer is not None:
+            first, last = self.stats.first_tick_wall, self.stats.last_tick_wall
+            wall = last - (first or 0.0)
+            extra["achieved_rtf"] = self.sim.time / wall if first is not None and wall > 0 else None
+            extra["paced_fell_behind"] = self.pacer.behind_count
+        return self.stats.summary(self.sim.time, extra)
+
+    # ------------------------------------------------------------- internals
+    def _log(self, level: str, text: str, throttle: float = 0.0, key: str = "") -> None:
+        self._out.append(Log(level, text, throttle, key))
+
+    def _act(self, reply: Reply, torques: list[float], source: str) -> None:
+        """Carry out what :class:`Lockstep` made of a reply."""
+        if reply is Reply.STEP:
+            self._advance(torques)
+        elif reply is Reply.RESET:
+            self._place()
+            self._log("info", "robot back in the initial state at t = 0 s")
+        elif reply is Reply.FOREIGN:
+            self._refuse(source)
+        # IGNORE: answers no state now due (a duplicate or stale stamp); HOLD: kept until the step may run
+
+    def _refuse(self, source: str) -> None:
+        self.stats.torques_rejected += 1
+        self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on {topics.JOINT_TORQUES}: "
+                           f"this simulator takes them from {self.controller} only (another takes over after {TAKEOVER_AFTER:.0f} s without "
+                           "an answer from it)", 5.0, "refused")
+
+    def _must_hold(self) -> bool:
+        """Lockstep/paced: the physics may not step now (paused, or a recorder lags)."""
+        return self.paused or self.recorder.holds(self.published_stamp)
+
+    def _resume(self) -> None:
+        """Lockstep/paced: step on torques held while the step could not run, or send the
+        due state again for a controller (or recorder) that came late."""
+        if self._must_hold():
+            return
+        held = self.lockstep.take_held()
+        if held is not None:
+            self._advance(held)
+        elif self.lockstep.awaiting_reply:
+            self._send_state()
+
+    def _place(self) -> None:
+        pushing = any(self.sim.push_wrench)
+        self.sim.reset(*self.initial_state)
+        self.placements += 1
+        self._out.append(Placed(self.placements))  # before the placed state goes out
+        if pushing:  # the reset removed it
+            self._push_applied()
+        self.started, self.halted, self.halt_reason, self.pace_pending = True, False, "", False
+        self.lockstep.restart()
+        if self.pacer is not None:
+            self.pacer.restart(0.0)
+        self.stats.forget()
+        self._latest_torque_wall = -1.0
+        if self.fallen:
+            self.fallen = False
+            self._out.append(Fallen(False))
+        if self._marker_period:
+            self._markers()  # a viewer shows the robot where it stands, before it walks
+        if self.settings.viewer:
+            self._out.append(Frame(force=True))
+        if self.by_replies:
+            self._send_next_state()
+
+    def _advance(self, torques: list[float]) -> None:
+        """Lockstep/paced: apply one reply, step, send the next state (its reply is then due,
+        unless the physics halted); paced, the state waits for its wall time."""
+        self._step(torques)
+        if self.pacer is not None and not self.halted and self.pacer.wait(self.sim.time) > 0.0:
+            self.pace_pending = True  # paced_wake sends it
+            return
+        self._send_next_state()
+
+    def _send_next_state(self) -> None:
+        stamp = self._send_state()
+        if not self.halted:
+            self.lockstep.published(stamp)
+
+    def _send_state(self, track_latency: bool = False) -> int:
+        data = self.sim.data
+        stamp = seconds_to_ns(data.time)
+        self._out.append(State(stamp, data.qpos.tolist(), data.qvel.tolist(), data.qfrc_actuator.tolist()))
+        self.published_stamp = stamp
+        self.stats.state_sent(self.clock(), stamp, track_latency)
+        return stamp
+
+    def _push_applied(self) -> None:
+        self._out.append(PushApplied(seconds_to_ns(self.sim.time), tuple(self.sim.push_wrench)))
+
+    def _markers(self) -> None:
+        self._out.append(Markers(seconds_to_ns(self.sim.time), self._shapes.shapes(self.sim.data)))
+
+    def _step(self, torques: list[float]) -> None:
+        sim = self.sim
+        sim.step(torques)
+        self.stats.tick(self.clock())
+        if self._marker_period and round(sim.time / sim.timestep) % self._marker_period == 0:
+            self._markers()
+        if self.settings.viewer:
+            self._out.append(Frame())
+        if sim.push_changed:  # a scheduled push started, or a push ended
+            self._push_applied()
+            fx, fz, ty = sim.push_wrench
+            if fx or fz or ty:
+                self._log("info", f"scheduled push at t = {sim.time:.3f} s: fx = {fx:.1f} N")
+        if sim.fallen():
+            self.halted = self.fallen = True
+            self._out.append(Fallen(True))
+            qpos = sim.data.qpos
+            self._log("warning", f"RABBIT fell at t = {sim.time:.3f} s (hip height {qpos[1]:.3f} m, torso pitch "
+                                 f"{qpos[2]:.3f} rad); physics halted, call {topics.RESET_SERVICE} to start again")
+        elif self.settings.stop_time and sim.time >= self.settings.stop_time - 1e-9:
+            self.halted = True
+            self._log("info", f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
+
+    def _run_due_ticks(self) -> None:
+        """Realtime: the ticks due now by the wall clock."""
+        for _ in range(self.realtime.due()):
+            if self._latest_torque_wall < 0.0:
+                # hold the initial state (re-published every 10 ms) until the controller answers
+                self._held_ticks += 1
+                if self._held_ticks % 10 == 1:
+                    self._send_state()
+                continue
+            self._held_ticks = 0
+            self._realtime_tick()
+            if self.halted:
+                break
+        self._report_lateness()
+
+    def _report_lateness(self) -> None:
+        """Once a second: say when the control loop fell behind in that second; halt the
+        physics when it fell too far behind to go on."""
+        late = self.lateness.check(self.stats, self.realtime.skipped)
+        if late is None:
+            return
+        what = (f"{late.late} of {late.ticks} ticks ran on a stale torque and {late.skipped} were skipped in the last "
+                f"second, worst delay {late.worst_ms:.1f} ms")
+        if not late.stop:
+            self._log("warning", f"realtime: the control loop fell behind at t = {self.sim.time:.2f} s: {what}")
+            return
+        self.halted = True
+        self.halt_reason = f"the control loop could not keep up with the wall clock ({what})"
+        self._log("error", f"realtime: physics halted at t = {self.sim.time:.2f} s: {self.halt_reason}; walking on "
+                           "stale torques would make RABBIT fall. On a slow or busy machine use mode:=paced (never "
+                           "steps without its torque)")
+
+    def _realtime_tick(self) -> None:
+        now = self.clock()
+        self.stats.realtime_tick_due(now)
+        rates = self.sim.data.qvel[3:3 + N_ACTUATED].tolist()
+        torques, event = self.watchdog.torques(self._latest_torques, self._latest_torque_wall, now, rates)
+        if event is WatchdogEvent.RESUMED:
+            self._log("info", f"torque commands resumed at t = {self.sim.time:.3f} s; damping off")
+        elif event is WatchdogEvent.TRIPPED:
+            self._log("warning", f"watchdog: no torque for {self.watchdog.timeout * 1e3:.0f} ms at "
+                                 f"t = {self.sim.time:.3f} s; applying damping ({self.watchdog.damping:.0f} N m s/rad) "
+                                 "until commands resume")
+        self._step(torques)
+        self._send_state(track_latency=True)

@@ -1,0 +1,141 @@
+"""sim_node's driver without ROS (rabbit_sim.stepping.SimDriver): events in, actions out,
+for the three modes, on the real MuJoCo model with a fake wall clock."""
+
+from __future__ import annotations
+
+import pytest
+
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_sim.model import load_model
+from rabbit_sim.settings import SimSettings
+from rabbit_sim.simulation import Simulator
+from rabbit_sim.stepping import RECORDER_LAG, Fallen, Log, Placed, PushApplied, SimDriver, State
+
+pytestmark = pytest.mark.unit
+
+MS = 1_000_000  # ns
+C = "hzd_controller_node/cccc"
+ZERO = [0.0] * 4
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture(scope="module")
+def initial_state() -> tuple[list[float], list[float]]:
+    qpos, qvel = state_on_gait(GaitLibrary.load().nearest(1.0).alpha, 1.0)
+    return list(qpos), list(qvel)
+
+
+def _driver(initial_state, clock=None, **settings) -> SimDriver:
+    driver = SimDriver(SimSettings(**settings), Simulator(load_model("paper")), clock or FakeClock(), shapes=False)
+    driver.on_initial_state(*initial_state)
+    return driver
+
+
+def _states(actions) -> list[int]:
+    return [a.stamp for a in actions if isinstance(a, State)]
+
+
+def test_lockstep_places_the_robot_then_steps_once_per_reply_to_the_due_state(initial_state):
+    driver = SimDriver(SimSettings(), Simulator(load_model("paper")), FakeClock(), shapes=False)
+    actions = driver.on_initial_state(*initial_state)
+    assert isinstance(actions[0], Placed) and actions[0].count == 1  # /sim/resets before the placed state
+    (placed,) = [a for a in actions if isinstance(a, State)]
+    assert placed.stamp == 0 and placed.qpos == pytest.approx(initial_state[0])
+    assert _states(driver.on_torques(0, C, ZERO, 100.0)) == [MS]
+    assert driver.on_torques(0, C, ZERO, 100.0) == []  # a duplicate: answers no state now due
+    assert _states(driver.on_torques(MS, C, ZERO, 100.0)) == [2 * MS]
+    refused = driver.on_torques(2 * MS, "rogue", [37.0] * 4, 100.0)
+    assert _states(refused) == [] and any(isinstance(a, Log) and a.level == "error" for a in refused)
+    assert driver.stats.torques_rejected == 1 and driver.sim.time == pytest.approx(0.002)
+
+
+def test_a_reply_while_paused_steps_when_resumed_and_a_reset_places_again(initial_state):
+    driver = _driver(initial_state, start_paused=True)
+    assert driver.on_torques(0, C, ZERO, 100.0) == []  # held: the step may not run
+    message, actions = driver.on_pause(False)
+    assert message == "running" and _states(actions) == [MS]
+    ok, message, actions = driver.on_reset("/sim/initial_state")
+    assert ok and message == "reset at the next tick" and actions == []  # the reply to t = 1 ms comes first
+    actions = driver.on_torques(MS, C, ZERO, 100.0)
+    assert [type(a) for a in actions][:1] == [Placed] and _states(actions) == [0] and driver.sim.time == 0.0
+
+
+def test_an_overdue_reply_makes_the_supervisor_send_the_state_again(initial_state):
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, resend_timeout=0.2)
+    assert driver.supervise(lambda: 1) == []
+    clock.now += 0.3
+    actions = driver.supervise(lambda: 0)
+    assert _states(actions) == [0]
+    assert any(isinstance(a, Log) and "no node publishes /joint_torques" in a.text for a in actions)
+
+
+def test_paced_states_wait_for_their_wall_time(initial_state):
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, mode="paced", rtf=1.0)
+    assert _states(driver.on_torques(0, C, ZERO, clock.now)) == []  # t = 1 ms is due 1 ms after the start
+    assert _states(driver.paced_wake()) == []
+    clock.now += 0.001
+    assert _states(driver.paced_wake()) == [MS]
+    assert driver.paced_wake() == []
+
+
+def test_recorder_lag_holds_lockstep_until_the_recorder_catches_up(initial_state):
+    driver = _driver(initial_state, wait_for_recorder=True)
+    driver.on_recorded(0)
+    lag = RECORDER_LAG + 1  # states the recorder may lag behind, and the one it waits for
+    for tick in range(lag):
+        assert _states(driver.on_torques(tick * MS, C, ZERO, 100.0)) == [(tick + 1) * MS]
+    assert driver.on_torques(lag * MS, C, ZERO, 100.0) == []  # the recorder is too far behind
+    assert _states(driver.on_recorded(MS)) == [(lag + 1) * MS]
+
+
+def test_realtime_holds_the_start_until_a_torque_then_steps_by_the_wall_clock(initial_state):
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, mode="realtime", watchdog_timeout=0.008)
+    clock.now += 0.0105
+    assert driver.sim.time == 0.0 and _states(driver.realtime_wake()) == [0]  # held, re-sent every 10 ticks
+    driver.on_torques(0, C, ZERO, clock.now)
+    clock.now += 0.001
+    actions = driver.realtime_wake()
+    assert _states(actions) and driver.sim.time > 0.0
+    clock.now += 0.02  # no torque for 20 ms: damping, said once
+    tripped = [a for _ in range(3) for a in driver.realtime_wake() if isinstance(a, Log) and "watchdog" in a.text]
+    assert len(tripped) == 1 and driver.watchdog.active
+
+
+def test_a_push_is_applied_and_reported_and_a_bad_one_refused(initial_state):
+    driver = _driver(initial_state)
+    actions = driver.on_push(-50.0, 0.0, 0.0)
+    assert [a.wrench for a in actions if isinstance(a, PushApplied)] == [(-50.0, 0.0, 0.0)]
+    refused = driver.on_push(float("nan"), 0.0, 0.0)
+    assert driver.pushes_rejected == 1 and [a.level for a in refused] == ["error"]
+
+
+def test_a_fall_halts_the_physics_until_a_reset(initial_state):
+    driver = _driver(initial_state)
+    stamp, fell = 0, []
+    while not fell and stamp < 3000 * MS:  # no torque: RABBIT collapses
+        actions = driver.on_torques(stamp, C, ZERO, 100.0)
+        fell = [a for a in actions if isinstance(a, Fallen)]
+        stamp += MS
+    assert fell == [Fallen(True)] and driver.halted and driver.fallen
+    assert driver.on_torques(stamp, C, ZERO, 100.0) == []  # halted: nothing steps
+    ok, _message, actions = driver.on_reset("/sim/initial_state")
+    assert ok and Fallen(False) in actions and _states(actions) == [0] and not driver.halted
+
+
+def test_stop_time_halts_the_physics(initial_state):
+    driver = _driver(initial_state, stop_time=0.003)
+    for tick in range(3):
+        actions = driver.on_torques(tick * MS, C, ZERO, 100.0)
+    assert driver.halted and not driver.fallen and any("stop_time" in a.text for a in actions if isinstance(a, Log))
+    assert driver.on_torques(3 * MS, C, ZERO, 100.0) == []
