@@ -17,9 +17,11 @@ PACKAGES = ("rabbit_msgs_py", "rabbit_sim", "rabbit_hzd_controller", "rabbit_pol
 
 ROSDEP_KEYS = {
     # Python modules from PyPI / Debian -> rosdep keys
-    "numpy": "python3-numpy", "mujoco": "python3-mujoco", "PIL": "python3-pil",
-    "matplotlib": "python3-matplotlib", "torch": "python3-torch", "gymnasium": "python3-gymnasium",
-    "cma": "python3-cma", "rosbags": "python3-rosbags", "yaml": "python3-yaml", "tqdm": "python3-tqdm", "mcap": "python3-mcap",
+    # (keys as ros/rosdistro's rosdep/python.yaml names them: *-pip where only pip has it;
+    # mcap has no key of its own, mcap-ros2-support installs it)
+    "numpy": "python3-numpy", "mujoco": "python3-mujoco-pip", "PIL": "python3-pil",
+    "matplotlib": "python3-matplotlib", "torch": "python3-torch", "gymnasium": "python3-gymnasium-pip",
+    "rosbags": "python3-rosbags-pip", "yaml": "python3-yaml", "tqdm": "python3-tqdm", "mcap": "mcap-ros2-support",
     # ROS 2 packages: the key is the package name
     **{name: name for name in ("rclpy", "std_msgs", "sensor_msgs", "geometry_msgs", "rosgraph_msgs", "std_srvs",
                                "rcl_interfaces", "builtin_interfaces", "visualization_msgs")},
@@ -27,9 +29,11 @@ ROSDEP_KEYS = {
 }
 
 
-# pip-only, no rosdep key: pinned in requirements.txt; rabbit_policy.parallel imports it only
-# for --backend ray, so the package runs without it on a ROS install
-OPTIONAL = {"ray"}
+# pip-only, no rosdep key in rosdistro: pinned in requirements.txt and imported only where
+# needed (rabbit_policy.parallel for --backend ray; the gait optimizer for CMA-ES), so the
+# packages run without them on a ROS install (README: pip install -r requirements.txt)
+OPTIONAL = {"ray", "cma"}
+ROSDISTRO_EXCERPT = Path(__file__).resolve().parent / "data" / "rosdep_python_excerpt.yaml"
 
 
 def imported_modules(package: str) -> set[str]:
@@ -73,3 +77,18 @@ def test_the_tests_import_the_packages_from_src():
     for name in PACKAGES:
         module = importlib.import_module(name)
         assert module.__file__ and Path(module.__file__).resolve().is_relative_to(SRC / name), module
+
+
+def test_every_python_rosdep_key_is_one_rosdistro_defines():
+    """``rosdep install`` resolves every non-ROS key of every package.xml: each is an entry of
+    rosdistro's rosdep/python.yaml (tests/data holds the entries, with the commit they are
+    from) for Debian and Ubuntu."""
+    import yaml
+
+    entries = yaml.safe_load(ROSDISTRO_EXCERPT.read_text())
+    assert "commit" in ROSDISTRO_EXCERPT.read_text().splitlines()[0]
+    ros = {name for name, key in ROSDEP_KEYS.items() if name == key}
+    for package in PACKAGES:
+        for key in declared(package) - ros - {"python3-pytest"}:
+            assert key in entries, f"{package}/package.xml: {key} is not a rosdep key in rosdistro"
+            assert {"debian", "ubuntu"} <= set(entries[key]), f"{key} does not resolve on Debian and Ubuntu"

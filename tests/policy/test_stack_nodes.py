@@ -137,6 +137,36 @@ def test_bad_speed_commands_are_clamped_or_rejected():
         assert spin_until(executor, lambda: policy.desired_speed == 0.7)
 
 
+def test_cmd_vel_commands_the_speed_as_teleop_tools_send_it(capfd):
+    """geometry_msgs/Twist on /cmd_vel (teleop_twist_keyboard, navigation): linear.x is the
+    commanded speed, through the same clamping and rejection as /cmd_speed; a turn or any
+    other field is ignored with one warning."""
+    from geometry_msgs.msg import Twist
+
+    with ros_context() as (context, executor):
+        policy = PolicyNode(context=context)
+        executor.add_node(policy)
+        import rclpy
+
+        user = rclpy.create_node("teleop", context=context)
+        executor.add_node(user)
+        pub = user.create_publisher(Twist, topics.CMD_VEL, qos.COMMAND_QOS)
+        assert spin_until(executor, lambda: pub.get_subscription_count() > 0)
+        for _ in range(2):
+            msg = Twist()
+            msg.linear.x, msg.angular.z = 1.1, 0.5
+            pub.publish(msg)
+        assert spin_until(executor, lambda: policy.desired_speed == 1.1)
+        msg = Twist()
+        msg.linear.x = math.nan
+        pub.publish(msg)
+        assert spin_until(executor, lambda: policy.rejected_commands == 1) and policy.desired_speed == 1.1
+        msg.linear.x = 9.0
+        pub.publish(msg)
+        assert spin_until(executor, lambda: policy.desired_speed == 1.5)
+    assert capfd.readouterr().err.count("only linear.x (the speed) is used") == 1
+
+
 def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
     gait = GaitLibrary.load().nearest(1.0)
     with ros_context() as (context, executor):

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
+from geometry_msgs.msg import Twist, TwistStamped, Wrench, WrenchStamped
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -48,6 +48,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.KD, Float64, qos.GAIT_QOS),
         TopicSpec(topics.GAIT_TIMING, String, qos.GAIT_QOS),
         TopicSpec(topics.CMD_SPEED, Float64, qos.COMMAND_QOS),
+        TopicSpec(topics.CMD_VEL, Twist, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH, Wrench, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH_APPLIED, WrenchStamped, qos.EVENT_QOS),
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),

@@ -26,6 +26,10 @@ controller holds its reply to each due state for that state's decision). The con
 follows it unless its ``gait_timing`` parameter says otherwise."""
 CMD_SPEED = "/cmd_speed"
 """std_msgs/Float64, desired forward speed (m/s)."""
+CMD_VEL = "/cmd_vel"
+"""geometry_msgs/Twist, the usual velocity command (teleop_twist_keyboard, navigation):
+``linear.x`` is the desired forward speed (m/s), as on ``/cmd_speed``; RABBIT walks
+straight in its plane, so the other fields are ignored (policy_node warns once)."""
 PUSH = "/push"
 """geometry_msgs/Wrench on the torso (N, N m, world frame)."""
 PUSH_APPLIED = "/push_applied"

@@ -1,8 +1,8 @@
 """``policy_node``: picks the gait (alpha, Kd) for each step from the commanded speed and the
 averaged hip speed, as in the paper's Fig. 2.
 
-Subscribes ``/cmd_speed`` (m/s), ``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns,
-from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
+Subscribes ``/cmd_speed`` (m/s; or ``/cmd_vel``, geometry_msgs/Twist, linear.x),
+``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns, from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
 start and then at every step, and with each gait ``/sim/initial_state`` (transient local):
 the state at phase 0 of that gait with the hip moving at ``initial_speed``, where the
 simulator starts and resets (it knows no gait itself). The policy's inputs are the paper's: the commanded speed v_d,
@@ -39,7 +39,7 @@ from __future__ import annotations
 import math
 import sys
 
-from geometry_msgs.msg import TwistStamped
+from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -95,9 +95,9 @@ def gait_timing(period: int) -> str:
     return f"at_once:{period}" if period else "next_step"
 
 
-def clamp_message(value: float, low: float, high: float, clamped: float) -> str:
+def clamp_message(value: float, low: float, high: float, clamped: float, topic: str = topics.CMD_SPEED) -> str:
     """The log line for a clamped command; any value prints short (``1e+308``, not 309 digits)."""
-    return f"{topics.CMD_SPEED} {value:.4g} m/s is outside [{low:g}, {high:g}]; clamped to {clamped:.2f} m/s"
+    return f"{topic} {value:.4g} m/s is outside [{low:g}, {high:g}]; clamped to {clamped:.2f} m/s"
 
 
 class PolicyNode(Node):
@@ -142,6 +142,8 @@ class PolicyNode(Node):
         self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
         self._timing_pub.publish(String(data=gait_timing(self.decision_period)))
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
+        self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
+        self._warned_planar = False
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
         self._decide(Observation(self.desired_speed, self.desired_speed, 0.0))  # the start: on the command
@@ -167,15 +169,28 @@ class PolicyNode(Node):
         self.desired_speed = min(max(self.desired_speed, low), high)
         return SetParametersResult(successful=True)
 
+    def _on_cmd_vel(self, msg: Twist) -> None:
+        """``/cmd_vel``: linear.x is the commanded speed; RABBIT walks straight in its plane."""
+        if not self._warned_planar and (msg.linear.y or msg.linear.z or msg.angular.x or msg.angular.y
+                                        or msg.angular.z):
+            self._warned_planar = True
+            self.get_logger().warning(f"{topics.CMD_VEL}: RABBIT walks straight in its plane; only linear.x (the "
+                                      "speed) is used, the other fields are ignored (said once)")
+        self._command(msg.linear.x, topics.CMD_VEL)
+
     def _on_cmd_speed(self, msg: Float64) -> None:
+        self._command(msg.data, topics.CMD_SPEED)
+
+    def _command(self, value: float, topic: str) -> None:
+        """A commanded speed (m/s) from ``topic``: clamped into range, rejected if not finite."""
         try:
-            speed = clamp_speed(msg.data, self.min_speed, self.max_speed)
+            speed = clamp_speed(value, self.min_speed, self.max_speed)
         except ValueError as exc:
             self.rejected_commands += 1
-            self.get_logger().error(f"rejected {topics.CMD_SPEED}: {exc}; keeping {self.desired_speed:.2f} m/s")
+            self.get_logger().error(f"rejected {topic}: {exc}; keeping {self.desired_speed:.2f} m/s")
             return
-        if speed != msg.data:
-            self.get_logger().warning(clamp_message(msg.data, self.min_speed, self.max_speed, speed))
+        if speed != value:
+            self.get_logger().warning(clamp_message(value, self.min_speed, self.max_speed, speed, topic))
         if speed != self.desired_speed:
             self.get_logger().info(f"commanded speed {speed:.2f} m/s")
         self.desired_speed = speed
