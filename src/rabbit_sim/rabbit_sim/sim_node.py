@@ -54,7 +54,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, UInt32
+from std_msgs.msg import Bool, Header, UInt32
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -101,8 +101,7 @@ class SimNode(Node):
         self.sim = self.driver.sim
         self._lock = threading.RLock()
         self._joint_msg = JointState(name=list(JOINT_NAMES))
-        self._hip_msg = TwistStamped()
-        self._hip_msg.header.frame_id = "world"
+        self._hip_msg = TwistStamped(header=Header(frame_id="world"))
         self._marker_builder = MarkerArrayBuilder()
         self._logged: dict[str, float] = {}  # throttled log lines: key -> when last logged (monotonic s)
         self.viewer = None
@@ -243,6 +242,7 @@ class SimNode(Node):
             kind = type(action)
             if kind is State:
                 self._publish_state(action)
+                self.driver.sent(action)
             elif kind is Log:
                 self._log(action)
             elif kind is Frame:

@@ -47,12 +47,14 @@ from .rules import (
 @dataclass(frozen=True)
 class State:
     """Publish the state at ``stamp`` (ns): positions (m, rad), velocities (m/s, rad/s) of
-    the 7 joints and the applied actuator efforts (N m), world frame for the base."""
+    the 7 joints and the applied actuator efforts (N m), world frame for the base; then
+    tell :meth:`SimDriver.sent` (the latency of its reply counts from then)."""
 
     stamp: int
     qpos: list[float]
     qvel: list[float]
     effort: list[float]
+    track_latency: bool = False
 
 
 @dataclass(frozen=True)
@@ -169,6 +171,10 @@ class SimDriver:
             return self._out
         self._act(self.lockstep.on_reply(stamp, source, torques, self._must_hold()), torques, source)
         return self._out
+
+    def sent(self, state: State) -> None:
+        """The node published ``state`` (now: where its reply's latency starts)."""
+        self.stats.state_sent(self.clock(), state.stamp, state.track_latency)
 
     def on_malformed_torques(self) -> None:
         self.stats.torques_rejected += 1
@@ -375,9 +381,9 @@ class SimDriver:
     def _send_state(self, track_latency: bool = False) -> int:
         data = self.sim.data
         stamp = seconds_to_ns(data.time)
-        self._out.append(State(stamp, data.qpos.tolist(), data.qvel.tolist(), data.qfrc_actuator.tolist()))
+        self._out.append(State(stamp, data.qpos.tolist(), data.qvel.tolist(), data.qfrc_actuator.tolist(),
+                               track_latency))
         self.published_stamp = stamp
-        self.stats.state_sent(self.clock(), stamp, track_latency)
         return stamp
 
     def _push_applied(self) -> None:
