@@ -188,25 +188,37 @@ def test_blend_makes_the_desired_outputs_continuous_across_a_gait_change():
 
 
 def test_blend_fades_out_within_its_phase(gait):
+    """A gait queued for the touchdown (``set_alpha``) with ``blend_phase`` 0.2: right after
+    the touchdown the outputs start where the old gait's were and fade into the new gait's
+    by a smoothstep over 0.2 of phase; past it the plain law of the new gait, and the blend
+    is over for good. Checked through torques on states at rest on the new gait (where the
+    plain law gives only Kp terms: kp * offset * w), kp low so that nothing saturates."""
     from rabbit_hzd_controller.gait_state import state_on_gait
 
-    offsets = (0.005, -0.005, 0.002, 0.0)  # as a gait change at phase 0.1 would leave them
-    plain = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp))
-    for tau, blending in ((0.15, True), (0.6, False)):
-        q, _ = state_on_gait(gait.alpha, gait.speed, tau=tau)  # on the gait, at rest: only Kp terms
-        dq = [0.0] * 7
-        c = HZDController(gait.alpha, gait.kd, ControllerConfig(kp=gait.kp, blend_phase=0.2))
-        c._blend = (0.1, offsets, (0.0,) * 4, 0.2)
-        got, want = c.compute(q, dq), plain.compute(q, dq)
-        assert c.tau == pytest.approx(tau, abs=1e-6)
-        if blending:  # inside the blend: offset by kp * offset * w, w = smoothstep-down
-            r = (tau - 0.1) / 0.2
-            w = 1.0 - r * r * (3.0 - 2.0 * r)
-            assert c._blend is not None
-            assert got[0] - want[0] == pytest.approx(gait.kp * offsets[0] * w, rel=0.02)
-        else:  # past it: the plain law, and the blend is dropped
-            assert c._blend is None
-            np.testing.assert_allclose(got, want)
+    new = GaitLibrary.load().nearest(1.2)
+    config = ControllerConfig(kp=300.0, blend_phase=0.2)
+    c = HZDController(gait.alpha, gait.kd, config)
+    c.set_alpha(new.alpha)
+    q_end, _ = state_on_gait(gait.alpha, gait.speed, tau=1.0)  # the swing foot lands
+    c.compute(q_end, [0.0] * 7)
+    assert c.touchdown and c.stance is Leg.RIGHT and c.alpha == tuple(new.alpha)
+    start = c.tau  # where the blend starts (the new gait's phase at the touchdown state)
+    plain = HZDController(new.alpha, new.kd, config, stance=Leg.RIGHT)
+
+    def offset(tau: float) -> np.ndarray:
+        q, _ = state_on_gait(new.alpha, new.speed, tau=tau, stance=Leg.RIGHT)
+        return np.array(c.compute(q, [0.0] * 7)) - np.array(plain.compute(q, [0.0] * 7))
+
+    def w(tau: float) -> float:  # smoothstep down over the blend
+        r = (tau - start) / 0.2
+        return 1.0 - r * r * (3.0 - 2.0 * r)
+
+    first = offset(start + 0.02)
+    assert np.max(np.abs(first)) > 1.0  # N m: the outputs start at the old gait's
+    for tau in (0.08, 0.15):
+        np.testing.assert_allclose(offset(tau), first * w(tau) / w(start + 0.02), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(offset(0.6), 0.0, atol=1e-9)  # past it: the plain law
+    np.testing.assert_allclose(offset(0.1), 0.0, atol=1e-9)  # and the blend does not come back
 
 
 def _desired(c: HZDController, q, dq, eps: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
