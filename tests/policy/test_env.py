@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import rabbit_policy.learning.env  # noqa: F401  (registers RabbitHZD-v0)
 from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
@@ -20,6 +19,24 @@ def test_env_passes_the_gymnasium_checker():
     env = gym.make("RabbitHZD-v0")
     check_env(env.unwrapped, skip_render_check=True)
     assert env.observation_space.shape == (3,) and env.action_space.shape == (21,)
+
+
+@pytest.mark.parametrize("imports", ["import rabbit_policy; import gymnasium",
+                                     "import gymnasium; import rabbit_policy"])
+def test_gymnasium_makes_the_env_after_import_rabbit_policy_and_policy_node_pays_nothing(imports):
+    """``gymnasium.make("RabbitHZD-v0")`` after ``import rabbit_policy``, in either import
+    order, in a fresh interpreter; importing policy_node imports neither Gymnasium nor the
+    env module (the id is registered by entry-point string when Gymnasium is imported)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import rabbit_policy.policy_node; "
+            "assert 'gymnasium' not in sys.modules and 'rabbit_policy.learning.env' not in sys.modules; "
+            f"{imports}; env = gymnasium.make('RabbitHZD-v0'); env.reset(seed=0); "
+            "print(type(env.unwrapped).__name__)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["RabbitHZDEnv"]
 
 
 def test_classic_gaits_lie_inside_the_action_bounds():

@@ -1,4 +1,5 @@
-"""Gait policies for RABBIT, by concern (importing this package imports nothing heavy):
+"""Gait policies for RABBIT, by concern (importing this package imports nothing heavy; it
+registers ``RabbitHZD-v0`` with Gymnasium when Gymnasium is imported, see :mod:`.registration`):
 
 * :mod:`.runtime`: what ``policy_node`` runs: policies, the speed window, the network, the
   classic gait library.
@@ -12,3 +13,7 @@
   stability, push recovery, figures, report.
 * :mod:`.bringup`: starting the ROS 2 stack in place of a launch file.
 """
+
+from .registration import register_when_gymnasium_is_imported
+
+register_when_gymnasium_is_imported()

@@ -46,6 +46,7 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import option
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.registration import register
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_sim.model import ModelOptions, load_model
@@ -269,9 +270,4 @@ class RabbitHZDEnv(gym.Env):
         return obs, float(reward), terminated, truncated, info
 
 
-def register() -> None:
-    """Register ``RabbitHZD-v0`` with Gymnasium (done when this module is imported)."""
-    if "RabbitHZD-v0" not in gym.registry:
-        gym.register(id="RabbitHZD-v0", entry_point="rabbit_policy.learning.env:RabbitHZDEnv")
-
-register()
+register(gym)  # also here: gymnasium.make("rabbit_policy.learning.env:RabbitHZD-v0") imports this module

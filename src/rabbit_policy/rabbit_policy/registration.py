@@ -1,0 +1,48 @@
+"""``RabbitHZD-v0`` in Gymnasium's registry once ``rabbit_policy`` is imported, at no cost to
+what does not use Gymnasium (``policy_node``): the id is registered by entry-point string
+(the env module is imported only by ``gymnasium.make``), at once if Gymnasium is imported
+already, else as soon as it is (a one-shot import hook on ``sys.meta_path``)."""
+
+from __future__ import annotations
+
+import importlib.abc
+import importlib.util
+import sys
+
+ENV_ID = "RabbitHZD-v0"
+ENTRY_POINT = "rabbit_policy.learning.env:RabbitHZDEnv"
+
+
+def register(gymnasium_module) -> None:
+    """Register :data:`ENV_ID` with this Gymnasium (once)."""
+    if ENV_ID not in gymnasium_module.registry:
+        gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT)
+
+
+class _RegisterWhenImported(importlib.abc.MetaPathFinder):
+    """Finds ``gymnasium`` the usual way and registers the env right after it is executed."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name != "gymnasium":
+            return None
+        if self in sys.meta_path:
+            sys.meta_path.remove(self)  # one shot, and not in the way of the normal search below
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.loader is None:
+            return spec
+        execute = spec.loader.exec_module
+
+        def exec_module(module) -> None:
+            execute(module)
+            register(module)
+
+        spec.loader.exec_module = exec_module
+        return spec
+
+
+def register_when_gymnasium_is_imported() -> None:
+    """See the module docstring (called by ``rabbit_policy/__init__``)."""
+    if "gymnasium" in sys.modules:
+        register(sys.modules["gymnasium"])
+    elif not any(isinstance(finder, _RegisterWhenImported) for finder in sys.meta_path):
+        sys.meta_path.insert(0, _RegisterWhenImported())
