@@ -29,7 +29,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.parallel import add_backend_arguments, open_backend
+from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 from rabbit_sim.gl_backend import choose_headless_gl
 
 # MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
@@ -44,7 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
     parser.add_argument("--quick", action="store_true", help="short version for tests")
     parser.add_argument("--workers", type=int, default=2, help="processes for the independent walks")
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, progress=True)
     parser.add_argument("--model", choices=("paper", "drives"), default="paper")
     parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
     parser.add_argument("--policy-file", default=None, help="HZD-RL checkpoint (default: packaged)")
@@ -114,7 +114,7 @@ def main(argv: list[str] | None = None) -> int:
     log = lambda message: print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr)  # noqa: E731
 
     backend = open_backend(build_parser(), args)
-    map_fn = backend.map
+    map_fn = ProgressMap(backend, "evaluation walks", enabled=not args.no_progress)
     try:
         log("speed tracking")
         tracking = {name: evaluation.speed_tracking(policy, config, model)[0] for name, policy in policies.items()}
@@ -152,6 +152,7 @@ def main(argv: list[str] | None = None) -> int:
             verdicts = {name: judge_policy(policy, robust[name], robust["classic"]["push_margins"],
                                            poincare[name], map_fn) for name, policy in policies.items()}
     finally:
+        map_fn.close()
         backend.close()
 
     videos: list[dict] = []

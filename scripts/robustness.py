@@ -20,7 +20,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.parallel import add_backend_arguments, open_backend
+from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 
 PARTS = ("grid", "transitions", "random", "pushes", "models")
 
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> int:
                              "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--workers", type=int, default=2)
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, progress=True)
     parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
     parser.add_argument("--out", type=Path, default=None, help="also write the JSON here")
     args = parser.parse_args(argv)
@@ -62,13 +62,15 @@ def main(argv: list[str] | None = None) -> int:
     start = time.perf_counter()
     results: dict = {"config": config.to_dict(), "controllers": {}}
     backend = open_backend(parser, args)
+    map_fn = ProgressMap(backend, "robustness walks", enabled=not args.no_progress)
     try:
         for name, policy in policies.items():
             results["controllers"][name] = {"policy": policy.name}
             for part in args.parts:
                 print(f"[{time.perf_counter() - start:7.1f} s] {name}: {part}", file=sys.stderr, flush=True)
-                results["controllers"][name][part] = parts[part](policy, config, backend.map)
+                results["controllers"][name][part] = parts[part](policy, config, map_fn)
     finally:
+        map_fn.close()
         backend.close()
     results["wall_time_s"] = round(time.perf_counter() - start, 1)
     text = strict_json.dumps(results)

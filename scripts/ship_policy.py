@@ -29,7 +29,7 @@ from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
-from rabbit_policy.parallel import add_backend_arguments, open_backend
+from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 TARGET = ROOT / "src" / "rabbit_policy" / "rabbit_policy" / "trained"
@@ -190,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
     parser.add_argument("--workers", type=int, default=2)
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, progress=True)
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
@@ -214,26 +214,28 @@ def main(argv: list[str] | None = None) -> int:
         print(message, file=sys.stderr, flush=True)
 
     backend = open_backend(parser, args)
+    map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        reference = broad_acceptance(classic, classic, config, map_fn=backend.map, stability_samples=samples, log=log)
-        learned = broad_acceptance(policy, classic, config, map_fn=backend.map, stability_samples=samples, log=log,
+        reference = broad_acceptance(classic, classic, config, map_fn=map_fn, stability_samples=samples, log=log)
+        learned = broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples, log=log,
                                    classic_margins=reference["classic_push_margins"])
         broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
                  ("classic HZD (calibrated library, every 20 ticks)", reference)]
         log("tracking checks")
-        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=backend.map))]
+        results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=map_fn))]
         if not args.quick:  # the fast subset: the policy's own tracking table only
             for other in others:
                 results.append((f"HZD-RL ({other.checkpoint.info.get('algorithm')})",
-                                acceptance(other, criteria, map_fn=backend.map)))
+                                acceptance(other, criteria, map_fn=map_fn)))
             start = warm_start_policy(policy.checkpoint)
             if start is not None:
                 results.append((f"warm start only ({info.get('warm_start')}, untrained)",
-                                acceptance(start, criteria, map_fn=backend.map)))
+                                acceptance(start, criteria, map_fn=map_fn)))
             for mode in ("nearest", "interpolate"):
                 results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode), criteria,
-                                                                    map_fn=backend.map)))
+                                                                    map_fn=map_fn)))
     finally:
+        map_fn.close()
         backend.close()
     command = "scripts/ship_policy.py " + " ".join(argv if argv is not None else sys.argv[1:])
     card = model_card(info, results, broad, command, criteria)

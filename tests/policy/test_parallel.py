@@ -254,6 +254,24 @@ def test_a_node_lost_mid_generation_has_its_tasks_rerun(cluster, undisturbed):
     assert np.array_equal(theta, undisturbed[0]) and stats == undisturbed[1]
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_the_progress_bar_counts_every_walk_of_every_sweep(workers):
+    """ProgressMap (evaluate/robustness/ship_policy's progress bar): the backend's results,
+    in order, and a bar whose total grows with each sweep and whose count reaches it."""
+    from rabbit_policy.parallel import ProgressMap
+
+    backend = LocalBackend(workers)
+    progress = ProgressMap(backend, enabled=False)  # counts without drawing
+    try:
+        assert progress(abs, [-3, 1, -2]) == [3, 1, 2]
+        assert (progress.done, progress.total) == (3, 3)
+        assert progress(str, range(4)) == ["0", "1", "2", "3"]
+        assert (progress.done, progress.total) == (7, 7)
+    finally:
+        progress.close()
+        backend.close()
+
+
 @pytest.mark.slow
 def test_a_failed_task_raises_and_stops_its_siblings(cluster):
     """One task of a map raises: map raises that error, and the map's other tasks are
@@ -267,7 +285,7 @@ def test_a_failed_task_raises_and_stops_its_siblings(cluster):
         return item
 
     with pytest.raises(ValueError, match="task 0 failed"):
-        cluster.map(_fail_first, range(3))
+        cluster.map(_fail_first, range(2))  # as many tasks as the cluster has CPUs: none waits for one
     deadline = time.monotonic() + 60
     while any(_title(pid).startswith("ray::_fail_first") for pid in _ray_pids()):
         assert time.monotonic() < deadline, "the failed map's other tasks kept running"

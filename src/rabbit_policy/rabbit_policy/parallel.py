@@ -69,9 +69,14 @@ class LocalBackend:
         self.workers = workers
         self._pool = get_context("fork").Pool(workers, initializer=ignore_interrupts) if workers > 1 else None
 
-    def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list:
-        items = list(items)
-        return self._pool.map(fn, items) if self._pool is not None else [fn(item) for item in items]
+    def map(self, fn: Callable[[Any], Any], items: Iterable[Any], on_each: Callable[[], None] | None = None) -> list:
+        """``fn`` on every item, results in order; ``on_each()`` after each item is done."""
+        results = []
+        for result in (self._pool.imap(fn, items) if self._pool is not None else map(fn, items)):
+            results.append(result)
+            if on_each is not None:
+                on_each()
+        return results
 
     def close(self, terminate: bool = False) -> None:
         if self._pool is None:
@@ -191,15 +196,21 @@ class RayBackend:
         """CPUs the cluster offers to tasks (all nodes)."""
         return int(self._ray.cluster_resources().get("CPU", 0))
 
-    def map(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list:
-        """``fn`` on every item as Ray tasks; results in order. A task whose worker process
-        or node dies is re-run (up to ``max_retries``); an exception raised by ``fn`` itself
-        is not retried and is raised here."""
+    def map(self, fn: Callable[[Any], Any], items: Iterable[Any], on_each: Callable[[], None] | None = None) -> list:
+        """``fn`` on every item as Ray tasks; results in order (``on_each()`` as each is done).
+        A task whose worker process or node dies is re-run (up to ``max_retries``); an
+        exception raised by ``fn`` itself is not retried and is raised here at once."""
         remote = self._remote.get(fn)
         if remote is None:
             remote = self._remote[fn] = self._ray.remote(max_retries=self.max_retries, num_cpus=1)(fn)
         refs = [remote.remote(item) for item in items]
         try:
+            pending = refs
+            while pending:
+                done, pending = self._ray.wait(pending, num_returns=1)
+                self._ray.get(done)  # a failed task raises now, not after the others
+                if on_each is not None:
+                    on_each()
             return self._ray.get(refs)
         except Exception:
             # a failed task: the others stop too, nothing keeps running on our behalf. Not on
@@ -264,9 +275,38 @@ def make_backend(config: BackendConfig) -> Backend:
     return LocalBackend(config.workers)
 
 
-def add_backend_arguments(parser) -> None:
+class ProgressMap:
+    """A backend's ``map`` with one progress bar (tqdm, on stderr) over all the walks it runs:
+    the total grows as each sweep hands over its walks, the count as each walk ends. Pass it
+    where a ``map_fn`` goes; :meth:`close` ends the bar."""
+
+    def __init__(self, backend: "Backend", label: str = "walks", enabled: bool = True) -> None:
+        from tqdm import tqdm
+
+        self.backend = backend
+        self.total = self.done = 0  # walks handed over, walks ended
+        self.bar = tqdm(total=0, unit="walk", desc=label, disable=not enabled, dynamic_ncols=True)
+
+    def __call__(self, fn: Callable[[Any], Any], items: Iterable[Any]) -> list:
+        items = list(items)
+        self.total += len(items)
+        self.bar.total = self.total
+        self.bar.refresh()
+        return self.backend.map(fn, items, on_each=self._one_done)
+
+    def _one_done(self) -> None:
+        self.done += 1
+        self.bar.update(1)
+
+    def close(self) -> None:
+        self.bar.close()
+
+
+def add_backend_arguments(parser, progress: bool = False) -> None:
     """``--backend`` and ``--ray-address`` for a script's argument parser (``--workers`` is
-    the script's own)."""
+    the script's own); with ``progress`` also ``--no-progress`` (for :class:`ProgressMap`)."""
+    if progress:
+        parser.add_argument("--no-progress", action="store_true", help="no progress bar (log lines only)")
     parser.add_argument("--backend", choices=BACKENDS, default="local",
                         help="local: a process pool on this machine; ray: Ray tasks (a private local "
                              "instance, or the cluster at --ray-address)")
