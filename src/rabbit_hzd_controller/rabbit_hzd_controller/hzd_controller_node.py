@@ -137,7 +137,9 @@ class HZDControllerNode(Node):
         self._due: PeriodicDecisions | None = None
         self._gaits: dict[str, deque] = {"alpha": deque(), "kd": deque()}
         self._held: tuple[JointState, list[float], list[float], int, float] | None = None
-        self._timing_known = False  # /hzd/gait_timing received
+        # decision_sync, following the policy's timing: the first state waits for /hzd/gait_timing
+        # as for the gait (a decision due on it would be missed)
+        self._timing_unknown = self.decision_sync and self.follow_policy_timing
         self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
         self.decisions_waited = 0  # due states answered with their decision
         self.decisions_timed_out = 0
@@ -220,7 +222,7 @@ class HZDControllerNode(Node):
             self._gaits[part].append(value)  # counted: sync resumes once alpha and Kd came again
             if self._gaits["alpha"] and self._gaits["kd"]:
                 self._sync_paused = False
-                self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+                self._forget_gaits()
         if value is not None:
             self._apply(part, value, self.gait_timing == "at_once")
 
@@ -229,6 +231,10 @@ class HZDControllerNode(Node):
             self.controller.apply_now(tuple(value)) if at_once else self.controller.set_alpha(value)
         else:
             self.controller.set_kd(value) if at_once else self.controller.queue_kd(value)
+
+    def _forget_gaits(self) -> None:
+        for parts in self._gaits.values():
+            parts.clear()
 
     @property
     def _syncing(self) -> bool:
@@ -239,18 +245,14 @@ class HZDControllerNode(Node):
         if not self.follow_policy_timing:
             return
         timing, _, period = msg.data.partition(":")
-        try:
-            if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit()
-                                                           or int(period) < 1)):
-                raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
-        except ValueError as exc:
-            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: {exc}; "
-                                    f"keeping {self.gait_timing}")
+        if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
+            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: not one of "
+                                    f"{GAIT_TIMINGS}, or at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
             return
         if timing != self.gait_timing:
             self.get_logger().info(f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
         self.gait_timing = timing
-        self._timing_known = True
+        self._timing_unknown = False
         due = PeriodicDecisions(int(period), TICK_NS) if period and self.decision_sync else None
         if due is not None and self._last_stamp >= 0:
             due.join(self._last_stamp)  # mid-run: the policy's clock has followed since the placement
@@ -267,7 +269,7 @@ class HZDControllerNode(Node):
         if first:
             return  # the count in force when this node started: nothing to restart
         self._restart = True
-        self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+        self._forget_gaits()
         self._held = None  # the placed state comes next; its answer is due, not this one's
         self._forget_last_state()
 
@@ -278,12 +280,6 @@ class HZDControllerNode(Node):
         if self._dropped is not None:
             msg_state, self._dropped = self._dropped, None
             self._on_state(msg_state)
-
-    @property
-    def _timing_unknown(self) -> bool:
-        """decision_sync, following the policy's timing, before the policy has said it: the
-        first state waits for it as for the gait (a decision due on it would be missed)."""
-        return self.decision_sync and self.follow_policy_timing and not self._timing_known
 
     def _answer_waiting_state(self) -> None:
         """Answer the state that arrived before the first complete gait, if any."""
@@ -329,8 +325,7 @@ class HZDControllerNode(Node):
             self._restart = False
         self._dropped = None
         if self._due is not None and self._due.due(stamp) and self._syncing:
-            if self._held is not None:  # a newer state while one waits (its reply was given up): drop the old
-                self._held = None
+            # (a newer state while one waits: its reply was given up, the older one is dropped)
             self._held = (msg, q, dq, stamp, time.monotonic())
             self._answer_held()
             return
@@ -363,7 +358,7 @@ class HZDControllerNode(Node):
             return
         msg, q, dq, stamp, _since = self._held
         self._held = None
-        self._gaits["alpha"].clear(), self._gaits["kd"].clear()
+        self._forget_gaits()
         self.get_logger().warning(f"{why}: answering t = {stamp / 1e9:.3f} s with the gait in force; gaits apply "
                                   "on arrival until the policy's next one")
         self._answer(msg, q, dq, stamp)

@@ -47,7 +47,6 @@ import time
 from dataclasses import fields, replace
 from pathlib import Path
 
-from builtin_interfaces.msg import Time
 from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -59,7 +58,8 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, strict_json, topics
-from rabbit_msgs_py.conversions import MessageError, joint_state_vectors, stamp_to_ns, torques_from_msg
+from rabbit_msgs_py.conversions import (
+    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.runtime import NodeStartError, run_node
@@ -79,11 +79,6 @@ default depth 10 requests beyond 10 at once were dropped; docs/faults.md)."""
 SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS)
               for f in fields(SimSettings)}
 """sim_node's parameters, declared from :class:`SimSettings` (one place for each default)."""
-
-
-def time_of(ns: int) -> Time:
-    """A stamp in ns -> builtin_interfaces/Time."""
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 class SimNode(Node):
@@ -250,11 +245,11 @@ class SimNode(Node):
                     self.viewer.sync(force=action.force)
             elif kind is PushApplied:
                 msg = WrenchStamped()
-                msg.header.stamp, msg.header.frame_id = time_of(action.stamp), "world"
+                msg.header.stamp, msg.header.frame_id = stamp_from_ns(action.stamp), "world"
                 msg.wrench.force.x, msg.wrench.force.z, msg.wrench.torque.y = action.wrench
                 self._push_applied_pub.publish(msg)
             elif kind is Markers:
-                self._markers_pub.publish(self._marker_builder.build(action.shapes, time_of(action.stamp)))
+                self._markers_pub.publish(self._marker_builder.build(action.shapes, stamp_from_ns(action.stamp)))
             elif kind is Fallen:
                 self._fallen_pub.publish(Bool(data=action.value))
             elif kind is Placed:
@@ -278,7 +273,7 @@ class SimNode(Node):
 
     def _publish_state(self, state: State) -> None:
         """Joint states, hip velocity (world frame: x forward, z up, pitch rate) and clock."""
-        stamp = time_of(state.stamp)
+        stamp = stamp_from_ns(state.stamp)
         msg = self._joint_msg
         msg.header.stamp = stamp
         msg.position, msg.velocity, msg.effort = state.qpos, state.qvel, state.effort

@@ -236,7 +236,7 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
         if not running and time.perf_counter() - start > stall_timeout:
             return f"the nodes did not connect within {stall_timeout:.0f} s"
         if running:
-            waited = time.perf_counter() - max(supervisor.last_progress_wall or running_since, running_since)
+            waited = time.perf_counter() - max(supervisor.last_progress_wall or 0.0, running_since)
             if supervisor.config.record and supervisor.recorded_until < supervisor.sim_time - 1e-9:
                 # a recorder that has written something and then stops fails the run within
                 # recorder_timeout; its first state (discovery on a busy machine) may take up
