@@ -3,12 +3,14 @@ action walks with a small tracking error."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from rabbit_policy.learning.env import RabbitHZDEnv
+from rabbit_policy.learning.env import DISTRIBUTIONS, RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 pytestmark = pytest.mark.sim
@@ -164,3 +166,18 @@ def test_broad_episodes_draw_commands_pushes_models_and_delays():
     again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
     again.reset(seed=3)
     assert again.loop.scenario == drawn[3]  # seeded
+
+
+def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_true_speed():
+    noisy = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
+    clean = RabbitHZDEnv(max_steps=500, decision_period=20,
+                         distribution=replace(DISTRIBUTIONS["robust"], observation_noise=0.0))
+    obs_noisy, _ = noisy.reset(seed=5)
+    obs_clean, _ = clean.reset(seed=5)
+    assert obs_noisy[0] == obs_clean[0]  # the command is not measured: no noise
+    assert not np.allclose(obs_noisy[1:], obs_clean[1:])
+    action = (noisy.bounds.low + noisy.bounds.high) / 2
+    for _ in range(3):
+        _, reward_noisy, _, _, info_noisy = noisy.step(action)
+        _, reward_clean, _, _, info_clean = clean.step(action)
+        assert reward_noisy == reward_clean and info_noisy["mean_speed"] == info_clean["mean_speed"]
