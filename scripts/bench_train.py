@@ -76,7 +76,7 @@ def env_throughput(steps: int, seed: int = 0, decision_period: int = 20) -> tupl
     for _ in range(steps):
         with torch.no_grad():
             action = net(torch.as_tensor(obs)).numpy()
-        obs, _r, terminated, truncated, info = env.step(action)
+        obs, _r, terminated, truncated, info = env.step(env.bounds.to_normalised(action))
         if terminated or truncated:
             sim_time += info["time"]
             obs, _ = env.reset()

@@ -18,6 +18,8 @@ mj_step ~110k steps/s) marks itself ``@pytest.mark.slow`` (or its whole module d
 
 import os
 import random
+import shutil
+import subprocess
 
 import pytest
 
@@ -36,3 +38,21 @@ def pytest_collection_modifyitems(config, items):
         if len(kinds) != 1:
             raise pytest.UsageError(f"{item.nodeid}: give it one kind of {KINDS} (its module's pytestmark or "
                                     f"its own mark), not {sorted(kinds) or 'none'}")
+
+
+@pytest.fixture(scope="session")
+def display():
+    """A virtual X display (Xvfb) for the viewer tests (its name, e.g. ``:99``)."""
+    if shutil.which("Xvfb") is None:
+        pytest.fail("Xvfb is missing: apt-get install xvfb (.ci/run installs it)")
+    read, write = os.pipe()
+    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "800x600x24", "-nolisten", "tcp"],
+                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write)
+    with os.fdopen(read) as f:
+        number = f.readline().strip()
+    try:
+        yield f":{number}"
+    finally:
+        server.terminate()
+        server.wait(timeout=10)

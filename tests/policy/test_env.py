@@ -3,6 +3,8 @@ action walks with a small tracking error."""
 
 from __future__ import annotations
 
+import os
+import warnings
 from dataclasses import replace
 
 import gymnasium as gym
@@ -16,11 +18,105 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 pytestmark = pytest.mark.sim
 
 
-@pytest.mark.filterwarnings("ignore:.*symmetric and normalized space")  # physical units by design
-def test_env_passes_the_gymnasium_checker():
+def test_env_passes_the_gymnasium_and_sb3_checkers_with_no_warning():
+    from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
     env = gym.make("RabbitHZD-v0")
-    check_env(env.unwrapped, skip_render_check=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any checker warning fails the test
+        check_env(env.unwrapped, skip_render_check=True)
+        sb3_check_env(RabbitHZDEnv(max_steps=5), warn=True, skip_render_check=True)
     assert env.observation_space.shape == (3,) and env.action_space.shape == (21,)
+    assert env.action_space.low.min() == -1.0 and env.action_space.high.max() == 1.0
+    assert env.spec.max_episode_steps == 60
+
+
+def test_normalised_actions_map_onto_the_physical_bounds():
+    bounds = RabbitHZDEnv().bounds
+    assert np.allclose(bounds.to_physical(-np.ones(21)), bounds.low)
+    assert np.allclose(bounds.to_physical(np.ones(21)), bounds.high)
+    assert np.allclose(bounds.to_physical(np.full(21, 7.0)), bounds.high)  # clipped
+    x = bounds.low + 0.3 * (bounds.high - bounds.low)
+    assert np.allclose(bounds.to_physical(bounds.to_normalised(x)), x, atol=1e-12)
+
+
+def test_the_episode_length_is_the_specs_max_episode_steps():
+    env = gym.make("RabbitHZD-v0", max_steps=3, max_episode_steps=3, decision_period=20)
+    env.reset(seed=0)
+    ends = [env.step(np.zeros(21, np.float32))[2:4] for _ in range(3)]
+    assert ends == [(False, False), (False, False), (False, True)]
+    assert gym.spec("RabbitHZD-v0").max_episode_steps == RabbitHZDEnv().max_steps == 60
+
+
+def test_reward_terms_are_in_info_and_sum_to_the_reward():
+    env = RabbitHZDEnv(max_steps=60, decision_period=20)
+    env.reset(seed=1)
+    _obs, reward, _te, _tr, info = env.step(np.zeros(21, np.float32))
+    assert reward == info["reward_tracking"] + info["reward_fall"] and info["reward_fall"] == 0.0
+    assert info["reward_tracking"] == -((info["mean_speed"] - info["desired_speed"]) ** 2)
+    falling = RabbitHZDEnv(max_steps=60, decision_period=20, fall_penalty=-7.0)
+    falling.reset(seed=1)
+    for _ in range(60):  # the lowest coefficients and Kd everywhere: RABBIT collapses
+        _obs, reward, terminated, _tr, info = falling.step(-np.ones(21, np.float32))
+        if terminated:
+            break
+    assert terminated and info["reward_fall"] == -7.0 and reward == info["reward_tracking"] - 7.0
+
+
+def test_render_mode_is_checked_and_rendering_without_one_warns():
+    with pytest.raises(ValueError, match="render_mode"):
+        RabbitHZDEnv(render_mode="video")
+    env = RabbitHZDEnv()
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert env.render() is None
+
+
+RENDER_CHECK = """
+import gymnasium, numpy as np, rabbit_policy
+from gymnasium.utils.env_checker import check_env
+env = gymnasium.make('RabbitHZD-v0', render_mode='rgb_array', decision_period=20)
+env.reset(seed=0)
+first = env.render()
+for _ in range(10):
+    env.step(np.zeros(21, np.float32))
+later = env.render()
+assert first.shape == (240, 320, 3) and first.dtype == np.uint8, first.shape
+assert np.abs(first.astype(int) - later).mean() > 0.5  # the camera follows a walking robot
+assert env.metadata['render_fps'] == 50
+env.close()
+if {full}:  # every render mode (human: MuJoCo's viewer), no warning
+    import warnings
+    warnings.simplefilter('error')
+    check_env(gymnasium.make('RabbitHZD-v0').unwrapped)
+print('ok')
+"""
+
+
+@pytest.mark.slow
+def test_rgb_array_renders_offscreen_and_the_checker_passes_every_render_mode(display):
+    """In fresh interpreters: ``rgb_array`` headless with MuJoCo's EGL backend (Mesa's software
+    rasteriser, no display), then on a virtual display Gymnasium's checker with its render
+    checks (``human`` opens MuJoCo's viewer), warnings as errors."""
+    import subprocess
+    import sys
+
+    headless = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    on_display = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    for env, full in (({**headless, "MUJOCO_GL": "egl"}, False), ({**on_display, "DISPLAY": display}, True)):
+        out = subprocess.run([sys.executable, "-c", RENDER_CHECK.format(full=full)], capture_output=True, text=True,
+                             timeout=180, env=env)
+        assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-2000:]
+
+
+def test_human_rendering_without_a_display_is_one_clear_error(monkeypatch):
+    from rabbit_sim.viewer import ViewerUnavailable
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    env = RabbitHZDEnv(render_mode="human")
+    with pytest.raises(ViewerUnavailable, match="display"):
+        env.reset(seed=0)
 
 
 @pytest.mark.parametrize("imports", ["import rabbit_policy; import gymnasium",
@@ -55,7 +151,7 @@ def test_library_gait_as_action_walks_and_tracks():
     rewards, last = [], None
     for _ in range(30):
         gait = library.nearest(info["desired_speed"])
-        obs, reward, terminated, truncated, info = env.step(np.append(gait.free, gait.kd).astype(np.float32))
+        obs, reward, terminated, truncated, info = env.step(env.bounds.to_normalised(np.append(gait.free, gait.kd)))
         rewards.append(reward)
         assert not info["rejected"]
         if terminated or truncated:
@@ -81,7 +177,7 @@ def test_determinism_for_a_seed():
         env.reset(seed=7)
         out = []
         for _ in range(5):
-            out.append(env.step(np.full(21, 0.5, np.float32) * (env.bounds.low + env.bounds.high))[:2])
+            out.append(env.step(np.zeros(21, np.float32))[:2])
         return out
     a, b = rollout(), rollout()
     assert all(np.array_equal(x[0], y[0]) and x[1] == y[1] for x, y in zip(a, b))
@@ -107,7 +203,7 @@ def test_warm_started_network_reproduces_the_library_and_walks():
         assert error[:20].max() < 0.05  # rad
     obs, _info = env.reset(seed=2)
     for _ in range(20):
-        obs, _r, terminated, truncated, info = env.step(act(net, Observation(*obs.astype(float))).astype(np.float32))
+        obs, _r, terminated, truncated, info = env.step(env.bounds.to_normalised(act(net, Observation(*obs.astype(float)))))
         assert not terminated and not info["rejected"]
     assert truncated
 
@@ -140,10 +236,10 @@ def test_decisions_every_n_ticks_step_the_env_by_n_ticks_and_apply_at_once():
     gait = env.library.nearest(1.0)
     other = env.library.nearest(1.2)
     start = env.loop.ticks
-    obs, _, terminated, _, info = env.step(np.append(gait.free, gait.kd))
+    obs, _, terminated, _, info = env.step(env.bounds.to_normalised(np.append(gait.free, gait.kd)))
     assert env.loop.ticks - start == 20 and not terminated
-    obs, _, _, _, info = env.step(np.append(other.free, other.kd))
-    assert env.loop.controller.alpha == tuple(other.alpha)  # at once, not at the next touchdown
+    obs, _, _, _, info = env.step(env.bounds.to_normalised(np.append(other.free, other.kd)))
+    assert np.allclose(env.loop.controller.alpha, other.alpha, atol=1e-12)  # at once, not at the next touchdown
     assert env.loop.controller.pending_alpha is None
     with pytest.raises(ValueError):
         RabbitHZDEnv(decision_period=-1)
@@ -176,7 +272,7 @@ def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_tr
     obs_clean, _ = clean.reset(seed=5)
     assert obs_noisy[0] == obs_clean[0]  # the command is not measured: no noise
     assert not np.allclose(obs_noisy[1:], obs_clean[1:])
-    action = (noisy.bounds.low + noisy.bounds.high) / 2
+    action = np.zeros(21, np.float32)
     for _ in range(3):
         _, reward_noisy, _, _, info_noisy = noisy.step(action)
         _, reward_clean, _, _, info_clean = clean.step(action)

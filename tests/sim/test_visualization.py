@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -112,24 +111,6 @@ def test_recorded_markers_render_to_a_png_matching_mujoco_bodies(bag, tmp_path):
 
 
 # ------------------------------------------------------------------ MuJoCo's viewer
-@pytest.fixture(scope="module")
-def display():
-    """A virtual X display (Xvfb) for the viewer tests."""
-    if shutil.which("Xvfb") is None:
-        pytest.fail("Xvfb is missing: apt-get install xvfb (.ci/run installs it)")
-    read, write = os.pipe()
-    server = subprocess.Popen(["Xvfb", "-displayfd", str(write), "-screen", "0", "800x600x24", "-nolisten", "tcp"],
-                              pass_fds=(write,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(write)
-    with os.fdopen(read) as f:
-        number = f.readline().strip()
-    try:
-        yield f":{number}"
-    finally:
-        server.terminate()
-        server.wait(timeout=10)
-
-
 @pytest.mark.slow
 def test_viewer_window_shows_the_robot(display):
     """``walk.py --viewer`` (its own process: the test process never holds an X connection

@@ -11,12 +11,14 @@ import sys
 
 ENV_ID = "RabbitHZD-v0"
 ENTRY_POINT = "rabbit_policy.learning.env:RabbitHZDEnv"
+MAX_EPISODE_STEPS = 60
+"""The spec's episode length (env steps), the env's own default (``learning.env.DEFAULT_MAX_STEPS``)."""
 
 
 def register(gymnasium_module) -> None:
     """Register :data:`ENV_ID` with this Gymnasium (once)."""
     if ENV_ID not in gymnasium_module.registry:
-        gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT)
+        gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS)
 
 
 class _RegisterWhenImported(importlib.abc.MetaPathFinder):

@@ -48,34 +48,53 @@ def side_camera(distance: float = 2.6, height: float = 0.6, elevation: float = -
     return camera
 
 
+class FrameRenderer:
+    """RGB frames (height x width x 3, uint8) of ``model``'s states from ``camera`` (default
+    :func:`side_camera`), which follows the hip's x (m). One OpenGL context, kept until
+    :meth:`close`; raises :class:`RenderingUnavailable` with one line when none can be made."""
+
+    def __init__(self, model: mujoco.MjModel, width: int = 320, height: int = 240,
+                 camera: mujoco.MjvCamera | None = None) -> None:
+        if not hasattr(mujoco.gl_context, "GLContext"):  # MUJOCO_GL=disable, or no backend found
+            raise RenderingUnavailable(f"MuJoCo was imported without an OpenGL backend (MUJOCO_GL="
+                                       f"{os.environ.get('MUJOCO_GL', 'unset')}); install Mesa's EGL "
+                                       "(libegl1 libegl-mesa0 libgl1-mesa-dri) or OSMesa (libosmesa6)")
+        try:
+            self.renderer = mujoco.Renderer(model, height=height, width=width)
+        except Exception as exc:  # mujoco raises plain Exceptions for GL failures
+            raise RenderingUnavailable(f"cannot create an OpenGL context (MUJOCO_GL="
+                                       f"{os.environ.get('MUJOCO_GL', 'unset')}; on a headless machine set "
+                                       f"MUJOCO_GL=egl before importing mujoco): {exc}") from exc
+        self.model = model
+        self.camera = camera or side_camera()
+
+    def render(self, data: mujoco.MjData) -> np.ndarray:
+        """The frame of ``data``'s state (its kinematics must be current: after a step or
+        ``mj_forward``)."""
+        self.camera.lookat[0] = data.qpos[0]
+        self.renderer.update_scene(data, camera=self.camera)
+        return self.renderer.render().copy()
+
+    def close(self) -> None:
+        self.renderer.close()  # an explicit close avoids an EGL error at interpreter exit
+
+
 def render_frames(model: mujoco.MjModel, qpos: np.ndarray, width: int = 320, height: int = 240,
                   camera: mujoco.MjvCamera | None = None) -> list[np.ndarray]:
-    """One RGB frame (height x width x 3, uint8) per row of ``qpos``; the camera (default
-    :func:`side_camera`) follows the hip's x (``qpos[:, 0]``, m)."""
+    """One RGB frame (:class:`FrameRenderer`) per row of ``qpos`` (the model's order)."""
     qpos = np.asarray(qpos, dtype=float)
     if qpos.ndim != 2 or qpos.shape[1] != model.nq:
         raise ValueError(f"qpos must be n x {model.nq}, got shape {qpos.shape}")
     data = mujoco.MjData(model)
-    if not hasattr(mujoco.gl_context, "GLContext"):  # MUJOCO_GL=disable, or no backend found
-        raise RenderingUnavailable(f"MuJoCo was imported without an OpenGL backend (MUJOCO_GL="
-                                   f"{os.environ.get('MUJOCO_GL', 'unset')}); install Mesa's EGL "
-                                   "(libegl1 libegl-mesa0 libgl1-mesa-dri) or OSMesa (libosmesa6)")
-    try:
-        renderer = mujoco.Renderer(model, height=height, width=width)
-    except Exception as exc:  # mujoco raises plain Exceptions for GL failures
-        raise RenderingUnavailable(f"cannot create an OpenGL context (MUJOCO_GL="
-                                   f"{os.environ.get('MUJOCO_GL', 'unset')}): {exc}") from exc
-    camera = camera or side_camera()
+    renderer = FrameRenderer(model, width, height, camera)
     frames = []
     try:
         for row in qpos:
             data.qpos[:] = row
             mujoco.mj_forward(model, data)
-            camera.lookat[0] = row[0]
-            renderer.update_scene(data, camera=camera)
-            frames.append(renderer.render().copy())
+            frames.append(renderer.render(data))
     finally:
-        renderer.close()  # an explicit close avoids an EGL error at interpreter exit
+        renderer.close()
     return frames
 
 

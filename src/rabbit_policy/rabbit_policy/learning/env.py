@@ -1,37 +1,93 @@
 """``RabbitHZD-v0``: the paper's HZD-RL learning problem as a Gymnasium environment.
 
-One environment step is one walking step. No ROS inside: the same MuJoCo model
-(:mod:`rabbit_sim`) and the same HZD controller core (:class:`HZDController`) the nodes run,
-with the same decision timing as the node stack: the action chosen at a touchdown is
-queued and takes effect at the next touchdown.
+    import gymnasium, rabbit_policy
+    env = gymnasium.make("RabbitHZD-v0")                       # the paper's episodes, 60 walking steps
+    env = gymnasium.make("RabbitHZD-v0", decision_period=20, distribution="robust",
+                         max_episode_steps=500, render_mode="rgb_array")
 
-* Observation (m/s): the paper's three inputs — desired speed v_d, the mean hip speed over
-  the last step (touchdown to touchdown, at most ``window`` ticks) and the mean of
-  (v_d - hip speed) over the same ticks, taken at the touchdown
-  (:class:`~rabbit_policy.runtime.speed_window.SpeedWindow`; why one step and not 200 ticks: see there).
-* Action: the 20 free Bezier coefficients (rad, the core's order, see
-  ``rabbit_hzd_controller.alpha``) and Kd (N m s/rad), inside :class:`ActionBounds`.
-  The coefficients are joint waypoints, so the bounds come from the classic gaits'
-  range widened by ``margin`` and clipped to the controller's joint-waypoint bounds.
-  An action the controller rejects (e.g. an implied step shorter than 5 cm) leaves the
-  previous gait in force, as the controller node does; ``info["rejected"]`` says so.
-* Reward per step: ``-(mean hip speed - v_d)^2`` (the paper), plus ``fall_penalty`` once
-  when the episode ends by a fall: with only negative rewards an early end would
-  otherwise pay. Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5
-  rad or the hip height leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s).
-  Truncated after ``max_steps`` steps.
-* v_d is drawn uniformly from [0.7, 1.5] m/s at reset and redrawn once, at a step drawn
-  uniformly from the middle half of the episode (the paper's episodes). ``distribution``
-  (:class:`EpisodeDistribution`, :data:`DISTRIBUTIONS`) widens that: a new command every
-  2-5 s of sim time, a push of random impulse, direction and time, and a model drawn from
-  foot frictions, torso masses, the ``drives`` variant and torque delays.
-* ``decision_period`` N > 0: one environment step is N control ticks (1 ms) instead, the
-  observation the moving average over the last ``window`` ticks, and the action applies
-  at once, blended in (``HZDController.apply_now``), as the paper evaluates its network
-  at every simulation step. ``max_steps`` and the command change count environment steps.
-* Reset: the robot starts at phase 0 of the classic gait nearest v_d, on it.
-  ``reset(options={"desired_speed": v0, "next_speed": v1})`` fixes the two commands
-  (stratified sampling in ES, evaluation); otherwise both are drawn.
+No ROS inside: the same MuJoCo model (:mod:`rabbit_sim`) and the same HZD controller core
+(:class:`HZDController`) the nodes run, in the same closed loop
+(:class:`~rabbit_policy.experiment.loop.ClosedLoop`) as walk.py and the evaluations.
+
+## Action space
+
+``Box(-1, 1, (21,), float32)``, normalised: ``a = -1`` is the lower physical bound, ``+1`` the
+upper (:meth:`ActionBounds.to_physical`; ``env.unwrapped.bounds`` holds them). The physical
+action is the gait:
+
+| index | action | physical bounds |
+|-------|--------|-----------------|
+| 0-19  | the 20 free Bezier coefficients alpha (rad, joint waypoints; the core's order, ``rabbit_hzd_controller.alpha``: output ``i % 4`` = stance hip, stance knee, swing hip, swing knee) | the classic gaits' range widened by ``margin`` (0.15 rad), clipped to the controller's joint-waypoint bounds |
+| 20    | Kd, the PD derivative gain (N m s/rad) | 20 to 150 |
+
+Decision timing as in the node stack: with ``decision_period`` 0 (the default) one env step is
+one walking step and the action is the gait for the *next* step (queued at the touchdown);
+with N > 0 one env step is N control ticks (1 ms each) and the action applies at once, blended
+in (``HZDController.apply_now``), as the paper evaluates its network every simulation step.
+An action the controller rejects (e.g. an implied step shorter than 5 cm) leaves the previous
+gait in force, as the controller node does; ``info["rejected"]`` says so.
+
+## Observation space
+
+``Box((v_min, -3, -3), (v_max, 3, 3), (3,), float32)``, the paper's three inputs (m/s):
+
+| index | observation | unit |
+|-------|-------------|------|
+| 0 | commanded speed v_d | m/s |
+| 1 | mean hip speed over the last step (touchdown to touchdown), or with a decision period the moving average over the last step's duration (:class:`~rabbit_policy.runtime.speed_window.SpeedWindow`) | m/s |
+| 2 | mean of (v_d - hip speed) over the same ticks | m/s |
+
+Indices 1 and 2 carry Gaussian noise of ``distribution.observation_noise`` (m/s; the robust
+distribution: 0.02).
+
+## Rewards
+
+| term (``info`` key) | value |
+|---------------------|-------|
+| ``reward_tracking`` | ``-(mean hip speed - v_d)^2`` per env step (the paper; the true speed, without noise) |
+| ``reward_fall`` | ``fall_penalty`` once, when the episode ends by a fall or stall (0 otherwise): with only negative rewards an early end would otherwise pay |
+
+The reward is their sum. ``info`` also holds ``desired_speed``, ``mean_speed`` (m/s), ``fell``,
+``stalled``, ``rejected`` and ``time`` (sim s).
+
+## Starting state and episodes
+
+The robot starts at phase 0 of the classic gait nearest v_d, on it, at its first touchdown.
+v_d is drawn uniformly from ``speed_range`` and redrawn once, at a step drawn uniformly from
+the middle half of the episode (the paper's episodes); ``reset(options={"desired_speed": v0,
+"next_speed": v1})`` fixes the two commands. ``distribution`` (:class:`EpisodeDistribution`,
+:data:`DISTRIBUTIONS`: ``paper``, ``broad``, ``robust``) widens that: a new command every 2-5 s
+of sim time, a push of random impulse, direction and time, a model drawn from foot
+frictions, torso masses, the ``drives`` variant and torque delays, observation noise.
+
+## Episode end
+
+Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5 rad or the hip height
+leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s). Truncated after ``max_steps`` env
+steps (60), the spec's ``max_episode_steps`` too. ``max_steps`` also places the command change
+and the push inside the episode, and Gymnasium does not pass ``max_episode_steps`` to the env:
+for another length give both, ``gymnasium.make("RabbitHZD-v0", max_steps=500,
+max_episode_steps=500)``.
+
+## Arguments
+
+| argument | default | meaning |
+|----------|---------|---------|
+| ``model`` | ``"paper"`` | the MJCF variant or a :class:`~rabbit_sim.model.ModelOptions` |
+| ``speed_range`` | (0.7, 1.5) | commands are drawn from it (m/s) |
+| ``max_steps`` | 60 | env steps per episode (see Episode end) |
+| ``window`` | 1000 | speed-window length (ticks) |
+| ``fall_penalty`` | -10.0 | see Rewards |
+| ``rules`` | ``StopRules()`` | fall and stall limits |
+| ``margin`` | 0.15 | widening of the coefficient bounds (rad) |
+| ``decision_period`` | 0 | ticks per env step (0: one walking step) |
+| ``distribution`` | ``"paper"`` | the episodes (see above) |
+| ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
+
+## Version history
+
+* v0: the paper's problem; normalised actions, reward terms in ``info``, render modes, the
+  spec's ``max_episode_steps`` (this version).
 """
 
 from __future__ import annotations
@@ -46,11 +102,14 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import option
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.registration import register
+from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
+
+DEFAULT_MAX_STEPS = MAX_EPISODE_STEPS
+"""Env steps per episode unless the spec (``max_episode_steps``) or ``max_steps`` says otherwise."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +130,16 @@ class ActionBounds:
             lo, hi = config.knee_coefficient_range if i % 2 else config.hip_coefficient_range
             low[i], high[i] = max(low[i], lo), min(high[i], hi)
         return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
+
+    def to_physical(self, normalised: np.ndarray) -> np.ndarray:
+        """The physical action (rad, N m s/rad) of a normalised one, clipped to [-1, 1] first."""
+        a = np.clip(np.asarray(normalised, dtype=float), -1.0, 1.0)
+        return self.low + (a + 1.0) * 0.5 * (self.high - self.low)
+
+    def to_normalised(self, physical: np.ndarray) -> np.ndarray:
+        """The normalised action in [-1, 1] of a physical one (clipped to the bounds first)."""
+        x = np.clip(np.asarray(physical, dtype=float), self.low, self.high)
+        return 2.0 * (x - self.low) / (self.high - self.low) - 1.0
 
 
 @dataclass(frozen=True)
@@ -143,20 +212,29 @@ class EpisodeConfig:
 class RabbitHZDEnv(gym.Env):
     """See the module docstring."""
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 50}
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
-                 max_steps: int = 60, window: int = 1000, fall_penalty: float = -10.0,
+                 max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
-                 distribution: EpisodeDistribution | str = "paper") -> None:
+                 distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None) -> None:
+        if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
+            raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
         if not (isinstance(decision_period, int) and decision_period >= 0):
             raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {decision_period!r}")
+        if not (isinstance(max_steps, int) and max_steps >= 1):
+            raise ValueError(f"max_steps must be a whole number >= 1, got {max_steps!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.decision_period = decision_period
+        # frames per second of sim time when rendered once per env step (a walking step: ~0.5 s)
+        self.metadata = {**self.metadata, "render_fps": round(1000 / decision_period) if decision_period else 2}
+        self.render_mode = render_mode
+        self._view = None  # the renderer or viewer, opened on first use
         self.library = GaitLibrary.load()
         self.bounds = ActionBounds.from_library(self.library, margin)
-        self.action_space = gym.spaces.Box(self.bounds.low.astype(np.float32), self.bounds.high.astype(np.float32),
-                                           dtype=np.float32)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.observation_space = gym.spaces.Box(
             low=np.array([speed_range[0], -3.0, -3.0], dtype=np.float32),
             high=np.array([speed_range[1], 3.0, 3.0], dtype=np.float32), dtype=np.float32,
@@ -228,6 +306,8 @@ class RabbitHZDEnv(gym.Env):
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
             raise RuntimeError("the starting gait did not reach its first touchdown")
+        if self.render_mode == "human":
+            self.render()
         return self._observation(), {"desired_speed": self.desired_speed}
 
     def _draw_scenario(self) -> Scenario:
@@ -258,7 +338,7 @@ class RabbitHZDEnv(gym.Env):
     def step(self, action):
         if self._loop is None:
             raise RuntimeError("call reset() before step()")
-        action = np.clip(np.asarray(action, dtype=float), self.bounds.low, self.bounds.high)
+        action = self.bounds.to_physical(action)
         try:
             command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))
             rejected = not (self._loop.apply_gait(command) if self.decision_period else self._loop.set_gait(command))
@@ -269,17 +349,48 @@ class RabbitHZDEnv(gym.Env):
         self.desired_speed = self._loop.desired_speed  # the schedule's command (broad distributions)
         obs = self._observation()
         mean_speed = float(self._loop.observation(moving=bool(self.decision_period)).mean_speed)  # noise-free
-        reward = -((mean_speed - self.desired_speed) ** 2)
         terminated = fell or stalled
-        if terminated:
-            reward += self.fall_penalty
+        terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
+                 "reward_fall": self.fall_penalty if terminated else 0.0}
+        reward = terms["reward_tracking"] + terms["reward_fall"]
         truncated = not terminated and self._steps >= self.max_steps
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
-                "stalled": stalled, "rejected": rejected, "time": self._loop.time}
+                "stalled": stalled, "rejected": rejected, "time": self._loop.time, **terms}
         if self.distribution.command_interval is None and self._steps == self._switch_step:  # the paper's change
             self.desired_speed = self._next_speed
             self._loop.set_command(self._next_speed)
+        if self.render_mode == "human":
+            self.render()
         return obs, float(reward), terminated, truncated, info
+
+    def render(self):
+        """``rgb_array``: the current state as an RGB frame (240 x 320 x 3, uint8) from a side
+        camera following the hip; ``human``: the state shown in MuJoCo's viewer (called by
+        reset and step); None without a render mode."""
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render_mode: give render_mode to gymnasium.make")
+            return None
+        if self._loop is None:
+            raise RuntimeError("call reset() before render()")
+        if self.render_mode == "rgb_array":
+            from rabbit_sim.rendering import FrameRenderer
+
+            if self._view is None or self._view.model is not self._loop.model:
+                self.close()
+                self._view = FrameRenderer(self._loop.model)
+            return self._view.render(self._loop.data)
+        from rabbit_sim.viewer import PassiveViewer
+
+        if self._view is None or self._view.data is not self._loop.data:  # a new episode: a new loop
+            self.close()
+            self._view = PassiveViewer(self._loop.model, self._loop.data)
+        self._view.sync(force=True)
+        return None
+
+    def close(self) -> None:
+        if self._view is not None:
+            self._view.close()
+            self._view = None
 
 
 register(gym)  # also here: gymnasium.make("rabbit_policy.learning.env:RabbitHZD-v0") imports this module

@@ -117,8 +117,8 @@ def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, episode: Episode) -> Ro
     total, steps, abs_error = 0.0, 0, 0.0
     with torch.no_grad():
         while True:
-            action = net(torch.as_tensor(obs, dtype=torch.float32)).numpy()
-            obs, reward, terminated, truncated, info = env.step(action)
+            action = net(torch.as_tensor(obs, dtype=torch.float32)).numpy()  # physical units
+            obs, reward, terminated, truncated, info = env.step(env.bounds.to_normalised(action))
             total += reward
             steps += 1
             abs_error += abs(info["mean_speed"] - info["desired_speed"])

@@ -31,9 +31,10 @@ import torch
 from torch import nn
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.env import ActionBounds, EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.learning.vector import make_vector_env
 from rabbit_policy.parallel import Backend, ignore_interrupts
+from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.network import HZDPolicyNet
 
 
@@ -122,6 +123,7 @@ class PPOTrainer:
         self.config = config
         self.net = net
         self.policy = GaussianPolicy(net, config.init_log_std)
+        self.bounds = ActionBounds.from_library(GaitLibrary.load())  # the env's: its actions are normalised
         torch.manual_seed(config.seed)
         self.critic = Critic(net)
         self.optimiser = torch.optim.Adam(list(self.policy.parameters()) + list(self.critic.parameters()),
@@ -178,7 +180,7 @@ class PPOTrainer:
                 action = dist.mean + dist.stddev * torch.randn(dist.mean.shape, generator=self.generator)
                 logp = dist.log_prob(action).sum(-1)
                 value = self.critic(obs)
-            next_obs, reward, terminated, truncated, info = self.envs.step(action.numpy())
+            next_obs, reward, terminated, truncated, info = self.envs.step(self.bounds.to_normalised(action.numpy()))
             reward = np.asarray(reward, dtype=float).copy()
             self._episode_return += reward
             self._episode_length += 1
