@@ -95,3 +95,13 @@ def test_the_install_space_carries_the_package_data(install_space):
     assert "interpolation.json" in packaged and len(packaged) == 12
     for name in ("hzd_rl_policy.pt", "MODEL_CARD.md", "evaluation.json"):
         assert (site[0] / "trained" / name).is_file(), name
+
+
+def test_the_urdf_is_installed_where_ros_tools_look_for_it(install_space):
+    """share/rabbit_sim/urdf/rabbit.urdf (``$(find-pkg-share rabbit_sim)/urdf/rabbit.urdf``), and
+    inside the Python package, where sim_node and scripts find it."""
+    from rabbit_sim.urdf import packaged_urdf
+
+    assert (install_space / "rabbit_sim" / "share" / "rabbit_sim" / "urdf" / "rabbit.urdf").read_text() == packaged_urdf()
+    site = list((install_space / "rabbit_sim" / "lib").glob("python3*/site-packages/rabbit_sim/urdf/rabbit.urdf"))
+    assert len(site) == 1 and site[0].read_text() == packaged_urdf()

@@ -8,10 +8,11 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
-    package_data={'rabbit_sim': ['models/*.xml']},
+    package_data={'rabbit_sim': ['models/*.xml', 'urdf/*.urdf']},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),
         ("share/" + PACKAGE, ["package.xml"]),
+        ("share/" + PACKAGE + "/urdf", ["rabbit_sim/urdf/rabbit.urdf"]),  # robot_state_publisher, RViz
     ],
     install_requires=["setuptools"],
     zip_safe=False,

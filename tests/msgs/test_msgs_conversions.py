@@ -84,7 +84,7 @@ def test_joint_state_any_order():
 
 def test_topic_names_are_absolute_and_unique():
     names = [v for k, v in vars(topics).items() if k.isupper()]
-    assert len(names) == len(set(names)) == 19  # 17 topics, 2 services
+    assert len(names) == len(set(names)) == 20  # 18 topics, 2 services
     assert all(n.startswith("/") for n in names)
     assert topics.ALPHA == "/hzd/alpha" and topics.CMD_SPEED == "/cmd_speed"
 

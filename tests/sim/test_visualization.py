@@ -198,3 +198,43 @@ def test_foxglove_layout_uses_only_topics_and_fields_that_exist():
     assert layout["configById"]["3D!rabbit"]["topics"] == {"/rabbit/markers": {"visible": True}}
     panels = json.dumps(layout["layout"])
     assert all(name in panels for name in layout["configById"])  # every panel is placed
+
+
+# ------------------------------------------------------------------ the URDF on /robot_description
+def test_the_recorded_robot_description_is_a_urdf_whose_kinematics_are_mujocos(bag):
+    """sim_node's /robot_description (recorded: transient local, as robot_state_publisher
+    offers it) parses with yourdfpy, a maintained URDF library; for recorded /joint_states
+    (a walk with a push) every link frame and foot from the URDF's forward kinematics is where
+    MuJoCo puts the body (1e-9 m, 1e-9 rotation)."""
+    import io
+
+    import yourdfpy
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    descriptions, states = [], []
+    with Reader(bag) as reader:
+        for connection, _t, raw in reader.messages():
+            if connection.topic == "/robot_description":
+                descriptions.append(store.deserialize_cdr(raw, connection.msgtype).data)
+            elif connection.topic == "/joint_states":
+                states.append(store.deserialize_cdr(raw, connection.msgtype))
+    assert len(descriptions) == 1 and len(states) > 1500
+    robot = yourdfpy.URDF.load(io.StringIO(descriptions[0]), load_meshes=False)
+    assert robot.validate()
+    model = load_model("paper")
+    data = mujoco.MjData(model)
+    bodies = ("torso", "left_femur", "left_tibia", "right_femur", "right_tibia")
+    assert set(robot.actuated_joint_names) == set(states[0].name)
+    for msg in states[::50]:
+        robot.update_cfg(dict(zip(msg.name, msg.position)))
+        data.qpos[:] = msg.position  # /joint_states is in qpos order (JOINT_NAMES)
+        mujoco.mj_kinematics(model, data)
+        for body in bodies:
+            pose = robot.get_transform(body, "world")
+            assert np.allclose(pose[:3, 3], data.xpos[model.body(body).id], atol=1e-9), body
+            assert np.allclose(pose[:3, :3], data.xmat[model.body(body).id].reshape(3, 3), atol=1e-9), body
+        for foot in ("left_foot", "right_foot"):
+            assert np.allclose(robot.get_transform(foot, "world")[:3, 3], data.site_xpos[model.site(foot).id],
+                               atol=1e-9)

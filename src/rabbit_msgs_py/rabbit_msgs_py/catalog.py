@@ -54,5 +54,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.INITIAL_STATE, JointState, qos.GAIT_QOS),
         TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
         TopicSpec(topics.MARKERS, MarkerArray, qos.MARKERS_QOS),
+        TopicSpec(topics.ROBOT_DESCRIPTION, String, qos.STATUS_QOS),
     )
 }

@@ -61,6 +61,11 @@ MARKERS = "/rabbit/markers"
 tibias as cylinders, feet as spheres (larger and yellow on the ground), a ground plate, the
 push acting now as a red arrow. See ``rabbit_sim.markers``."""
 
+ROBOT_DESCRIPTION = "/robot_description"
+"""std_msgs/String (transient local), published once by sim_node: the URDF of the model it
+simulates (``rabbit_sim.urdf``; links, masses, joints named as in ``/joint_states``), as
+robot_state_publisher publishes it, for RViz's RobotModel and Foxglove's URDF layer."""
+
 RECORDED_UNTIL = "/recorder/recorded_until"
 """rosgraph_msgs/Clock (transient local): the header stamp (sim time) of the newest
 ``/joint_states`` message recorder_node has written, after each. In lockstep and paced

@@ -2,7 +2,9 @@
 
 Publishes ``/joint_states`` (7 joints: position, velocity, applied effort), ``/hip_velocity``
 and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes; applies the
-four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset`` and ``/sim/pause``.
+four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset`` and ``/sim/pause``;
+publishes the URDF of its model once on ``/robot_description`` (transient local, as
+robot_state_publisher does: ``rabbit_sim.urdf``).
 
 Modes (parameter ``mode``):
 
@@ -53,7 +55,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Header, UInt32
+from std_msgs.msg import Bool, Header, String, UInt32
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -69,6 +71,7 @@ from .model import load_model
 from .settings import RUN_TIME_PARAMS, SimSettings
 from .simulation import Simulator
 from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State
+from .urdf import urdf_from_model
 from .viewer import PassiveViewer, ViewerUnavailable
 
 SERVICE_QOS = QoSProfile(depth=1000)
@@ -113,6 +116,7 @@ class SimNode(Node):
         self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
+        pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
