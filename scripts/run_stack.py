@@ -55,6 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
                         help='pushes on the torso, e.g. "5:60:0.1" (s, N, s)')
     parser.add_argument("--model", choices=("paper", "drives"), default="paper")
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "
+                             "stacks in different namespaces run side by side in one domain (default: the root)")
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic policy: nearest gait or blend of the two around the speed")
     parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
@@ -117,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
-            recorder_timeout=args.recorder_timeout,
+            recorder_timeout=args.recorder_timeout, namespace=args.namespace,
         )
         if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
             raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
@@ -144,12 +147,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    present = other_stack()
+    present = other_stack(namespace=config.namespace)
     if present:
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
-        print(f"error: another rabbit-hzd stack runs in ROS_DOMAIN_ID={domain} ({', '.join(present)}); stop it, or "
-              f"start this one in another domain: ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} "
-              "scripts/run_stack.py ...", file=sys.stderr)
+        print(f"error: another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} "
+              f"({', '.join(present)}); stop it, or start this one in another namespace (--namespace rabbit2) or "
+              f"domain (ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} scripts/run_stack.py ...)",
+              file=sys.stderr)
         return 2
 
     # Ctrl-C / SIGTERM end the run cleanly: the loop sees the flag, stops the nodes and

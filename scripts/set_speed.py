@@ -4,7 +4,7 @@
 
     ros2 topic pub --once /cmd_speed std_msgs/msg/Float64 "{data: 1.2}"
 
-Usage: scripts/set_speed.py 1.2 [--wait 5]
+Usage: scripts/set_speed.py 1.2 [--wait 5] [--namespace rabbit2]
 Waits (up to ``--wait`` s) until a subscriber (the policy node) is connected, publishes
 once and waits for delivery. Exit status: 0 delivered, 1 nobody listening, 2 bad value.
 The policy node clamps speeds outside 0.7..1.5 m/s (with a warning) and rejects NaN/inf.
@@ -26,9 +26,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("speed", type=float, help="desired forward speed (m/s)")
     parser.add_argument("--wait", type=float, default=5.0, help="seconds to wait for a subscriber")
+    parser.add_argument("--namespace", default="", help="the stack's namespace (run_stack.py --namespace)")
     args = parser.parse_args(argv)
     if not math.isfinite(args.speed):
         parser.error("speed must be a finite number (m/s)")
+    from rabbit_policy.bringup.config import valid_namespace
+
+    try:
+        namespace = valid_namespace(args.namespace) or "/"
+    except ValueError as exc:
+        parser.error(str(exc))
 
     import rclpy
     from std_msgs.msg import Float64
@@ -36,18 +43,19 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_msgs_py import qos, topics
 
     rclpy.init()
-    node = rclpy.create_node("set_speed")
+    node = rclpy.create_node("set_speed", namespace=namespace)
+    topic = topics.resolve(topics.CMD_SPEED, namespace)
     try:
         pub = node.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
         deadline = time.monotonic() + args.wait
         while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
             rclpy.spin_once(node, timeout_sec=0.05)
         if pub.get_subscription_count() == 0:
-            print(f"error: nobody subscribes to {topics.CMD_SPEED} (is policy_node running?)", file=sys.stderr)
+            print(f"error: nobody subscribes to {topic} (is policy_node running?)", file=sys.stderr)
             return 1
         pub.publish(Float64(data=args.speed))
         pub.wait_for_all_acked(rclpy.duration.Duration(seconds=2.0))
-        print(f"{topics.CMD_SPEED} <- {args.speed:.3f} m/s")
+        print(f"{topic} <- {args.speed:.3f} m/s")
         return 0
     finally:
         node.destroy_node()

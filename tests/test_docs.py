@@ -166,7 +166,8 @@ def test_architecture_lists_every_topic_with_its_type_and_qos():
     from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec
     from rosgraph_msgs.msg import Clock
 
-    specs = {**STACK_TOPICS, topics.RECORDED_UNTIL: TopicSpec(topics.RECORDED_UNTIL, Clock, qos.STATUS_QOS)}
+    specs = {topics.resolve(name): spec for name, spec in  # the docs name them in the root namespace
+             {**STACK_TOPICS, topics.RECORDED_UNTIL: TopicSpec(topics.RECORDED_UNTIL, Clock, qos.STATUS_QOS)}.items()}
     table = _architecture_section("| topic | type | who | QoS |", "\nServices")
     rows = [[cell.strip() for cell in re.split(r"(?<!\\)\|", line)[1:-1]]
             for line in table.splitlines()[2:] if line.startswith("| `/")]
@@ -189,7 +190,8 @@ def test_architecture_names_the_services_and_every_node_parameter():
     from rabbit_sim.sim_node import SIM_PARAMS
 
     services = _architecture_section("Services (sim_node)", "\n\n")
-    assert sorted(re.findall(r"`(/[\w/]+)`", services)) == sorted([topics.RESET_SERVICE, topics.PAUSE_SERVICE])
+    assert sorted(re.findall(r"`(/[\w/]+)`", services)) == sorted([topics.resolve(topics.RESET_SERVICE),
+                                                                      topics.resolve(topics.PAUSE_SERVICE)])
     declared = {"sim_node": SIM_PARAMS, "hzd_controller_node": {**CONTROLLER_PARAMS, **NODE_PARAMS},
                 "policy_node": POLICY_PARAMS, "recorder_node": RECORDER_PARAMS}
     table = _architecture_section("| node (", "\n\n")

@@ -82,11 +82,13 @@ def test_joint_state_any_order():
         joint_state_vectors(names, list(range(6)), list(range(7)))
 
 
-def test_topic_names_are_absolute_and_unique():
+def test_topic_names_are_relative_unique_and_resolve_in_a_namespace():
     names = [v for k, v in vars(topics).items() if k.isupper()]
     assert len(names) == len(set(names)) == 20  # 18 topics, 2 services
-    assert all(n.startswith("/") for n in names)
-    assert topics.ALPHA == "/hzd/alpha" and topics.CMD_SPEED == "/cmd_speed"
+    assert not any(n.startswith("/") for n in names)  # relative: a node's namespace applies
+    assert topics.resolve(topics.ALPHA) == "/hzd/alpha" and topics.resolve(topics.CMD_SPEED) == "/cmd_speed"
+    assert topics.resolve(topics.JOINT_STATES, "/rabbit2") == "/rabbit2/joint_states"
+    assert topics.resolve(topics.JOINT_STATES, "/rabbit2/") == "/rabbit2/joint_states"
 
 
 def test_gait_parameters_are_latched():

@@ -33,14 +33,17 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
     (["rabbit_policy.policy_node", "-p", "policy:=learned", "-p", "policy_file:=/etc/passwd"],
      "not a policy checkpoint"),
     (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "it is for the learned controller"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "initial_speed must be a finite number"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
-    (["rabbit_sim.sim_node", "-p", "damping:=nan"], "damping must be a finite number"),
-    (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "stop_time must be a finite number"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "parameter initial_speed must be in [0, 3], got inf"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=2.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0"], "parameter initial_speed must be in [0, 3], got 5.0"),
+    (["rabbit_sim.sim_node", "-p", "max_late_fraction:=1.5"], "parameter max_late_fraction must be in [0, 1]"),
+    (["rabbit_sim.sim_node", "-p", "damping:=nan"], "parameter damping must be in [0, 10000], got nan"),
+    (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "parameter stop_time must be in [0, 1e+09], got nan"),
     (["rabbit_sim.sim_node", "-p", "stats_file:=/nonexistent/dir/stats.json"], "does not exist"),
     (["rabbit_sim.sim_node", "-p", "mode:=paced", "-p", "rtf:=0.0"], "rtf must be a finite number > 0"),
-    (["rabbit_policy.policy_node", "-p", "window:=0", "-p", "decision_period:=20"], "window must be >= 1"),
-    (["rabbit_policy.policy_node", "-p", "window:=-5"], "window must be >= 1"),
+    (["rabbit_policy.policy_node", "-p", "window:=0", "-p", "decision_period:=20"],
+     "parameter window must be in [1, 100000], got 0"),
+    (["rabbit_policy.policy_node", "-p", "window:=-5"], "parameter window must be in [1, 100000], got -5"),
 ])
 def test_bad_parameters_stop_a_node_with_one_line(args, message):
     module, *params = args
@@ -94,6 +97,39 @@ def test_run_time_changes_are_validated_and_read_only_ones_refused():
             if close:
                 close()
             node.destroy_node()
+
+
+def test_numeric_parameters_carry_their_range_in_the_descriptor_and_rclpy_enforces_it():
+    """What ``ros2 param describe`` shows: a floating-point or integer range on every number
+    whose description states one; ``ros2 param set`` outside it is refused with the reason."""
+    from rabbit_hzd_controller.hzd_controller_node import CONTROLLER_PARAMS, NODE_PARAMS
+    from rabbit_policy.policy_node import POLICY_PARAMS
+    from rabbit_sim.sim_node import SIM_PARAMS
+
+    with ros_context() as (context, _executor):
+        nodes = {"hzd_controller_node": (HZDControllerNode(context=context), {**CONTROLLER_PARAMS, **NODE_PARAMS}),
+                 "policy_node": (PolicyNode(context=context), POLICY_PARAMS),
+                 "sim_node": (SimNode(context=context), SIM_PARAMS)}
+        try:
+            for name, (node, params) in nodes.items():
+                numbers = [k for k, p in params.items()
+                           if isinstance(p.default, (int, float)) and not isinstance(p.default, bool)]
+                assert numbers, name
+                for key in numbers:
+                    descriptor = node.describe_parameter(key)
+                    ranges = descriptor.floating_point_range or descriptor.integer_range
+                    assert len(ranges) == 1, (name, key)
+                    low, high = ranges[0].from_value, ranges[0].to_value
+                    assert (low, high) == params[key].range and low <= params[key].default <= high, (name, key)
+            controller = nodes["hzd_controller_node"][0]
+            result = controller.set_parameters([Parameter("kp", value=2e5)])[0]
+            assert not result.successful and "range" in result.reason and controller.config.kp == 3000.0
+        finally:
+            for node, _params in nodes.values():
+                close = getattr(node, "close", None)
+                if close:
+                    close()
+                node.destroy_node()
 
 
 def test_an_unknown_parameter_is_named_in_the_log(capfd):

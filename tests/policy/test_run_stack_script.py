@@ -4,6 +4,7 @@ Ctrl-C (SIGINT) stopping everything cleanly with a partial report."""
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
 import sys
@@ -82,22 +83,38 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     assert "Traceback" not in err and "FATAL" not in err
 
 
-def test_a_second_stack_in_the_same_domain_is_refused():
-    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--json"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace_is_refused():
+    """One domain: a stack in /rabbit1 walks at 0.8 m/s; a second in /rabbit1 is refused with
+    one line; a stack in /rabbit2 walks at 1.3 m/s beside the first (every topic and service
+    relative, so neither hears the other's speed command or torques), then the first is
+    stopped: it never fell."""
+    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "0.8", "--duration", "600", "--json",
+                              "--namespace", "rabbit1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
         while len(_node_processes(first.pid)) < 3 and time.monotonic() < deadline:
             time.sleep(0.2)
         time.sleep(2.0)  # let its nodes come up and be discovered
-        second = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.2", "--duration", "2", "--json"],
-                                capture_output=True, text=True, timeout=120)
-        assert second.returncode == 2, second.stderr[-2000:]
-        assert "another rabbit-hzd stack runs in ROS_DOMAIN_ID=" in second.stderr
-        assert first.poll() is None  # the first one was left alone
+        clash = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.2", "--duration", "2", "--json",
+                                "--namespace", "/rabbit1"], capture_output=True, text=True, timeout=120)
+        assert clash.returncode == 2, clash.stderr[-2000:]
+        lines = clash.stderr.strip().splitlines()
+        assert len(lines) == 1 and "another rabbit-hzd stack runs in namespace /rabbit1 of ROS_DOMAIN_ID=" in lines[0]
+        beside = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.3", "--duration", "6", "--json",
+                                 "--namespace", "rabbit2"], capture_output=True, text=True, timeout=180)
+        assert beside.returncode == 0, beside.stderr[-2000:]
+        report = json.loads(beside.stdout)
+        assert report["completed"] and not report["fell"]
+        assert abs(report["segments"][0]["mean_speed"] - 1.3) < 0.1
+        left_alone = first.poll() is None  # the first one was left alone
     finally:
         first.send_signal(signal.SIGINT)
-        first.communicate(timeout=60)
+        out, err = first.communicate(timeout=60)
+    if not left_alone:
+        open(f"/tmp/first_err_{os.getpid()}.log", "w").write(err + "\nOUT " + out)
+    assert left_alone, (out, "\n".join(line for line in err.splitlines() if "[INFO]" not in line)[-6000:])
+    report = json.loads(out)
+    assert report["fell"] is False and report["duration"] > 1.0, err[-2000:]
 
 
 def test_a_run_stack_killed_outright_takes_its_nodes_with_it():

@@ -636,7 +636,7 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
     typestore = get_typestore(Stores.ROS2_JAZZY)
     states = {}
     with Reader(tmp_path / "bag") as reader:
-        connections = [c for c in reader.connections if c.topic == topics.JOINT_STATES]
+        connections = [c for c in reader.connections if c.topic == topics.resolve(topics.JOINT_STATES)]
         for connection, _t, raw in reader.messages(connections):
             msg = typestore.deserialize_cdr(raw, connection.msgtype)
             stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec

@@ -180,14 +180,16 @@ def test_foxglove_layout_uses_only_topics_and_fields_that_exist():
     message type (index into a sequence; header stamps only where the message has one)."""
     import re
 
+    from rabbit_msgs_py import topics
     from rabbit_msgs_py.catalog import STACK_TOPICS
 
+    specs = {topics.resolve(name): spec for name, spec in STACK_TOPICS.items()}  # the layout's: the root namespace
     layout = json.loads((ROOT / "docs" / "foxglove_layout.json").read_text())
     paths = [p for panel in layout["configById"].values() for p in panel.get("paths", [])]
     assert len(paths) >= 12
     for path in paths:
-        topic = next(t for t in sorted(STACK_TOPICS, key=len, reverse=True) if path["value"].startswith(t + "."))
-        value = STACK_TOPICS[topic].msg_class()
+        topic = next(t for t in sorted(specs, key=len, reverse=True) if path["value"].startswith(t + "."))
+        value = specs[topic].msg_class()
         if path["timestampMethod"] == "headerStamp":
             assert hasattr(value, "header"), path
         for field, index in re.findall(r"\.(\w+)(?:\[(\d+)\])?", path["value"][len(topic):]):

@@ -72,19 +72,25 @@ FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
 _DEFAULTS = ControllerConfig()
 CONTROLLER_PARAMS = {
-    "kp": Param(_DEFAULTS.kp, "proportional gain of the PD law, N m/rad, finite > 0", dynamic=True),
-    "torque_limit": Param(_DEFAULTS.torque_limit, "torque saturation, N m, finite > 0 (RABBIT: 150)"),
+    "kp": Param(_DEFAULTS.kp, "proportional gain of the PD law, N m/rad, finite > 0", dynamic=True, range=(0.0, 1e5)),
+    "torque_limit": Param(_DEFAULTS.torque_limit, "torque saturation, N m, finite > 0 (RABBIT: 150)",
+                          range=(0.0, 1000.0)),
     "touchdown_min_phase": Param(_DEFAULTS.touchdown_min_phase,
-                                 "phase the swing foot must pass before a touchdown counts, in (0, 1)"),
-    "max_kd": Param(_DEFAULTS.max_kd, "largest Kd accepted on /hzd/kd, N m s/rad, finite > 0", dynamic=True),
+                                 "phase the swing foot must pass before a touchdown counts, in (0, 1)",
+                                 range=(0.0, 1.0)),
+    "max_kd": Param(_DEFAULTS.max_kd, "largest Kd accepted on /hzd/kd, N m s/rad, finite > 0", dynamic=True,
+                    range=(0.0, 1e4)),
     "blend_phase": Param(_DEFAULTS.blend_phase, "blend a new gait in over this much phase after a touchdown "
-                                                "that brings it, in [0, 1] (0 = off)", dynamic=True),
+                                                "that brings it, in [0, 1] (0 = off)", dynamic=True,
+                         range=(0.0, 1.0)),
     "within_step_blend": Param(_DEFAULTS.within_step_blend, "gait_timing at_once: blend a new gait in over "
-                                                            "this much phase, in (0, 1]", dynamic=True),
+                                                            "this much phase, in (0, 1]", dynamic=True,
+                               range=(0.0, 1.0)),
     "within_step_until": Param(_DEFAULTS.within_step_until, "gait_timing at_once: a gait arriving at or after "
                                                             "this phase waits for the next touchdown, in (0, 1]",
-                               dynamic=True),
+                               dynamic=True, range=(0.0, 1.0)),
 }
+
 GAIT_TIMINGS = ("next_step", "at_once")
 NODE_PARAMS = {
     "gait_timing": Param("policy", "when a new gait applies: policy (as /hzd/gait_timing says; next_step until "
@@ -94,7 +100,7 @@ NODE_PARAMS = {
                                   "/hzd/gait_timing at_once:N) until that decision's gait is in (the ROS-free loop "
                                   "bit for bit); not for realtime"),
     "decision_timeout": Param(2.0, "decision_sync: wall s to wait for a due decision before answering with the "
-                                   "gait in force, finite > 0"),
+                                   "gait in force, finite > 0", range=(0.0, 3600.0)),
 }
 
 
@@ -103,8 +109,8 @@ class HZDControllerNode(Node):
     ``within_step_blend`` may change at run time; the rest are read-only) and
     :data:`NODE_PARAMS`."""
 
-    def __init__(self, context=None, **overrides) -> None:
-        super().__init__("hzd_controller_node", context=context)
+    def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
+        super().__init__("hzd_controller_node", context=context, namespace=namespace)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
         self.follow_policy_timing = values.pop("gait_timing") == "policy"
         self.gait_timing = "next_step" if self.follow_policy_timing else self.get_parameter("gait_timing").value
@@ -189,7 +195,8 @@ class HZDControllerNode(Node):
             alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
         except (MessageError, ValueError) as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {topics.ALPHA}: {short(str(exc), 200)}; keeping the last good gait")
+            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.ALPHA)}: {short(str(exc), 200)}; "
+                                    "keeping the last good gait")
             self._take("alpha", None)
             return
         self._alpha = alpha
@@ -201,7 +208,8 @@ class HZDControllerNode(Node):
             kd = validate_kd(msg.data, self.config)
         except ValueError as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {topics.KD}: {short(str(exc), 200)}; keeping the last good value")
+            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.KD)}: {short(str(exc), 200)}; "
+                                    "keeping the last good value")
             self._take("kd", None)
             return
         self._kd = kd
@@ -246,8 +254,8 @@ class HZDControllerNode(Node):
             return
         timing, _, period = msg.data.partition(":")
         if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
-            self.get_logger().error(f"rejected {topics.GAIT_TIMING} {short(repr(msg.data), 60)}: not one of "
-                                    f"{GAIT_TIMINGS}, or at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
+            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} {short(repr(msg.data), 60)}: "
+                                    f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
             return
         if timing != self.gait_timing:
             self.get_logger().info(f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
@@ -294,7 +302,8 @@ class HZDControllerNode(Node):
             q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
             self.rejected_states += 1
-            self.get_logger().error(f"ignoring malformed {topics.JOINT_STATES}: {exc}", throttle_duration_sec=1.0)
+            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
+                                    throttle_duration_sec=1.0)
             return
         self.states_received += 1
         stamp = stamp_to_ns(msg.header.stamp)
@@ -307,10 +316,10 @@ class HZDControllerNode(Node):
             return
         if self._alpha is None or self._kd is None or self._timing_unknown:
             self._waiting_state = msg
+            missing = [topics.ALPHA, topics.KD] + ([topics.GAIT_TIMING] if self._timing_unknown else [])
             self.get_logger().warning(
-                f"no gait yet (waiting for {topics.ALPHA} and {topics.KD}"
-                f"{f' and {topics.GAIT_TIMING}' if self._timing_unknown else ''}); the state will be answered once "
-                "it is complete",
+                f"no gait yet (waiting for {' and '.join(self.resolve_topic_name(t) for t in missing)}); the state will "
+                "be answered once it is complete",
                 throttle_duration_sec=2.0,
             )
             return

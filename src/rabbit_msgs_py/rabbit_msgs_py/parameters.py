@@ -3,8 +3,11 @@
 is meant (``-p kp:=3000``, as most ROS nodes do), and anything else of the wrong type a
 one-line :class:`~rabbit_msgs_py.runtime.NodeStartError` instead of a traceback.
 
-``ros2 param describe`` shows the description; ``ros2 param set`` on a read-only parameter
-is refused by rclpy with the reason.
+``ros2 param describe`` shows the description and, for a number, its range
+(``floating_point_range`` / ``integer_range``: rclpy refuses a value outside it, on the
+command line with one line, and on ``ros2 param set`` with the reason); ``ros2 param set``
+on a read-only parameter is refused by rclpy with the reason. A range is closed: where the
+description says "> 0" the node's own check refuses 0 too.
 """
 
 from __future__ import annotations
@@ -13,7 +16,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterValueException
 
 from .runtime import NodeStartError
 
@@ -28,6 +32,22 @@ class Param:
     default: Any
     description: str
     dynamic: bool = False
+    range: tuple[float, float] | None = None  # closed [low, high] of a number, in the descriptor
+
+    def descriptor(self) -> ParameterDescriptor:
+        """The ROS descriptor: description, read-only unless dynamic, the range of a number."""
+        descriptor = ParameterDescriptor(description=self.description, read_only=not self.dynamic,
+                                         dynamic_typing=True)
+        if self.range is not None:
+            low, high = self.range
+            if isinstance(self.default, bool) or not isinstance(self.default, (int, float)):
+                raise TypeError(f"a range needs a numeric default, not {self.default!r}")
+            if isinstance(self.default, int):
+                descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+            else:
+                descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),
+                                                                      step=0.0)]
+        return descriptor
 
 
 def coerce(name: str, value: Any, default: Any) -> Any:
@@ -56,9 +76,13 @@ def declare(node, params: dict[str, Param], overrides: dict[str, Any]) -> dict[s
     :class:`NodeStartError` with one line for a value of the wrong type."""
     values = {}
     for name, spec in params.items():
-        descriptor = ParameterDescriptor(description=spec.description, read_only=not spec.dynamic,
-                                         dynamic_typing=True)
-        node.declare_parameter(name, overrides.get(name, spec.default), descriptor)
+        try:
+            node.declare_parameter(name, overrides.get(name, spec.default), spec.descriptor())
+        except InvalidParameterValueException:
+            given = getattr(node, "_parameter_overrides", {})  # the command line's, which wins
+            value = given[name].value if name in given else overrides.get(name, spec.default)
+            raise NodeStartError(f"{node.get_name()}: parameter {name} must be in [{spec.range[0]:g}, "
+                                 f"{spec.range[1]:g}], got {value!r}") from None
         try:
             values[name] = coerce(name, node.get_parameter(name).value, spec.default)
         except ValueError as exc:

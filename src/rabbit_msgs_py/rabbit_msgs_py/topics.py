@@ -1,79 +1,89 @@
 """Topic and service names of the rabbit-hzd stack (ROS-free constants).
 
-No node spells a topic by hand: they all import these. Names are absolute, so they are
-the same in every node namespace; remap with ``--ros-args -r`` as usual.
+No node spells a topic by hand: they all import these. Names are relative, so a stack
+started in a namespace (``run_stack.py --namespace rabbit2``, or ``--ros-args -r
+__ns:=/rabbit2`` on each node) uses ``/rabbit2/joint_states`` and so on, and two robots run
+side by side in one ROS domain; in the root namespace they resolve to ``/joint_states`` ...
+(:func:`resolve`), the names the docs use. Remap with ``--ros-args -r`` as usual.
 """
 
-JOINT_STATES = "/joint_states"
+JOINT_STATES = "joint_states"
 """sensor_msgs/JointState, all 7 model joints (``JOINT_NAMES``), sim_node at 1 kHz."""
-HIP_VELOCITY = "/hip_velocity"
+HIP_VELOCITY = "hip_velocity"
 """geometry_msgs/TwistStamped, linear.x = forward hip speed (m/s), sim_node at 1 kHz."""
-CLOCK = "/clock"
+CLOCK = "clock"
 """rosgraph_msgs/Clock, simulation time, sim_node."""
-JOINT_TORQUES = "/joint_torques"
+JOINT_TORQUES = "joint_torques"
 """sensor_msgs/JointState, the controller's reply to one ``/joint_states`` message: the
 four ``ACTUATED_JOINTS`` with their torques (N m) in ``effort``, ``header.stamp`` = the
 stamp of the state answered, ``header.frame_id`` = the controller instance's id."""
-ALPHA = "/hzd/alpha"
+ALPHA = "hzd/alpha"
 """std_msgs/Float64MultiArray, 6 x 4 Bezier coefficients (rad), see conversions."""
-KD = "/hzd/kd"
+KD = "hzd/kd"
 """std_msgs/Float64, derivative gain (N m s/rad)."""
-GAIT_TIMING = "/hzd/gait_timing"
+GAIT_TIMING = "hzd/gait_timing"
 """std_msgs/String (transient local), published by the policy node: how its gaits are
 meant to apply, ``next_step`` (decided once per step, for the next one) or ``at_once:N``
 (decided every N ticks, applied when they arrive, blended in; a ``decision_sync``
 controller holds its reply to each due state for that state's decision). The controller
 follows it unless its ``gait_timing`` parameter says otherwise."""
-CMD_SPEED = "/cmd_speed"
+CMD_SPEED = "cmd_speed"
 """std_msgs/Float64, desired forward speed (m/s)."""
-CMD_VEL = "/cmd_vel"
+CMD_VEL = "cmd_vel"
 """geometry_msgs/Twist, the usual velocity command (teleop_twist_keyboard, navigation):
 ``linear.x`` is the desired forward speed (m/s), as on ``/cmd_speed``; RABBIT walks
 straight in its plane, so the other fields are ignored (policy_node warns once)."""
-PUSH = "/push"
+PUSH = "push"
 """geometry_msgs/Wrench on the torso (N, N m, world frame)."""
-PUSH_APPLIED = "/push_applied"
+PUSH_APPLIED = "push_applied"
 """geometry_msgs/WrenchStamped, published by sim_node whenever the push on the torso
 changes (a push starts, from ``/push`` or its ``push_schedule``, or ends: zeros);
 ``stamp`` = sim time, frame ``world``. Recordings show the pushes from it."""
-FALLEN = "/fallen"
+FALLEN = "fallen"
 """std_msgs/Bool, true once the paper's limits (torso pitch, hip height) are left."""
-STEP = "/hzd/step"
+STEP = "hzd/step"
 """std_msgs/Header, published by hzd_controller_node at each touchdown: ``stamp`` = sim time
 of the state on which the stance switched, ``frame_id`` = the new stance foot
 (``left_foot`` / ``right_foot``, the model's foot sites). The policy node evaluates its
 policy on this event."""
 
-INITIAL_STATE = "/sim/initial_state"
+INITIAL_STATE = "sim/initial_state"
 """sensor_msgs/JointState (transient local), the 7 joints' positions and velocities the
 simulator starts from and returns to on ``/sim/reset``: the state at phase 0 of the gait in
 force, published by ``policy_node`` with every gait. The simulator knows no gait."""
 
-RESETS = "/sim/resets"
+RESETS = "sim/resets"
 """std_msgs/UInt32 (transient local): how many times sim_node has placed the robot (1 at the
 start, +1 at every reset), published just before the placed state. The controller restarts
 on it and answers the placed state even when it equals the last state it answered: a
 reset is an event, not inferred from stamps or values."""
 
-MARKERS = "/rabbit/markers"
+MARKERS = "rabbit/markers"
 """visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every
 ``1 / markers_rate`` s of sim time; frame ``world``, namespace ``rabbit``): torso, femurs and
 tibias as cylinders, feet as spheres (larger and yellow on the ground), a ground plate, the
 push acting now as a red arrow. See ``rabbit_sim.markers``."""
 
-ROBOT_DESCRIPTION = "/robot_description"
+ROBOT_DESCRIPTION = "robot_description"
 """std_msgs/String (transient local), published once by sim_node: the URDF of the model it
 simulates (``rabbit_sim.urdf``; links, masses, joints named as in ``/joint_states``), as
 robot_state_publisher publishes it, for RViz's RobotModel and Foxglove's URDF layer."""
 
-RECORDED_UNTIL = "/recorder/recorded_until"
+RECORDED_UNTIL = "recorder/recorded_until"
 """rosgraph_msgs/Clock (transient local): the header stamp (sim time) of the newest
 ``/joint_states`` message recorder_node has written, after each. In lockstep and paced
 modes with ``wait_for_recorder`` sim_node steps only while the recorder is at most a few
 states behind, so under any load no message is lost; run_stack stops the nodes of a
 recorded run only once it reaches the run's last state, so the bag ends with the run."""
 
-RESET_SERVICE = "/sim/reset"
+RESET_SERVICE = "sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
-PAUSE_SERVICE = "/sim/pause"
+PAUSE_SERVICE = "sim/pause"
 """std_srvs/SetBool: data=true pauses the physics, false resumes."""
+
+
+def resolve(name: str, namespace: str = "/") -> str:
+    """The fully qualified name of a stack topic or service in ``namespace``:
+    ``resolve(JOINT_STATES)`` = ``/joint_states``, ``resolve(JOINT_STATES, "/rabbit2")`` =
+    ``/rabbit2/joint_states``."""
+    return f"{namespace.rstrip('/')}/{name.lstrip('/')}"

@@ -73,18 +73,21 @@ def clamp_speed(value: float, low: float, high: float) -> float:
 
 POLICY_PARAMS = {
     "policy": Param("classic", "classic (the HZD gait library; alias library) or learned (the HZD-RL network)"),
-    "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) or nearest gait"),
+    "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) "
+                                         "or nearest gait"),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
-                                "within [min_speed, max_speed]"),
-    "min_speed": Param(0.7, "lowest command, m/s; /cmd_speed below is clamped", dynamic=True),
-    "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True),
-    "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1"),
-    "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)"),
+                                "within [min_speed, max_speed]", range=(0.0, 3.0)),
+    "min_speed": Param(0.7, "lowest command, m/s; /cmd_speed below is clamped", dynamic=True, range=(0.0, 3.0)),
+    "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True, range=(0.0, 3.0)),
+    "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
+    "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
-                                 "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied at once"),
-    "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1"),
+                                 "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied "
+                                 "at once", range=(-1, 100000)),
+    "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1",
+                             range=(1, 100000)),
 }
 
 
@@ -103,8 +106,8 @@ def clamp_message(value: float, low: float, high: float, clamped: float, topic: 
 class PolicyNode(Node):
     """The gait policy node."""
 
-    def __init__(self, context=None, **overrides) -> None:
-        super().__init__("policy_node", context=context)
+    def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
+        super().__init__("policy_node", context=context, namespace=namespace)
         values = declare(self, POLICY_PARAMS, overrides)
         try:
             self.min_speed = finite("min_speed", values["min_speed"], 0.1, 3.0)
@@ -148,7 +151,8 @@ class PolicyNode(Node):
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
         self._decide(Observation(self.desired_speed, self.desired_speed, 0.0))  # the start: on the command
         self.get_logger().info(
-            f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; send speeds on {topics.CMD_SPEED}"
+            f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; "
+            f"send speeds on {self.resolve_topic_name(topics.CMD_SPEED)}"
         )
 
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
@@ -174,12 +178,12 @@ class PolicyNode(Node):
         if not self._warned_planar and (msg.linear.y or msg.linear.z or msg.angular.x or msg.angular.y
                                         or msg.angular.z):
             self._warned_planar = True
-            self.get_logger().warning(f"{topics.CMD_VEL}: RABBIT walks straight in its plane; only linear.x (the "
-                                      "speed) is used, the other fields are ignored (said once)")
-        self._command(msg.linear.x, topics.CMD_VEL)
+            self.get_logger().warning(f"{self.resolve_topic_name(topics.CMD_VEL)}: RABBIT walks straight in its plane; "
+                                      "only linear.x (the speed) is used, the other fields are ignored (said once)")
+        self._command(msg.linear.x, self.resolve_topic_name(topics.CMD_VEL))
 
     def _on_cmd_speed(self, msg: Float64) -> None:
-        self._command(msg.data, topics.CMD_SPEED)
+        self._command(msg.data, self.resolve_topic_name(topics.CMD_SPEED))
 
     def _command(self, value: float, topic: str) -> None:
         """A commanded speed (m/s) from ``topic``: clamped into range, rejected if not finite."""
@@ -199,7 +203,8 @@ class PolicyNode(Node):
         try:
             due = self.clock.sample(stamp_to_ns(msg.header.stamp), msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
-            self.get_logger().error(f"ignoring {topics.HIP_VELOCITY}: {exc}", throttle_duration_sec=1.0)
+            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}",
+                                    throttle_duration_sec=1.0)
             return
         for observation in due:
             self._decide(observation)

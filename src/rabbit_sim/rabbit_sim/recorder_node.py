@@ -78,9 +78,11 @@ def _subscription_qos(spec: TopicSpec) -> QoSProfile:
 
 
 def recorded_qos(topic: str) -> QosSpec:
-    """The QoS a bag records for a topic: its publisher's, from the stack's catalogue
-    (reliable, volatile, depth 10 for a topic the stack does not know)."""
-    spec = STACK_TOPICS.get(topic)
+    """The QoS a bag records for a topic (relative, or fully qualified in any namespace): its
+    publisher's, from the stack's catalogue (reliable, volatile, depth 10 for a topic the
+    stack does not know)."""
+    matches = [name for name in STACK_TOPICS if topic in (name, f"/{name}") or topic.endswith(f"/{name}")]
+    spec = STACK_TOPICS[max(matches, key=len)] if matches else None
     if spec is None:
         return QosSpec(True, False, 10)
     return QosSpec(reliable=spec.qos.reliability == ReliabilityPolicy.RELIABLE,
@@ -90,7 +92,8 @@ def recorded_qos(topic: str) -> QosSpec:
 
 RECORDER_PARAMS = {
     "output": Param("", "bag directory to create (required)"),
-    "topics": Param([""], "topics to record ([''] = every stack topic)"),
+    "topics": Param([""], "topics to record, relative to the node's namespace or fully qualified ([''] = every "
+                          "stack topic)"),
     "compression": Param("none", "none or zstd (MCAP chunk compression)"),
     "log_time": Param("receive", "message log time: receive (wall clock) or sim (/clock)"),
     "overwrite": Param(False, "replace an existing bag directory (never anything else)"),
@@ -109,18 +112,21 @@ class RecorderNode(Node):
         """Messages handled so far (written, or skipped as sent again): run_node's drain."""
         return sum(self.bag.counts.values()) + self.resends_skipped
 
-    def __init__(self, context=None, **overrides) -> None:
-        super().__init__("recorder_node", context=context)
+    def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
+        super().__init__("recorder_node", context=context, namespace=namespace)
         values = declare(self, RECORDER_PARAMS, overrides)
         value = values.__getitem__
         output = value("output")
-        names = [t for t in value("topics") if t] or list(STACK_TOPICS)
-        unknown = [t for t in names if t not in STACK_TOPICS]
+        # stack topics by their names in this namespace (the bag's names) and relative
+        resolved = {topic_names.resolve(name, self.get_namespace()): name for name in STACK_TOPICS}
+        wanted = [t for t in value("topics") if t] or list(STACK_TOPICS)
+        names = [resolved.get(t, t) for t in wanted]
+        unknown = [t for t, name in zip(wanted, names) if name not in STACK_TOPICS]
         try:
             if not output:
                 raise ValueError("parameter 'output' (the bag directory) is required")
             if unknown:
-                raise ValueError(f"unknown topics {unknown}; known: {sorted(STACK_TOPICS)}")
+                raise ValueError(f"unknown topics {unknown}; known: {sorted(resolved)}")
             if value("log_time") not in LOG_TIMES:
                 raise ValueError(f"log_time must be one of {LOG_TIMES}")
             if value("compression") not in COMPRESSIONS:
@@ -144,7 +150,7 @@ class RecorderNode(Node):
         self._torque_sub = None  # recorded torque replies: no progress is reported before it matched
         for name in names:
             spec = STACK_TOPICS[name]
-            self.bag.add_topic(name, spec.type_name, recorded_qos(name))
+            self.bag.add_topic(self.resolve_topic_name(name), spec.type_name, recorded_qos(name))
             sub = self.create_subscription(
                 spec.msg_class, name, self._writer_for(name), _subscription_qos(spec), raw=True
             )
@@ -156,10 +162,12 @@ class RecorderNode(Node):
     def counts(self) -> dict[str, int]:
         return self.bag.counts
 
-    def _writer_for(self, topic: str):
-        is_clock = topic == topic_names.CLOCK
-        is_state = topic == topic_names.JOINT_STATES
-        resent = ResendFilter() if topic in RESENT_TOPICS else None
+    def _writer_for(self, name: str):
+        """The writer of stack topic ``name`` (relative) into the bag, under its full name."""
+        topic = self.resolve_topic_name(name)
+        is_clock = name == topic_names.CLOCK
+        is_state = name == topic_names.JOINT_STATES
+        resent = ResendFilter() if name in RESENT_TOPICS else None
 
         def write(data: bytes) -> None:
             if self.error is not None:

@@ -79,7 +79,8 @@ SERVICE_QOS = QoSProfile(depth=1000)
 default depth 10 requests beyond 10 at once were dropped; docs/faults.md)."""
 
 
-SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS)
+SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS,
+                            range=f.metadata.get("range"))
               for f in fields(SimSettings)}
 """sim_node's parameters, declared from :class:`SimSettings` (one place for each default)."""
 
@@ -87,13 +88,13 @@ SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN
 class SimNode(Node):
     """Parameters, topics, services and timers around a :class:`SimDriver` (under ``self._lock``)."""
 
-    def __init__(self, context=None, **overrides) -> None:
-        super().__init__("sim_node", context=context)
+    def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
+        super().__init__("sim_node", context=context, namespace=namespace)
         values = declare(self, SIM_PARAMS, overrides)
         try:
             self.settings = SimSettings(**values)
             self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model)),
-                                    shapes=bool(self.settings.markers_rate))
+                                    shapes=bool(self.settings.markers_rate), namespace=self.get_namespace())
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"sim_node: {exc}") from exc
         self.sim = self.driver.sim
@@ -142,7 +143,7 @@ class SimNode(Node):
         self.get_logger().info(
             f"RABBIT simulation ({self.settings.model} model, {mode} mode"
             + (f", rtf {self.settings.rtf:g}" if mode == "paced" else "")
-            + f") waiting for a state on {topics.INITIAL_STATE}"
+            + f") waiting for a state on {self.resolve_topic_name(topics.INITIAL_STATE)}"
         )
 
     # ----------------------------------------------------------------- status
@@ -196,7 +197,7 @@ class SimNode(Node):
         try:
             qpos, qvel = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
-            self.get_logger().error(f"ignoring malformed {topics.INITIAL_STATE}: {exc}")
+            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.INITIAL_STATE)}: {exc}")
             return
         self._run(self.driver.on_initial_state, qpos, qvel)
 
@@ -206,7 +207,8 @@ class SimNode(Node):
             stamp, source, torques = torques_from_msg(msg)
         except MessageError as exc:
             self.driver.on_malformed_torques()
-            self.get_logger().error(f"ignoring malformed {topics.JOINT_TORQUES}: {exc}", throttle_duration_sec=1.0)
+            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_TORQUES)}: {exc}",
+                                    throttle_duration_sec=1.0)
             return
         self._run(self.driver.on_torques, stamp, source, torques, now)
 
@@ -219,7 +221,8 @@ class SimNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._lock:
-            response.success, response.message, actions = self.driver.on_reset(topics.INITIAL_STATE)
+            source = self.resolve_topic_name(topics.INITIAL_STATE)
+            response.success, response.message, actions = self.driver.on_reset(source)
             self._do(actions)
         return response
 

@@ -30,7 +30,6 @@ from xml.sax.saxutils import quoteattr
 
 import mujoco
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 BASE_LIMIT = 1.0e4
 """Limit (m) of the planar base's prismatic joints (URDF requires one)."""
@@ -48,8 +47,11 @@ def _numbers(values) -> str:
 def _origin(pos, quat=(1.0, 0.0, 0.0, 0.0)) -> str:
     """``<origin>`` of a MuJoCo position and (w, x, y, z) quaternion: URDF's fixed-axis roll,
     pitch, yaw (R = Rz Ry Rx)."""
-    w, x, y, z = quat
-    rpy = Rotation.from_quat([x, y, z, w]).as_euler("xyz")
+    matrix = np.empty(9)
+    mujoco.mju_quat2Mat(matrix, np.asarray(quat, dtype=float))
+    r = matrix.reshape(3, 3)
+    rpy = np.array([np.arctan2(r[2, 1], r[2, 2]), np.arctan2(-r[2, 0], np.hypot(r[2, 1], r[2, 2])),
+                    np.arctan2(r[1, 0], r[0, 0])])
     rpy[np.abs(rpy) < 1e-12] = 0.0
     return f'<origin xyz="{_numbers(pos)}" rpy="{_numbers(rpy)}"/>'
 

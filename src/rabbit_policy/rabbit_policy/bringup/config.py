@@ -4,6 +4,7 @@ options give it) and the node parameters and command lines it makes."""
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
@@ -48,10 +49,12 @@ class StackConfig:
     viewer: bool = False
     recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
+    namespace: str = ""  # every node's ROS namespace ("" = the root); two stacks in two namespaces run side by side
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
             raise ValueError("duration must be > 0 s")
+        object.__setattr__(self, "namespace", valid_namespace(self.namespace))
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
         if not (math.isfinite(self.recorder_timeout) and self.recorder_timeout > 0.0):
@@ -99,11 +102,26 @@ class StackConfig:
         return params
 
 
-def ros_arguments(parameters: dict[str, object]) -> list[str]:
+NAMESPACE = re.compile(r"^(/[A-Za-z][A-Za-z0-9_]*)+$")
+
+
+def valid_namespace(namespace: str) -> str:
+    """``"rabbit2"`` or ``"/rabbit2"`` -> ``"/rabbit2"``; ``""`` or ``"/"`` -> ``""`` (the root);
+    anything that is not a ROS namespace raises ValueError."""
+    if namespace in ("", "/"):
+        return ""
+    full = namespace if namespace.startswith("/") else "/" + namespace
+    if not NAMESPACE.match(full):
+        raise ValueError(f"namespace {namespace!r} is not a ROS namespace (letters, digits and _, each part "
+                         "starting with a letter, parts separated by /)")
+    return full
+
+
+def ros_arguments(parameters: dict[str, object], namespace: str = "") -> list[str]:
     """``{"mode": "lockstep", "stop_time": 5.0}`` ->
     ``["--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0"]``; empty strings are
-    left out (the node's default applies)."""
-    args = ["--ros-args"]
+    left out (the node's default applies); a ``namespace`` adds ``-r __ns:=NAMESPACE``."""
+    args = ["--ros-args"] + (["-r", f"__ns:={namespace}"] if namespace else [])
     for name, value in parameters.items():
         if value == "":
             continue

@@ -29,13 +29,14 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     executor = None
     try:
         params = config.node_parameters()
-        nodes["policy_node"] = PolicyNode(context=context, **params["policy_node"])
-        nodes["hzd_controller_node"] = HZDControllerNode(context=context, **params["hzd_controller_node"])
-        nodes["sim_node"] = SimNode(context=context, **params["sim_node"])
+        ns = config.namespace or None
+        nodes["policy_node"] = PolicyNode(context=context, namespace=ns, **params["policy_node"])
+        nodes["hzd_controller_node"] = HZDControllerNode(context=context, namespace=ns, **params["hzd_controller_node"])
+        nodes["sim_node"] = SimNode(context=context, namespace=ns, **params["sim_node"])
         if "recorder_node" in params:
             from rabbit_sim.recorder_node import RecorderNode
 
-            nodes["recorder_node"] = RecorderNode(context=context, **params["recorder_node"])
+            nodes["recorder_node"] = RecorderNode(context=context, namespace=ns, **params["recorder_node"])
         supervisor = nodes["supervisor"] = Supervisor(config, context=context)
         for i, factory in enumerate(observers):
             nodes[f"observer_{i}"] = factory(context)

@@ -40,7 +40,7 @@ class NodeProcesses:
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
         for name, params in config.node_parameters().items():
-            cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params)]
+            cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params, config.namespace)]
             self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
                                                 preexec_fn=_die_with_parent)
 

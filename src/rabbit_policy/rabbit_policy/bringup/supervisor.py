@@ -67,7 +67,7 @@ class Supervisor(Node):
     """Runs the experiment: speed schedule, segment statistics, falls and stalls, end of run."""
 
     def __init__(self, config: StackConfig, context=None) -> None:
-        super().__init__("run_stack_supervisor", context=context)
+        super().__init__("run_stack_supervisor", context=context, namespace=config.namespace or None)
         self.config = config
         self._changes = list(config.schedule[1:])  # (t, v) still to command
         self._times: list[float] = []  # every distinct state's sim time (s) and hip x (m)

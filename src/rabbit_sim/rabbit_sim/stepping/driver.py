@@ -112,8 +112,9 @@ class SimDriver:
     docstring. Not thread-safe: the node calls it under one lock."""
 
     def __init__(self, settings: SimSettings, sim: Simulator, clock: Callable[[], float] = time.perf_counter,
-                 shapes: bool = True) -> None:
+                 shapes: bool = True, namespace: str = "/") -> None:
         self.settings, self.sim, self.clock = settings, sim, clock
+        self.namespace = namespace  # the node's: log lines name topics in full (_topic)
         mode = settings.mode
         self.by_replies = mode in REPLY_MODES
         self.initial_state: tuple[list[float], list[float]] | None = None
@@ -146,6 +147,10 @@ class SimDriver:
         self._out: list[Action] = []
 
     # ---------------------------------------------------------------- events
+    def _topic(self, name: str) -> str:
+        """A stack topic's full name in the node's namespace (for log lines)."""
+        return topics.resolve(name, self.namespace)
+
     def on_initial_state(self, qpos: list[float], qvel: list[float]) -> list[Action]:
         """The newest state to start and reset from; the first one places the robot."""
         self._out = []
@@ -253,10 +258,11 @@ class SimDriver:
         waited = self.lockstep.resend_due(self.paused)
         if waited is None:
             return self._out
-        why = (f"no node publishes {topics.JOINT_TORQUES}: is hzd_controller_node running?" if torque_publishers() == 0
+        why = (f"no node publishes {self._topic(topics.JOINT_TORQUES)}: is hzd_controller_node running?"
+               if torque_publishers() == 0
                else f"controller {self.lockstep.controller or '(none answered yet)'} has not answered: it waits "
-                    f"for a gait on {topics.ALPHA} and {topics.KD}, is busy, or died (a killed node stays listed for "
-                    "up to 20 s)")
+                    f"for a gait on {self._topic(topics.ALPHA)} and {self._topic(topics.KD)}, is busy, or died "
+                    "(a killed node stays listed for up to 20 s)")
         self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
                              f"re-sending it ({why})", 5.0, "resend")
         self._send_state()
@@ -322,9 +328,9 @@ class SimDriver:
 
     def _refuse(self, source: str) -> None:
         self.stats.torques_rejected += 1
-        self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on {topics.JOINT_TORQUES}: "
-                           f"this simulator takes them from {self.controller} only (another takes over after {TAKEOVER_AFTER:.0f} s without "
-                           "an answer from it)", 5.0, "refused")
+        self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on "
+                           f"{self._topic(topics.JOINT_TORQUES)}: this simulator takes them from {self.controller} only "
+                           f"(another takes over after {TAKEOVER_AFTER:.0f} s without an answer from it)", 5.0, "refused")
 
     def _must_hold(self) -> bool:
         """Lockstep/paced: the physics may not step now (paused, or a recorder lags)."""
@@ -410,7 +416,8 @@ class SimDriver:
             self._out.append(Fallen(True))
             qpos = sim.data.qpos
             self._log("warning", f"RABBIT fell at t = {sim.time:.3f} s (hip height {qpos[1]:.3f} m, torso pitch "
-                                 f"{qpos[2]:.3f} rad); physics halted, call {topics.RESET_SERVICE} to start again")
+                                 f"{qpos[2]:.3f} rad); physics halted, call {self._topic(topics.RESET_SERVICE)} to "
+                                 "start again")
         elif self.settings.stop_time and sim.time >= self.settings.stop_time - 1e-9:
             self.halted = True
             self._log("info", f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
