@@ -4,6 +4,7 @@
     scripts/train.py --algo es --out runs/es0             # the shipped policy's run (the defaults)
     scripts/train.py --algo ppo --out runs/ppo0 --iterations 200
     scripts/train.py ... --resume                          # continue from OUT/checkpoint.pt
+    scripts/train.py --config config/train/shipped_es.yaml --out runs/X   # a preset (rl-zoo style)
 
 Every option is a field of one configuration dataclass, its default and help written once
 there (as CleanRL's ``Args``): the run's ``TrainingConfig`` (``rabbit_policy.learning.
@@ -24,6 +25,7 @@ from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_argumen
 from rabbit_policy.learning.env import EpisodeConfig
 from rabbit_policy.learning.es import ESConfig
 from rabbit_policy.learning.ppo import PPOConfig
+from rabbit_policy.learning.presets import parse_with_preset
 from rabbit_policy.learning.training import TrainingConfig
 from rabbit_policy.parallel import add_backend_arguments, backend_config
 
@@ -43,9 +45,10 @@ def build_parser() -> ArgumentParser:
 
 
 def parse_config(argv: list[str] | None) -> TrainingConfig:
-    """The run's configuration from a command line (bad values: one line, exit status 2)."""
+    """The run's configuration from a command line and an optional ``--config`` preset
+    (``rabbit_policy.learning.presets``; bad values: one line, exit status 2)."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_with_preset(parser, argv)
     try:
         trainer_cls = TRAINERS[args.algo]
         trainer = (config_from_args(ESConfig, args, workers=args.workers) if trainer_cls is ESConfig

@@ -91,6 +91,15 @@ def read_csv(path: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+def tensorboard_scalars(directory: Path) -> dict[str, list]:
+    """Every scalar series in a TensorBoard log directory, read with TensorBoard's own reader."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(directory))
+    events.Reload()
+    return {tag: events.Scalars(tag) for tag in events.Tags()["scalars"]}
+
+
 @pytest.mark.slow
 def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     common = ["scripts/train.py", "--algo", "es", "--seed", "3", "--workers", "2", "--pairs", "2",
@@ -111,6 +120,15 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     assert best["iteration"] == 2 and best["acceptance"]["failures"] == int(evals[1]["failures"])
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["info"]["algorithm"] == "es" and summary["info"]["parameters"] == 633
+    scalars = tensorboard_scalars(tmp_path / "a" / "tb")  # the same numbers, against env steps
+    assert [s.step for s in scalars["rollout/episode_return"]] == [int(r["env_steps"]) for r in log]
+    assert [s.value for s in scalars["rollout/episode_return"]] == pytest.approx(
+        [float(r["episode_return"]) for r in log], rel=1e-6)
+    assert [s.value for s in scalars["eval/failed_checks"]] == [float(r["failures"]) for r in evals]
+    assert "es/population_mean" in scalars and "time/wall_s" in scalars
+    plotted = run_script("scripts/plot_training.py", str(tmp_path / "a"), "--out", str(tmp_path / "curves.png"))
+    assert plotted.returncode == 0 and (tmp_path / "curves.png").stat().st_size > 10_000, plotted.stderr
+    assert run_script("scripts/plot_training.py", str(tmp_path / "nothing")).returncode == 2
 
     first = run_script(*common, "--out", str(tmp_path / "b"), "--iterations", "1", "--eval-every", "0")
     assert first.returncode == 0, first.stderr
@@ -300,3 +318,39 @@ def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_co
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
     assert train.parse_config(shlex.split(command)).trainer.to_dict() == info["config"]
+
+
+# ------------------------------------------------------------------------- presets
+def _train_module():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("train_script", ROOT / "scripts" / "train.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(tmp_path):
+    train = _train_module()
+    preset = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x"])
+    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
+    assert preset == train.parse_config([*command, "--out", "runs/x"])
+    assert preset.trainer.to_dict() == make_policy("learned").checkpoint.info["config"]  # what trained it
+    overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
+                                     "--iterations", "3"])
+    assert overridden.iterations == 3 and overridden.trainer == preset.trainer  # the command line wins
+    for path in sorted((ROOT / "config" / "train").glob("*.yaml")):
+        if not path.name.startswith("sb3"):
+            assert train.parse_config(["--config", str(path), "--out", "runs/x"]).algo in ("es", "ppo"), path
+
+
+@pytest.mark.parametrize("text, message", [("sigmaa: 0.1\n", "'sigmaa' is not a train.py option"),
+                                           ("distribution: wide\n", "is not one of"),
+                                           ("- a list\n", "a mapping"),
+                                           ("stop_when_passed: maybe\n", "must be true or false")])
+def test_a_bad_preset_is_one_line(tmp_path, text, message):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("algo: es\n" + text if not text.startswith("-") else text)
+    out = run_script("scripts/train.py", "--config", str(bad), "--out", str(tmp_path / "run"))
+    assert out.returncode == 2 and message in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr

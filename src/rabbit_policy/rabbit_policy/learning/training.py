@@ -12,6 +12,8 @@ of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
 Outputs in OUT:
 * ``log.csv``: one row per iteration (wall time, env steps, returns, fall fraction, mean
   |v̄ - v_d| per step, algorithm statistics); a progress bar on the terminal.
+* ``tb/``: TensorBoard scalars of both (``rabbit_policy.learning.scalars``: the tags the SB3
+  baseline writes too); ``scripts/plot_training.py OUT`` draws the curves to PNG.
 * ``eval.csv``: every ``--eval-every`` iterations the current deterministic policy runs
   the acceptance checks (``rabbit_policy.evaluation.acceptance``: 9 constant speeds x 30 s and the
   0.8 -> 1.2 -> 0.9 -> 1.5 -> 0.7 m/s schedule, ROS-free); failures and errors per row.
@@ -119,6 +121,7 @@ def train(args: TrainingConfig) -> int:
 
     from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
     from rabbit_policy.learning.env import ActionBounds
+    from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
@@ -173,11 +176,14 @@ def train(args: TrainingConfig) -> int:
         (out / "summary.json").write_text(strict_json.dumps({"info": info(), "first_pass": first_pass, "best": best,
                                                       "warm_start": warm_start_result}, indent=2) + "\n")
 
+    scalars = TrainingScalars(out / "tb", args.algo)
+
     def evaluate() -> None:
         nonlocal best, first_pass
         result = acceptance(NetworkPolicy(net, decision_period=args.trainer.decision_period), map_fn=backend.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
+        scalars.evaluation(row)
         baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
         if baseline:
             warm_start_result["passed"] = result["passed"]
@@ -207,6 +213,7 @@ def train(args: TrainingConfig) -> int:
         while trainer.iteration < args.iterations:
             stats = trainer.step()
             append_csv(out / "log.csv", {"wall_s": round(wall(), 1), **stats})
+            scalars.iteration(stats, wall())
             bar.update(1)
             bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
                             falls=f"{stats['fall_fraction']:.2f}")
@@ -223,6 +230,7 @@ def train(args: TrainingConfig) -> int:
         bar.write("interrupted: saving a checkpoint")
     finally:
         bar.close()
+        scalars.close()
         save_checkpoint()
         if not interrupted:
             trainer.close()
