@@ -643,3 +643,58 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
             states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
     assert sorted(states) == list(range(2001))
     assert np.array_equal(np.array([states[i] for i in range(2001)]), np.array(reference))
+
+
+def _state(t: float, x: float) -> JointState:
+    from rabbit_msgs_py.conversions import stamp_from_ns
+
+    msg = JointState()
+    msg.header.stamp = stamp_from_ns(round(t * 1e9))
+    msg.position, msg.effort = [x, 0.75, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0] * 7
+    return msg
+
+
+def _step(t: float):
+    from std_msgs.msg import Header
+
+    from rabbit_msgs_py.conversions import stamp_from_ns
+
+    return Header(stamp=stamp_from_ns(round(t * 1e9)), frame_id="left_foot")
+
+
+def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_run(monkeypatch):
+    """The supervisor's callbacks in the order a loaded machine delivered them: the states
+    run 2.5 s past the last touchdown event while three touchdowns are still on their way
+    (a lost reliable sample waits for the writer's next heartbeat, and the events behind it
+    with it). They arrive late: no stall. With no event at all a stall counts once the grace
+    is over, at the sim time it was suspected, and the walk ends there."""
+    from rabbit_policy.bringup import supervisor as module
+
+    with ros_context() as (context, _executor):
+        config = StackConfig(duration=10.0, schedule=((0.0, 1.0),))
+        late = module.Supervisor(config, context=context)
+        ticks = np.round(np.arange(0.0, 3.5005, 0.001), 3)
+        for t in ticks:
+            late._on_state(_state(t, t))
+            if t in (0.5, 1.0):
+                late._count_step(_step(t - 0.001))
+        assert not late.stalled and late._suspected is not None and not late.done  # suspected, not concluded
+        for t in (1.6, 2.2, 2.8):
+            late._count_step(_step(t))  # the late ones
+        assert late._suspected is None and not late.stalled
+        monkeypatch.setattr(module, "EVENT_GRACE", 0.2)
+        time.sleep(0.3)
+        assert not late.done and not late.stalled  # nothing to settle: the run goes on
+
+        stalled = module.Supervisor(config, context=context)
+        for t in ticks:
+            stalled._on_state(_state(t, t))
+            if t == 1.0:
+                stalled._count_step(_step(t - 0.001))
+        assert not stalled.stalled
+        time.sleep(0.3)  # the grace passes with no event
+        assert stalled.done and stalled.stalled and stalled.stall_time == pytest.approx(3.001)
+        result = stalled.result()
+        assert result.stalled and result.times[-1] == pytest.approx(3.001)  # ends at the stall
+        for node in (late, stalled):
+            node.destroy_node()

@@ -63,6 +63,14 @@ class RunReport:
                 "rejected": self.rejected}
 
 
+EVENT_GRACE = 5.0
+"""s (wall): how long a suspected stall waits for a late ``/hzd/step`` before it counts. A
+reliable sample lost under load reaches its subscriber only when the writer repairs it
+(Fast DDS: at its next heartbeat, up to 3 s), and every later event of that writer waits
+behind it, while the states keep coming: a stack under load once reported a stall at
+t = 34.8 s with the touchdowns at 33.4, 34.1 and 34.7 s merely late."""
+
+
 class Supervisor(Node):
     """Runs the experiment: speed schedule, segment statistics, falls and stalls, end of run."""
 
@@ -80,6 +88,7 @@ class Supervisor(Node):
         self.fall_time: float | None = None
         self.stalled = False
         self.stall_time: float | None = None
+        self._suspected: tuple[float, float] | None = None  # (sim t, wall s): no touchdown seen for stall_after
         self._last_step_time = 0.0
         self.sim_time = 0.0
         self.first_state_wall: float | None = None
@@ -127,13 +136,34 @@ class Supervisor(Node):
 
     @property
     def done(self) -> bool:
-        return self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9
+        """The run is over: it fell, stalled or reached its duration, with no stall suspected
+        whose touchdown events may still be on their way (:data:`EVENT_GRACE`)."""
+        self._settle()
+        return self._suspected is None and (self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9)
+
+    def _settle(self, now: float | None = None) -> None:
+        """A suspected stall that no late touchdown refuted within the grace is a stall, at the
+        sim time it was suspected (a fall after it is not counted: the walk ended there)."""
+        if self._suspected is None:
+            return
+        t, since = self._suspected
+        if (time.perf_counter() if now is None else now) - since < EVENT_GRACE:
+            return
+        self._suspected = None
+        self.stalled, self.stall_time = True, t
+        if self.fell and self.fall_time is not None and self.fall_time > t:
+            self.fell, self.fall_time = False, None
+        self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
 
     def _count_step(self, msg: Header) -> None:
         t = stamp_to_seconds(msg.stamp)  # the sim time of the state on which the stance switched
         self._touchdown_times.append(t)
         if t < self.sim_time:  # the state after it is here already: the touchdown's time (see result())
             self._last_step_time = max(self._last_step_time, self._times[int(np.searchsorted(self._times, t + 1e-9))])
+            if self._suspected is not None and not self.config.rules.stalled(self._suspected[0], self._last_step_time):
+                self.get_logger().info(f"a late touchdown event (t = {t:.3f} s) arrived: not stalled at "
+                                       f"t = {self._suspected[0]:.2f} s")
+                self._suspected = None
         else:
             self._pending_step = t
 
@@ -160,9 +190,9 @@ class Supervisor(Node):
             self.peak_torque = max(self.peak_torque, *(abs(e) for e in msg.effort[3:]))
         if self._pending_step is not None and t > self._pending_step:
             self._last_step_time, self._pending_step = t, None
-        if not self.stalled and self.config.rules.stalled(t, self._last_step_time):
-            self.stalled, self.stall_time = True, t
-            self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
+        if not self.stalled and self._suspected is None and self.config.rules.stalled(t, self._last_step_time):
+            self._suspected = (t, now)  # a stall, unless a late touchdown event says otherwise (EVENT_GRACE)
+        self._settle(now)
         # the schedule, as ClosedLoop steps it: there the state after the step that reaches a
         # change is the first sample under the new command, so the command goes out one state
         # ahead (then, in one process, it is in before that state's hip speed)
@@ -182,6 +212,9 @@ class Supervisor(Node):
                             rules=config.rules)
         t0, x0 = self._start or (0.0, 0.0)
         times, xs = np.array(self._times), np.array(self._xs)
+        if self.stalled:  # the walk ended at the stall, as the fast path's does (later states came in the grace)
+            keep = times <= self.stall_time + 1e-9
+            times, xs = times[keep], xs[keep]
         touchdowns = []
         for stamp in sorted(self._touchdown_times):
             # at the state after the switch, one tick later (the fast path's time); its hip x

@@ -8,6 +8,12 @@ we follow.
 Inputs are normalised inside the network from physical units (m/s): the desired speed
 is centred on the middle of [0.7, 1.5] m/s, and all three are divided by ``input_scale``,
 so a checkpoint carries everything needed to run it.
+
+``output`` says how the last layer maps onto the action bounds: ``sigmoid`` (ours, ES and
+PPO), ``clip`` (a Gaussian policy's mean clipped to [-1, 1], stable-baselines3's PPO) or
+``tanh`` (a squashed Gaussian, SB3's SAC); the last two come from ``scripts/train_sb3.py``,
+which exports SB3's actor (the same 3 -> 12 -> 12 -> 12 -> 21 tanh body, raw inputs:
+offset 0, scale 1) into this network, so ``policy_node`` and ``walk.py`` run it without SB3.
 """
 
 from __future__ import annotations
@@ -24,14 +30,18 @@ from rabbit_policy.runtime.speed_window import Observation
 HIDDEN = 12
 N_INPUTS = 3
 N_OUTPUTS = 21
+OUTPUTS = ("sigmoid", "clip", "tanh")
 
 
 class HZDPolicyNet(nn.Module):
     """obs (..., 3) in m/s -> action (..., 21) inside [low, high]."""
 
     def __init__(self, low: np.ndarray, high: np.ndarray, speed_centre: float = 1.1,
-                 input_scale: float = 0.4) -> None:
+                 input_scale: float = 0.4, output: str = "sigmoid") -> None:
         super().__init__()
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+        self.output = output
         self.body = nn.Sequential(
             nn.Linear(N_INPUTS, HIDDEN), nn.Tanh(),
             nn.Linear(HIDDEN, HIDDEN), nn.Tanh(),
@@ -44,8 +54,12 @@ class HZDPolicyNet(nn.Module):
         self.register_buffer("scale", torch.full((N_INPUTS,), float(input_scale)))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
-        x = (obs - self.offset) / self.scale
-        return self.low + (self.high - self.low) * torch.sigmoid(self.body(x))
+        y = self.body((obs - self.offset) / self.scale)
+        if self.output == "sigmoid":
+            unit = torch.sigmoid(y)
+        else:  # a normalised action in [-1, 1], as a Gymnasium env with a [-1, 1] Box takes it
+            unit = (1.0 + (torch.clamp(y, -1.0, 1.0) if self.output == "clip" else torch.tanh(y))) / 2.0
+        return self.low + (self.high - self.low) * unit
 
 
 def parameter_count(net: nn.Module) -> int:
@@ -63,7 +77,7 @@ class PolicyCheckpoint:
     info: dict
 
     def network(self) -> HZDPolicyNet:
-        net = HZDPolicyNet(self.low, self.high)
+        net = HZDPolicyNet(self.low, self.high, output=self.info.get("output", "sigmoid"))
         net.load_state_dict(self.state_dict)
         net.eval()
         return net

@@ -1,0 +1,52 @@
+#!/usr/bin/env python3
+"""The stable-baselines3 baseline: SB3's PPO (or SAC) on ``RabbitHZD-v0``, the actor our
+network's shape, judged by the same acceptance as ``train.py`` and written the same way
+(``rabbit_policy.learning.sb3``).
+
+    scripts/train_sb3.py --out runs/sb3_ppo --timesteps 200000
+    scripts/train_sb3.py --config config/train/sb3_ppo.yaml --out runs/sb3_ppo
+    scripts/walk.py --controller learned --policy-file runs/sb3_ppo/best.pt --speed 1.2
+
+OUT gets ``log.csv``, ``eval.csv``, ``tb/`` (TensorBoard, the tags train.py writes),
+``policy.pt`` (the latest actor as our policy file), ``best.pt`` (the evaluated actor with
+the fewest failed acceptance checks), ``sb3_model.zip`` (SB3's own save) and ``summary.json``.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args
+from rabbit_policy.learning.presets import parse_with_preset
+from rabbit_policy.learning.sb3 import SB3Config
+
+
+def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool]:
+    """(configuration, output directory, progress bar) from a command line and an optional
+    ``--config`` preset (bad values: one line, exit status 2)."""
+    parser = ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
+    parser.add_argument("--out", type=Path, required=True, help="run directory (new or empty)")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_config_arguments(parser, SB3Config)
+    args = parse_with_preset(parser, argv)
+    try:
+        config = config_from_args(SB3Config, args)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if args.out.exists() and any(args.out.iterdir()):
+        parser.error(f"{args.out} is not empty; choose another --out")
+    return config, args.out, not args.no_progress
+
+
+def main(argv: list[str] | None = None) -> int:
+    config, out, progress = parse_config(argv)
+    from rabbit_msgs_py import strict_json
+    from rabbit_policy.learning.sb3 import train_sb3
+
+    print(strict_json.dumps(train_sb3(config, out, progress=progress)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
