@@ -20,31 +20,41 @@ from pathlib import Path
 from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args
 from rabbit_policy.learning.presets import parse_with_preset
 from rabbit_policy.learning.sb3 import SB3Config
+from rabbit_policy.parallel import BackendConfig, add_backend_arguments, backend_config
 
 
-def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool]:
-    """(configuration, output directory, progress bar) from a command line and an optional
-    ``--config`` preset (bad values: one line, exit status 2)."""
+def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, BackendConfig]:
+    """(configuration, output directory, progress bar, evaluation backend) from a command line
+    and an optional ``--config`` preset (bad values: one line, exit status 2)."""
     parser = ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("--out", type=Path, required=True, help="run directory (new or empty)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_config_arguments(parser, SB3Config)
+    add_backend_arguments(parser)
     args = parse_with_preset(parser, argv)
     try:
         config = config_from_args(SB3Config, args)
+        backend = backend_config(args)
     except ValueError as exc:
         parser.error(str(exc))
     if args.out.exists() and any(args.out.iterdir()):
         parser.error(f"{args.out} is not empty; choose another --out")
-    return config, args.out, not args.no_progress
+    return config, args.out, not args.no_progress, backend
 
 
 def main(argv: list[str] | None = None) -> int:
-    config, out, progress = parse_config(argv)
+    config, out, progress, backend = parse_config(argv)
     from rabbit_msgs_py import strict_json
     from rabbit_policy.learning.sb3 import train_sb3
 
-    print(strict_json.dumps(train_sb3(config, out, progress=progress)))
+    from rabbit_policy.parallel import BackendUnavailable
+
+    try:
+        summary = train_sb3(config, out, progress=progress, backend_config=backend)
+    except BackendUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(strict_json.dumps(summary))
     return 0
 
 

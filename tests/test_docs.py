@@ -266,7 +266,7 @@ def test_the_readme_running_it_commands_run(tmp_path):
         assert out.returncode == 0, f"{line}\n{out.stderr[-2000:]}"
         assert "nan" not in out.stdout.lower().split(), line
         ran.append(command[1])
-    assert ran.count("scripts/run_stack.py") == 3 and "scripts/play.py" in ran and "scripts/walk.py" in ran
+    assert ran.count("scripts/run_stack.py") == 4 and "scripts/play.py" in ran and "scripts/walk.py" in ran
 
 
 @pytest.mark.unit

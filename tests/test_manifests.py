@@ -30,9 +30,10 @@ ROSDEP_KEYS = {
 
 
 # pip-only, no rosdep key in rosdistro: pinned in requirements.txt and imported only where
-# needed (rabbit_policy.parallel for --backend ray; the gait optimizer for CMA-ES), so the
-# packages run without them on a ROS install (README: pip install -r requirements.txt)
-OPTIONAL = {"ray", "cma"}
+# needed (rabbit_policy.parallel for --backend ray; the gait optimizer for CMA-ES; the SB3
+# baseline, rabbit_policy.learning.sb3), so the packages run without them on a ROS install
+# (README: pip install -r requirements.txt)
+OPTIONAL = {"ray", "cma", "stable_baselines3"}
 ROSDISTRO_EXCERPT = Path(__file__).resolve().parent / "data" / "rosdep_python_excerpt.yaml"
 
 

@@ -4,7 +4,6 @@ Ctrl-C (SIGINT) stopping everything cleanly with a partial report."""
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -110,8 +109,6 @@ def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace
     finally:
         first.send_signal(signal.SIGINT)
         out, err = first.communicate(timeout=60)
-    if not left_alone:
-        open(f"/tmp/first_err_{os.getpid()}.log", "w").write(err + "\nOUT " + out)
     assert left_alone, (out, "\n".join(line for line in err.splitlines() if "[INFO]" not in line)[-6000:])
     report = json.loads(out)
     assert report["fell"] is False and report["duration"] > 1.0, err[-2000:]

@@ -36,7 +36,7 @@ def test_the_sb3_presets_parse(tmp_path):
     presets = sorted((ROOT / "config" / "train").glob("sb3*.yaml"))
     assert presets
     for path in presets:
-        config, out, _ = script.parse_config(["--config", str(path), "--out", str(tmp_path / "x")])
+        config, out, _, _ = script.parse_config(["--config", str(path), "--out", str(tmp_path / "x")])
         assert config.algo in ("ppo", "sac") and out == tmp_path / "x"
 
 

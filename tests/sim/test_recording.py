@@ -16,7 +16,10 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS
+
+RECORDED = {topic_names.resolve(name): spec for name, spec in STACK_TOPICS.items()}  # a root-namespace stack's
 from rabbit_msgs_py.runtime import NodeStartError
 from rabbit_policy.experiment.scenario import Push
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
@@ -72,7 +75,7 @@ def test_bag_holds_every_message_the_stack_published(recorded):
     # types as documented, timestamps monotonic per topic
     types = {topic: schema for topic, _t, _m, schema in messages}
     for topic, schema in types.items():
-        assert schema == STACK_TOPICS[topic].type_name
+        assert schema == RECORDED[topic].type_name
     last = defaultdict(int)
     for topic, log_time, _msg, _schema in messages:
         assert log_time >= last[topic]
@@ -92,10 +95,10 @@ def test_metadata_yaml_matches_the_mcap(recorded):
     _header, _summary, messages = _read_all(bag)
     counts = Counter(topic for topic, *_ in messages)
     listed = {t["topic_metadata"]["name"]: t for t in meta["topics_with_message_count"]}
-    assert set(listed) == set(STACK_TOPICS)
+    assert set(listed) == set(RECORDED)
     for topic, entry in listed.items():
         assert entry["message_count"] == counts[topic]
-        assert entry["topic_metadata"]["type"] == STACK_TOPICS[topic].type_name
+        assert entry["topic_metadata"]["type"] == RECORDED[topic].type_name
         assert entry["topic_metadata"]["serialization_format"] == "cdr"
         assert entry["topic_metadata"]["offered_qos_profiles"]
     assert meta["message_count"] == len(messages)

@@ -14,15 +14,23 @@ from pathlib import Path
 
 def parse_with_preset(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
     """Parse ``argv`` with ``parser`` after applying the preset named by ``--config`` (if any)
-    as the defaults; adds the ``--config`` option to ``parser``."""
+    as the defaults; adds the ``--config`` option to ``parser``. An option the parser marks
+    required may come from the preset: it is checked after both (one line, exit 2)."""
     parser.add_argument("--config", type=Path, default=None, metavar="YAML",
                         help="a preset file of these options (config/train/*.yaml); the command line overrides it")
+    required = [a for a in parser._actions if a.required and a.option_strings]
+    for action in required:
+        action.required = False
     first = argparse.ArgumentParser(add_help=False)
     first.add_argument("--config", type=Path, default=None)
     known, _rest = first.parse_known_args(argv)
     if known.config is not None:
         apply_preset(parser, known.config)
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    missing = [a.option_strings[0] for a in required if getattr(args, a.dest) is None]
+    if missing:
+        parser.error(f"the following arguments are required: {', '.join(missing)}")
+    return args
 
 
 def apply_preset(parser: argparse.ArgumentParser, path: Path) -> None:
@@ -46,4 +54,3 @@ def apply_preset(parser: argparse.ArgumentParser, path: Path) -> None:
         if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction)) and not isinstance(value, bool):
             parser.error(f"--config {path}: {key} must be true or false, got {value!r}")
         action.default = action.type(value) if action.type is not None and isinstance(value, str) else value
-        action.required = False

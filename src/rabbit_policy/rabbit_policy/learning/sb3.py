@@ -50,7 +50,7 @@ class SB3Config(EpisodeConfig):
     log_every: int = option(2048, "env steps between log.csv rows")
     eval_every: int = option(20_000, "env steps between acceptance evaluations (and at the start and end; 0: "
                                      "at the end only)")
-    workers: int = option(2, "processes for the acceptance evaluations")
+    workers: int = option(2, "processes (or Ray CPUs) for the acceptance evaluations")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -135,8 +135,10 @@ def _append(path: Path, row: dict) -> None:
         writer.writerow(row)
 
 
-def train_sb3(config: SB3Config, out: Path, progress: bool = True) -> dict:
-    """Train as configured into ``out`` (new or empty); returns the summary (also ``summary.json``)."""
+def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_config=None) -> dict:
+    """Train as configured into ``out`` (new or empty), the acceptance evaluations on
+    ``backend_config`` (a :class:`~rabbit_policy.parallel.BackendConfig`; None: a local pool
+    of ``config.workers``); returns the summary (also ``summary.json``)."""
     import gymnasium as gym
     from stable_baselines3.common.callbacks import BaseCallback
     from stable_baselines3.common.env_util import make_vec_env
@@ -148,7 +150,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True) -> dict:
     from rabbit_policy.learning.env import ActionBounds
     from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.learning.training import evaluation_row
-    from rabbit_policy.parallel import LocalBackend
+    from rabbit_policy.parallel import BackendConfig, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.policies import NetworkPolicy
 
@@ -162,7 +164,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True) -> dict:
     model = build_model(config, env)
     mse = warm_start_actor(model, config.algo, bounds.low, bounds.high, config.seed) \
         if config.warm_start == "feedback" else None
-    backend = LocalBackend(config.workers)
+    backend = make_backend(backend_config or BackendConfig("local", config.workers))
     scalars = TrainingScalars(out / "tb", f"sb3_{config.algo}")
     start = time.perf_counter()
     state = {"best": None, "iteration": 0}

@@ -12,11 +12,14 @@ TensorBoard (``tensorboard --logdir runs``), against env steps:
 | ``<algo>/<statistic>`` | the algorithm's own statistics (``log.csv``'s other columns: ``es/population_mean``, ``ppo/approx_kl``, ...) |
 
 The same numbers are in ``log.csv`` and ``eval.csv`` (``scripts/plot_training.py`` draws them).
+Without the ``tensorboard`` package (pip only, in requirements.txt) a run says so once and
+writes the CSV files alone.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 SHARED = {"episode_return": "rollout/episode_return", "fall_fraction": "rollout/fall_fraction",
@@ -30,12 +33,19 @@ class TrainingScalars:
     """Writes a run's scalars to ``directory`` (TensorBoard event files; appended to on resume)."""
 
     def __init__(self, directory: Path, algorithm: str) -> None:
-        from torch.utils.tensorboard import SummaryWriter
-
         self.algorithm = algorithm
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError:
+            print("note: no TensorBoard scalars (pip install tensorboard); log.csv and eval.csv hold the same",
+                  file=sys.stderr)
+            self.writer = None
+            return
         self.writer = SummaryWriter(log_dir=str(directory))
 
     def _add(self, tag: str, value, step: int) -> None:
+        if self.writer is None:
+            return
         if isinstance(value, bool):
             value = float(value)
         if isinstance(value, (int, float)) and math.isfinite(value):
@@ -48,13 +58,16 @@ class TrainingScalars:
             if key not in NOT_SCALARS:
                 self._add(SHARED.get(key, f"{self.algorithm}/{key}"), value, step)
         self._add("time/wall_s", wall_s, step)
-        self.writer.flush()
+        if self.writer is not None:
+            self.writer.flush()
 
     def evaluation(self, row: dict) -> None:
         """One acceptance evaluation (an ``eval.csv`` row)."""
         for key, tag in EVALUATION.items():
             self._add(tag, row.get(key), int(row["env_steps"]))
-        self.writer.flush()
+        if self.writer is not None:
+            self.writer.flush()
 
     def close(self) -> None:
-        self.writer.close()
+        if self.writer is not None:
+            self.writer.close()
