@@ -277,3 +277,49 @@ def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_tr
         _, reward_noisy, _, _, info_noisy = noisy.step(action)
         _, reward_clean, _, _, info_clean = clean.step(action)
         assert reward_noisy == reward_clean and info_noisy["mean_speed"] == info_clean["mean_speed"]
+
+
+def test_memory_features_integrate_the_speed_error_with_anti_windup_and_carry_the_last_action():
+    from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
+
+    memory = SpeedMemory(MemoryConfig(dt=0.02, limit=0.2))
+    first = memory.inputs(np.array([1.0, 0.9, 0.1]))
+    assert first.shape == (25,) and first[3] == pytest.approx(0.002) and not first[4:].any()
+    memory.record(np.full(21, 0.5))
+    for _ in range(200):  # a steady 0.1 m/s error: the integral stops at the bound
+        x = memory.inputs(np.array([1.0, 0.9, 0.1]))
+    assert x[3] == pytest.approx(0.2) and np.all(x[4:] == 0.5)
+    memory.reset()
+    assert memory.integral == 0.0
+
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, features="memory")
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.shape == (25,) and env.observation_space.contains(obs)
+    gait = env.library.nearest(float(obs[0]))
+    assert np.allclose(obs[4:], env.bounds.to_normalised(np.append(gait.free, gait.kd)), atol=1e-6)
+    action = np.full(21, 0.25, np.float32)
+    obs, *_ = env.step(action)
+    assert np.allclose(obs[4:], 0.25) and env.observation_space.contains(obs)
+
+
+def test_a_memory_policy_runs_in_the_closed_loop_and_starts_every_walk_afresh():
+    """The network widened with zero weights on the memory inputs acts as the paper network
+    (a warm start carried over); the policy resets its memory at every walk."""
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.scenario import Scenario
+    from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
+    from rabbit_policy.runtime.network import HZDPolicyNet, act, widen_inputs
+    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.runtime.speed_window import Observation
+
+    bounds = RabbitHZDEnv().bounds
+    paper = HZDPolicyNet(bounds.low, bounds.high)
+    wide = widen_inputs(paper, 25)
+    policy = NetworkPolicy(wide, decision_period=20, memory=SpeedMemory(MemoryConfig.for_period(20)))
+    observation = Observation(1.0, 0.95, 0.05)
+    assert np.allclose(act(paper, observation), act(wide, policy.memory.inputs(observation.as_tuple())), atol=1e-6)
+    first = walk(policy, Scenario.constant(1.0), 2.0)
+    integral = policy.memory.integral
+    second = walk(policy, Scenario.constant(1.0), 2.0)
+    assert policy.memory.integral == integral  # the same walk again: reset, not carried over
+    assert np.array_equal(first.hip_x, second.hip_x)

@@ -354,3 +354,20 @@ def test_a_bad_preset_is_one_line(tmp_path, text, message):
     bad.write_text("algo: es\n" + text if not text.startswith("-") else text)
     out = run_script("scripts/train.py", "--config", str(bad), "--out", str(tmp_path / "run"))
     assert out.returncode == 2 and message in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+
+
+@pytest.mark.slow
+def test_a_memory_run_ships_a_policy_that_keeps_its_memory_in_every_loop(tmp_path):
+    """Ablation row b through train.py: the checkpoint says its features and memory, and the
+    learned policy built from it (walk.py, the evaluations, policy_node) runs the memory."""
+    out = tmp_path / "memory"
+    result = run_script("scripts/train.py", "--algo", "es", "--out", str(out), "--seed", "1", "--workers", "1",
+                        "--pairs", "1", "--episodes", "1", "--max-steps", "20", "--decision-period", "20",
+                        "--features", "memory", "--iterations", "1", "--eval-every", "0", "--warm-start",
+                        "interpolate", "--no-progress")
+    assert result.returncode == 0, result.stderr
+    policy = make_policy("learned", policy_file=out / "policy.pt")
+    assert policy.checkpoint.info["features"] == "memory" and policy.memory is not None
+    assert policy.net.body[0].in_features == 25
+    walked = walk(policy, Scenario.constant(1.0), 3.0)
+    assert not walked.failed and policy.memory.integral != 0.0

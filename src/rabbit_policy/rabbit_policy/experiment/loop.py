@@ -38,7 +38,7 @@ from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period
+from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period, reset_policy
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
@@ -71,6 +71,7 @@ class ClosedLoop:
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
                  record_state: bool = False, observe_speed: bool = False,
                  observe_period: int = 0) -> None:
+        reset_policy(policy)  # a policy with memory starts each walk afresh
         if start is None:
             if policy is None:
                 raise ValueError("a closed loop needs a policy or a starting gait")

@@ -38,7 +38,9 @@ gait in force, as the controller node does; ``info["rejected"]`` says so.
 | 2 | mean of (v_d - hip speed) over the same ticks | m/s |
 
 Indices 1 and 2 carry Gaussian noise of ``distribution.observation_noise`` (m/s; the robust
-distribution: 0.02).
+distribution: 0.02). ``features="memory"`` (the learning issue's ablation row b,
+:mod:`rabbit_policy.runtime.memory`) appends the integral of the speed error (index 3, m,
+within +-0.2: anti-windup) and the last action (indices 4-24, normalised): a 25-vector.
 
 ## Rewards
 
@@ -82,6 +84,7 @@ max_episode_steps=500)``.
 | ``margin`` | 0.15 | widening of the coefficient bounds (rad) |
 | ``decision_period`` | 0 | ticks per env step (0: one walking step) |
 | ``distribution`` | ``"paper"`` | the episodes (see above) |
+| ``features`` | ``"paper"`` | the observation: the paper's three, or ``"memory"`` (see Observation space) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
 ## Version history
@@ -104,6 +107,7 @@ from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
@@ -196,6 +200,9 @@ class EpisodeConfig:
                                         "20 N s, delays up to 4 ms and noisy speeds); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
+    features: str = option("paper", "the policy's inputs: paper (the three speeds) or memory (+ the integral of "
+                                    "the speed error and the last action; rabbit_policy.runtime.memory)",
+                           choices=FEATURES)
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
@@ -207,6 +214,8 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
+        if self.features not in FEATURES:
+            raise ValueError(f"features must be one of {FEATURES}, got {self.features!r}")
 
 
 class RabbitHZDEnv(gym.Env):
@@ -217,7 +226,8 @@ class RabbitHZDEnv(gym.Env):
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
-                 distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None) -> None:
+                 distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
+                 features: str = "paper") -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -235,10 +245,16 @@ class RabbitHZDEnv(gym.Env):
         self.library = GaitLibrary.load()
         self.bounds = ActionBounds.from_library(self.library, margin)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
-        self.observation_space = gym.spaces.Box(
-            low=np.array([speed_range[0], -3.0, -3.0], dtype=np.float32),
-            high=np.array([speed_range[1], 3.0, 3.0], dtype=np.float32), dtype=np.float32,
-        )
+        if features not in FEATURES:
+            raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
+        self.features = features
+        self.memory = SpeedMemory(MemoryConfig.for_period(decision_period)) if features == "memory" else None
+        low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
+        if self.memory is not None:
+            limit = self.memory.config.limit
+            low, high = low + [-limit] + [-1.0] * (N_FREE + 1), high + [limit] + [1.0] * (N_FREE + 1)
+        self.observation_space = gym.spaces.Box(np.array(low, dtype=np.float32), np.array(high, dtype=np.float32),
+                                                dtype=np.float32)
         self.speed_range = speed_range
         self.max_steps = max_steps
         self.window_size = window
@@ -260,8 +276,10 @@ class RabbitHZDEnv(gym.Env):
         noise = self.distribution.observation_noise
         if noise > 0.0:
             obs[1:] += self.np_random.normal(0.0, noise, 2)
-        clipped = np.clip(obs, self.observation_space.low, self.observation_space.high)
-        return clipped.astype(np.float32)
+        obs = np.clip(obs, self.observation_space.low[:3], self.observation_space.high[:3])
+        if self.memory is not None:
+            obs = self.memory.inputs(obs)
+        return obs.astype(np.float32)
 
     def _run_to_touchdown(self) -> tuple[bool, bool]:
         """Simulate until the next touchdown (or a stop rule); returns (fell, stalled)."""
@@ -303,6 +321,8 @@ class RabbitHZDEnv(gym.Env):
                                 observe_period=self.decision_period)
         self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
         self._steps = 0
+        if self.memory is not None:  # the last action: the gait it starts on
+            self.memory.reset(self.bounds.to_normalised(np.append(gait.free, gait.kd)))
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
             raise RuntimeError("the starting gait did not reach its first touchdown")
@@ -338,6 +358,8 @@ class RabbitHZDEnv(gym.Env):
     def step(self, action):
         if self._loop is None:
             raise RuntimeError("call reset() before step()")
+        if self.memory is not None:
+            self.memory.record(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
         action = self.bounds.to_physical(action)
         try:
             command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))

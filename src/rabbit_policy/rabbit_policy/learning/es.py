@@ -60,7 +60,7 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- rollouts (per worker)
-EnvKey = tuple[int, int, str, float]  # (max_steps, decision_period, distribution, fall_penalty)
+EnvKey = tuple[int, int, str, float, str]  # (max_steps, decision_period, distribution, fall_penalty, features)
 _WORKER: dict[EnvKey, tuple[RabbitHZDEnv, HZDPolicyNet]] = {}
 
 
@@ -69,10 +69,10 @@ def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
     worker process, local or Ray, keeps its own)."""
     if key not in _WORKER:
         torch.set_num_threads(1)
-        max_steps, decision_period, distribution, fall_penalty = key
+        max_steps, decision_period, distribution, fall_penalty, features = key
         env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                           fall_penalty=fall_penalty)
-        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high))
+                           fall_penalty=fall_penalty, features=features)
+        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0]))
     return _WORKER[key]
 
 
@@ -174,7 +174,8 @@ class EvolutionStrategy:
         self.adam = Adam(config.lr)
         self.generation = 0
         self.env_steps = 0
-        self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
+        self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
+                                config.features)
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
 

@@ -73,7 +73,7 @@ class Critic(nn.Module):
         super().__init__()
         self.register_buffer("offset", actor.offset.clone())
         self.register_buffer("scale", actor.scale.clone())
-        self.body = nn.Sequential(nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
+        self.body = nn.Sequential(nn.Linear(actor.offset.numel(), hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
                                   nn.Linear(hidden, 1))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
@@ -104,12 +104,13 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
     return errors
 
 
-def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0):
+def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0,
+              features: str = "paper"):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
         return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                            fall_penalty=fall_penalty)
+                            fall_penalty=fall_penalty, features=features)
 
     return make
 
@@ -130,7 +131,8 @@ class PPOTrainer:
                                           lr=config.lr, eps=1e-5)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
-        factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty)
+        factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
+                            config.features)
         self.envs = make_vector_env([factory] * config.envs, backend)
         self.iteration = 0
         self.env_steps = 0
@@ -168,7 +170,7 @@ class PPOTrainer:
             self._episode_return[:] = 0.0
             self._episode_length[:] = 0
         shape = (cfg.steps, cfg.envs)
-        obs_buf = torch.zeros(shape + (3,))
+        obs_buf = torch.zeros(shape + (self.net.offset.numel(),))
         act_buf = torch.zeros(shape + (self.net.low.numel(),))
         logp_buf, rew_buf, done_buf, val_buf = (torch.zeros(shape) for _ in range(4))
         finished: list[tuple[float, int, bool]] = []
@@ -207,7 +209,7 @@ class PPOTrainer:
             delta = rew_buf[t] + cfg.gamma * following * not_done - val_buf[t]
             last = delta + cfg.gamma * cfg.gae_lambda * not_done * last
             advantages[t] = last
-        return {"obs": obs_buf.reshape(-1, 3), "actions": act_buf.reshape(-1, act_buf.shape[-1]),
+        return {"obs": obs_buf.reshape(-1, obs_buf.shape[-1]), "actions": act_buf.reshape(-1, act_buf.shape[-1]),
                 "logp": logp_buf.reshape(-1), "advantages": advantages.reshape(-1),
                 "returns": (advantages + val_buf).reshape(-1), "finished": finished, "errors": errors}
 

@@ -60,6 +60,8 @@ class SB3Config(EpisodeConfig):
             raise ValueError("timesteps, envs, n_steps, batch_size, log_every and workers must be >= 1")
         if self.eval_every < 0:
             raise ValueError("eval_every must be >= 0")
+        if self.features != "paper":
+            raise ValueError("the SB3 baseline takes the paper's inputs only (features paper)")
         if not (self.learning_rate > 0.0 and 0.0 < self.gamma <= 1.0):
             raise ValueError("learning_rate must be > 0 and gamma in (0, 1]")
 

@@ -124,7 +124,8 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
+    from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
+    from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
     from rabbit_policy.runtime.policies import NetworkPolicy
     from rabbit_policy.learning.warm_start import initial_network
 
@@ -141,6 +142,10 @@ def train(args: TrainingConfig) -> int:
     bounds = ActionBounds.from_library(library)
     net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
                                "none" if args.resume else args.warm_start)
+    features = args.trainer.features
+    memory = MemoryConfig.for_period(args.trainer.decision_period) if features == "memory" else None
+    if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
+        net = widen_inputs(net, INPUTS[features], memory.limit)
     state: dict = {}
     if args.resume:
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
@@ -167,7 +172,8 @@ def train(args: TrainingConfig) -> int:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
                 "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": args.trainer.to_dict(),
                 "warm_start": args.warm_start, "eval_every": args.eval_every,
-                "parameters": parameter_count(net), **(extra or {})}
+                "parameters": parameter_count(net), "features": features,
+                **({"memory": memory.to_dict()} if memory is not None else {}), **(extra or {})}
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
@@ -180,7 +186,9 @@ def train(args: TrainingConfig) -> int:
 
     def evaluate() -> None:
         nonlocal best, first_pass
-        result = acceptance(NetworkPolicy(net, decision_period=args.trainer.decision_period), map_fn=backend.map)
+        policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
+                               memory=SpeedMemory(memory) if memory is not None else None)
+        result = acceptance(policy, map_fn=backend.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
         scalars.evaluation(row)

@@ -37,21 +37,28 @@ class HZDPolicyNet(nn.Module):
     """obs (..., 3) in m/s -> action (..., 21) inside [low, high]."""
 
     def __init__(self, low: np.ndarray, high: np.ndarray, speed_centre: float = 1.1,
-                 input_scale: float = 0.4, output: str = "sigmoid") -> None:
+                 input_scale: float = 0.4, output: str = "sigmoid", inputs: int = N_INPUTS,
+                 memory_limit: float = 0.2) -> None:
+        """``inputs`` > 3: the paper's three then :mod:`.memory`'s (the integral, scaled by
+        ``memory_limit``, and the last action, already in [-1, 1])."""
         super().__init__()
         if output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+        if inputs < N_INPUTS:
+            raise ValueError(f"a policy network has at least {N_INPUTS} inputs, got {inputs}")
         self.output = output
         self.body = nn.Sequential(
-            nn.Linear(N_INPUTS, HIDDEN), nn.Tanh(),
+            nn.Linear(inputs, HIDDEN), nn.Tanh(),
             nn.Linear(HIDDEN, HIDDEN), nn.Tanh(),
             nn.Linear(HIDDEN, HIDDEN), nn.Tanh(),
             nn.Linear(HIDDEN, N_OUTPUTS),
         )
         self.register_buffer("low", torch.as_tensor(low, dtype=torch.float64).float())
         self.register_buffer("high", torch.as_tensor(high, dtype=torch.float64).float())
-        self.register_buffer("offset", torch.tensor([speed_centre, speed_centre, 0.0]))
-        self.register_buffer("scale", torch.full((N_INPUTS,), float(input_scale)))
+        extra = inputs - N_INPUTS
+        self.register_buffer("offset", torch.tensor([speed_centre, speed_centre, 0.0] + [0.0] * extra))
+        self.register_buffer("scale", torch.tensor([float(input_scale)] * N_INPUTS
+                                                   + ([float(memory_limit)] + [1.0] * (extra - 1) if extra else [])))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         y = self.body((obs - self.offset) / self.scale)
@@ -60,6 +67,21 @@ class HZDPolicyNet(nn.Module):
         else:  # a normalised action in [-1, 1], as a Gymnasium env with a [-1, 1] Box takes it
             unit = (1.0 + (torch.clamp(y, -1.0, 1.0) if self.output == "clip" else torch.tanh(y))) / 2.0
         return self.low + (self.high - self.low) * unit
+
+
+def widen_inputs(net: HZDPolicyNet, inputs: int, memory_limit: float = 0.2) -> HZDPolicyNet:
+    """``net`` with ``inputs`` inputs whose new ones start with zero weights: the same outputs
+    for any value of the new inputs (a warm start on the paper's three carried over)."""
+    wide = HZDPolicyNet(net.low.numpy(), net.high.numpy(), output=net.output, inputs=inputs,
+                        memory_limit=memory_limit)
+    state = {k: v.clone() for k, v in net.state_dict().items() if k not in ("offset", "scale")}
+    weight = torch.zeros(HIDDEN, inputs)
+    weight[:, :net.body[0].in_features] = state["body.0.weight"]
+    state["body.0.weight"] = weight
+    state["offset"], state["scale"] = wide.offset.clone(), wide.scale.clone()
+    state["offset"][:N_INPUTS], state["scale"][:N_INPUTS] = net.offset[:N_INPUTS], net.scale[:N_INPUTS]
+    wide.load_state_dict(state)
+    return wide
 
 
 def parameter_count(net: nn.Module) -> int:
@@ -77,7 +99,8 @@ class PolicyCheckpoint:
     info: dict
 
     def network(self) -> HZDPolicyNet:
-        net = HZDPolicyNet(self.low, self.high, output=self.info.get("output", "sigmoid"))
+        net = HZDPolicyNet(self.low, self.high, output=self.info.get("output", "sigmoid"),
+                           inputs=int(self.state_dict["body.0.weight"].shape[1]))
         net.load_state_dict(self.state_dict)
         net.eval()
         return net
@@ -92,8 +115,10 @@ class PolicyCheckpoint:
         return cls(data["state_dict"], np.array(data["low"]), np.array(data["high"]), data.get("info", {}))
 
 
-def act(net: HZDPolicyNet, observation: Observation) -> np.ndarray:
-    """One deterministic action (21 floats) for an observation."""
+def act(net: HZDPolicyNet, observation: Observation | np.ndarray) -> np.ndarray:
+    """One deterministic action (21 floats, physical units) for an observation (or the
+    network's whole input vector)."""
+    x = observation.as_tuple() if isinstance(observation, Observation) else observation
     with torch.no_grad():
-        out = net(torch.tensor(observation.as_tuple(), dtype=torch.float32))
+        out = net(torch.as_tensor(np.asarray(x, dtype=np.float32)))
     return out.numpy().astype(float)

@@ -84,6 +84,11 @@ class RateLimitedPolicy:
         if decision_period(policy):  # a learned policy trained to decide every N ticks: keep its rate
             self.decision_period, self.decision_window = policy.decision_period, policy.decision_window
 
+    def reset(self) -> None:
+        """A new walk: the first decision starts at the requested command again."""
+        self.command = None
+        reset_policy(self.policy)
+
     def act(self, observation: Observation) -> GaitCommand:
         wanted = observation.desired_speed
         if self.command is None:
@@ -123,8 +128,18 @@ class PeriodicPolicy:
         self.decision_window = window
         self.name = f"{policy.name}@{period}ticks"
 
+    def reset(self) -> None:
+        reset_policy(self.policy)
+
     def act(self, observation: Observation) -> GaitCommand:
         return self.policy.act(observation)
+
+
+def reset_policy(policy: Policy | None) -> None:
+    """Start a policy's walk afresh: a stateful one (memory, a rate limit) has ``reset``."""
+    reset = getattr(policy, "reset", None)
+    if reset is not None:
+        reset()
 
 
 def decision_period(policy: Policy | None) -> int:
@@ -142,21 +157,34 @@ class NetworkPolicy:
     """An HZD-RL network in memory (``HZDPolicyNet``): observation -> 20 free
     coefficients + Kd -> (alpha, Kd). Training evaluates its current network with it.
     ``decision_period`` > 0: the network was trained to decide every that many ticks (the
-    loops that run it read it, as for a :class:`PeriodicPolicy`)."""
+    loops that run it read it, as for a :class:`PeriodicPolicy`). ``memory``: a network with
+    :mod:`.memory`'s inputs keeps its integral and last action here (:meth:`reset` at the
+    start of a walk; ``ClosedLoop`` and ``policy_node`` call it)."""
 
-    def __init__(self, net, name: str = "learned", decision_period: int = 0) -> None:
+    def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None) -> None:
         self.net = net
         self.name = name
+        self.memory = memory
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW
+
+    def reset(self) -> None:
+        """A new walk: the memory (if any) starts again."""
+        if self.memory is not None:
+            self.memory.reset()
 
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 
         from rabbit_policy.runtime.network import act
 
-        action = act(self.net, observation)
+        if self.memory is None:
+            action = act(self.net, observation)
+        else:
+            action = act(self.net, self.memory.inputs(observation.as_tuple()))
+            low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
+            self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
@@ -172,7 +200,12 @@ class LearnedPolicy(NetworkPolicy):
         if decision_period is None:
             decision_period = int(self.checkpoint.info.get("config", {}).get("decision_period", 0))
         name = f"learned/{Path(path).name}" + (f"@{decision_period}ticks" if decision_period else "")
-        super().__init__(self.checkpoint.network(), name, decision_period)
+        memory = None
+        if self.checkpoint.info.get("features", "paper") == "memory":
+            from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
+
+            memory = SpeedMemory(MemoryConfig(**self.checkpoint.info["memory"]))
+        super().__init__(self.checkpoint.network(), name, decision_period, memory)
 
 
 def controller_name(name: str) -> str:

@@ -1,0 +1,71 @@
+"""Memory for the policy (the learning issue's ablation row b): besides the paper's three
+inputs, the integral of the speed error with anti-windup and the last action.
+
+A memoryless map from (v_d, v̄, v_d - v̄) to a gait can only correct a steady speed error in
+proportion to it (the ``drives`` model walks 0.06-0.18 m/s too slow); an integral removes it
+(Westervelt et al., IEEE TAC 2003: an event-based PI controller on RABBIT), and the last
+action lets the policy change its gait smoothly. :class:`SpeedMemory` is the one
+implementation, run by the learning environment and by :class:`NetworkPolicy` (``walk.py``,
+the evaluations, ``policy_node``), so a policy sees in the loops what it saw in training.
+
+Inputs, in order: the paper's three (m/s), then the integral (m: the sum of the mean speed
+error v_d - v̄ times the decision interval, clamped to +-``limit``: anti-windup), then the
+last action normalised to [-1, 1] (21 numbers; at the start the gait the robot starts on).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+N_ACTION = 21
+FEATURES = ("paper", "memory")
+INPUTS = {"paper": 3, "memory": 3 + 1 + N_ACTION}
+
+
+@dataclass(frozen=True)
+class MemoryConfig:
+    """``dt``: s between decisions (the decision period; per step: a nominal step);
+    ``limit``: the anti-windup bound of the integral (m)."""
+
+    dt: float
+    limit: float = 0.2
+
+    def __post_init__(self) -> None:
+        if not (self.dt > 0.0 and self.limit > 0.0):
+            raise ValueError(f"memory dt and limit must be > 0, got {self.dt}, {self.limit}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def for_period(cls, decision_period: int, limit: float = 0.2) -> "MemoryConfig":
+        """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
+        per walking step, about 0.6 s)."""
+        return cls(decision_period / 1000.0 if decision_period else 0.6, limit)
+
+
+class SpeedMemory:
+    """The integral and the last action (see the module docstring). Call :meth:`inputs` once
+    per decision, then :meth:`record` with the action taken."""
+
+    def __init__(self, config: MemoryConfig) -> None:
+        self.config = config
+        self.reset()
+
+    def reset(self, last_action: np.ndarray | None = None) -> None:
+        """A new walk: the integral at 0, the last action ``last_action`` (normalised; None: 0)."""
+        self.integral = 0.0
+        self.last_action = np.zeros(N_ACTION) if last_action is None else np.asarray(last_action, dtype=float).copy()
+
+    def inputs(self, paper: np.ndarray) -> np.ndarray:
+        """The network's inputs for this decision from the paper's three (v_d, v̄, v_d - v̄)."""
+        paper = np.asarray(paper, dtype=float)
+        limit = self.config.limit
+        self.integral = min(limit, max(-limit, self.integral + float(paper[2]) * self.config.dt))
+        return np.concatenate([paper, [self.integral], self.last_action])
+
+    def record(self, normalised_action: np.ndarray) -> None:
+        """The action just taken, normalised to [-1, 1]."""
+        self.last_action = np.clip(np.asarray(normalised_action, dtype=float), -1.0, 1.0)
