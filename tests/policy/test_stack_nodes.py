@@ -698,3 +698,41 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
         assert result.stalled and result.times[-1] == pytest.approx(3.001)  # ends at the stall
         for node in (late, stalled):
             node.destroy_node()
+
+
+def test_policy_node_starts_a_memory_policy_afresh_when_the_robot_is_placed_again(tmp_path):
+    from std_msgs.msg import UInt32
+
+    from rabbit_policy.learning.env import ActionBounds
+    from rabbit_policy.runtime.memory import MemoryConfig
+    from rabbit_policy.runtime.network import HZDPolicyNet, PolicyCheckpoint, widen_inputs
+
+    bounds = ActionBounds.from_library(GaitLibrary.load())
+    net = widen_inputs(HZDPolicyNet(bounds.low, bounds.high), 25)
+    path = tmp_path / "memory.pt"
+    PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high,
+                     {"features": "memory", "memory": MemoryConfig.for_period(20).to_dict(),
+                      "config": {"decision_period": 20}}).save(path)
+    with ros_context() as (context, executor):
+        policy = PolicyNode(context=context, policy="learned", policy_file=str(path))
+        user = context_node(context)
+        pub = user.create_publisher(UInt32, topics.RESETS, qos.STATUS_QOS)
+        executor.add_node(policy)
+        executor.add_node(user)
+        memory = policy.policy.memory
+        assert memory is not None
+        pub.publish(UInt32(data=1))  # the start: nothing to forget
+        assert spin_until(executor, lambda: policy._placements == 1)
+        memory.integral = 0.1
+        pub.publish(UInt32(data=2))  # a reset
+        assert spin_until(executor, lambda: policy._placements == 2)
+        assert memory.integral == 0.0
+        for node in (policy, user):
+            executor.remove_node(node)
+            node.destroy_node()
+
+
+def context_node(context):
+    import rclpy
+
+    return rclpy.create_node("reset_publisher", context=context)

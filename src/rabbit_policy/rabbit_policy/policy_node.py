@@ -43,7 +43,7 @@ from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray, Header, String
+from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_msgs_py import qos, topics
@@ -59,6 +59,7 @@ from rabbit_policy.runtime.policies import (
     PolicyUnavailable,
     decision_period,
     make_policy,
+    reset_policy,
 )
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
@@ -149,6 +150,8 @@ class PolicyNode(Node):
         self._warned_planar = False
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
+        self._placements = 0
+        self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         self._decide(Observation(self.desired_speed, self.desired_speed, 0.0))  # the start: on the command
         self.get_logger().info(
             f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; "
@@ -181,6 +184,13 @@ class PolicyNode(Node):
             self.get_logger().warning(f"{self.resolve_topic_name(topics.CMD_VEL)}: RABBIT walks straight in its plane; "
                                       "only linear.x (the speed) is used, the other fields are ignored (said once)")
         self._command(msg.linear.x, self.resolve_topic_name(topics.CMD_VEL))
+
+    def _on_resets(self, msg: UInt32) -> None:
+        """The robot was placed again (a reset): a policy with memory starts afresh, as each
+        walk of the ROS-free loop does (its first placement is the start: nothing to forget)."""
+        if msg.data > 1 and msg.data != self._placements:
+            reset_policy(self.policy)
+        self._placements = msg.data
 
     def _on_cmd_speed(self, msg: Float64) -> None:
         self._command(msg.data, self.resolve_topic_name(topics.CMD_SPEED))
