@@ -177,6 +177,11 @@ DISTRIBUTIONS = {
     "broad": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, max_impulse=15.0,
                                  frictions=(None, None, 0.6, 0.5, 0.4), torso_mass_scales=(0.85, 1.0, 1.0, 1.15),
                                  variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.002, 0.003)),
+    # a step towards robust (a curriculum's middle): pushes up to 12 N s, delays up to 2 ms, milder model errors
+    "moderate": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, max_impulse=12.0,
+                                    frictions=(None, None, 0.6, 0.5), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),
+                                    variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.001, 0.002),
+                                    observation_noise=0.02),
     # what the learning issue judges on (checks 1-6): pushes up to 20 N s both ways, delays 0-4 ms, noisy speeds
     "robust": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.8, max_impulse=20.0,
                                   frictions=(None, None, 0.6, 0.5, 0.4), torso_mass_scales=(0.85, 1.0, 1.0, 1.15),
@@ -196,8 +201,9 @@ class EpisodeConfig:
     decision_period: int = option(20, "ticks (1 ms) per env step, the gait applied at once; 0: one env step per "
                                       "walking step, the gait for the next step")
     distribution: str = option("broad", "episodes: paper (one command change), broad (commands every 2-5 s, "
-                                        "pushes, model errors, torque delays) or robust (broad with pushes up to "
-                                        "20 N s, delays up to 4 ms and noisy speeds); DISTRIBUTIONS",
+                                        "pushes, model errors, torque delays), moderate (pushes up to 12 N s, delays up "
+                                        "to 2 ms, noisy speeds) or robust (pushes up to 20 N s, delays up to 4 ms, "
+                                        "noisy speeds); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     features: str = option("paper", "the policy's inputs: paper (the three speeds) or memory (+ the integral of "
