@@ -10,8 +10,10 @@
 * Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
   the current state.
 * Events (``/hzd/step``): reliable, keep last 10.
-* Monitors that only need the newest state (run_stack's supervisor): best effort,
-  keep last 1 — a slow monitor never holds the 1 kHz loop back.
+* Monitors that only need the newest state (run_stack's supervisor): reliable, keep last
+  1 — the newest state always arrives (the run's last one too: a best-effort subscriber
+  that missed it under load never saw the run end), and a slow monitor never holds the
+  1 kHz loop back (keep-last writers overwrite what it has not taken).
 * Clock: reliable, keep last 10 (a recorder in lockstep must get every one; the newest
   is the one that matters to anyone else).
 """
@@ -37,9 +39,4 @@ COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(10)
 MARKERS_QOS = _reliable(10)
-MONITOR_QOS = QoSProfile(
-    history=HistoryPolicy.KEEP_LAST,
-    depth=1,
-    reliability=ReliabilityPolicy.BEST_EFFORT,
-    durability=DurabilityPolicy.VOLATILE,
-)
+MONITOR_QOS = _reliable(1)
