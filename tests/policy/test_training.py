@@ -312,12 +312,13 @@ def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_co
     spec.loader.exec_module(train)
     info = PolicyCheckpoint.load(packaged_policy_file()).info
     defaults = train.parse_config(["--algo", info["algorithm"], "--out", "runs/X"])
-    assert defaults.trainer.to_dict() == info["config"]
+    shipped = {"features": "paper", **info["config"]}  # trained before the features option; paper's inputs
+    assert defaults.trainer.to_dict() == shipped
     assert (defaults.workers, defaults.warm_start, defaults.eval_every) == (info["workers"], info["warm_start"],
                                                                            info["eval_every"])
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
-    assert train.parse_config(shlex.split(command)).trainer.to_dict() == info["config"]
+    assert train.parse_config(shlex.split(command)).trainer.to_dict() == shipped
 
 
 # ------------------------------------------------------------------------- presets
@@ -336,9 +337,8 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = make_policy("learned").checkpoint.info["config"]  # what trained it (before features existed)
-    assert {k: v for k, v in preset.trainer.to_dict().items() if k != "features"} == trained
-    assert preset.trainer.features == trained.get("features", "paper") == "paper"
+    trained = {"features": "paper", **make_policy("learned").checkpoint.info["config"]}  # what trained it
+    assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])
     assert overridden.iterations == 3 and overridden.trainer == preset.trainer  # the command line wins
