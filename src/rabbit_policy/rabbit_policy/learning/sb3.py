@@ -16,7 +16,6 @@ has (``log.csv``, ``eval.csv``, ``tb/`` under the same tags, ``policy.pt``, ``be
 
 from __future__ import annotations
 
-import csv
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -128,15 +127,6 @@ def build_model(config: SB3Config, env):
     return SAC("MlpPolicy", env, batch_size=config.batch_size, policy_kwargs=kwargs, **common)
 
 
-def _append(path: Path, row: dict) -> None:
-    new = not path.exists()
-    with path.open("a", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(row))
-        if new:
-            writer.writeheader()
-        writer.writerow(row)
-
-
 def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_config=None) -> dict:
     """Train as configured into ``out`` (new or empty), the acceptance evaluations on
     ``backend_config`` (a :class:`~rabbit_policy.parallel.BackendConfig`; None: a local pool
@@ -151,7 +141,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
     from rabbit_policy.learning.env import ActionBounds
     from rabbit_policy.learning.scalars import TrainingScalars
-    from rabbit_policy.learning.training import evaluation_row
+    from rabbit_policy.learning.training import append_csv, evaluation_row
     from rabbit_policy.parallel import BackendConfig, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.policies import NetworkPolicy
@@ -182,7 +172,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
         result = acceptance(NetworkPolicy(checkpoint.network(), decision_period=config.decision_period),
                             map_fn=backend.map)
         row = evaluation_row(state["iteration"], time.perf_counter() - start, int(model.num_timesteps), result)
-        _append(out / "eval.csv", row)
+        append_csv(out / "eval.csv", row)
         scalars.evaluation(row)
         rank = list(acceptance_rank(result))
         if model.num_timesteps > 0 and (state["best"] is None or rank < state["best"]["rank"]):
@@ -216,7 +206,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
                        "episode_return": float(np.mean(self.returns)) if self.returns else float("nan"),
                        "fall_fraction": float(np.mean(self.falls)) if self.falls else float("nan"),
                        "mean_abs_error": float(np.mean(self.errors)) if self.errors else float("nan")}
-                _append(out / "log.csv", row)
+                append_csv(out / "log.csv", row)
                 scalars.iteration(row, row["wall_s"])
                 self.bar.set_postfix(ret=f"{row['episode_return']:.2f}", falls=f"{row['fall_fraction']:.2f}")
                 self.returns, self.falls, self.errors = [], [], []
