@@ -109,6 +109,7 @@ from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import GaitCommand
+from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
 
@@ -277,8 +278,11 @@ class RabbitHZDEnv(gym.Env):
         return self._loop
 
     # ------------------------------------------------------------------ helpers
-    def _observation(self) -> np.ndarray:
-        obs = np.array(self._loop.observation(moving=bool(self.decision_period)).as_tuple())
+    def _observation(self, clean: Observation | None = None) -> np.ndarray:
+        """The policy's input from the loop's noise-free observation ``clean`` (taken now if None)."""
+        if clean is None:
+            clean = self._loop.observation(moving=bool(self.decision_period))
+        obs = np.array(clean.as_tuple())
         noise = self.distribution.observation_noise
         if noise > 0.0:
             obs[1:] += self.np_random.normal(0.0, noise, 2)
@@ -375,8 +379,9 @@ class RabbitHZDEnv(gym.Env):
         fell, stalled = self._run_decision()
         self._steps += 1
         self.desired_speed = self._loop.desired_speed  # the schedule's command (broad distributions)
-        obs = self._observation()
-        mean_speed = float(self._loop.observation(moving=bool(self.decision_period)).mean_speed)  # noise-free
+        clean = self._loop.observation(moving=bool(self.decision_period))
+        obs = self._observation(clean)
+        mean_speed = float(clean.mean_speed)  # noise-free
         terminated = fell or stalled
         terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
                  "reward_fall": self.fall_penalty if terminated else 0.0}
