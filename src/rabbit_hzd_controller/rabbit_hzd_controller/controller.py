@@ -235,6 +235,7 @@ class HZDController:
         self.stance = Leg(stance)
         self.steps = 0
         self.tau = 0.0
+        self.tau_rate = 0.0  # d tau / dt (1/s) at the last compute
         self.touchdown = False
         self._replaced: _Outputs | None = None  # the gait a touchdown (or apply_now) just replaced
         self._replaced_blend: _BlendState | None = None  # its blend then, if any
@@ -349,6 +350,7 @@ class HZDController:
             dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
             dtau = dp_hip / span
         self.tau = t
+        self.tau_rate = dtau
         if self._replaced is not None:
             self._start_blend(t, (sh, sk, wh, wk), p_hip)
 

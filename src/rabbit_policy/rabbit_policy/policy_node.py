@@ -119,6 +119,10 @@ class PolicyNode(Node):
                                       values["policy_file"] or None,
                                       finite("max_command_step", values["max_command_step"], 0.0),
                                       None if values["decision_period"] == -1 else max(values["decision_period"], 0))
+            if getattr(self.policy, "needs_body", False):
+                raise ValueError("this policy reads the body state inside the step (features body), which "
+                                 "policy_node does not build from the topics yet; run it in the ROS-free loops "
+                                 "(walk.py, evaluate.py)")
             if values["decision_period"] < -1:
                 raise ValueError(f"decision_period must be -1 (the policy's own), 0 or N > 0 ticks, "
                                  f"got {values['decision_period']}")

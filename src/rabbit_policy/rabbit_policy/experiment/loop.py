@@ -38,6 +38,7 @@ from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period, reset_policy
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
@@ -49,8 +50,10 @@ Observer = Callable[["ClosedLoop", Sequence[float]], None]
 
 
 def first_command(policy: Policy, speed: float) -> GaitCommand:
-    """The gait a policy starts on at ``speed`` m/s: its answer to (v, v, 0)."""
-    return policy.act(Observation(speed, speed, 0.0))
+    """The gait a policy starts on at ``speed`` m/s: its ``start_command`` if it has one
+    (a policy that reads the body state), else its answer to (v, v, 0)."""
+    start = getattr(policy, "start_command", None)
+    return start(speed) if start is not None else policy.act(Observation(speed, speed, 0.0))
 
 
 class ClosedLoop:
@@ -172,6 +175,12 @@ class ClosedLoop:
             return False
         return True
 
+    def body_state(self) -> tuple[float, ...]:
+        """The body state now (:func:`~rabbit_policy.runtime.body.body_state`: torso pitch,
+        its rate, the phase, its rate, the hip velocity)."""
+        c = self.controller
+        return body_state(self._qpos, self._qvel, c.tau, c.tau_rate)
+
     # ------------------------------------------------------------------- tick
     def tick(self) -> bool:
         """One control tick and physics step (see the module docstring); returns True when
@@ -236,6 +245,8 @@ class ClosedLoop:
         learning environment decides itself)."""
         if self.policy is None:
             return
+        if getattr(self.policy, "needs_body", False):
+            observation = replace(observation, body=self.body_state())
         command = self.policy.act(observation)
         accepted = self.apply_gait(command) if self._period else self.set_gait(command)
         self.decisions.append(Decision(t, observation.mean_speed, self.desired_speed, command.kd, not accepted))

@@ -41,6 +41,14 @@ Indices 1 and 2 carry Gaussian noise of ``distribution.observation_noise`` (m/s;
 distribution: 0.02). ``features="memory"`` (the learning issue's ablation row b,
 :mod:`rabbit_policy.runtime.memory`) appends the integral of the speed error (index 3, m,
 within +-0.2: anti-windup) and the last action (indices 4-24, normalised): a 25-vector.
+``features="body"`` (row c; needs a decision period) appends to those the body state at the
+decision (:mod:`rabbit_policy.runtime.body`: torso pitch (rad) and rate (rad/s), phase and
+its rate (1/s), hip velocity (m/s); noise-free): a 30-vector.
+
+With ``action="residual"`` (row d, :mod:`rabbit_policy.runtime.actions`) the action is a
+residual on the calibrated library's gait at the commanded speed: -1..1 maps onto
++-0.1 rad per coefficient and +-20 N m s/rad on Kd, and the action 0 is the classic
+controller's gait; ``env.unwrapped.bounds`` then holds the residual's bounds.
 
 ## Rewards
 
@@ -84,7 +92,8 @@ max_episode_steps=500)``.
 | ``margin`` | 0.15 | widening of the coefficient bounds (rad) |
 | ``decision_period`` | 0 | ticks per env step (0: one walking step) |
 | ``distribution`` | ``"paper"`` | the episodes (see above) |
-| ``features`` | ``"paper"`` | the observation: the paper's three, or ``"memory"`` (see Observation space) |
+| ``features`` | ``"paper"`` | the observation: the paper's three, ``"memory"`` or ``"body"`` (see Observation space) |
+| ``action`` | ``"direct"`` | the action: the gait, or ``"residual"`` on the library (see Observation space) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
 ## Version history
@@ -101,11 +110,12 @@ import gymnasium as gym
 import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
-from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import option
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
+from rabbit_policy.runtime.actions import ACTIONS, ActionBounds, ResidualAction  # noqa: F401  (ActionBounds re-exported)
+from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import GaitCommand
@@ -115,36 +125,6 @@ from rabbit_sim.simulation import StopRules
 
 DEFAULT_MAX_STEPS = MAX_EPISODE_STEPS
 """Env steps per episode unless the spec (``max_episode_steps``) or ``max_steps`` says otherwise."""
-
-
-@dataclass(frozen=True)
-class ActionBounds:
-    """Lower/upper bounds of the 21-dimensional action (20 coefficients in rad, Kd)."""
-
-    low: np.ndarray
-    high: np.ndarray
-
-    @classmethod
-    def from_library(cls, library: GaitLibrary, margin: float = 0.15,
-                     kd_range: tuple[float, float] = (20.0, 150.0),
-                     config: ControllerConfig | None = None) -> "ActionBounds":
-        config = config or ControllerConfig()
-        free = np.array([g.free for g in library.gaits])
-        low, high = free.min(axis=0) - margin, free.max(axis=0) + margin
-        for i in range(N_FREE):  # output i % 4: hips even, knees odd
-            lo, hi = config.knee_coefficient_range if i % 2 else config.hip_coefficient_range
-            low[i], high[i] = max(low[i], lo), min(high[i], hi)
-        return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
-
-    def to_physical(self, normalised: np.ndarray) -> np.ndarray:
-        """The physical action (rad, N m s/rad) of a normalised one, clipped to [-1, 1] first."""
-        a = np.clip(np.asarray(normalised, dtype=float), -1.0, 1.0)
-        return self.low + (a + 1.0) * 0.5 * (self.high - self.low)
-
-    def to_normalised(self, physical: np.ndarray) -> np.ndarray:
-        """The normalised action in [-1, 1] of a physical one (clipped to the bounds first)."""
-        x = np.clip(np.asarray(physical, dtype=float), self.low, self.high)
-        return 2.0 * (x - self.low) / (self.high - self.low) - 1.0
 
 
 @dataclass(frozen=True)
@@ -207,9 +187,13 @@ class EpisodeConfig:
                                         "noisy speeds); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
-    features: str = option("paper", "the policy's inputs: paper (the three speeds) or memory (+ the integral of "
-                                    "the speed error and the last action; rabbit_policy.runtime.memory)",
+    features: str = option("paper", "the policy's inputs: paper (the three speeds), memory (+ the integral of "
+                                    "the speed error and the last action; rabbit_policy.runtime.memory) or body "
+                                    "(+ torso pitch and rate, phase and rate, hip velocity; needs a decision period)",
                            choices=FEATURES)
+    action: str = option("direct", "the policy's output: direct (the gait) or residual (a bounded residual on the "
+                                   "calibrated library at the command; zero = classic HZD; "
+                                   "rabbit_policy.runtime.actions)", choices=ACTIONS)
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
@@ -221,8 +205,9 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
-        if self.features not in FEATURES:
-            raise ValueError(f"features must be one of {FEATURES}, got {self.features!r}")
+        MemoryConfig.for_features(self.features, self.decision_period)  # raises for a bad combination
+        if self.action not in ACTIONS:
+            raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
 
 
 class RabbitHZDEnv(gym.Env):
@@ -234,7 +219,7 @@ class RabbitHZDEnv(gym.Env):
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
-                 features: str = "paper") -> None:
+                 features: str = "paper", action: str = "direct") -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -250,16 +235,22 @@ class RabbitHZDEnv(gym.Env):
         self.render_mode = render_mode
         self._view = None  # the renderer or viewer, opened on first use
         self.library = GaitLibrary.load()
-        self.bounds = ActionBounds.from_library(self.library, margin)
+        if action not in ACTIONS:
+            raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+        self.action = action
+        direct = ActionBounds.from_library(self.library, margin)
+        self.residual = ResidualAction(self.library, direct) if action == "residual" else None
+        self.bounds = self.residual.bounds if self.residual is not None else direct
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
-        if features not in FEATURES:
-            raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
         self.features = features
-        self.memory = SpeedMemory(MemoryConfig.for_period(decision_period)) if features == "memory" else None
+        memory = MemoryConfig.for_features(features, decision_period)  # raises for a bad combination
+        self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:
             limit = self.memory.config.limit
             low, high = low + [-limit] + [-1.0] * (N_FREE + 1), high + [limit] + [1.0] * (N_FREE + 1)
+            if memory.body:  # pitch, pitch rate, phase, phase rate, hip velocity
+                low, high = low + [-1.0, -20.0, 0.0, -20.0, -3.0], high + [1.0, 20.0, 1.0, 20.0, 3.0]
         self.observation_space = gym.spaces.Box(np.array(low, dtype=np.float32), np.array(high, dtype=np.float32),
                                                 dtype=np.float32)
         self.speed_range = speed_range
@@ -288,8 +279,8 @@ class RabbitHZDEnv(gym.Env):
             obs[1:] += self.np_random.normal(0.0, noise, 2)
         obs = np.clip(obs, self.observation_space.low[:3], self.observation_space.high[:3])
         if self.memory is not None:
-            obs = self.memory.inputs(obs)
-        return obs.astype(np.float32)
+            obs = self.memory.inputs(obs, self._loop.body_state() if self.memory.config.body else None)
+        return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(np.float32)
 
     def _run_to_touchdown(self) -> tuple[bool, bool]:
         """Simulate until the next touchdown (or a stop rule); returns (fell, stalled)."""
@@ -331,8 +322,9 @@ class RabbitHZDEnv(gym.Env):
                                 observe_period=self.decision_period)
         self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
         self._steps = 0
-        if self.memory is not None:  # the last action: the gait it starts on
-            self.memory.reset(self.bounds.to_normalised(np.append(gait.free, gait.kd)))
+        if self.memory is not None:  # the last action: the gait it starts on (a residual: zero)
+            self.memory.reset(None if self.residual is not None
+                              else self.bounds.to_normalised(np.append(gait.free, gait.kd)))
         fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
         if fell or stalled:  # a shipped gait does not fall in one step; keep the API honest anyway
             raise RuntimeError("the starting gait did not reach its first touchdown")
@@ -371,6 +363,8 @@ class RabbitHZDEnv(gym.Env):
         if self.memory is not None:
             self.memory.record(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
         action = self.bounds.to_physical(action)
+        if self.residual is not None:
+            action = self.residual.compose(action, self.desired_speed)
         try:
             command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))
             rejected = not (self._loop.apply_gait(command) if self.decision_period else self._loop.set_gait(command))

@@ -60,7 +60,7 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- rollouts (per worker)
-EnvKey = tuple[int, int, str, float, str]  # (max_steps, decision_period, distribution, fall_penalty, features)
+EnvKey = tuple[int, int, str, float, str, str]  # (max_steps, decision_period, distribution, fall_penalty, features, action)
 _WORKER: dict[EnvKey, tuple[RabbitHZDEnv, HZDPolicyNet]] = {}
 
 
@@ -69,10 +69,11 @@ def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
     worker process, local or Ray, keeps its own)."""
     if key not in _WORKER:
         torch.set_num_threads(1)
-        max_steps, decision_period, distribution, fall_penalty, features = key
+        max_steps, decision_period, distribution, fall_penalty, features, action = key
         env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                           fall_penalty=fall_penalty, features=features)
-        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0]))
+                           fall_penalty=fall_penalty, features=features, action=action)
+        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0],
+                                          output="tanh" if action == "residual" else "sigmoid"))
     return _WORKER[key]
 
 
@@ -175,7 +176,7 @@ class EvolutionStrategy:
         self.generation = 0
         self.env_steps = 0
         self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                                config.features)
+                                config.features, config.action)
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
 

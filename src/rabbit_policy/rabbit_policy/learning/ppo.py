@@ -31,7 +31,8 @@ import torch
 from torch import nn
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import ActionBounds, EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.runtime.actions import policy_bounds
 from rabbit_policy.learning.vector import make_vector_env
 from rabbit_policy.parallel import Backend, ignore_interrupts
 from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -105,12 +106,12 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
 
 
 def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0,
-              features: str = "paper"):
+              features: str = "paper", action: str = "direct"):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
         return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                            fall_penalty=fall_penalty, features=features)
+                            fall_penalty=fall_penalty, features=features, action=action)
 
     return make
 
@@ -124,7 +125,7 @@ class PPOTrainer:
         self.config = config
         self.net = net
         self.policy = GaussianPolicy(net, config.init_log_std)
-        self.bounds = ActionBounds.from_library(GaitLibrary.load())  # the env's: its actions are normalised
+        self.bounds = policy_bounds(config.action, GaitLibrary.load())  # the env's: its actions are normalised
         torch.manual_seed(config.seed)
         self.critic = Critic(net)
         self.optimiser = torch.optim.Adam(list(self.policy.parameters()) + list(self.critic.parameters()),
@@ -132,7 +133,7 @@ class PPOTrainer:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
         factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                            config.features)
+                            config.features, config.action)
         self.envs = make_vector_env([factory] * config.envs, backend)
         self.iteration = 0
         self.env_steps = 0

@@ -61,6 +61,8 @@ class SB3Config(EpisodeConfig):
             raise ValueError("eval_every must be >= 0")
         if self.features != "paper":
             raise ValueError("the SB3 baseline takes the paper's inputs only (features paper)")
+        if self.action != "direct":
+            raise ValueError("the SB3 baseline outputs the gait itself (action direct)")
         if not (self.learning_rate > 0.0 and 0.0 < self.gamma <= 1.0):
             raise ValueError("learning_rate must be > 0 and gamma in (0, 1]")
 

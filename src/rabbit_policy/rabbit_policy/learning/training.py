@@ -120,14 +120,14 @@ def train(args: TrainingConfig) -> int:
     from tqdm import tqdm
 
     from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
-    from rabbit_policy.learning.env import ActionBounds
     from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ActionBounds, ResidualAction, policy_bounds
     from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
     from rabbit_policy.runtime.policies import NetworkPolicy
-    from rabbit_policy.learning.warm_start import initial_network
+    from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
 
     try:  # before anything slow: a backend that cannot start is a one-line error at once
         backend = make_backend(args.backend)
@@ -139,13 +139,20 @@ def train(args: TrainingConfig) -> int:
     torch.manual_seed(args.seed)
     out.mkdir(parents=True, exist_ok=True)
     library = GaitLibrary.load()
-    bounds = ActionBounds.from_library(library)
-    net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
-                               "none" if args.resume else args.warm_start)
-    features = args.trainer.features
-    memory = MemoryConfig.for_period(args.trainer.decision_period) if features == "memory" else None
-    if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
-        net = widen_inputs(net, INPUTS[features], memory.limit)
+    features, action = args.trainer.features, args.trainer.action
+    bounds = policy_bounds(action, library)
+    memory = MemoryConfig.for_features(features, args.trainer.decision_period)
+    residual = ResidualAction(library, ActionBounds.from_library(library)) if action == "residual" else None
+    if residual is not None:  # a zero residual: the classic controller
+        net, mse = zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), None
+        if args.warm_start != "none" and not args.resume:
+            print(f"action residual: starts from the zero residual (classic HZD); --warm-start {args.warm_start} "
+                  "is not used", flush=True)
+    else:
+        net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
+                                   "none" if args.resume else args.warm_start)
+        if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
+            net = widen_inputs(net, INPUTS[features], memory.limit)
     state: dict = {}
     if args.resume:
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
@@ -172,8 +179,9 @@ def train(args: TrainingConfig) -> int:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
                 "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": args.trainer.to_dict(),
                 "warm_start": args.warm_start, "eval_every": args.eval_every,
-                "parameters": parameter_count(net), "features": features,
-                **({"memory": memory.to_dict()} if memory is not None else {}), **(extra or {})}
+                "parameters": parameter_count(net), "features": features, "action": action, "output": net.output,
+                **({"memory": memory.to_dict()} if memory is not None else {}),
+                **({"residual_scale": list(RESIDUAL_SCALE)} if residual is not None else {}), **(extra or {})}
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
@@ -187,7 +195,7 @@ def train(args: TrainingConfig) -> int:
     def evaluate() -> None:
         nonlocal best, first_pass
         policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
-                               memory=SpeedMemory(memory) if memory is not None else None)
+                               memory=SpeedMemory(memory) if memory is not None else None, residual=residual)
         result = acceptance(policy, map_fn=backend.map)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)

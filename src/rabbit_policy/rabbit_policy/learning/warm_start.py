@@ -139,3 +139,17 @@ def initial_network(low: np.ndarray, high: np.ndarray, library: GaitLibrary, see
     if start == "none":
         return net, None
     return net, warm_start(net, library, seed=seed, config=WARM_STARTS[start])
+
+
+def zero_residual_network(low: np.ndarray, high: np.ndarray, inputs: int, seed: int) -> HZDPolicyNet:
+    """The network a residual policy (``action="residual"``) starts from: random hidden
+    layers (after ``torch.manual_seed(seed)``), a zero last layer and a tanh output on
+    symmetric bounds, so its residual is exactly 0 — the classic controller — for any input."""
+    if not np.allclose(np.asarray(low), -np.asarray(high)):
+        raise ValueError("a residual's bounds are symmetric about 0")
+    torch.manual_seed(seed)
+    net = HZDPolicyNet(low, high, output="tanh", inputs=inputs)
+    with torch.no_grad():
+        net.body[-1].weight.zero_()
+        net.body[-1].bias.zero_()
+    return net

@@ -11,6 +11,8 @@ the evaluations, ``policy_node``), so a policy sees in the loops what it saw in 
 Inputs, in order: the paper's three (m/s), then the integral (m: the sum of the mean speed
 error v_d - v̄ times the decision interval, clamped to +-``limit``: anti-windup), then the
 last action normalised to [-1, 1] (21 numbers; at the start the gait the robot starts on).
+With ``body`` (features ``"body"``, the ablation's row c) the five body-state numbers of
+:mod:`.body` follow (torso pitch and rate, phase and rate, hip velocity): 30 inputs.
 """
 
 from __future__ import annotations
@@ -19,18 +21,21 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from rabbit_policy.runtime.body import N_BODY
+
 N_ACTION = 21
-FEATURES = ("paper", "memory")
-INPUTS = {"paper": 3, "memory": 3 + 1 + N_ACTION}
+FEATURES = ("paper", "memory", "body")
+INPUTS = {"paper": 3, "memory": 3 + 1 + N_ACTION, "body": 3 + 1 + N_ACTION + N_BODY}
 
 
 @dataclass(frozen=True)
 class MemoryConfig:
     """``dt``: s between decisions (the decision period; per step: a nominal step);
-    ``limit``: the anti-windup bound of the integral (m)."""
+    ``limit``: the anti-windup bound of the integral (m); ``body``: the body state follows."""
 
     dt: float
     limit: float = 0.2
+    body: bool = False
 
     def __post_init__(self) -> None:
         if not (self.dt > 0.0 and self.limit > 0.0):
@@ -40,10 +45,19 @@ class MemoryConfig:
         return asdict(self)
 
     @classmethod
-    def for_period(cls, decision_period: int, limit: float = 0.2) -> "MemoryConfig":
+    def for_period(cls, decision_period: int, limit: float = 0.2, body: bool = False) -> "MemoryConfig":
         """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
         per walking step, about 0.6 s)."""
-        return cls(decision_period / 1000.0 if decision_period else 0.6, limit)
+        return cls(decision_period / 1000.0 if decision_period else 0.6, limit, body)
+
+    @classmethod
+    def for_features(cls, features: str, decision_period: int) -> "MemoryConfig | None":
+        """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's."""
+        if features not in FEATURES:
+            raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
+        if features == "body" and not decision_period:
+            raise ValueError("features 'body' (the body state inside the step) needs a decision period > 0")
+        return None if features == "paper" else cls.for_period(decision_period, body=features == "body")
 
 
 class SpeedMemory:
@@ -59,12 +73,16 @@ class SpeedMemory:
         self.integral = 0.0
         self.last_action = np.zeros(N_ACTION) if last_action is None else np.asarray(last_action, dtype=float).copy()
 
-    def inputs(self, paper: np.ndarray) -> np.ndarray:
-        """The network's inputs for this decision from the paper's three (v_d, v̄, v_d - v̄)."""
+    def inputs(self, paper: np.ndarray, body: tuple[float, ...] | None = None) -> np.ndarray:
+        """The network's inputs for this decision from the paper's three (v_d, v̄, v_d - v̄)
+        and, with ``config.body``, the body state (:func:`.body.body_state`)."""
         paper = np.asarray(paper, dtype=float)
+        if self.config.body and (body is None or len(body) != N_BODY):
+            raise ValueError(f"this policy needs the body state ({N_BODY} numbers) with each observation")
         limit = self.config.limit
         self.integral = min(limit, max(-limit, self.integral + float(paper[2]) * self.config.dt))
-        return np.concatenate([paper, [self.integral], self.last_action])
+        parts = [paper, [self.integral], self.last_action] + ([np.asarray(body, dtype=float)] if self.config.body else [])
+        return np.concatenate(parts)
 
     def record(self, normalised_action: np.ndarray) -> None:
         """The action just taken, normalised to [-1, 1]."""

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from rabbit_policy.runtime.body import BODY_OFFSET, BODY_SCALE
 from rabbit_policy.runtime.speed_window import Observation
 
 HIDDEN = 12
@@ -40,7 +41,8 @@ class HZDPolicyNet(nn.Module):
                  input_scale: float = 0.4, output: str = "sigmoid", inputs: int = N_INPUTS,
                  memory_limit: float = 0.2) -> None:
         """``inputs`` > 3: the paper's three then :mod:`.memory`'s (the integral, scaled by
-        ``memory_limit``, and the last action, already in [-1, 1])."""
+        ``memory_limit``, and the last action, already in [-1, 1]), then :mod:`.body`'s
+        (normalised by its ``BODY_OFFSET``/``BODY_SCALE``)."""
         super().__init__()
         if output not in OUTPUTS:
             raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
@@ -55,10 +57,9 @@ class HZDPolicyNet(nn.Module):
         )
         self.register_buffer("low", torch.as_tensor(low, dtype=torch.float64).float())
         self.register_buffer("high", torch.as_tensor(high, dtype=torch.float64).float())
-        extra = inputs - N_INPUTS
-        self.register_buffer("offset", torch.tensor([speed_centre, speed_centre, 0.0] + [0.0] * extra))
-        self.register_buffer("scale", torch.tensor([float(input_scale)] * N_INPUTS
-                                                   + ([float(memory_limit)] + [1.0] * (extra - 1) if extra else [])))
+        offset, scale = input_normalisation(inputs, speed_centre, input_scale, memory_limit)
+        self.register_buffer("offset", torch.tensor(offset))
+        self.register_buffer("scale", torch.tensor(scale))
 
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         y = self.body((obs - self.offset) / self.scale)
@@ -67,6 +68,18 @@ class HZDPolicyNet(nn.Module):
         else:  # a normalised action in [-1, 1], as a Gymnasium env with a [-1, 1] Box takes it
             unit = (1.0 + (torch.clamp(y, -1.0, 1.0) if self.output == "clip" else torch.tanh(y))) / 2.0
         return self.low + (self.high - self.low) * unit
+
+
+def input_normalisation(inputs: int, speed_centre: float = 1.1, input_scale: float = 0.4,
+                        memory_limit: float = 0.2) -> tuple[list[float], list[float]]:
+    """(offset, scale) of each of ``inputs`` inputs, in the order of :mod:`.memory`: the
+    paper's three, the integral and the 21 last actions, the body state; the network sees
+    (input - offset) / scale."""
+    offset = [speed_centre, speed_centre, 0.0] + [0.0] * 22 + list(BODY_OFFSET)
+    scale = [float(input_scale)] * N_INPUTS + [float(memory_limit)] + [1.0] * 21 + list(BODY_SCALE)
+    if not (N_INPUTS <= inputs <= len(offset)):
+        raise ValueError(f"a policy network has {N_INPUTS} to {len(offset)} inputs, got {inputs}")
+    return offset[:inputs], scale[:inputs]
 
 
 def widen_inputs(net: HZDPolicyNet, inputs: int, memory_limit: float = 0.2) -> HZDPolicyNet:

@@ -20,6 +20,8 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Protocol
 
+import numpy as np
+
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_window import Observation
 
@@ -80,6 +82,9 @@ class RateLimitedPolicy:
         self.policy = policy
         self.max_step = max_step
         self.name = f"{policy.name}+limit{max_step:g}"
+        self.needs_body = getattr(policy, "needs_body", False)
+        if self.needs_body:  # it starts on its own gait (no body state before the walk)
+            self.start_command = policy.start_command
         self.command: float | None = None
         if decision_period(policy):  # a learned policy trained to decide every N ticks: keep its rate
             self.decision_period, self.decision_window = policy.decision_period, policy.decision_window
@@ -96,7 +101,8 @@ class RateLimitedPolicy:
         else:
             self.command += min(self.max_step, max(-self.max_step, wanted - self.command))
         shift = self.command - wanted
-        return self.policy.act(Observation(self.command, observation.mean_speed, observation.mean_error + shift))
+        return self.policy.act(Observation(self.command, observation.mean_speed, observation.mean_error + shift,
+                                           observation.body))
 
 
 CLASSIC_DECISION_PERIOD = 20
@@ -127,6 +133,9 @@ class PeriodicPolicy:
         self.decision_period = period
         self.decision_window = window
         self.name = f"{policy.name}@{period}ticks"
+        self.needs_body = getattr(policy, "needs_body", False)
+        if self.needs_body:  # it starts on its own gait (no body state before the walk)
+            self.start_command = policy.start_command
 
     def reset(self) -> None:
         reset_policy(self.policy)
@@ -159,20 +168,37 @@ class NetworkPolicy:
     ``decision_period`` > 0: the network was trained to decide every that many ticks (the
     loops that run it read it, as for a :class:`PeriodicPolicy`). ``memory``: a network with
     :mod:`.memory`'s inputs keeps its integral and last action here (:meth:`reset` at the
-    start of a walk; ``ClosedLoop`` and ``policy_node`` call it)."""
+    start of a walk; ``ClosedLoop`` and ``policy_node`` call it); with the body state it
+    reads ``observation.body`` (``needs_body``). ``residual``: the network's output is a
+    residual on the library (:class:`~.actions.ResidualAction`), not the gait itself."""
 
-    def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None) -> None:
+    def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None, residual=None) -> None:
         self.net = net
         self.name = name
         self.memory = memory
+        self.residual = residual
+        self.needs_body = bool(memory is not None and memory.config.body)
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW
 
     def reset(self) -> None:
-        """A new walk: the memory (if any) starts again."""
+        """A new walk: the memory (if any) starts again (the last action: the residual's
+        zero, or none)."""
         if self.memory is not None:
             self.memory.reset()
+
+    def start_command(self, speed: float) -> GaitCommand:
+        """The gait a walk starts on at ``speed`` m/s (before any state exists): the answer
+        to (v, v, 0); a policy that reads the body state starts on the calibrated library's
+        gait at ``speed`` (its residual's zero; the last action remembered as that)."""
+        if not self.needs_body:
+            return self.act(Observation(speed, speed, 0.0))
+        gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
+        if self.residual is None:
+            low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
+            self.memory.record(2.0 * (np.append(gait.free, gait.kd) - low) / (high - low) - 1.0)
+        return GaitCommand(alpha=gait.alpha, kd=gait.kd)
 
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
@@ -180,11 +206,13 @@ class NetworkPolicy:
         from rabbit_policy.runtime.network import act
 
         if self.memory is None:
-            action = act(self.net, observation)
+            action = act(self.net, observation.as_tuple())
         else:
-            action = act(self.net, self.memory.inputs(observation.as_tuple()))
+            action = act(self.net, self.memory.inputs(observation.as_tuple(), observation.body))
             low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
             self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
+        if self.residual is not None:
+            action = self.residual.compose(action, observation.desired_speed)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
@@ -197,15 +225,22 @@ class LearnedPolicy(NetworkPolicy):
         from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
 
         self.checkpoint = PolicyCheckpoint.load(path)
+        info = self.checkpoint.info
         if decision_period is None:
-            decision_period = int(self.checkpoint.info.get("config", {}).get("decision_period", 0))
+            decision_period = int(info.get("config", {}).get("decision_period", 0))
         name = f"learned/{Path(path).name}" + (f"@{decision_period}ticks" if decision_period else "")
         memory = None
-        if self.checkpoint.info.get("features", "paper") == "memory":
+        if info.get("features", "paper") in ("memory", "body"):
             from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
 
-            memory = SpeedMemory(MemoryConfig(**self.checkpoint.info["memory"]))
-        super().__init__(self.checkpoint.network(), name, decision_period, memory)
+            memory = SpeedMemory(MemoryConfig(**info["memory"]))
+        residual = None
+        if info.get("action", "direct") == "residual":
+            from rabbit_policy.runtime.actions import ActionBounds, ResidualAction
+
+            library = GaitLibrary.load()
+            residual = ResidualAction(library, ActionBounds.from_library(library), tuple(info["residual_scale"]))
+        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual)
 
 
 def controller_name(name: str) -> str:

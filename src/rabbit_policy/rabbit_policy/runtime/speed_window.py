@@ -19,11 +19,14 @@ from math import isfinite
 
 @dataclass(frozen=True)
 class Observation:
-    """Policy input (m/s): commanded speed v_d, mean hip speed and mean of (v_d - v)."""
+    """Policy input (m/s): commanded speed v_d, mean hip speed and mean of (v_d - v); ``body``:
+    the body state at the decision (:mod:`.body`; the closed loop adds it, for a policy that
+    reads it), else None."""
 
     desired_speed: float
     mean_speed: float
     mean_error: float
+    body: tuple[float, ...] | None = None
 
     def as_tuple(self) -> tuple[float, float, float]:
         return (self.desired_speed, self.mean_speed, self.mean_error)

@@ -1,0 +1,96 @@
+"""What a policy's 21 numbers mean: the gait directly, or a bounded residual on the library.
+
+* ``direct`` (the paper): the 20 free Bezier coefficients alpha (rad) and Kd (N m s/rad),
+  inside :class:`ActionBounds` (the classic gaits' range widened by a margin).
+* ``residual`` (the learning issue's ablation row d, after NaviGait 2025): the calibrated
+  library's gait interpolated at the commanded speed (what the classic controller runs) plus
+  a residual inside +-``scale`` (:data:`RESIDUAL_SCALE`: 0.1 rad on each coefficient, 20
+  N m s/rad on Kd), the sum clipped to the direct bounds. A zero residual is the classic
+  controller, so training starts exactly from it.
+
+:class:`ResidualAction` is the one implementation, run by the learning environment and by
+:class:`~rabbit_policy.runtime.policies.NetworkPolicy` (walk.py, the evaluations, policy_node).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rabbit_hzd_controller.alpha import N_FREE
+from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_policy.runtime.gait_library import GaitLibrary
+
+ACTIONS = ("direct", "residual")
+RESIDUAL_SCALE = (0.1,) * N_FREE + (20.0,)
+"""Default residual bounds: +-0.1 rad per coefficient, +-20 N m s/rad on Kd."""
+
+
+@dataclass(frozen=True)
+class ActionBounds:
+    """Lower/upper bounds of the 21-dimensional action (20 coefficients in rad, Kd)."""
+
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def from_library(cls, library: GaitLibrary, margin: float = 0.15,
+                     kd_range: tuple[float, float] = (20.0, 150.0),
+                     config: ControllerConfig | None = None) -> "ActionBounds":
+        config = config or ControllerConfig()
+        free = np.array([g.free for g in library.gaits])
+        low, high = free.min(axis=0) - margin, free.max(axis=0) + margin
+        for i in range(N_FREE):  # output i % 4: hips even, knees odd
+            lo, hi = config.knee_coefficient_range if i % 2 else config.hip_coefficient_range
+            low[i], high[i] = max(low[i], lo), min(high[i], hi)
+        return cls(np.append(low, kd_range[0]), np.append(high, kd_range[1]))
+
+    def to_physical(self, normalised: np.ndarray) -> np.ndarray:
+        """The physical action (rad, N m s/rad) of a normalised one, clipped to [-1, 1] first."""
+        a = np.clip(np.asarray(normalised, dtype=float), -1.0, 1.0)
+        return self.low + (a + 1.0) * 0.5 * (self.high - self.low)
+
+    def to_normalised(self, physical: np.ndarray) -> np.ndarray:
+        """The normalised action in [-1, 1] of a physical one (clipped to the bounds first)."""
+        x = np.clip(np.asarray(physical, dtype=float), self.low, self.high)
+        return 2.0 * (x - self.low) / (self.high - self.low) - 1.0
+
+
+@dataclass(frozen=True)
+class ResidualAction:
+    """The gait = the library's at the commanded speed + a residual (see the module docstring).
+
+    ``library``: the calibrated library (interpolated); ``direct``: the bounds the sum is
+    clipped to; ``scale``: the residual's bounds, +-scale (21: rad, then N m s/rad)."""
+
+    library: GaitLibrary
+    direct: ActionBounds
+    scale: tuple[float, ...] = RESIDUAL_SCALE
+
+    def __post_init__(self) -> None:
+        if len(self.scale) != N_FREE + 1 or not all(s > 0.0 for s in self.scale):
+            raise ValueError(f"a residual scale is {N_FREE + 1} numbers > 0, got {self.scale!r}")
+
+    @property
+    def bounds(self) -> ActionBounds:
+        """The residual's own bounds (what a network outputs, physical units)."""
+        scale = np.asarray(self.scale, dtype=float)
+        return ActionBounds(-scale, scale.copy())
+
+    def compose(self, residual: np.ndarray, desired_speed: float) -> np.ndarray:
+        """The physical action (20 coefficients in rad, Kd) for a physical ``residual`` under
+        the command ``desired_speed`` (m/s)."""
+        gait = self.library.interpolate(desired_speed)
+        base = np.append(gait.free, gait.kd)
+        r = np.clip(np.asarray(residual, dtype=float), -np.asarray(self.scale), np.asarray(self.scale))
+        return np.clip(base + r, self.direct.low, self.direct.high)
+
+
+def policy_bounds(action: str, library: GaitLibrary, margin: float = 0.15) -> ActionBounds:
+    """The bounds of what a policy outputs for ``action`` (:data:`ACTIONS`): the gait's, or
+    the residual's."""
+    if action not in ACTIONS:
+        raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
+    direct = ActionBounds.from_library(library, margin)
+    return ResidualAction(library, direct).bounds if action == "residual" else direct

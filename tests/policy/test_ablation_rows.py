@@ -1,0 +1,115 @@
+"""The learning issue's ablation rows c (the body state inside the step) and d (the action
+as a bounded residual on the calibrated library): what each means, in the environment, in
+the closed loop, through train.py and in the node."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_policy.experiment.loop import ClosedLoop
+from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.warm_start import zero_residual_network
+from rabbit_policy.runtime.actions import ActionBounds, ResidualAction, policy_bounds
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
+from rabbit_policy.runtime.policies import NetworkPolicy, RateLimitedPolicy, make_policy
+
+
+ROOT = Path(__file__).resolve().parents[2]
+LIBRARY = GaitLibrary.load()
+
+
+def zero_residual_policy(features: str = "body") -> NetworkPolicy:
+    bounds = policy_bounds("residual", LIBRARY)
+    net = zero_residual_network(bounds.low, bounds.high, INPUTS[features], seed=3)
+    memory = MemoryConfig.for_features(features, 20)
+    return NetworkPolicy(net, decision_period=20, memory=None if memory is None else SpeedMemory(memory),
+                         residual=ResidualAction(LIBRARY, ActionBounds.from_library(LIBRARY)))
+
+
+@pytest.mark.sim
+def test_the_body_state_needs_a_decision_period_and_unknown_choices_are_refused():
+    with pytest.raises(ValueError, match="needs a decision period"):
+        MemoryConfig.for_features("body", 0)
+    with pytest.raises(ValueError, match="needs a decision period"):
+        EpisodeConfig(features="body", decision_period=0)
+    with pytest.raises(ValueError, match="action must be one of"):
+        EpisodeConfig(action="delta")
+    with pytest.raises(ValueError, match="symmetric"):
+        zero_residual_network(np.zeros(21), np.ones(21), 3, seed=0)
+    with pytest.raises(ValueError, match="needs the body state"):
+        SpeedMemory(MemoryConfig.for_features("body", 20)).inputs(np.array([1.0, 1.0, 0.0]))
+
+
+@pytest.mark.slow
+@pytest.mark.sim
+def test_a_zero_residual_is_the_classic_controller_bit_for_bit_through_a_speed_change_and_a_push():
+    """Row d starts exactly from classic HZD: the zero residual walks the same trajectory,
+    also when the rate-limit wrapper carries the body state through."""
+    scenario = Scenario(schedule=((0.0, 0.8), (1.5, 1.3)), pushes=(Push(2.5, -80.0, 0.1),))
+    final = []
+    for policy in (zero_residual_policy(), RateLimitedPolicy(zero_residual_policy(), 10.0),
+                   make_policy("classic")):
+        loop = ClosedLoop(scenario, policy)
+        loop.run(4.0)
+        assert not loop.failed
+        final.append(loop.data.qpos.copy())
+    assert np.array_equal(final[0], final[2]) and np.array_equal(final[1], final[2])
+
+
+@pytest.mark.sim
+def test_the_body_observation_is_the_loops_state_and_the_residual_action_zero_is_the_library_gait():
+    env = RabbitHZDEnv(max_steps=50, decision_period=20, features="body", action="residual")
+    assert env.observation_space.shape == (30,) and env.action_space.shape == (21,)
+    obs, _ = env.reset(seed=4, options={"desired_speed": 1.2, "next_speed": 1.2})
+    assert env.observation_space.contains(obs)
+    for _ in range(5):
+        obs, _r, terminated, _t, info = env.step(np.zeros(21, dtype=np.float32))
+        assert not terminated and not info["rejected"]
+    loop = env.loop
+    assert np.allclose(obs[25:], loop.body_state(), atol=1e-6)  # pitch, rate, phase, rate, hip velocity
+    assert obs[25] == pytest.approx(loop.data.qpos[2], abs=1e-6) and obs[29] == pytest.approx(loop.data.qvel[0], abs=1e-6)
+    assert 0.0 <= obs[27] <= 1.0 and obs[28] > 0.0  # the phase moves forward
+    gait = LIBRARY.interpolate(1.2)
+    assert np.allclose(loop.controller.alpha, gait.alpha) and loop.controller.kd == pytest.approx(gait.kd)
+    assert np.array_equal(obs[4:25], np.zeros(21, dtype=np.float32))  # the last action: the zero residual
+    env.step(np.ones(21, dtype=np.float32))  # the residual's upper bound: + 0.1 rad on each, + 20 on Kd
+    assert loop.controller.kd == pytest.approx(gait.kd + 20.0)
+    with pytest.raises(ValueError, match="needs a decision period"):
+        RabbitHZDEnv(decision_period=0, features="body")
+
+
+@pytest.mark.slow
+@pytest.mark.ros
+def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_and_policy_node_refuses(tmp_path):
+    """Row d through train.py (its preset, one short generation): the checkpoint says its
+    features, action and residual; the learned policy from it is the zero residual's
+    classic start moved by the trained residual; policy_node refuses it with one line."""
+    out = tmp_path / "d"
+    result = subprocess.run([sys.executable, "scripts/train.py", "--config", "config/train/ablation_d_es_moderate.yaml",
+                             "--out", str(out), "--iterations", "1", "--pairs", "1", "--episodes", "1",
+                             "--max-steps", "30", "--eval-every", "0", "--no-progress"],
+                            capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert result.returncode == 0, result.stderr
+    policy = make_policy("learned", policy_file=out / "policy.pt")
+    info = policy.checkpoint.info
+    assert (info["features"], info["action"], info["output"]) == ("body", "residual", "tanh")
+    assert policy.needs_body and policy.residual is not None and policy.net.body[0].in_features == 30
+    assert policy.decision_period == 20
+    loop = ClosedLoop(Scenario.constant(1.0), policy)
+    loop.run(2.0)
+    assert not loop.failed and len(loop.decisions) >= 90
+    from rabbit_policy.policy_node import PolicyNode
+    from ros_helpers import ros_context
+
+    with ros_context() as (context, _executor):
+        with pytest.raises(NodeStartError, match="reads the body state") as error:
+            PolicyNode(context=context, policy="learned", policy_file=str(out / "policy.pt"))
+    assert "\n" not in str(error.value)
