@@ -29,6 +29,7 @@ from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_policy.evaluation.acceptance import broad_table
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -83,42 +84,6 @@ def train_command(info: dict) -> str:
         if field.metadata.get("cli", True) and field.name != "seed" and value is not None:
             parts += [config_flag(field), str(value)]
     return " ".join(parts + ["--out", "runs/X"])
-
-
-def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
-    """Markdown: checks 1-6 per controller, passed or not, with the headline figure."""
-    def figure(check: str, detail) -> str:
-        if not detail:
-            return "not measured"
-        if check == "1_speed_grid":
-            worst = detail["worst_error"]
-            return f"{detail['passed']}/{detail['total']}, worst {'—' if worst is None else f'{worst:.3f}'} m/s"
-        if check == "2_transitions":
-            return f"{detail['passed']}/{detail['total']}, {detail['fell_or_stalled']} fell/stalled"
-        if check == "3_random_sequences":
-            return f"{detail['passed']}/{detail['total']} without fall or stall"
-        if check == "4_pushes":
-            margins = " · ".join(f"{m['speed']:.1f} {m['direction'][0]} {m['survived_Ns']}"
-                                 + (f"/{m['required_Ns']:g}" if m['required_Ns'] is not None else "")
-                                 for m in detail["margins"])
-            scen = detail.get("scenarios") or []
-            return f"{margins} N s; scenarios survived {sum(s['survived'] for s in scen)}/{len(scen)}"
-        if check == "5_model_errors":
-            judged = [r for r in detail if r["judged"]]
-            ok = sum(r["outcome"] == "walked" and (r["error"] is None or abs(r["error"]) <= 0.05) for r in judged)
-            return f"{ok}/{len(judged)} judged cases"
-        largest = [v for v in detail["largest_moduli"].values() if v is not None]
-        return f"max \\|λ\\| {max(largest):.2f}" if largest else "no cycle found"  # pipes escaped: a table cell
-
-    checks = list(broad[0][1]["checks"])
-    lines = ["| check | " + " | ".join(name for name, _ in broad) + " |", "|---|" + "---|" * len(broad)]
-    for check in checks:
-        cells = []
-        for _, result in broad:
-            c = result["checks"][check]
-            cells.append(f"{'**pass**' if c['passed'] else 'fail'}: {figure(check, c['detail'])}")
-        lines.append(f"| {check.replace('_', ' ', 1)} | " + " | ".join(cells) + " |")
-    return lines
 
 
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,

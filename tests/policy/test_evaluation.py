@@ -245,7 +245,7 @@ def test_a_walk_that_ends_early_fails_every_schedule_segment_it_never_began():
 
 
 # ------------------------------------------------------------------ broad acceptance (checks 1-6)
-def _robust(grid_ok=True, changes_ok=True, sequences_ok=True, drives_error=0.01, delay_outcome="walked",
+def _robust(grid_ok=True, changes_ok=True, sequences_ok=True, drives_error=0.01, delay_outcome="walked", delay_error=0.02,
             margins=((1.0, "forward", 20), (1.0, "backward", 12))) -> dict:
     return {
         "speed_grid": {"passed": 3 if grid_ok else 2, "total": 3, "worst_error": 0.02, "failed_speeds": [],
@@ -259,7 +259,9 @@ def _robust(grid_ok=True, changes_ok=True, sequences_ok=True, drives_error=0.01,
         "model_errors": {"rows": [
             {"case": "drives", "speed": 1.0, "outcome": "walked", "error": drives_error},
             {"case": "friction 0.3", "speed": 1.0, "outcome": "fell", "error": None},  # a probe: not judged
-            {"case": "torque delay 5 ms", "speed": 1.0, "outcome": delay_outcome, "error": None}]},
+            {"case": "torque delay 3 ms", "speed": 1.0, "outcome": delay_outcome,
+             "error": delay_error if delay_outcome == "walked" else None},
+            {"case": "torque delay 5 ms", "speed": 1.0, "outcome": "fell", "error": None}]},  # a probe
     }
 
 
@@ -286,9 +288,21 @@ def test_judge_applies_checks_1_to_6_as_the_issue_states_them():
     assert verdict(_robust(sequences_ok=False))["failed"] == ["3_random_sequences"]
     assert verdict(_robust(drives_error=0.06))["failed"] == ["5_model_errors"]
     assert verdict(_robust(delay_outcome="fell"))["failed"] == ["5_model_errors"]
+    assert verdict(_robust(delay_error=0.06))["failed"] == ["5_model_errors"]  # 3 ms: walks, and on speed
     assert verdict(_robust(), stability={"1.00": {"magnitudes": [1.01]}})["failed"] == ["6_still_hzd"]
     assert verdict(_robust(), stability={"1.00": {"error": "no cycle"}})["failed"] == ["6_still_hzd"]
     assert verdict(_robust(), outputs=24)["failed"] == ["6_still_hzd"]
     # a check without its inputs fails
     assert set(judge({})["failed"]) == {"1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes",
                                         "5_model_errors", "6_still_hzd"}
+
+
+@pytest.mark.parametrize("args, message", [
+    (["src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt", "--names", "a", "b"], "2 names for 1 policies"),
+    (["README.md"], "cannot load policy file README.md"),
+    (["no/such.pt"], "does not exist"),
+])
+def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, message):
+    out = run_script("scripts/compare_policies.py", *args, "--quick")
+    assert out.returncode == 2 and message in out.stderr, out.stderr
+    assert len(out.stderr.strip().splitlines()) <= 2  # argparse: usage + the error; ours: one line

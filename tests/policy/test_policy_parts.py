@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from rabbit_hzd_controller.controller import HZDController, Leg, infer_stance
@@ -34,6 +35,26 @@ def test_speed_window_averages_up_to_a_stamp():
     assert len(window) == 1 and window.observation(3.0).mean_speed == 9.0
     with pytest.raises(ValueError):
         window.add(MS, math.nan, 1.0)
+
+
+def test_speed_window_keeps_the_newest_two_windows_and_its_means_are_correctly_rounded():
+    """The window finds its samples by bisection and sums them with fsum: the mean is the
+    exact sum rounded once, over n (so it does not depend on the order or on what came before),
+    over at most ``size`` samples among the newest ``2 * size``, however many were added."""
+    from fractions import Fraction
+
+    rng = np.random.default_rng(5)
+    window = SpeedWindow(size=50)
+    speeds = rng.uniform(0.0, 2.0, 1000) * 10.0 ** rng.integers(-8, 2, 1000)  # badly scaled: order matters
+    for i, v in enumerate(speeds):
+        window.add(i * MS, float(v), desired_speed=1.0)
+        assert len(window) == min(i + 1, 100)
+    for stamp, since in [(None, None), (999 * MS, 975 * MS), (960 * MS, None), (930 * MS, 920 * MS)]:
+        end = 1000 if stamp is None else stamp // MS + 1
+        start = max(end - 50, 900, (since // MS + 1) if since is not None else 0)
+        exact = sum(Fraction(float(v)) for v in speeds[start:end])
+        assert window.observation(1.0, stamp, since).mean_speed == float(exact) / (end - start)
+    assert window.observation(1.0, 880 * MS).as_tuple() == (1.0, 1.0, 0.0)  # older than the newest 100: dropped
 
 
 def test_clamp_speed():

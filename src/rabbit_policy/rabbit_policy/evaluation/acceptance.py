@@ -134,8 +134,9 @@ class BroadCriteria:
     4. push margins at every speed and direction: >= ``push_factor`` x classic's where
        classic's is below ``push_threshold``, >= classic's elsewhere; and the paper's three
        push scenarios at ``scenario_speed`` with magnitudes beyond classic's margin survived;
-    5. model errors: ``drives``, foot friction down to 0.4 and torso mass +-15 % within
-       ``model_tolerance``; 3 and 5 ms torque delays walk (the rest are probes, reported);
+    5. model errors: ``drives``, foot friction down to 0.4, torso mass +-15 % and a 3 ms
+       torque delay within ``model_tolerance`` (the second learning issue: the delay at 3 ms,
+       judged on its speed; 5 ms and the rest are probes, reported);
     6. still HZD: every Poincaré |lambda| < 1 at the analysed speeds, peak torque within
        ``torque_limit``, the outputs the paper's (20 free Bezier coefficients + Kd)."""
 
@@ -143,8 +144,8 @@ class BroadCriteria:
     push_threshold: float = 15.0
     model_tolerance: float = 0.05
     judged_models: tuple[str, ...] = ("drives", "friction 0.5", "friction 0.4", "torso mass -15 %",
-                                      "torso mass +15 %")
-    delays_that_must_walk: tuple[str, ...] = ("torque delay 3 ms", "torque delay 5 ms")
+                                      "torso mass +15 %", "torque delay 3 ms")
+    delays_that_must_walk: tuple[str, ...] = ("torque delay 3 ms",)
     torque_limit: float = 150.0
 
 
@@ -276,3 +277,39 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
                     stability, peak, policy_outputs(policy), criteria)
     return {"policy": policy.name, **verdict, "robustness": robust, "classic_push_margins": classic_margins,
             "stability": stability, "config": config.to_dict()}
+
+
+def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
+    """Markdown: checks 1-6 per controller, passed or not, with the headline figure."""
+    def figure(check: str, detail) -> str:
+        if not detail:
+            return "not measured"
+        if check == "1_speed_grid":
+            worst = detail["worst_error"]
+            return f"{detail['passed']}/{detail['total']}, worst {'—' if worst is None else f'{worst:.3f}'} m/s"
+        if check == "2_transitions":
+            return f"{detail['passed']}/{detail['total']}, {detail['fell_or_stalled']} fell/stalled"
+        if check == "3_random_sequences":
+            return f"{detail['passed']}/{detail['total']} without fall or stall"
+        if check == "4_pushes":
+            margins = " · ".join(f"{m['speed']:.1f} {m['direction'][0]} {m['survived_Ns']}"
+                                 + (f"/{m['required_Ns']:g}" if m['required_Ns'] is not None else "")
+                                 for m in detail["margins"])
+            scen = detail.get("scenarios") or []
+            return f"{margins} N s; scenarios survived {sum(s['survived'] for s in scen)}/{len(scen)}"
+        if check == "5_model_errors":
+            judged = [r for r in detail if r["judged"]]
+            ok = sum(r["outcome"] == "walked" and (r["error"] is None or abs(r["error"]) <= 0.05) for r in judged)
+            return f"{ok}/{len(judged)} judged cases"
+        largest = [v for v in detail["largest_moduli"].values() if v is not None]
+        return f"max \\|λ\\| {max(largest):.2f}" if largest else "no cycle found"  # pipes escaped: a table cell
+
+    checks = list(broad[0][1]["checks"])
+    lines = ["| check | " + " | ".join(name for name, _ in broad) + " |", "|---|" + "---|" * len(broad)]
+    for check in checks:
+        cells = []
+        for _, result in broad:
+            c = result["checks"][check]
+            cells.append(f"{'**pass**' if c['passed'] else 'fail'}: {figure(check, c['detail'])}")
+        lines.append(f"| {check.replace('_', ' ', 1)} | " + " | ".join(cells) + " |")
+    return lines

@@ -215,7 +215,8 @@ class ClosedLoop:
         if self.observer is not None:
             self.observer(self, torques)
         if self.clock is not None:
-            for observation in self.clock.sample(i + 1, qvel[0], self.desired_speed):  # every N ticks
+            for observation in self.clock.sample(i + 1, qvel[0], self.desired_speed,
+                                                 self.policy is not None):  # every N ticks
                 self._decide(observation, t)
         stop = False
         if not (self._min_height < height < self._max_height and -self._max_pitch < pitch < self._max_pitch):

@@ -52,13 +52,14 @@ class DecisionClock:
     def newest(self) -> int | None:
         return self.window.newest_stamp
 
-    def sample(self, stamp: int, speed: float, desired_speed: float) -> list[Observation]:
+    def sample(self, stamp: int, speed: float, desired_speed: float, observe: bool = True) -> list[Observation]:
         """Add the hip speed (m/s) of the state at ``stamp`` under the command ``desired_speed``
         (m/s); returns the decisions now due (at most one every N ticks; once per step, one
         per switch whose next sample this is). A stamp older than the newest (a reset) starts
         afresh; the newest again (a state re-sent) counts once; the placed state (stamp 0) is
         no sample. Raises ``ValueError`` for a
-        non-finite speed."""
+        non-finite speed. ``observe`` False: keep the samples and the schedule, build no
+        observation (every N ticks; a loop with nobody deciding on it)."""
         newest = self.window.newest_stamp
         if newest is not None and stamp == newest:
             return []  # the same state sent again (a lockstep re-send): one sample
@@ -68,7 +69,7 @@ class DecisionClock:
                 return []
         self.window.add(stamp, speed, desired_speed)
         if self._ticks is not None:
-            if not self._ticks.due(stamp):
+            if not self._ticks.due(stamp) or not observe:
                 return []
             step = self._step_duration(stamp)
             return [self.window.observation(desired_speed, stamp, None if step is None else stamp - step)]
