@@ -264,6 +264,18 @@ def test_broad_episodes_draw_commands_pushes_models_and_delays():
     assert again.loop.scenario == drawn[3]  # seeded
 
 
+def test_push_episodes_push_every_episode_between_the_least_and_the_largest_impulse_both_ways():
+    env = RabbitHZDEnv(max_steps=250, decision_period=20, distribution="pushes")
+    impulses = []
+    for seed in range(16):
+        env.reset(seed=seed)
+        (push,) = env.loop.scenario.pushes
+        assert 1.0 - 1e-9 <= push.time <= 4.0 + 1e-9  # inside the 5 s episode, 1 s from either end
+        impulses.append(push.impulse)
+    assert all(6.0 - 1e-9 <= abs(i) <= 20.0 + 1e-9 for i in impulses)
+    assert min(impulses) < 0.0 < max(impulses)
+
+
 def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_true_speed():
     noisy = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
     clean = RabbitHZDEnv(max_steps=500, decision_period=20,

@@ -66,7 +66,7 @@ The robot starts at phase 0 of the classic gait nearest v_d, on it, at its first
 v_d is drawn uniformly from ``speed_range`` and redrawn once, at a step drawn uniformly from
 the middle half of the episode (the paper's episodes); ``reset(options={"desired_speed": v0,
 "next_speed": v1})`` fixes the two commands. ``distribution`` (:class:`EpisodeDistribution`,
-:data:`DISTRIBUTIONS`: ``paper``, ``broad``, ``robust``) widens that: a new command every 2-5 s
+:data:`DISTRIBUTIONS`: ``paper``, ``broad``, ``moderate``, ``robust``, ``pushes``) widens that: a new command every 2-5 s
 of sim time, a push of random impulse, direction and time, a model drawn from foot
 frictions, torso masses, the ``drives`` variant and torque delays, observation noise.
 
@@ -134,7 +134,8 @@ class EpisodeDistribution:
     command_interval: a new uniform command every U(interval) s of sim time (the first
         change to the ``next_speed`` reset option if given); None: the paper's one change.
     push_probability, max_impulse, push_duration: with this probability the episode has one
-        push on the torso, impulse uniform in [-max, max], at a uniform time from 1 s to 1 s
+        push on the torso, impulse uniform in [-max, max] (with ``min_impulse`` > 0: a
+        magnitude uniform in [min, max], either way), at a uniform time from 1 s to 1 s
         before the episode's nominal end.
     frictions, torso_mass_scales, variants, torque_delays: the model and the delay, each
         drawn uniformly from its tuple (repeat an entry to weight it; None friction: the
@@ -145,6 +146,7 @@ class EpisodeDistribution:
     command_interval: tuple[float, float] | None = None
     push_probability: float = 0.0
     max_impulse: float = 0.0
+    min_impulse: float = 0.0
     push_duration: float = 0.1
     frictions: tuple[float | None, ...] = (None,)
     torso_mass_scales: tuple[float, ...] = (1.0,)
@@ -168,6 +170,10 @@ DISTRIBUTIONS = {
                                   frictions=(None, None, 0.6, 0.5, 0.4), torso_mass_scales=(0.85, 1.0, 1.0, 1.15),
                                   variants=("paper", "paper", "drives"),
                                   torque_delays=(0.0, 0.0, 0.001, 0.002, 0.003, 0.004), observation_noise=0.02),
+    # check 4 as a training signal: one push in every episode, 6-20 N s either way (classic survives
+    # backward pushes of about 8-10 N s, forward about 24), commands every 2-5 s, the nominal model
+    "pushes": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, min_impulse=6.0,
+                                  max_impulse=20.0, observation_noise=0.02),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
 
@@ -183,8 +189,9 @@ class EpisodeConfig:
                                       "walking step, the gait for the next step")
     distribution: str = option("broad", "episodes: paper (one command change), broad (commands every 2-5 s, "
                                         "pushes, model errors, torque delays), moderate (pushes up to 12 N s, delays up "
-                                        "to 2 ms, noisy speeds) or robust (pushes up to 20 N s, delays up to 4 ms, "
-                                        "noisy speeds); DISTRIBUTIONS",
+                                        "to 2 ms, noisy speeds), robust (pushes up to 20 N s, delays up to 4 ms, "
+                                        "noisy speeds) or pushes (a 6-20 N s push either way in every episode); "
+                                        "DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     features: str = option("paper", "the policy's inputs: paper (the three speeds), memory (+ the integral of "
@@ -346,7 +353,10 @@ class RabbitHZDEnv(gym.Env):
                 t, speed = t + float(rng.uniform(*d.command_interval)), float(rng.uniform(lo, hi))
         pushes = ()
         if d.push_probability > 0.0 and rng.random() < d.push_probability and horizon > 2.0:
-            impulse = float(rng.uniform(-d.max_impulse, d.max_impulse))
+            if d.min_impulse > 0.0:
+                impulse = float(rng.choice((-1.0, 1.0)) * rng.uniform(d.min_impulse, d.max_impulse))
+            else:
+                impulse = float(rng.uniform(-d.max_impulse, d.max_impulse))
             pushes = (Push(float(rng.uniform(1.0, horizon - 1.0)), impulse / d.push_duration, d.push_duration),)
         model = ModelOptions(d.variants[int(rng.integers(len(d.variants)))],
                              friction=d.frictions[int(rng.integers(len(d.frictions)))],
