@@ -335,3 +335,16 @@ def test_a_memory_policy_runs_in_the_closed_loop_and_starts_every_walk_afresh():
     second = walk(policy, Scenario.constant(1.0), 2.0)
     assert policy.memory.integral == integral  # the same walk again: reset, not carried over
     assert np.array_equal(first.hip_x, second.hip_x)
+
+
+def test_a_reset_whose_drawn_model_stalls_on_the_first_step_draws_again_and_starts_walking():
+    """Seed 1092 of the robust distribution (500 steps, every 20 ticks) first draws friction
+    0.4 and a lighter torso at 0.716 m/s: the starting gait stalls before its first touchdown
+    (SB3's PPO met it after 43,667 env steps and the reset raised). The reset draws the
+    model again; the episode starts at a touchdown, seeded, on the same command."""
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
+    obs, info = env.reset(seed=1092)
+    assert not env.loop.failed and len(env.loop.touchdowns) == 1
+    assert info["desired_speed"] == pytest.approx(0.716, abs=1e-3)
+    again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
+    assert np.array_equal(again.reset(seed=1092)[0], obs) and again.loop.scenario == env.loop.scenario
