@@ -41,8 +41,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.names is not None and len(args.names) != len(args.policies):
         parser.error(f"--names gives {len(args.names)} names for {len(args.policies)} policies")
 
-    from rabbit_policy.evaluation.acceptance import broad_acceptance, broad_table
-    from rabbit_policy.evaluation.robustness import RobustnessConfig
+    from rabbit_policy.evaluation.acceptance import broad_comparison, broad_table
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     try:
@@ -51,9 +50,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     names = args.names or [str(p) for p in args.policies]
-    classic = make_policy("classic")
-    config = RobustnessConfig.quick() if args.quick else RobustnessConfig()
-    samples = 30 if args.quick else 400
 
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
@@ -61,14 +57,11 @@ def main(argv: list[str] | None = None) -> int:
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        reference = broad_acceptance(classic, classic, config, map_fn=map_fn, stability_samples=samples, log=log)
-        broad = [("classic HZD", reference)]
-        for name, policy in zip(names, policies):
-            broad.append((name, broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples,
-                                                 log=log, classic_margins=reference["classic_push_margins"])))
+        reference, results = broad_comparison(list(zip(names, policies)), args.quick, map_fn, log)
     finally:
         map_fn.close()
         backend.close()
+    broad = [("classic HZD", reference), *results]
     print("\n".join(broad_table(broad)))
     for name, result in broad:
         print(strict_json.dumps({"controller": name, "passed": result["passed"], "failed": result["failed"]}))

@@ -160,8 +160,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.workers < 1:
         parser.error("--workers must be >= 1")
 
-    from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_acceptance
-    from rabbit_policy.evaluation.robustness import RobustnessConfig
+    from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     try:
@@ -171,19 +170,15 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     info = policy.checkpoint.info
-    classic = make_policy("classic")  # its best variant: the calibrated library, every 20 ticks
-    config = RobustnessConfig.quick() if args.quick else RobustnessConfig()
     criteria = Criteria.quick() if args.quick else Criteria()
-    samples = 30 if args.quick else 400
+
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)
 
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        reference = broad_acceptance(classic, classic, config, map_fn=map_fn, stability_samples=samples, log=log)
-        learned = broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples, log=log,
-                                   classic_margins=reference["classic_push_margins"])
+        reference, ((_, learned),) = broad_comparison([("learned", policy)], args.quick, map_fn, log)
         broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
                  ("classic HZD (calibrated library, every 20 ticks)", reference)]
         log("tracking checks")

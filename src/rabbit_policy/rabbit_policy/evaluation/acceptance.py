@@ -279,6 +279,25 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
             "stability": stability, "config": config.to_dict()}
 
 
+def broad_comparison(policies: list[tuple[str, Policy]], quick: bool = False,
+                     map_fn: Callable[[Callable, Iterable], Iterable] = map,
+                     log: Callable[[str], None] = lambda _message: None) -> tuple[dict, list[tuple[str, dict]]]:
+    """Checks 1-6 (:func:`broad_acceptance`) for classic HZD (the calibrated library, every
+    20 ticks: the reference, measured once) and each named policy against it; ``quick``:
+    ``RobustnessConfig.quick()`` and 30 Poincaré samples (a first look). Returns classic's
+    result and ``[(name, result), ...]``."""
+    from rabbit_policy.evaluation.robustness import RobustnessConfig
+    from rabbit_policy.runtime.policies import make_policy
+
+    classic = make_policy("classic")
+    config = RobustnessConfig.quick() if quick else RobustnessConfig()
+    samples = 30 if quick else 400
+    reference = broad_acceptance(classic, classic, config, map_fn=map_fn, stability_samples=samples, log=log)
+    return reference, [(name, broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples,
+                                               log=log, classic_margins=reference["classic_push_margins"]))
+                       for name, policy in policies]
+
+
 def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
     """Markdown: checks 1-6 per controller, passed or not, with the headline figure."""
     def figure(check: str, detail) -> str:

@@ -118,7 +118,6 @@ from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import ACTIONS, ActionBounds, ResidualAction  # noqa: F401  (ActionBounds re-exported)
-from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import GaitCommand
