@@ -300,6 +300,22 @@ def test_train_stops_cleanly_on_ctrl_c_or_sigterm(tmp_path, algo, sig, backend):
     assert not _processes_with(marker)
 
 
+@pytest.mark.slow
+def test_stopping_workers_whose_pipes_broke_exits_cleanly():
+    """``pkill -f train.py`` signals the workers too: PPO's environment workers die at once
+    and closing them raises ConnectionResetError in the stopper thread (seen as a traceback
+    after "interrupted: saving a checkpoint"). The stop finishes quietly, exit 0."""
+    code = """
+from rabbit_policy.learning.training import stop_workers
+class Broken:
+    def close(self, terminate=False):
+        raise ConnectionResetError(104, "Connection reset by peer")
+stop_workers(Broken(), Broken())
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+
+
 def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_configuration():
     """CleanRL-style configuration: train.py's options come from the config dataclasses, so
     its defaults are the shipped run's, and the model card's regenerate command parses back

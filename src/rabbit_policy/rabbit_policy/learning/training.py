@@ -267,8 +267,11 @@ def stop_workers(trainer, backend) -> None:
     signals the workers too), so it gets a few seconds in a thread and the kill does not
     depend on it."""
     def terminate() -> None:
-        trainer.close(terminate=True)
-        backend.close(terminate=True)  # a private Ray instance is shut down with it
+        for close in (trainer.close, backend.close):  # a private Ray instance is shut down with the backend
+            try:
+                close(terminate=True)
+            except (OSError, EOFError):  # workers signalled too (pkill -f): their pipes are already closed
+                pass
 
     stopper = threading.Thread(target=terminate, daemon=True)
     stopper.start()
