@@ -113,3 +113,15 @@ def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_and_policy_
         with pytest.raises(NodeStartError, match="reads the body state") as error:
             PolicyNode(context=context, policy="learned", policy_file=str(out / "policy.pt"))
     assert "\n" not in str(error.value)
+
+
+@pytest.mark.slow
+@pytest.mark.sim
+def test_the_poincare_analysis_runs_a_body_state_policy_and_a_zero_residual_is_classics_map():
+    """Check 6 on rows c/d: the return map gives the policy the body state at its decisions
+    (it raised before), and the zero residual's map is classic HZD's."""
+    from rabbit_policy.evaluation.stability import analyse_stability
+
+    zero = analyse_stability(zero_residual_policy(), 1.0, True, samples=20).to_dict()
+    classic = analyse_stability(make_policy("classic"), 1.0, True, samples=20).to_dict()
+    assert zero["magnitudes"] == classic["magnitudes"] and max(zero["magnitudes"]) < 1.0

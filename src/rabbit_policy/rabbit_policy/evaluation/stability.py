@@ -129,8 +129,12 @@ class WalkReturnMap:
                                  self._jac @ self.data.qvel, self.step_count)
 
     def _act(self, mean_speed: float):
+        """The policy's gait for a step whose mean speed was ``mean_speed`` (m/s); a policy that
+        reads the body state sees the current one (once per step here: an approximation for a
+        policy deciding every N ticks, as for memory)."""
         v_d = self.desired_speed
-        return self.policy.act(Observation(v_d, mean_speed, v_d - mean_speed))
+        body = self.loop.body_state() if getattr(self.policy, "needs_body", False) else None
+        return self.policy.act(Observation(v_d, mean_speed, v_d - mean_speed, body))
 
     def _apply(self, x: np.ndarray) -> None:
         """Restore the captured state and controller, then set the coordinates ``x``."""
