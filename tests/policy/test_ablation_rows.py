@@ -125,3 +125,6 @@ def test_the_poincare_analysis_runs_a_body_state_policy_and_a_zero_residual_is_c
     zero = analyse_stability(zero_residual_policy(), 1.0, True, samples=20).to_dict()
     classic = analyse_stability(make_policy("classic"), 1.0, True, samples=20).to_dict()
     assert zero["magnitudes"] == classic["magnitudes"] and max(zero["magnitudes"]) < 1.0
+    from rabbit_policy.evaluation.acceptance import policy_outputs
+
+    assert policy_outputs(zero_residual_policy()) == 21  # check 6's count: it raised for a body policy

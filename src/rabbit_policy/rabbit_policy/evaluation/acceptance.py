@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from typing import Callable, Iterable
 
 
-from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.loop import first_command, walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import Policy
 from rabbit_sim.model import ModelOptions
@@ -239,9 +239,8 @@ def policy_outputs(policy: Policy) -> int:
     """How many numbers the policy decides: free Bezier coefficients (the impact equalities
     hold) + Kd; raises ``ValueError`` if its alpha breaks the equalities."""
     from rabbit_hzd_controller.alpha import reduce_alpha
-    from rabbit_policy.runtime.speed_window import Observation
 
-    command = policy.act(Observation(1.0, 1.0, 0.0))
+    command = first_command(policy, 1.0)  # what it starts on at 1 m/s (a body-state policy: no state yet)
     return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
 
 
