@@ -8,9 +8,10 @@ classic reference, measured once: the ablation's table.
 For classic HZD (the calibrated library, every 20 ticks) and each policy file, runs
 ``rabbit_policy.evaluation.acceptance.broad_acceptance`` (every speed, every ordered change
 at every phase, random command sequences, push margins against classic's and the paper's
-scenarios beyond them, model errors and torque delays, Poincaré), prints the markdown table
-(``broad_table``) and one JSON line per controller (passed, failed checks), and with ``--out``
-writes every figure. ROS-free. Exit status 0 (whatever the verdicts), 2 for bad arguments or
+scenarios beyond them, model errors and torque delays, Poincaré), prints one JSON line per
+controller as it finishes (passed, failed checks) and then the markdown table (``broad_table``);
+``--out`` gets every figure, rewritten after each controller (an interrupted run keeps what it
+measured). ROS-free. Exit status 0 (whatever the verdicts), 2 for bad arguments or
 a file that is not a policy.
 """
 
@@ -56,19 +57,20 @@ def main(argv: list[str] | None = None) -> int:
 
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
+    broad: list[tuple[str, dict]] = []
     try:
-        reference, results = broad_comparison(list(zip(names, policies)), args.quick, map_fn, log)
+        for name, result in broad_comparison(list(zip(names, policies)), args.quick, map_fn, log):
+            broad.append(("classic HZD" if not broad else name, result))
+            print(strict_json.dumps({"controller": broad[-1][0], "passed": result["passed"],
+                                     "failed": result["failed"]}), flush=True)
+            if args.out is not None:  # after each controller: an interrupted run keeps what it measured
+                args.out.parent.mkdir(parents=True, exist_ok=True)
+                args.out.write_text(strict_json.dumps({"quick": args.quick, "policies": [str(p) for p in args.policies],
+                                                       "results": dict(broad)}, indent=1) + "\n")
     finally:
         map_fn.close()
         backend.close()
-    broad = [("classic HZD", reference), *results]
     print("\n".join(broad_table(broad)))
-    for name, result in broad:
-        print(strict_json.dumps({"controller": name, "passed": result["passed"], "failed": result["failed"]}))
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(strict_json.dumps({"quick": args.quick, "policies": [str(p) for p in args.policies],
-                                               "results": {name: result for name, result in broad}}, indent=1) + "\n")
     return 0
 
 

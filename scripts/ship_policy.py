@@ -178,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        reference, ((_, learned),) = broad_comparison([("learned", policy)], args.quick, map_fn, log)
+        (_, reference), (_, learned) = broad_comparison([("learned", policy)], args.quick, map_fn, log)
         broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
                  ("classic HZD (calibrated library, every 20 ticks)", reference)]
         log("tracking checks")

@@ -13,7 +13,7 @@ Every check returns plain dicts (JSON-ready) with the measured figures and a ``p
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 
 from rabbit_policy.experiment.loop import first_command, walk
@@ -280,11 +280,11 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
 
 def broad_comparison(policies: list[tuple[str, Policy]], quick: bool = False,
                      map_fn: Callable[[Callable, Iterable], Iterable] = map,
-                     log: Callable[[str], None] = lambda _message: None) -> tuple[dict, list[tuple[str, dict]]]:
+                     log: Callable[[str], None] = lambda _message: None) -> Iterator[tuple[str, dict]]:
     """Checks 1-6 (:func:`broad_acceptance`) for classic HZD (the calibrated library, every
-    20 ticks: the reference, measured once) and each named policy against it; ``quick``:
-    ``RobustnessConfig.quick()`` and 30 Poincaré samples (a first look). Returns classic's
-    result and ``[(name, result), ...]``."""
+    20 ticks: the reference, measured once) and each named policy against it, yielded as they
+    finish: ``("classic", result)`` first, then ``(name, result)`` per policy. ``quick``:
+    ``RobustnessConfig.quick()`` and 30 Poincaré samples (a first look)."""
     from rabbit_policy.evaluation.robustness import RobustnessConfig
     from rabbit_policy.runtime.policies import make_policy
 
@@ -292,9 +292,10 @@ def broad_comparison(policies: list[tuple[str, Policy]], quick: bool = False,
     config = RobustnessConfig.quick() if quick else RobustnessConfig()
     samples = 30 if quick else 400
     reference = broad_acceptance(classic, classic, config, map_fn=map_fn, stability_samples=samples, log=log)
-    return reference, [(name, broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples,
-                                               log=log, classic_margins=reference["classic_push_margins"]))
-                       for name, policy in policies]
+    yield "classic", reference
+    for name, policy in policies:
+        yield name, broad_acceptance(policy, classic, config, map_fn=map_fn, stability_samples=samples, log=log,
+                                     classic_margins=reference["classic_push_margins"])
 
 
 def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
