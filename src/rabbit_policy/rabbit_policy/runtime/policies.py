@@ -196,9 +196,13 @@ class NetworkPolicy:
             return self.act(Observation(speed, speed, 0.0))
         gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
         if self.residual is None:
-            low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
-            self.memory.record(2.0 * (np.append(gait.free, gait.kd) - low) / (high - low) - 1.0)
+            self._remember(np.append(gait.free, gait.kd))
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
+
+    def _remember(self, action: np.ndarray) -> None:
+        """Record the network-side action (physical units) in the memory, normalised to its bounds."""
+        low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
+        self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
 
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
@@ -209,8 +213,7 @@ class NetworkPolicy:
             action = act(self.net, observation.as_tuple())
         else:
             action = act(self.net, self.memory.inputs(observation.as_tuple(), observation.body))
-            low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
-            self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
+            self._remember(action)
         if self.residual is not None:
             action = self.residual.compose(action, observation.desired_speed)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
