@@ -8,6 +8,9 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+# pytest-xdist workers for make test / test-fast (each its own ROS_DOMAIN_ID, tests/conftest.py);
+# TEST_WORKERS=0 runs the suite in one process
+TEST_WORKERS ?= 2
 PACKAGES := src/rabbit_msgs_py src/rabbit_sim src/rabbit_hzd_controller src/rabbit_policy
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
@@ -27,10 +30,10 @@ demo: $(STAMP)
 	$(PY) scripts/run_stack.py --controller learned --speed-schedule "0:0.8,6:1.4,13:0.9,18:1.2" --push "20:-60:0.1" --duration 26
 
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -m "not slow" -q
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup -m "not slow" -q
 
 bench: $(STAMP)
 	$(PY) scripts/bench_sim.py

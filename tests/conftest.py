@@ -27,6 +27,9 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
+if os.environ.get("PYTEST_XDIST_WORKER", "gw0") != "gw0":  # pytest -n N: a domain per worker
+    worker = int(os.environ["PYTEST_XDIST_WORKER"][2:])
+    os.environ["ROS_DOMAIN_ID"] = str((int(os.environ["ROS_DOMAIN_ID"]) - 1 + worker) % 101 + 1)
 
 KINDS = ("unit", "sim", "ros")
 

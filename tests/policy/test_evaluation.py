@@ -299,7 +299,7 @@ def test_judge_applies_checks_1_to_6_as_the_issue_states_them():
 
 @pytest.mark.parametrize("args, message", [
     (["src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt", "--names", "a", "b"], "2 names for 1 policies"),
-    (["README.md"], "cannot load policy file README.md"),
+    pytest.param(["README.md"], "cannot load policy file README.md", marks=pytest.mark.slow),  # imports torch
     (["no/such.pt"], "does not exist"),
 ])
 def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, message):

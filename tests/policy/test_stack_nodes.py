@@ -573,6 +573,7 @@ def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
         assert spin_until(executor, lambda: sim.time >= start + 0.3) and not sim.fallen
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("controller, period", [("classic", -1), ("learned", -1), ("learned", 0)])
 def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller, period):
     """One bookkeeping: the lockstep stack's report (run_stack.py --json) and the fast

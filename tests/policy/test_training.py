@@ -367,11 +367,24 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
                                            ("distribution: wide\n", "is not one of"),
                                            ("- a list\n", "a mapping"),
                                            ("stop_when_passed: maybe\n", "must be true or false")])
-def test_a_bad_preset_is_one_line(tmp_path, text, message):
+def test_a_bad_preset_is_one_line(tmp_path, capsys, text, message):
+    """train.py's parser in this process (the script's own code path: parse_config); that the
+    process exits 2 with that one line is checked once, through the script, below."""
     bad = tmp_path / "bad.yaml"
     bad.write_text("algo: es\n" + text if not text.startswith("-") else text)
+    with pytest.raises(SystemExit) as stopped:
+        _train_module().parse_config(["--config", str(bad), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err
+    assert stopped.value.code == 2 and message in err and len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.slow
+def test_a_bad_preset_stops_the_script_with_one_line_and_exit_2(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("algo: es\nsigmaa: 0.1\n")
     out = run_script("scripts/train.py", "--config", str(bad), "--out", str(tmp_path / "run"))
-    assert out.returncode == 2 and message in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert "'sigmaa' is not a train.py option" in out.stderr and not (tmp_path / "run").exists()
 
 
 @pytest.mark.slow
