@@ -2,7 +2,8 @@
 
 Every ROS process in the tests discovers on localhost only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set) and uses a domain ID of its own, so
-concurrent runs do not cross-talk.
+concurrent runs do not cross-talk; under pytest-xdist (``make test``: two workers) each worker
+takes the next domain ID after the session's random one.
 
 Layout: ``tests/{msgs,hzd_controller,sim,policy}/`` hold the tests of the ``rabbit_*`` package of
 that name (without the prefix: ``tests/rabbit_sim`` on the path would shadow the package); ``tests/`` itself
