@@ -3,9 +3,11 @@
 classic reference, measured once: the ablation's table.
 
     scripts/compare_policies.py docs/learning/a_es_moderate/best.pt docs/learning/b_es_moderate/best.pt \\
-        --names a b [--quick] [--workers 2] [--out runs/ablation_checks.json]
+        --names a b [--classic-integral 0.3] [--quick] [--workers 2] [--out runs/ablation_checks.json]
 
-For classic HZD (the calibrated library, every 20 ticks) and each policy file, runs
+For classic HZD (the calibrated library, every 20 ticks), each policy file and each
+``--classic-integral`` gain (classic HZD with Westervelt's event-based speed integral, a
+second baseline: what an integral alone buys), runs
 ``rabbit_policy.evaluation.acceptance.broad_acceptance`` (every speed, every ordered change
 at every phase, random command sequences, push margins against classic's and the paper's
 scenarios beyond them, model errors and torque delays, Poincaré), prints one JSON line per
@@ -28,7 +30,9 @@ from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_back
 
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("policies", nargs="+", type=Path, help="learned policy checkpoints (.pt)")
+    parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
+    parser.add_argument("--classic-integral", nargs="+", type=float, default=[], metavar="KI",
+                        help="also classic HZD with the event-based speed integral of this gain (1/s), one column each")
     parser.add_argument("--names", nargs="+", help="a column name per policy (default: the file paths)")
     parser.add_argument("--quick", action="store_true", help="the fast subset (RobustnessConfig.quick(), 30 "
                                                              "Poincaré samples): a first look only")
@@ -41,16 +45,20 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     if args.names is not None and len(args.names) != len(args.policies):
         parser.error(f"--names gives {len(args.names)} names for {len(args.policies)} policies")
+    if not args.policies and not args.classic_integral:
+        parser.error("give policy files, --classic-integral gains, or both")
 
     from rabbit_policy.evaluation.acceptance import broad_comparison, broad_table
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     try:
         policies = [make_policy("learned", policy_file=p) for p in args.policies]
-    except PolicyUnavailable as exc:
+        policies += [make_policy("classic", speed_integral=ki) for ki in args.classic_integral]
+    except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    names = args.names or [str(p) for p in args.policies]
+    names = (args.names or [str(p) for p in args.policies]) + [f"classic + integral {ki:g}"
+                                                              for ki in args.classic_integral]
 
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)

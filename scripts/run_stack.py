@@ -65,6 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--decision-period", type=int, default=-1, metavar="TICKS",
                         help="-1: the policy's own (classic: every 20 ticks; learned: as trained; the default), 0: "
                              "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
+    parser.add_argument("--speed-integral", type=float, default=0.0, metavar="KI",
+                        help="classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command plus a bounded integral of the speed error; 0 = off, the default: the paper's baseline)")
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--compression", "--record-compression", choices=("none", "zstd"), default="none",
@@ -116,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
             model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir,
             policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
-            decision_period=args.decision_period,
+            decision_period=args.decision_period, speed_integral=args.speed_integral,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
@@ -140,7 +142,7 @@ def main(argv: list[str] | None = None) -> int:
             if not is_bag_directory(Path(args.record)):
                 raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
         make_policy(args.controller, args.gait_dir or None, args.library_mode,
-                    args.policy_file or None)
+                    args.policy_file or None, speed_integral=args.speed_integral)
     except ValueError as exc:
         parser.error(str(exc))
     except PolicyUnavailable as exc:

@@ -76,6 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
                         help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
                              "once (default: the policy's own; classic 20, learned as trained)")
+    parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI",
+                        help="classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command plus a bounded integral of the speed error; 0 = off, the default: the paper's baseline)")
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true",
@@ -120,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     controller = controller_name(args.controller)
     try:
         policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step,
-                             args.decision_period)
+                             args.decision_period, args.speed_integral)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

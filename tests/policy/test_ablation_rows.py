@@ -26,12 +26,13 @@ ROOT = Path(__file__).resolve().parents[2]
 LIBRARY = GaitLibrary.load()
 
 
-def zero_residual_policy(features: str = "body") -> NetworkPolicy:
+def zero_residual_policy(features: str = "body", integral_gain: float = 0.0) -> NetworkPolicy:
     bounds = policy_bounds("residual", LIBRARY)
     net = zero_residual_network(bounds.low, bounds.high, INPUTS[features], seed=3)
-    memory = MemoryConfig.for_features(features, 20)
+    memory = MemoryConfig.for_features(features, 20, integral_gain)
     return NetworkPolicy(net, decision_period=20, memory=None if memory is None else SpeedMemory(memory),
-                         residual=ResidualAction(LIBRARY, ActionBounds.from_library(LIBRARY)))
+                         residual=ResidualAction(LIBRARY, ActionBounds.from_library(LIBRARY),
+                                                 integral_gain=integral_gain))
 
 
 @pytest.mark.sim
@@ -46,6 +47,12 @@ def test_the_body_state_needs_a_decision_period_and_unknown_choices_are_refused(
         zero_residual_network(np.zeros(21), np.ones(21), 3, seed=0)
     with pytest.raises(ValueError, match="needs the body state"):
         SpeedMemory(MemoryConfig.for_features("body", 20)).inputs(np.array([1.0, 1.0, 0.0]))
+    with pytest.raises(ValueError, match="needs action residual"):
+        EpisodeConfig(features="memory", integral_gain=0.3)
+    with pytest.raises(ValueError, match="needs features memory or body"):
+        EpisodeConfig(action="residual", integral_gain=0.3)
+    with pytest.raises(ValueError, match="integral_gain must be"):
+        RabbitHZDEnv(action="residual", features="memory", decision_period=20, integral_gain=-1.0)
 
 
 @pytest.mark.slow
@@ -62,6 +69,28 @@ def test_a_zero_residual_is_the_classic_controller_bit_for_bit_through_a_speed_c
         assert not loop.failed
         final.append(loop.data.qpos.copy())
     assert np.array_equal(final[0], final[2]) and np.array_equal(final[1], final[2])
+
+
+@pytest.mark.sim
+def test_a_zero_residual_on_the_speed_integral_is_classic_with_that_integral_bit_for_bit():
+    """With an integral gain the residual's base gait is offset by the memory's integral, the
+    same arithmetic as the classic controller's speed integral: the zero residual walks the
+    very same trajectory as classic + integral (a model that walks too slow, so the integral
+    works), not classic's."""
+    from rabbit_sim.model import ModelOptions
+
+    scenario = Scenario(schedule=((0.0, 1.0),), model=ModelOptions("drives"))
+    final = []
+    for policy in (zero_residual_policy("memory", 0.3), make_policy("classic", speed_integral=0.3),
+                   make_policy("classic")):
+        loop = ClosedLoop(scenario, policy)
+        loop.run(3.0)
+        assert not loop.failed
+        final.append(loop.data.qpos.copy())
+    assert np.array_equal(final[0], final[1]) and not np.array_equal(final[1], final[2])
+    env = RabbitHZDEnv(max_steps=20, decision_period=20, features="memory", action="residual", integral_gain=0.3)
+    assert env.memory.config.limit == pytest.approx(0.2 / 0.3)  # the offset's bound: 0.2 m/s
+    assert env.observation_space.high[3] == pytest.approx(0.2 / 0.3, rel=1e-6)
 
 
 @pytest.mark.sim

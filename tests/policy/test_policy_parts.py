@@ -126,6 +126,45 @@ def test_policies():
         make_policy("classic", mode="best")
 
 
+def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_afresh():
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, decision_dt, integral_limit
+    from rabbit_policy.runtime.speed_window import Observation
+
+    integral = SpeedIntegral(IntegralConfig(limit=0.4, dt=0.02))
+    assert integral.update(0.1) == pytest.approx(0.002)  # 0.1 m/s x 0.02 s
+    for _ in range(10_000):
+        integral.update(0.1)
+    assert integral.value == 0.4  # held at the bound (anti-windup) ...
+    assert integral.update(-0.1) == pytest.approx(0.398)  # ... so it unwinds at the first opposite error
+    integral.reset()
+    assert integral.value == 0.0
+    assert decision_dt(20) == 0.02 and decision_dt(0) == 0.6
+    assert integral_limit(0.5) == pytest.approx(0.4)  # 0.5 1/s x 0.4 m = the 0.2 m/s offset bound
+    for bad in ({"limit": -1.0}, {"dt": math.nan}):
+        with pytest.raises(ValueError, match="speed integral"):
+            IntegralConfig(**({"limit": 0.2, "dt": 0.02} | bad))
+    with pytest.raises(ValueError, match="speed integral"):
+        integral_limit(0.0)
+
+    library = GaitLibrary.load()
+    policy = make_policy("classic", speed_integral=0.5).policy  # every 20 ticks: dt 0.02 s
+    assert policy.name == "classic/interpolate+integral0.5"
+    first = policy.act(Observation(1.0, 0.9, 0.1))  # the gait for 1.001 m/s
+    assert first.alpha == library.interpolate(1.0 + 0.5 * 0.1 * 0.02).alpha
+    for _ in range(10_000):
+        policy.act(Observation(1.0, 0.9, 0.1))
+    assert policy.act(Observation(1.0, 0.9, 0.1)).alpha == library.interpolate(1.2).alpha  # held at +0.2 m/s
+    policy.reset()
+    assert policy.act(Observation(1.0, 1.0, 0.0)).alpha == library.interpolate(1.0).alpha
+    assert make_policy("classic", decision_period=0, speed_integral=0.5).integral.config.dt == 0.6
+    assert make_policy("classic").policy.integral is None  # off by default: the paper's baseline
+    for bad in (-0.1, math.inf, math.nan):
+        with pytest.raises(ValueError, match="speed integral gain"):
+            make_policy("classic", speed_integral=bad)
+    with pytest.raises(ValueError, match="classic controller's"):
+        make_policy("learned", speed_integral=0.5)
+
+
 def test_learned_policy_checkpoint_round_trip(tmp_path):
     import torch
 

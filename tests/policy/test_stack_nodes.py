@@ -137,6 +137,21 @@ def test_bad_speed_commands_are_clamped_or_rejected():
         assert spin_until(executor, lambda: policy.desired_speed == 0.7)
 
 
+def test_the_classic_speed_integral_is_a_policy_node_parameter_and_refused_for_the_learned_one():
+    from rabbit_msgs_py.runtime import NodeStartError
+
+    with ros_context() as (context, _executor):
+        node = PolicyNode(context=context, speed_integral=0.3)
+        assert node.policy.name == "classic/interpolate+integral0.3@20ticks"
+        assert node.get_parameter("speed_integral").value == 0.3
+        node.destroy_node()
+        with pytest.raises(NodeStartError, match="classic controller's") as error:
+            PolicyNode(context=context, policy="learned", speed_integral=0.3)
+        assert "\n" not in str(error.value)
+        with pytest.raises(NodeStartError, match="speed_integral"):
+            PolicyNode(context=context, speed_integral=math.nan)
+
+
 def test_cmd_vel_commands_the_speed_as_teleop_tools_send_it(capfd):
     """geometry_msgs/Twist on /cmd_vel (teleop_twist_keyboard, navigation): linear.x is the
     commanded speed, through the same clamping and rejection as /cmd_speed; a turn or any
@@ -724,7 +739,8 @@ def test_policy_node_starts_a_memory_policy_afresh_when_the_robot_is_placed_agai
         assert memory is not None
         pub.publish(UInt32(data=1))  # the start: nothing to forget
         assert spin_until(executor, lambda: policy._placements == 1)
-        memory.integral = 0.1
+        memory.inputs(np.array([1.0, 0.9, 0.1]))  # some error integrated
+        assert memory.integral != 0.0
         pub.publish(UInt32(data=2))  # a reset
         assert spin_until(executor, lambda: policy._placements == 2)
         assert memory.integral == 0.0

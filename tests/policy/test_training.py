@@ -328,7 +328,7 @@ def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_co
     spec.loader.exec_module(train)
     info = PolicyCheckpoint.load(packaged_policy_file()).info
     defaults = train.parse_config(["--algo", info["algorithm"], "--out", "runs/X"])
-    shipped = {"features": "paper", "action": "direct", **info["config"]}  # trained before these options
+    shipped = {"features": "paper", "action": "direct", "integral_gain": 0.0, **info["config"]}  # trained before these options
     assert defaults.trainer.to_dict() == shipped
     assert (defaults.workers, defaults.warm_start, defaults.eval_every) == (info["workers"], info["warm_start"],
                                                                            info["eval_every"])
@@ -353,7 +353,8 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = {"features": "paper", "action": "direct", **make_policy("learned").checkpoint.info["config"]}  # what trained it
+    trained = {"features": "paper", "action": "direct", "integral_gain": 0.0,
+               **make_policy("learned").checkpoint.info["config"]}  # what trained it
     assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])

@@ -124,6 +124,8 @@ def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:
 @pytest.mark.slow
 def test_walk_script_json_has_the_same_keys_with_and_without_a_schedule():
     constant = json.loads(_walk_script("--controller", "classic", "--speed", "0.9", "--duration", "5", "--json").stdout)
+    integral = json.loads(_walk_script("--speed", "0.9", "--duration", "1", "--speed-integral", "0.3", "--json").stdout)
+    assert integral["policy"].startswith("classic/interpolate+integral0.3") and set(integral) == WALK_KEYS
     scheduled = json.loads(_walk_script("--controller", "hzd", "--speed-schedule", "0:0.9,2:1.0", "--duration", "5",
                                         "--json").stdout)
     assert set(constant) == set(scheduled) == WALK_KEYS
@@ -146,8 +148,23 @@ def test_walk_script_reports_a_fall_as_json_null_not_nan():
     assert summary["mean_speed"] is None
 
 
+def test_the_speed_integral_removes_the_steady_error_of_the_drives_model():
+    """Classic HZD walks the ``drives`` model (rotor inertia, joint friction) about 0.19 m/s
+    too slow at 1.0 m/s; Westervelt's event-based integral on the command removes it."""
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_sim.model import ModelOptions
+
+    scenario = Scenario.constant(1.0, model=ModelOptions("drives"))
+    plain = walk(make_policy("classic"), scenario, 20.0)
+    integral = walk(make_policy("classic", speed_integral=0.3), scenario, 20.0)
+    assert not plain.failed and plain.mean_speed(10.0) < 0.9
+    assert not integral.failed and integral.mean_speed(10.0) == pytest.approx(1.0, abs=0.03)
+
+
 @pytest.mark.parametrize("args, word", [
     (("--duration", "-1"), "duration"),
+    (("--speed-integral", "-1"), "speed-integral"),
     (("--speed", "nan"), "speed"),
     (("--schedule", "1:0.8"), "t = 0"),
     (("--push", "2:50"), "push"),

@@ -21,6 +21,9 @@ queues it). Parameters:
 * ``policy_file``: learned policy checkpoint ('' = the packaged one).
 * ``initial_speed``: v_d before the first ``/cmd_speed`` and the hip speed of the initial
   state (m/s).
+* ``speed_integral``: classic only, Westervelt's event-based speed integral, gain in 1/s
+  (0 = off, the default): the gait for v_d plus the integral of the mean speed error, held
+  within +-0.2 m/s (:mod:`rabbit_policy.runtime.speed_integral`).
 * ``min_speed``, ``max_speed``: commands outside are clamped with a warning (0.7, 1.5).
 * ``window``: longest averaging window (ticks, 1000).
 * ``max_command_step``: command rate limit, m/s per step (0.0 = none, the default): the
@@ -80,6 +83,8 @@ POLICY_PARAMS = {
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
                                 "within [min_speed, max_speed]", range=(0.0, 3.0)),
+    "speed_integral": Param(0.0, "classic: event-based speed integral gain, 1/s (0 = off): the gait for the command "
+                                 "plus the bounded integral of the speed error", range=(0.0, 100.0)),
     "min_speed": Param(0.7, "lowest command, m/s; /cmd_speed below is clamped", dynamic=True, range=(0.0, 3.0)),
     "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True, range=(0.0, 3.0)),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
@@ -118,7 +123,8 @@ class PolicyNode(Node):
             self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
                                       values["policy_file"] or None,
                                       finite("max_command_step", values["max_command_step"], 0.0),
-                                      None if values["decision_period"] == -1 else max(values["decision_period"], 0))
+                                      None if values["decision_period"] == -1 else max(values["decision_period"], 0),
+                                      finite("speed_integral", values["speed_integral"], 0.0))
             if getattr(self.policy, "needs_body", False):
                 raise ValueError("this policy reads the body state inside the step (features body), which "
                                  "policy_node does not build from the topics yet; run it in the ROS-free loops "

@@ -38,6 +38,7 @@ class StackConfig:
     gait_dir: str = ""
     policy_file: str = ""
     decision_period: int = -1
+    speed_integral: float = 0.0  # 1/s, classic only: Westervelt's event-based speed integral (0 = off)
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
     stats_file: str = ""
@@ -75,6 +76,7 @@ class StackConfig:
                 "policy_file": self.policy_file,
                 "initial_speed": self.schedule[0][1],
                 "decision_period": self.decision_period,
+                "speed_integral": self.speed_integral,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime"},
@@ -137,6 +139,7 @@ def policy_name(config: StackConfig) -> str | None:
 
     try:
         return make_policy(config.controller, config.gait_dir or None, config.library_mode, config.policy_file or None,
-                           decision_period=None if config.decision_period == -1 else config.decision_period).name
+                           decision_period=None if config.decision_period == -1 else config.decision_period,
+                           speed_integral=config.speed_integral).name
     except (PolicyUnavailable, ValueError, OSError):
         return None

@@ -48,7 +48,10 @@ its rate (1/s), hip velocity (m/s); noise-free): a 30-vector.
 With ``action="residual"`` (row d, :mod:`rabbit_policy.runtime.actions`) the action is a
 residual on the calibrated library's gait at the commanded speed: -1..1 maps onto
 +-0.1 rad per coefficient and +-20 N m s/rad on Kd, and the action 0 is the classic
-controller's gait; ``env.unwrapped.bounds`` then holds the residual's bounds.
+controller's gait; ``env.unwrapped.bounds`` then holds the residual's bounds. With
+``integral_gain`` > 0 (1/s; memory or body features) the library's gait is the one for
+v_d + gain x the memory's integral (index 3, then bounded so that the offset stays within
++-0.2 m/s): the action 0 is then the classic controller with Westervelt's speed integral.
 
 ## Rewards
 
@@ -97,6 +100,7 @@ max_episode_steps=500)``.
 | ``distribution`` | ``"paper"`` | the episodes (see above) |
 | ``features`` | ``"paper"`` | the observation: the paper's three, ``"memory"`` or ``"body"`` (see Observation space) |
 | ``action`` | ``"direct"`` | the action: the gait, or ``"residual"`` on the library (see Observation space) |
+| ``integral_gain`` | 0.0 | residual only: the base gait at v_d + gain x the speed integral (1/s; see Observation space) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
 ## Version history
@@ -107,6 +111,7 @@ max_episode_steps=500)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -184,6 +189,15 @@ DISTRIBUTIONS = {
 """Named episode distributions (``scripts/train.py --episodes``)."""
 
 
+def check_integral_gain(gain: float, action: str) -> None:
+    """Raise ``ValueError`` unless ``gain`` (1/s) is finite and >= 0, and 0 unless the action is
+    a residual (the integral offsets the residual's base gait)."""
+    if not (math.isfinite(gain) and gain >= 0.0):
+        raise ValueError(f"integral_gain must be a finite number >= 0 (1/s), got {gain!r}")
+    if gain and action != "residual":
+        raise ValueError("integral_gain offsets a residual's base gait: it needs action residual")
+
+
 @dataclass(frozen=True)
 class EpisodeConfig:
     """What one training episode is, shared by ES and PPO (each field one ``scripts/train.py``
@@ -207,6 +221,9 @@ class EpisodeConfig:
     action: str = option("direct", "the policy's output: direct (the gait) or residual (a bounded residual on the "
                                    "calibrated library at the command; zero = classic HZD; "
                                    "rabbit_policy.runtime.actions)", choices=ACTIONS)
+    integral_gain: float = option(0.0, "action residual with memory or body features: the base gait is the "
+                                       "library's at v_d + this (1/s) x the memory's speed integral (zero residual = "
+                                       "classic HZD with that speed integral; 0 = none)")
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
@@ -218,9 +235,10 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
-        MemoryConfig.for_features(self.features, self.decision_period)  # raises for a bad combination
+        MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain)  # raises if bad
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
+        check_integral_gain(self.integral_gain, self.action)
 
 
 class RabbitHZDEnv(gym.Env):
@@ -232,7 +250,7 @@ class RabbitHZDEnv(gym.Env):
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
-                 features: str = "paper", action: str = "direct") -> None:
+                 features: str = "paper", action: str = "direct", integral_gain: float = 0.0) -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -251,12 +269,13 @@ class RabbitHZDEnv(gym.Env):
         if action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {action!r}")
         self.action = action
+        check_integral_gain(integral_gain, action)
         direct = ActionBounds.from_library(self.library, margin)
-        self.residual = ResidualAction(self.library, direct) if action == "residual" else None
+        self.residual = ResidualAction(self.library, direct, integral_gain=integral_gain) if action == "residual" else None
         self.bounds = self.residual.bounds if self.residual is not None else direct
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.features = features
-        memory = MemoryConfig.for_features(features, decision_period)  # raises for a bad combination
+        memory = MemoryConfig.for_features(features, decision_period, integral_gain)  # raises for a bad combination
         self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:
@@ -384,7 +403,8 @@ class RabbitHZDEnv(gym.Env):
             self.memory.record(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
         action = self.bounds.to_physical(action)
         if self.residual is not None:
-            action = self.residual.compose(action, self.desired_speed)
+            action = self.residual.compose(action, self.desired_speed,
+                                           self.memory.integral if self.memory is not None else 0.0)
         try:
             command = GaitCommand(tuple(expand_alpha(action[:N_FREE])), float(action[N_FREE]))
             rejected = not (self._loop.apply_gait(command) if self.decision_period else self._loop.set_gait(command))

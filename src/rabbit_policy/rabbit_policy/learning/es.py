@@ -60,7 +60,8 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- rollouts (per worker)
-EnvKey = tuple[int, int, str, float, str, str]  # (max_steps, decision_period, distribution, fall_penalty, features, action)
+EnvKey = tuple[int, int, str, float, str, str, float]
+"""(max_steps, decision_period, distribution, fall_penalty, features, action, integral_gain)"""
 _WORKER: dict[EnvKey, tuple[RabbitHZDEnv, HZDPolicyNet]] = {}
 
 
@@ -69,9 +70,9 @@ def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
     worker process, local or Ray, keeps its own)."""
     if key not in _WORKER:
         torch.set_num_threads(1)
-        max_steps, decision_period, distribution, fall_penalty, features, action = key
+        max_steps, decision_period, distribution, fall_penalty, features, action, integral_gain = key
         env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                           fall_penalty=fall_penalty, features=features, action=action)
+                           fall_penalty=fall_penalty, features=features, action=action, integral_gain=integral_gain)
         _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0],
                                           output="tanh" if action == "residual" else "sigmoid"))
     return _WORKER[key]
@@ -176,7 +177,7 @@ class EvolutionStrategy:
         self.generation = 0
         self.env_steps = 0
         self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                                config.features, config.action)
+                                config.features, config.action, config.integral_gain)
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
 

@@ -106,12 +106,13 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
 
 
 def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0,
-              features: str = "paper", action: str = "direct"):
+              features: str = "paper", action: str = "direct", integral_gain: float = 0.0):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
         return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                            fall_penalty=fall_penalty, features=features, action=action)
+                            fall_penalty=fall_penalty, features=features, action=action,
+                            integral_gain=integral_gain)
 
     return make
 
@@ -133,7 +134,7 @@ class PPOTrainer:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
         factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                            config.features, config.action)
+                            config.features, config.action, config.integral_gain)
         self.envs = make_vector_env([factory] * config.envs, backend)
         self.iteration = 0
         self.env_steps = 0

@@ -141,8 +141,10 @@ def train(args: TrainingConfig) -> int:
     library = GaitLibrary.load()
     features, action = args.trainer.features, args.trainer.action
     bounds = policy_bounds(action, library)
-    memory = MemoryConfig.for_features(features, args.trainer.decision_period)
-    residual = ResidualAction(library, ActionBounds.from_library(library)) if action == "residual" else None
+    gain = args.trainer.integral_gain
+    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain)
+    residual = (ResidualAction(library, ActionBounds.from_library(library), integral_gain=gain)
+                if action == "residual" else None)
     if residual is not None:  # a zero residual: the classic controller
         net, mse = zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), None
         if args.warm_start != "none" and not args.resume:
@@ -181,7 +183,8 @@ def train(args: TrainingConfig) -> int:
                 "warm_start": args.warm_start, "eval_every": args.eval_every,
                 "parameters": parameter_count(net), "features": features, "action": action, "output": net.output,
                 **({"memory": memory.to_dict()} if memory is not None else {}),
-                **({"residual_scale": list(RESIDUAL_SCALE)} if residual is not None else {}), **(extra or {})}
+                **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain} if residual is not None else {}),
+                **(extra or {})}
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),

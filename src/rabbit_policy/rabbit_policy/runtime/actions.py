@@ -6,7 +6,10 @@
   library's gait interpolated at the commanded speed (what the classic controller runs) plus
   a residual inside +-``scale`` (:data:`RESIDUAL_SCALE`: 0.1 rad on each coefficient, 20
   N m s/rad on Kd), the sum clipped to the direct bounds. A zero residual is the classic
-  controller, so training starts exactly from it.
+  controller, so training starts exactly from it. With ``integral_gain`` > 0 (1/s) the
+  library's gait is the one for ``v_d + integral_gain * I``, I the memory's integral of the
+  speed error (:mod:`.speed_integral`: Westervelt's event-based integral), so a zero
+  residual is the classic controller with that speed integral.
 
 :class:`ResidualAction` is the one implementation, run by the learning environment and by
 :class:`~rabbit_policy.runtime.policies.NetworkPolicy` (walk.py, the evaluations, policy_node).
@@ -14,6 +17,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,15 +66,20 @@ class ResidualAction:
     """The gait = the library's at the commanded speed + a residual (see the module docstring).
 
     ``library``: the calibrated library (interpolated); ``direct``: the bounds the sum is
-    clipped to; ``scale``: the residual's bounds, +-scale (21: rad, then N m s/rad)."""
+    clipped to; ``scale``: the residual's bounds, +-scale (21: rad, then N m s/rad);
+    ``integral_gain``: 1/s on the speed integral the base gait is offset by (0: none)."""
 
     library: GaitLibrary
     direct: ActionBounds
     scale: tuple[float, ...] = RESIDUAL_SCALE
+    integral_gain: float = 0.0
 
     def __post_init__(self) -> None:
         if len(self.scale) != N_FREE + 1 or not all(s > 0.0 for s in self.scale):
             raise ValueError(f"a residual scale is {N_FREE + 1} numbers > 0, got {self.scale!r}")
+        if not (math.isfinite(self.integral_gain) and self.integral_gain >= 0.0):
+            raise ValueError(f"the residual's integral gain must be a finite number >= 0 (1/s), "
+                             f"got {self.integral_gain!r}")
 
     @property
     def bounds(self) -> ActionBounds:
@@ -78,10 +87,12 @@ class ResidualAction:
         scale = np.asarray(self.scale, dtype=float)
         return ActionBounds(-scale, scale.copy())
 
-    def compose(self, residual: np.ndarray, desired_speed: float) -> np.ndarray:
+    def compose(self, residual: np.ndarray, desired_speed: float, integral: float = 0.0) -> np.ndarray:
         """The physical action (20 coefficients in rad, Kd) for a physical ``residual`` under
-        the command ``desired_speed`` (m/s)."""
-        gait = self.library.interpolate(desired_speed)
+        the command ``desired_speed`` (m/s) and the speed integral ``integral`` (m; used
+        with ``integral_gain``)."""
+        speed = desired_speed + self.integral_gain * integral if self.integral_gain else desired_speed
+        gait = self.library.interpolate(speed)
         base = np.append(gait.free, gait.kd)
         r = np.clip(np.asarray(residual, dtype=float), -np.asarray(self.scale), np.asarray(self.scale))
         return np.clip(base + r, self.direct.low, self.direct.high)

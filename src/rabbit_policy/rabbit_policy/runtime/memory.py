@@ -22,8 +22,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rabbit_policy.runtime.body import N_BODY
+from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, decision_dt, integral_limit
 
 N_ACTION = 21
+DEFAULT_LIMIT = 0.2
+"""The integral's bound (m) unless an integral gain sets it."""
 FEATURES = ("paper", "memory", "body")
 INPUTS = {"paper": 3, "memory": 3 + 1 + N_ACTION, "body": 3 + 1 + N_ACTION + N_BODY}
 
@@ -34,7 +37,7 @@ class MemoryConfig:
     ``limit``: the anti-windup bound of the integral (m); ``body``: the body state follows."""
 
     dt: float
-    limit: float = 0.2
+    limit: float = DEFAULT_LIMIT
     body: bool = False
 
     def __post_init__(self) -> None:
@@ -45,19 +48,28 @@ class MemoryConfig:
         return asdict(self)
 
     @classmethod
-    def for_period(cls, decision_period: int, limit: float = 0.2, body: bool = False) -> "MemoryConfig":
+    def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False) -> "MemoryConfig":
         """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
         per walking step, about 0.6 s)."""
-        return cls(decision_period / 1000.0 if decision_period else 0.6, limit, body)
+        return cls(decision_dt(decision_period), limit, body)
 
     @classmethod
-    def for_features(cls, features: str, decision_period: int) -> "MemoryConfig | None":
-        """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's."""
+    def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0) -> "MemoryConfig | None":
+        """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's.
+        ``integral_gain`` > 0 (1/s): its integral also offsets a residual's base gait by
+        ``integral_gain * I`` m/s, so I is bounded by
+        :func:`~.speed_integral.integral_limit` (the offset within +-0.2 m/s)."""
         if features not in FEATURES:
             raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
         if features == "body" and not decision_period:
             raise ValueError("features 'body' (the body state inside the step) needs a decision period > 0")
-        return None if features == "paper" else cls.for_period(decision_period, body=features == "body")
+        if features == "paper":
+            if integral_gain:
+                raise ValueError("an integral gain offsets the base gait by the memory's integral: it needs "
+                                 "features memory or body")
+            return None
+        limit = integral_limit(integral_gain) if integral_gain else DEFAULT_LIMIT
+        return cls.for_period(decision_period, limit, body=features == "body")
 
 
 class SpeedMemory:
@@ -66,11 +78,17 @@ class SpeedMemory:
 
     def __init__(self, config: MemoryConfig) -> None:
         self.config = config
+        self._integral = SpeedIntegral(IntegralConfig(limit=config.limit, dt=config.dt))
         self.reset()
+
+    @property
+    def integral(self) -> float:
+        """The integral of the speed error so far (m), within +-``config.limit``."""
+        return self._integral.value
 
     def reset(self, last_action: np.ndarray | None = None) -> None:
         """A new walk: the integral at 0, the last action ``last_action`` (normalised; None: 0)."""
-        self.integral = 0.0
+        self._integral.reset()
         self.last_action = np.zeros(N_ACTION) if last_action is None else np.asarray(last_action, dtype=float).copy()
 
     def inputs(self, paper: np.ndarray, body: tuple[float, ...] | None = None) -> np.ndarray:
@@ -79,9 +97,7 @@ class SpeedMemory:
         paper = np.asarray(paper, dtype=float)
         if self.config.body and (body is None or len(body) != N_BODY):
             raise ValueError(f"this policy needs the body state ({N_BODY} numbers) with each observation")
-        limit = self.config.limit
-        self.integral = min(limit, max(-limit, self.integral + float(paper[2]) * self.config.dt))
-        parts = [paper, [self.integral], self.last_action] + ([np.asarray(body, dtype=float)] if self.config.body else [])
+        parts = [paper, [self._integral.update(paper[2])], self.last_action] + ([np.asarray(body, dtype=float)] if self.config.body else [])
         return np.concatenate(parts)
 
     def record(self, normalised_action: np.ndarray) -> None:

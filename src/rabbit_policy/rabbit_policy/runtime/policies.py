@@ -4,7 +4,10 @@ scripts pick one with :func:`make_policy`. The two controllers have one name eac
 everywhere (CLI, parameters, results):
 
 * ``classic``: classic HZD, the gait library (``rabbit_policy/gaits``), the gait nearest
-  to the commanded speed or a linear blend of the two around it. Uses only v_d.
+  to the commanded speed or a linear blend of the two around it. Uses only v_d, unless
+  given Westervelt's event-based speed integral (``speed_integral`` > 0, off by default:
+  the paper's baseline has none), which commands the library the gait for v_d plus a
+  bounded integral of the speed error (:mod:`.speed_integral`).
 * ``learned``: HZD-RL, the network (:mod:`.network`) from a checkpoint file (default: the
   packaged ``rabbit_policy/trained/hzd_rl_policy.pt``).
 
@@ -23,6 +26,8 @@ from typing import Protocol
 import numpy as np
 
 from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, decision_dt,
+                                                  integral_limit)
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLERS = ("classic", "learned")
@@ -54,17 +59,32 @@ class PolicyUnavailable(RuntimeError):
 
 class LibraryPolicy:
     """Classic HZD: the library gait for the commanded speed (``nearest`` or
-    ``interpolate``); the measured speeds are not used."""
+    ``interpolate``); the measured speeds are not used. With ``integral_gain`` > 0 (1/s)
+    the gait is the one for ``v_d + integral_gain * I``, I the integral of the mean speed
+    error (:mod:`.speed_integral`: Westervelt's event-based integral, updated every ``dt``
+    s, the offset within +-``offset_limit`` m/s); :meth:`reset` zeroes it for a new walk."""
 
-    def __init__(self, library: GaitLibrary, mode: str = "nearest") -> None:
+    def __init__(self, library: GaitLibrary, mode: str = "nearest", integral_gain: float = 0.0, dt: float = 0.02,
+                 offset_limit: float = DEFAULT_OFFSET_LIMIT) -> None:
         if mode not in LIBRARY_MODES:
             raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
         self.library = library
         self.mode = mode
-        self.name = f"classic/{mode}"
+        self.integral_gain = float(integral_gain)
+        self.integral = None
+        if integral_gain:
+            self.integral = SpeedIntegral(IntegralConfig(integral_limit(integral_gain, offset_limit), dt))
+        self.name = f"classic/{mode}" + (f"+integral{integral_gain:g}" if integral_gain else "")
+
+    def reset(self) -> None:
+        """A new walk: the speed integral (if any) at 0."""
+        if self.integral is not None:
+            self.integral.reset()
 
     def act(self, observation: Observation) -> GaitCommand:
         speed = observation.desired_speed
+        if self.integral is not None:
+            speed += self.integral_gain * self.integral.update(observation.mean_error)
         gait = self.library.nearest(speed) if self.mode == "nearest" else self.library.interpolate(speed)
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
 
@@ -215,7 +235,8 @@ class NetworkPolicy:
             action = act(self.net, self.memory.inputs(observation.as_tuple(), observation.body))
             self._remember(action)
         if self.residual is not None:
-            action = self.residual.compose(action, observation.desired_speed)
+            action = self.residual.compose(action, observation.desired_speed,
+                                           self.memory.integral if self.memory is not None else 0.0)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
@@ -242,7 +263,8 @@ class LearnedPolicy(NetworkPolicy):
             from rabbit_policy.runtime.actions import ActionBounds, ResidualAction
 
             library = GaitLibrary.load()
-            residual = ResidualAction(library, ActionBounds.from_library(library), tuple(info["residual_scale"]))
+            residual = ResidualAction(library, ActionBounds.from_library(library), tuple(info["residual_scale"]),
+                                      float(info.get("integral_gain", 0.0)))
         super().__init__(self.checkpoint.network(), name, decision_period, memory, residual)
 
 
@@ -257,16 +279,24 @@ def controller_name(name: str) -> str:
 
 def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "interpolate",
                 policy_file: str | Path | None = None, max_command_step: float = 0.0,
-                decision_period: int | None = None) -> Policy:
+                decision_period: int | None = None, speed_integral: float = 0.0,
+                integral_offset_limit: float = DEFAULT_OFFSET_LIMIT) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on. ``max_command_step`` > 0 wraps it in a
     :class:`RateLimitedPolicy` (m/s per step; 0: no limit). ``decision_period``: None = the
     policy's own (classic: :data:`CLASSIC_DECISION_PERIOD`; learned: as trained), 0 = once
-    per step, N > 0 = every N ticks (a :class:`PeriodicPolicy`)."""
+    per step, N > 0 = every N ticks (a :class:`PeriodicPolicy`). ``speed_integral`` > 0
+    (1/s, classic only): Westervelt's event-based speed integral with that gain, its offset
+    within +-``integral_offset_limit`` m/s (see :class:`LibraryPolicy`)."""
     if decision_period is not None and (isinstance(decision_period, bool) or not isinstance(decision_period, int)
                                         or decision_period < 0):
         raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {decision_period!r}")
+    if not (math.isfinite(speed_integral) and speed_integral >= 0.0):
+        raise ValueError(f"the speed integral gain must be a finite number >= 0 (1/s; 0 = off), got {speed_integral!r}")
     kind = controller_name(kind)
+    if kind == "learned" and speed_integral:
+        raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "
+                         "policy with memory features carries its own")
     if kind == "classic" and policy_file:
         raise ValueError("a policy file is a learned policy's checkpoint: it is for the learned controller "
                          "(policy:=learned, --controller learned); the classic one uses gait_dir")
@@ -279,8 +309,8 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
             library = GaitLibrary.load(gait_dir or None)
         except (FileNotFoundError, ValueError) as exc:
             raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
-        policy: Policy = LibraryPolicy(library, mode)
         period = CLASSIC_DECISION_PERIOD if decision_period is None else decision_period
+        policy: Policy = LibraryPolicy(library, mode, speed_integral, decision_dt(period), integral_offset_limit)
     else:
         policy = _learned(policy_file, decision_period)  # it carries its decision period
     if max_command_step:
