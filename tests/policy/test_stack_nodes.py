@@ -42,8 +42,9 @@ def _recorder(store: list):
     return factory
 
 
-def _reference(duration: float, speed: float = 1.0) -> np.ndarray:
-    loop = ClosedLoop(Scenario.constant(speed), make_policy("classic"))  # every 20 ticks, as policy_node
+def _reference(duration: float, speed: float = 1.0, policy=None, scenario: Scenario | None = None) -> np.ndarray:
+    """Every state of the ROS-free loop (default: classic, every 20 ticks, as policy_node)."""
+    loop = ClosedLoop(scenario or Scenario.constant(speed), policy or make_policy("classic"))
     data = loop.data
     rows = [data.qpos.tolist() + data.qvel.tolist()]
     for _ in range(int(round(duration / 0.001))):
@@ -74,6 +75,51 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
         if mode == "paced":
             assert report.wall_time >= 0.9 * 2.0 / 4.0
             assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
+
+
+def _residual_integral_policy_file(path) -> str:
+    """A learned policy of the final run's kind, saved as train.py saves one: memory inputs,
+    a residual on the library at v_d + 0.3 x the speed integral, and a small nonzero
+    residual (the last layer perturbed), so the network's output matters."""
+    import torch
+
+    from rabbit_policy.learning.warm_start import zero_residual_network
+    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, policy_bounds
+    from rabbit_policy.runtime.memory import INPUTS, MemoryConfig
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+
+    bounds = policy_bounds("residual", GaitLibrary.load())
+    net = zero_residual_network(bounds.low, bounds.high, INPUTS["memory"], seed=5)
+    with torch.no_grad():
+        net.body[-1].bias.uniform_(-0.05, 0.05, generator=torch.Generator().manual_seed(5))
+    PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high,
+                     {"features": "memory", "action": "residual", "residual_scale": list(RESIDUAL_SCALE),
+                      "integral_gain": 0.3, "memory": MemoryConfig.for_features("memory", 20, 0.3).to_dict(),
+                      "config": {"decision_period": 20}}).save(path)
+    return str(path)
+
+
+@pytest.mark.slow
+def test_lockstep_runs_a_learned_memory_policy_on_the_speed_integral_as_the_ros_free_loop(tmp_path):
+    """The final run's kind of policy through the stack: policy_node builds its memory (the
+    speed integral and the last action) from /hip_velocity and its own decisions, the
+    residual's base gait moves with the integral (the ``drives`` model walks too slow, so it
+    does), and lockstep publishes every state of the ROS-free loop bit for bit."""
+    from rabbit_sim.model import ModelOptions
+
+    path = _residual_integral_policy_file(tmp_path / "final_kind.pt")
+    policy = make_policy("learned", policy_file=path)
+    reference = _reference(2.0, policy=policy, scenario=Scenario.constant(1.0, model=ModelOptions("drives")))
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), controller="learned", policy_file=path,
+                         model="drives")
+    states: list = []
+    report, nodes = run_in_process(config, observers=[_recorder(states)])
+    assert report.completed and not report.fell
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert unique.shape == reference.shape and np.array_equal(unique, reference)
+    memory = nodes["policy_node"].policy.memory
+    assert memory.integral > 0.0  # too slow on drives: the base gait was offset upwards
+    assert nodes["hzd_controller_node"].decisions_timed_out == 0
 
 
 @pytest.mark.slow
