@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Reproduce the paper's section IV for classic HZD and HZD-RL, with figures and a report.
 
-    scripts/evaluate.py [--out DIR] [--quick] [--workers 2] [--policy-file P] [--no-video]
+    scripts/evaluate.py [--out DIR] [--quick] [--workers 2] [--policy-file P] [--no-video] [--ablation JSON ...]
 
 Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
 
@@ -12,7 +12,8 @@ Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
 * push recovery: three push scenarios at 2, 4 and 6 s, who fell, speed plots, an
   impulse sweep, and a GIF of each controller under the pushes;
 
-and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
+with ``--ablation``, the checks 1-6 table of ``scripts/compare_policies.py --out`` files (the
+learning issue's ablation); and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
 the PNG/GIF files. ``--quick`` is a short version (about 25 s) for tests. The
 committed report in ``docs/results/`` was made with ``scripts/evaluate.py --out docs/results``.
 Exit status: 0 written, 2 bad arguments or no policy.
@@ -49,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
     parser.add_argument("--policy-file", default=None, help="HZD-RL checkpoint (default: packaged)")
     parser.add_argument("--no-video", action="store_true", help="skip the GIFs")
+    parser.add_argument("--ablation", nargs="+", default=[], metavar="JSON",
+                        help="scripts/compare_policies.py --out files: their checks 1-6 table joins the report")
     return parser
 
 
@@ -95,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures
-    from rabbit_policy.evaluation.report import render_report
+    from rabbit_policy.evaluation.report import load_comparisons, render_report
     from rabbit_policy.evaluation.robustness import robustness
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_sim.model import ModelOptions
@@ -103,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         policies = {"classic": make_policy("classic", args.gait_dir),
                     "learned": make_policy("learned", policy_file=args.policy_file)}
+        ablation = load_comparisons(args.ablation)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -160,13 +164,15 @@ def main(argv: list[str] | None = None) -> int:
         log("videos")
         videos = render_videos(push_walks, config.video_scenarios, out, config, model)
 
-    command = "scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
+    command = ("scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
+               + (" --ablation " + " ".join(args.ablation) if args.ablation else ""))
     results = {"meta": {"command": command, "model": model.to_dict(), "workers": args.workers,
                         "wall_time_s": time.perf_counter() - start,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
                "push": push, "push_sweep": sweep, "robustness": robust,
-               "acceptance_1_6": verdicts if config.robustness is not None else {}, "videos": videos}
+               "acceptance_1_6": verdicts if config.robustness is not None else {}, "videos": videos,
+               "ablation": ablation}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
     log(f"wrote {out / 'report.md'}")

@@ -176,11 +176,15 @@ except RenderingUnavailable as exc:
 # ------------------------------------------------------------------ the script
 @pytest.mark.slow
 def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
-    out = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), timeout=300)
+    ablation = "docs/learning/ablation_checks_1_6_quick.json"  # a committed compare_policies.py output
+    out = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--ablation", ablation, timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
     results = json.loads((tmp_path / "results.json").read_text())
     report = (tmp_path / "report.md").read_text()
     assert "## Summary" in report and "walking cycle stable at every speed tested" in report
+    assert list(results["ablation"]) == ["classic HZD", "a best", "b best", "c best", "d best", "c final", "d final"]
+    assert "## The ablation" in report and "| check | classic HZD | a best |" in report
+    assert results["meta"]["command"].endswith(f"--ablation {ablation}")
     for name, dimension in (("classic", 10), ("learned", 13)):
         analysis = results["poincare"][name]["1.00"]
         assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True
@@ -206,6 +210,9 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
         assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
     bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")
     assert bad.returncode == 2 and "does not exist" in bad.stderr
+    bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--ablation", "README.md")
+    assert bad.returncode == 2 and "is not a scripts/compare_policies.py --out file" in bad.stderr
+    assert len(bad.stderr.strip().splitlines()) == 1
 
 
 @pytest.mark.slow

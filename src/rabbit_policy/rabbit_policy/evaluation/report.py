@@ -239,6 +239,42 @@ def acceptance_section(verdicts: dict) -> list[str]:
     return lines + [""]
 
 
+def load_comparisons(paths) -> dict:
+    """The checks 1-6 of ``scripts/compare_policies.py --out`` files, for the report's ablation
+    section: classic HZD once (from the first file), then every other controller of every
+    file, by its column name. Raises ``ValueError`` naming a file that is not such an output."""
+    import json
+    from pathlib import Path
+
+    columns: dict = {}
+    for path in paths:
+        try:
+            results = json.loads(Path(path).read_text())["results"]
+            for name, result in results.items():
+                if name not in columns:
+                    columns[name] = {"policy": result["policy"], "checks": result["checks"],
+                                     "passed": result["passed"], "source": str(path)}
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise ValueError(f"{path} is not a scripts/compare_policies.py --out file "
+                             f"({type(exc).__name__}: {str(exc)[:120]})") from None
+    return columns
+
+
+def ablation_section(ablation: dict) -> list[str]:
+    """Checks 1-6 of the learning issue's ablation (``--ablation``: ``scripts/compare_policies.py``
+    outputs), one column per controller, with its headline figures."""
+    if not ablation:
+        return []
+    from rabbit_policy.evaluation.acceptance import broad_table
+
+    sources = sorted({c["source"] for c in ablation.values()})
+    return ["## The ablation: checks 1-6 per trained row (the learning issue)", "",
+            "Measured by `scripts/compare_policies.py` (every speed, every ordered change at every phase, 100 random "
+            "command sequences, push margins at every phase against classic's, model errors, Poincaré), from "
+            + ", ".join(f"`{s}`" for s in sources) + "; rows and budgets in docs/learning.md.", "",
+            *broad_table(list(ablation.items())), ""]
+
+
 def _speeds(speeds: list[float]) -> str:
     return "none" if not speeds else ", ".join(f"{v:.2f}" for v in speeds)
 
@@ -261,4 +297,5 @@ def render_report(results: dict) -> str:
     lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", []))
     lines += robustness_section(results.get("robustness", {}))
     lines += acceptance_section(results.get("acceptance_1_6", {}))
+    lines += ablation_section(results.get("ablation", {}))
     return "\n".join(lines)
