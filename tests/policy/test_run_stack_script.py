@@ -76,7 +76,9 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     assert proc.returncode == 3, err[-2000:]
     report = json.loads(out)
     assert report["error"] == "interrupted" and report["completed"] is False
-    assert 0.0 < report["duration"] < 600.0
+    # how much sim time 1 s of wall time buys depends on the machine: under load (two busy
+    # loops beside the suite) the interrupt came before the first state (CI read 0.0 s once)
+    assert 0.0 <= report["duration"] < 600.0
     assert report["segments"][0]["mean_speed"] is None  # cut short: no mean for the segment it was in
     assert _alive(children) == []
     assert "Traceback" not in err and "FATAL" not in err
