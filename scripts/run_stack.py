@@ -37,6 +37,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,7 +67,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="-1: the policy's own (classic: every 20 ticks; learned: as trained; the default), 0: "
                              "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
     parser.add_argument("--speed-integral", type=float, default=0.0, metavar="KI",
-                        help="classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command plus a bounded integral of the speed error; 0 = off, the default: the paper's baseline)")
+                        help=SPEED_INTEGRAL_HELP)
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--compression", "--record-compression", choices=("none", "zstd"), default="none",

@@ -37,6 +37,7 @@ import time
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
 def positive(text: str) -> float:
@@ -77,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
                              "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI",
-                        help="classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command plus a bounded integral of the speed error; 0 = off, the default: the paper's baseline)")
+                        help=SPEED_INTEGRAL_HELP)
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true",

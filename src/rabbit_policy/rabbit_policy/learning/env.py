@@ -111,7 +111,6 @@ max_episode_steps=500)``.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -125,6 +124,7 @@ from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import ACTIONS, ActionBounds, ResidualAction  # noqa: F401  (ActionBounds re-exported)
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
+from rabbit_policy.runtime.speed_integral import check_gain
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
@@ -192,9 +192,7 @@ DISTRIBUTIONS = {
 def check_integral_gain(gain: float, action: str) -> None:
     """Raise ``ValueError`` unless ``gain`` (1/s) is finite and >= 0, and 0 unless the action is
     a residual (the integral offsets the residual's base gait)."""
-    if not (math.isfinite(gain) and gain >= 0.0):
-        raise ValueError(f"integral_gain must be a finite number >= 0 (1/s), got {gain!r}")
-    if gain and action != "residual":
+    if check_gain(gain, "integral_gain") and action != "residual":
         raise ValueError("integral_gain offsets a residual's base gait: it needs action residual")
 
 
@@ -235,10 +233,10 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
-        MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain)  # raises if bad
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
         check_integral_gain(self.integral_gain, self.action)
+        MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain)  # raises if bad
 
 
 class RabbitHZDEnv(gym.Env):

@@ -17,7 +17,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -25,6 +24,7 @@ import numpy as np
 from rabbit_hzd_controller.alpha import N_FREE
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.speed_integral import check_gain
 
 ACTIONS = ("direct", "residual")
 RESIDUAL_SCALE = (0.1,) * N_FREE + (20.0,)
@@ -77,9 +77,7 @@ class ResidualAction:
     def __post_init__(self) -> None:
         if len(self.scale) != N_FREE + 1 or not all(s > 0.0 for s in self.scale):
             raise ValueError(f"a residual scale is {N_FREE + 1} numbers > 0, got {self.scale!r}")
-        if not (math.isfinite(self.integral_gain) and self.integral_gain >= 0.0):
-            raise ValueError(f"the residual's integral gain must be a finite number >= 0 (1/s), "
-                             f"got {self.integral_gain!r}")
+        check_gain(self.integral_gain, "the residual's integral gain")
 
     @property
     def bounds(self) -> ActionBounds:

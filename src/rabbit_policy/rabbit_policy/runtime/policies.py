@@ -26,8 +26,8 @@ from typing import Protocol
 import numpy as np
 
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, decision_dt,
-                                                  integral_limit)
+from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, check_gain,
+                                                  decision_dt, integral_limit)
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLERS = ("classic", "learned")
@@ -291,8 +291,7 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     if decision_period is not None and (isinstance(decision_period, bool) or not isinstance(decision_period, int)
                                         or decision_period < 0):
         raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {decision_period!r}")
-    if not (math.isfinite(speed_integral) and speed_integral >= 0.0):
-        raise ValueError(f"the speed integral gain must be a finite number >= 0 (1/s; 0 = off), got {speed_integral!r}")
+    check_gain(speed_integral, "the speed integral gain")
     kind = controller_name(kind)
     if kind == "learned" and speed_integral:
         raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "

@@ -32,6 +32,19 @@ fastest gaits walk *slower* on the ``drives`` model (measured: the 1.45-1.5 m/s 
 0.87 m/s there, the 1.3 m/s one 1.18), and a larger offset winds up into them."""
 
 
+SPEED_INTEGRAL_HELP = ("classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command "
+                       "plus a bounded integral of the speed error; 0 = off, the default: the paper's baseline)")
+"""The command lines' help for ``--speed-integral`` (walk.py, run_stack.py)."""
+
+
+def check_gain(gain: float, name: str) -> float:
+    """``gain`` (1/s) as a float if finite and >= 0 (0: no integral); else ``ValueError``
+    naming it ``name``."""
+    if not (isfinite(gain) and gain >= 0.0):
+        raise ValueError(f"{name} must be a finite number >= 0 (1/s; 0 = off), got {gain!r}")
+    return float(gain)
+
+
 def decision_dt(decision_period: int) -> float:
     """Seconds between decisions every ``decision_period`` ticks of 1 ms (0: once per
     walking step, :data:`NOMINAL_STEP_S`)."""
