@@ -64,6 +64,43 @@ def test_a_broken_params_file_is_one_line(tmp_path):
     assert [line for line in out.stdout.splitlines() if line.startswith("error:")]
 
 
+def test_a_node_that_fails_to_start_leaves_the_ros_graph_at_once(tmp_path):
+    """A node whose start fails destroys itself before the error propagates: it was seen as a
+    running ``policy_node`` by the next ``run_stack.py`` in the domain for as long as a test's
+    traceback kept it alive (CI refused a stack for that). The garbage collector is off here,
+    as when a traceback holds the node; an observer in the same context sees the graph at once."""
+    import gc
+
+    import rclpy
+
+    from rabbit_sim.player import BagPlayer, PlaybackError
+    from rabbit_sim.recorder_node import RecorderNode
+
+    failing = [("hzd_controller_node", lambda c: HZDControllerNode(context=c, kp="fast"), NodeStartError),
+               ("policy_node", lambda c: PolicyNode(context=c, speed_integral=float("nan")), NodeStartError),
+               ("policy_node", lambda c: PolicyNode(context=c, window=0, decision_period=20), NodeStartError),
+               ("sim_node", lambda c: SimNode(context=c, damping=float("nan")), NodeStartError),
+               ("recorder_node", lambda c: RecorderNode(context=c, output=""), NodeStartError),
+               ("rosbag2_player", lambda c: BagPlayer(tmp_path, rate=0.0, context=c), PlaybackError)]
+    with ros_context() as (context, _executor):
+        observer = rclpy.create_node("observer", context=context)
+        names = lambda: {name for name, _ns in observer.get_node_names_and_namespaces()}  # noqa: E731
+        started = PolicyNode(context=context)
+        assert "policy_node" in names()  # the observer sees a node of its context at once
+        started.destroy_node()
+        gc.disable()
+        try:
+            kept = []  # the errors and their tracebacks stay alive, as pytest's would
+            for name, make, error in failing:
+                with pytest.raises(error) as raised:
+                    make(context)
+                kept.append(raised)
+                assert name not in names(), f"{name} lingers after a failed start: {raised.value}"
+        finally:
+            gc.enable()
+        observer.destroy_node()
+
+
 def test_integer_parameters_where_doubles_are_meant():
     with ros_context() as (context, _executor):
         controller = HZDControllerNode(context=context, kp=3000, max_kd=250)

@@ -63,7 +63,7 @@ from rabbit_msgs_py.conversions import (
 )
 from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
-from rabbit_msgs_py.runtime import NodeStartError, run_node
+from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
 
@@ -109,6 +109,7 @@ class HZDControllerNode(Node):
     ``within_step_blend`` may change at run time; the rest are read-only) and
     :data:`NODE_PARAMS`."""
 
+    @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context, namespace=namespace)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)

@@ -14,6 +14,7 @@ spin with ``spin_once(timeout_sec=0.1)`` until a signal asks them to stop.
 
 from __future__ import annotations
 
+import functools
 import gc
 import os
 import signal
@@ -159,3 +160,22 @@ def one_line(text: str, limit: int = 300) -> str:
 
 class NodeStartError(RuntimeError):
     """A node cannot start with the parameters it was given (bad value, missing file)."""
+
+
+def destroyed_if_start_fails(init: Callable) -> Callable:
+    """Decorate a node class's ``__init__``: if it raises after ``Node.__init__`` ran, the node
+    destroys itself before the error propagates, so it leaves the ROS graph at once. Otherwise
+    the half-built node lives on, visible to every process in the domain, until the garbage
+    collector frees it (one kept alive by a test's traceback made the next ``run_stack.py`` in
+    that domain refuse to start beside "another stack")."""
+
+    @functools.wraps(init)
+    def start(self, *args, **kwargs) -> None:
+        try:
+            init(self, *args, **kwargs)
+        except BaseException:
+            if hasattr(self, "_type_description_service"):  # the last thing Node.__init__ builds
+                self.destroy_node()
+            raise
+
+    return start

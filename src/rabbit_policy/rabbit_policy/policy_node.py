@@ -54,7 +54,7 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
-from rabbit_msgs_py.runtime import NodeStartError, run_node
+from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from rabbit_policy.runtime.policies import (
     DEFAULT_DECISION_WINDOW,
@@ -112,6 +112,7 @@ def clamp_message(value: float, low: float, high: float, clamped: float, topic: 
 class PolicyNode(Node):
     """The gait policy node."""
 
+    @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("policy_node", context=context, namespace=namespace)
         values = declare(self, POLICY_PARAMS, overrides)

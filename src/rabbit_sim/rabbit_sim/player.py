@@ -22,6 +22,8 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
+from rabbit_msgs_py.runtime import destroyed_if_start_fails
+
 from .bag import BagError, open_bag
 
 MIN_DEPTH = 1000
@@ -88,6 +90,7 @@ def clock_times(start_ns: int, end_ns: int, rate_hz: float) -> Iterator[int]:
 class BagPlayer(Node):
     """Publishes a bag's messages (see the module docstring). :meth:`play` runs one pass."""
 
+    @destroyed_if_start_fails
     def __init__(self, bag: Path, topics: list[str] | None = None, rate: float = 1.0, clock_rate: float = 0.0,
                  context=None, log: Callable[[str], None] = print) -> None:
         super().__init__("rosbag2_player", context=context)

@@ -37,7 +37,7 @@ from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec
 from rabbit_msgs_py.conversions import stamp_to_ns
 from rabbit_msgs_py.parameters import Param, declare
-from rabbit_msgs_py.runtime import NodeStartError, run_node
+from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec
 
@@ -112,6 +112,7 @@ class RecorderNode(Node):
         """Messages handled so far (written, or skipped as sent again): run_node's drain."""
         return sum(self.bag.counts.values()) + self.resends_skipped
 
+    @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("recorder_node", context=context, namespace=namespace)
         values = declare(self, RECORDER_PARAMS, overrides)

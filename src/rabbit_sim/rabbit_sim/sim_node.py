@@ -64,7 +64,7 @@ from rabbit_msgs_py.conversions import (
     MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
-from rabbit_msgs_py.runtime import NodeStartError, run_node
+from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
@@ -88,6 +88,7 @@ SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN
 class SimNode(Node):
     """Parameters, topics, services and timers around a :class:`SimDriver` (under ``self._lock``)."""
 
+    @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("sim_node", context=context, namespace=namespace)
         values = declare(self, SIM_PARAMS, overrides)
