@@ -29,7 +29,7 @@ LIBRARY = GaitLibrary.load()
 def zero_residual_policy(features: str = "body", integral_gain: float = 0.0) -> NetworkPolicy:
     bounds = policy_bounds("residual", LIBRARY)
     net = zero_residual_network(bounds.low, bounds.high, INPUTS[features], seed=3)
-    memory = MemoryConfig.for_features(features, 20, integral_gain)
+    memory = MemoryConfig.for_features(features, 20, integral_gain, LIBRARY.speed_range)
     return NetworkPolicy(net, decision_period=20, memory=None if memory is None else SpeedMemory(memory),
                          residual=ResidualAction(LIBRARY, ActionBounds.from_library(LIBRARY),
                                                  integral_gain=integral_gain))
@@ -79,15 +79,18 @@ def test_a_zero_residual_on_the_speed_integral_is_classic_with_that_integral_bit
     works), not classic's."""
     from rabbit_sim.model import ModelOptions
 
-    scenario = Scenario(schedule=((0.0, 1.0),), model=ModelOptions("drives"))
-    final = []
-    for policy in (zero_residual_policy("memory", 0.3), make_policy("classic", speed_integral=0.3),
-                   make_policy("classic")):
-        loop = ClosedLoop(scenario, policy)
-        loop.run(3.0)
-        assert not loop.failed
-        final.append(loop.data.qpos.copy())
-    assert np.array_equal(final[0], final[1]) and not np.array_equal(final[1], final[2])
+    for speed in (1.0, 1.45):  # at 1.45 m/s the integral is held where the gait reaches the library's 1.5
+        scenario = Scenario(schedule=((0.0, speed),), model=ModelOptions("drives"))
+        residual, integral = zero_residual_policy("memory", 0.3), make_policy("classic", speed_integral=0.3)
+        final = []
+        for policy in (residual, integral, make_policy("classic")):
+            loop = ClosedLoop(scenario, policy)
+            loop.run(3.0)
+            assert not loop.failed
+            final.append(loop.data.qpos.copy())
+        assert np.array_equal(final[0], final[1]) and not np.array_equal(final[1], final[2])
+        assert residual.memory.integral == integral.policy.integral.value
+    assert integral.policy.integral.value == pytest.approx((1.5 - 1.45) / 0.3)  # v_d + 0.3 I = 1.5: held there
     env = RabbitHZDEnv(max_steps=20, decision_period=20, features="memory", action="residual", integral_gain=0.3)
     assert env.memory.config.limit == pytest.approx(0.2 / 0.3)  # the offset's bound: 0.2 m/s
     assert env.observation_space.high[3] == pytest.approx(0.2 / 0.3, rel=1e-6)

@@ -131,11 +131,11 @@ def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_af
     from rabbit_policy.runtime.speed_window import Observation
 
     integral = SpeedIntegral(IntegralConfig(limit=0.4, dt=0.02))
-    assert integral.update(0.1) == pytest.approx(0.002)  # 0.1 m/s x 0.02 s
+    assert integral.update(0.1, 1.0) == pytest.approx(0.002)  # 0.1 m/s x 0.02 s
     for _ in range(10_000):
-        integral.update(0.1)
+        integral.update(0.1, 1.0)
     assert integral.value == 0.4  # held at the bound (anti-windup) ...
-    assert integral.update(-0.1) == pytest.approx(0.398)  # ... so it unwinds at the first opposite error
+    assert integral.update(-0.1, 1.0) == pytest.approx(0.398)  # ... so it unwinds at the first opposite error
     integral.reset()
     assert integral.value == 0.0
     assert decision_dt(20) == 0.02 and decision_dt(0) == 0.6
@@ -154,6 +154,9 @@ def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_af
     for _ in range(10_000):
         policy.act(Observation(1.0, 0.9, 0.1))
     assert policy.act(Observation(1.0, 0.9, 0.1)).alpha == library.interpolate(1.2).alpha  # held at +0.2 m/s
+    for _ in range(10_000):
+        policy.act(Observation(1.4, 1.3, 0.1))
+    assert policy.integral.value == pytest.approx(0.2)  # 1.4 + 0.5 x 0.2 = 1.5, the library's fastest gait
     policy.reset()
     assert policy.act(Observation(1.0, 1.0, 0.0)).alpha == library.interpolate(1.0).alpha
     assert make_policy("classic", decision_period=0, speed_integral=0.5).integral.config.dt == 0.6
@@ -163,6 +166,32 @@ def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_af
             make_policy("classic", speed_integral=bad)
     with pytest.raises(ValueError, match="classic controller's"):
         make_policy("learned", speed_integral=0.5)
+
+
+def test_the_speed_integral_is_held_where_the_gait_would_leave_the_library_range():
+    """With a gain and the library's speed range, I stays where v_d + gain * I is inside it."""
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral
+
+    ranged = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0, gain=0.5, speed_range=(0.7, 1.5)))
+    assert ranged.update(0.1, 1.0) == pytest.approx(0.1)
+    assert ranged.update(1.0, 1.0) == pytest.approx(1.0)  # 1.0 + 0.5 x 1.0 = 1.5: the top of the range
+    assert ranged.update(0.1, 1.4) == pytest.approx(0.2)  # the command rose: I held at (1.5 - 1.4) / 0.5
+    assert ranged.update(-0.5, 0.7) == pytest.approx(0.0)  # at the bottom, I cannot go below 0
+    assert ranged.update(0.1, 0.7) == pytest.approx(0.1)
+    free = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0))  # no range: the memory of older checkpoints
+    assert free.update(0.9, 1.5) == pytest.approx(0.9)
+    from rabbit_policy.runtime.memory import MemoryConfig
+
+    memory = MemoryConfig.for_features("memory", 20, 0.3, (0.7, 1.5))  # a residual's base gait: held in range
+    assert memory.integral_config().speed_range == (0.7, 1.5)
+    assert MemoryConfig(**{**memory.to_dict(), "speed_range": [0.7, 1.5]}) == memory  # as a checkpoint holds it
+    assert MemoryConfig(dt=0.02, limit=0.5).integral_config().speed_range is None  # checkpoints from before the gate
+    with pytest.raises(ValueError, match="speed range"):
+        MemoryConfig.for_features("memory", 20, 0.3)
+    for bad in ({"speed_range": (1.5, 0.7), "gain": 0.5}, {"speed_range": (0.7, 1.5)},
+                {"speed_range": (0.7, math.nan), "gain": 0.5}):
+        with pytest.raises(ValueError, match="speed integral"):
+            IntegralConfig(**({"limit": 0.2, "dt": 0.02} | bad))
 
 
 def test_learned_policy_checkpoint_round_trip(tmp_path):

@@ -94,7 +94,7 @@ def _residual_integral_policy_file(path) -> str:
         net.body[-1].bias.uniform_(-0.05, 0.05, generator=torch.Generator().manual_seed(5))
     PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high,
                      {"features": "memory", "action": "residual", "residual_scale": list(RESIDUAL_SCALE),
-                      "integral_gain": 0.3, "memory": MemoryConfig.for_features("memory", 20, 0.3).to_dict(),
+                      "integral_gain": 0.3, "memory": MemoryConfig.for_features("memory", 20, 0.3, GaitLibrary.load().speed_range).to_dict(),
                       "config": {"decision_period": 20}}).save(path)
     return str(path)
 

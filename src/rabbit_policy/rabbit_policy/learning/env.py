@@ -123,7 +123,7 @@ from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import ACTIONS, ActionBounds, ResidualAction  # noqa: F401  (ActionBounds re-exported)
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory
+from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
 from rabbit_policy.runtime.speed_integral import check_gain
 from rabbit_policy.runtime.policies import GaitCommand
 from rabbit_policy.runtime.speed_window import Observation
@@ -236,7 +236,7 @@ class EpisodeConfig:
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
         check_integral_gain(self.integral_gain, self.action)
-        MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain)  # raises if bad
+        check_features(self.features, self.decision_period, self.integral_gain)
 
 
 class RabbitHZDEnv(gym.Env):
@@ -273,7 +273,8 @@ class RabbitHZDEnv(gym.Env):
         self.bounds = self.residual.bounds if self.residual is not None else direct
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.features = features
-        memory = MemoryConfig.for_features(features, decision_period, integral_gain)  # raises for a bad combination
+        memory = MemoryConfig.for_features(features, decision_period, integral_gain,  # raises for a bad combination
+                                           self.library.speed_range)
         self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:

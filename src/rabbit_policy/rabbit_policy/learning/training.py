@@ -142,7 +142,7 @@ def train(args: TrainingConfig) -> int:
     features, action = args.trainer.features, args.trainer.action
     bounds = policy_bounds(action, library)
     gain = args.trainer.integral_gain
-    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain)
+    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain, library.speed_range)
     residual = (ResidualAction(library, ActionBounds.from_library(library), integral_gain=gain)
                 if action == "residual" else None)
     if residual is not None:  # a zero residual: the classic controller

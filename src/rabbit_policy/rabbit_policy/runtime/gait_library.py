@@ -111,6 +111,12 @@ class GaitLibrary:
     def speeds(self) -> list[float]:
         return [g.speed for g in self.gaits]
 
+    @property
+    def speed_range(self) -> tuple[float, float]:
+        """The slowest and the fastest gait's design speed (m/s): what :meth:`interpolate`
+        can be asked for without clamping."""
+        return self.gaits[0].speed, self.gaits[-1].speed
+
     def nearest(self, speed: float) -> Gait:
         """The gait whose design speed is closest to ``speed`` (ties: the slower one)."""
         return min(self.gaits, key=lambda g: (abs(g.speed - speed), g.speed))

@@ -31,21 +31,46 @@ FEATURES = ("paper", "memory", "body")
 INPUTS = {"paper": 3, "memory": 3 + 1 + N_ACTION, "body": 3 + 1 + N_ACTION + N_BODY}
 
 
+def check_features(features: str, decision_period: int, integral_gain: float = 0.0) -> None:
+    """``ValueError`` for features that are not :data:`FEATURES` or do not go with the
+    decision period (ticks) or the integral gain (1/s)."""
+    if features not in FEATURES:
+        raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
+    if features == "body" and not decision_period:
+        raise ValueError("features 'body' (the body state inside the step) needs a decision period > 0")
+    if features == "paper" and integral_gain:
+        raise ValueError("an integral gain offsets the base gait by the memory's integral: it needs "
+                         "features memory or body")
+
+
 @dataclass(frozen=True)
 class MemoryConfig:
     """``dt``: s between decisions (the decision period; per step: a nominal step);
-    ``limit``: the anti-windup bound of the integral (m); ``body``: the body state follows."""
+    ``limit``: the anti-windup bound of the integral (m); ``body``: the body state follows;
+    ``gain`` (1/s) and ``speed_range`` (m/s): the integral also offsets a residual's base gait
+    by ``gain * I`` and is held where that gait stays within the library's speeds
+    (:class:`~.speed_integral.IntegralConfig`; None: not held, as in the policies trained
+    before the gate, whose checkpoints record none)."""
 
     dt: float
     limit: float = DEFAULT_LIMIT
     body: bool = False
+    gain: float = 0.0
+    speed_range: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (self.dt > 0.0 and self.limit > 0.0):
             raise ValueError(f"memory dt and limit must be > 0, got {self.dt}, {self.limit}")
+        if self.speed_range is not None:  # a checkpoint's JSON-like info holds a list
+            object.__setattr__(self, "speed_range", tuple(float(v) for v in self.speed_range))
+        self.integral_config()  # raises for a bad gain or range
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+    def integral_config(self) -> IntegralConfig:
+        """The configuration of the memory's :class:`~.speed_integral.SpeedIntegral`."""
+        return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range)
 
     @classmethod
     def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False) -> "MemoryConfig":
@@ -54,22 +79,22 @@ class MemoryConfig:
         return cls(decision_dt(decision_period), limit, body)
 
     @classmethod
-    def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0) -> "MemoryConfig | None":
+    def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0,
+                     speed_range: tuple[float, float] | None = None) -> "MemoryConfig | None":
         """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's.
         ``integral_gain`` > 0 (1/s): its integral also offsets a residual's base gait by
         ``integral_gain * I`` m/s, so I is bounded by
-        :func:`~.speed_integral.integral_limit` (the offset within +-0.2 m/s)."""
-        if features not in FEATURES:
-            raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
-        if features == "body" and not decision_period:
-            raise ValueError("features 'body' (the body state inside the step) needs a decision period > 0")
+        :func:`~.speed_integral.integral_limit` (the offset within +-0.2 m/s) and held where
+        the base gait would leave ``speed_range`` (m/s: the library's speeds; needed with a gain)."""
+        check_features(features, decision_period, integral_gain)
         if features == "paper":
-            if integral_gain:
-                raise ValueError("an integral gain offsets the base gait by the memory's integral: it needs "
-                                 "features memory or body")
             return None
-        limit = integral_limit(integral_gain) if integral_gain else DEFAULT_LIMIT
-        return cls.for_period(decision_period, limit, body=features == "body")
+        if not integral_gain:
+            return cls.for_period(decision_period, DEFAULT_LIMIT, body=features == "body")
+        if speed_range is None:
+            raise ValueError("a memory whose integral offsets the base gait needs the library's speed range")
+        return cls(decision_dt(decision_period), integral_limit(integral_gain), features == "body", integral_gain,
+                   speed_range)
 
 
 class SpeedMemory:
@@ -78,7 +103,7 @@ class SpeedMemory:
 
     def __init__(self, config: MemoryConfig) -> None:
         self.config = config
-        self._integral = SpeedIntegral(IntegralConfig(limit=config.limit, dt=config.dt))
+        self._integral = SpeedIntegral(config.integral_config())
         self.reset()
 
     @property
@@ -97,7 +122,7 @@ class SpeedMemory:
         paper = np.asarray(paper, dtype=float)
         if self.config.body and (body is None or len(body) != N_BODY):
             raise ValueError(f"this policy needs the body state ({N_BODY} numbers) with each observation")
-        parts = [paper, [self._integral.update(paper[2])], self.last_action] + ([np.asarray(body, dtype=float)] if self.config.body else [])
+        parts = [paper, [self._integral.update(paper[2], paper[0])], self.last_action] + ([np.asarray(body, dtype=float)] if self.config.body else [])
         return np.concatenate(parts)
 
     def record(self, normalised_action: np.ndarray) -> None:

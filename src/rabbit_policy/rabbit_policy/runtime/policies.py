@@ -62,7 +62,8 @@ class LibraryPolicy:
     ``interpolate``); the measured speeds are not used. With ``integral_gain`` > 0 (1/s)
     the gait is the one for ``v_d + integral_gain * I``, I the integral of the mean speed
     error (:mod:`.speed_integral`: Westervelt's event-based integral, updated every ``dt``
-    s, the offset within +-``offset_limit`` m/s); :meth:`reset` zeroes it for a new walk."""
+    s, the offset within +-``offset_limit`` m/s and I held where ``v_d + integral_gain * I``
+    would leave the library's speeds); :meth:`reset` zeroes it for a new walk."""
 
     def __init__(self, library: GaitLibrary, mode: str = "nearest", integral_gain: float = 0.0, dt: float = 0.02,
                  offset_limit: float = DEFAULT_OFFSET_LIMIT) -> None:
@@ -73,7 +74,8 @@ class LibraryPolicy:
         self.integral_gain = float(integral_gain)
         self.integral = None
         if integral_gain:
-            self.integral = SpeedIntegral(IntegralConfig(integral_limit(integral_gain, offset_limit), dt))
+            self.integral = SpeedIntegral(IntegralConfig(integral_limit(integral_gain, offset_limit), dt,
+                                                         integral_gain, library.speed_range))
         self.name = f"classic/{mode}" + (f"+integral{integral_gain:g}" if integral_gain else "")
 
     def reset(self) -> None:
@@ -84,7 +86,7 @@ class LibraryPolicy:
     def act(self, observation: Observation) -> GaitCommand:
         speed = observation.desired_speed
         if self.integral is not None:
-            speed += self.integral_gain * self.integral.update(observation.mean_error)
+            speed += self.integral_gain * self.integral.update(observation.mean_error, speed)
         gait = self.library.nearest(speed) if self.mode == "nearest" else self.library.interpolate(speed)
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
 
