@@ -3,7 +3,7 @@
 classic reference, measured once: the ablation's table.
 
     scripts/compare_policies.py docs/learning/a_es_moderate/best.pt docs/learning/b_es_moderate/best.pt \\
-        --names a b [--classic-integral 0.3] [--quick] [--workers 2] [--out runs/ablation_checks.json]
+        --names a b [--classic-integral 0.2] [--quick] [--workers 2] [--out runs/ablation_checks.json]
 
 For classic HZD (the calibrated library, every 20 ticks), each policy file and each
 ``--classic-integral`` gain (classic HZD with Westervelt's event-based speed integral, a
