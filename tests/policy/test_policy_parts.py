@@ -170,6 +170,7 @@ def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_af
 
 def test_the_speed_integral_is_held_where_the_gait_would_leave_the_library_range():
     """With a gain and the library's speed range, I stays where v_d + gain * I is inside it."""
+    from rabbit_policy.runtime.memory import MemoryConfig
     from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral
 
     ranged = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0, gain=0.5, speed_range=(0.7, 1.5)))
@@ -180,7 +181,6 @@ def test_the_speed_integral_is_held_where_the_gait_would_leave_the_library_range
     assert ranged.update(0.1, 0.7) == pytest.approx(0.1)
     free = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0))  # no range: the memory of older checkpoints
     assert free.update(0.9, 1.5) == pytest.approx(0.9)
-    from rabbit_policy.runtime.memory import MemoryConfig
 
     memory = MemoryConfig.for_features("memory", 20, 0.3, (0.7, 1.5))  # a residual's base gait: held in range
     assert memory.integral_config().speed_range == (0.7, 1.5)
