@@ -13,6 +13,8 @@ from rabbit_msgs_py.conversions import (
     alpha_to_msg,
     controller_id,
     joint_state_vectors,
+    phase_from_msg,
+    phase_to_msg,
     short,
     torques_from_msg,
     torques_to_msg,
@@ -53,6 +55,20 @@ def test_malformed_alpha_is_rejected(data, dims):
         alpha_from_msg(msg)
 
 
+def test_the_phase_round_trips_and_bad_phase_messages_are_refused():
+    from builtin_interfaces.msg import Time
+    from sensor_msgs.msg import JointState
+
+    msg = phase_to_msg(0.375, 2.25, Time(sec=1, nanosec=19_000_000), "right_foot")
+    assert (list(msg.name), msg.header.frame_id) == (["gait_phase"], "right_foot")
+    assert phase_from_msg(msg) == (1_019_000_000, 0.375, 2.25)
+    for bad in (JointState(name=["gait_phase"], position=[0.5], velocity=[]),
+                JointState(name=["phase"], position=[0.5], velocity=[1.0]),
+                JointState(name=["gait_phase"], position=[math.nan], velocity=[1.0])):
+        with pytest.raises(MessageError):
+            phase_from_msg(bad)
+
+
 def test_torque_replies_round_trip_in_any_joint_order_and_reject_bad_ones():
     from builtin_interfaces.msg import Time
     from sensor_msgs.msg import JointState
@@ -84,7 +100,7 @@ def test_joint_state_any_order():
 
 def test_topic_names_are_relative_unique_and_resolve_in_a_namespace():
     names = [v for k, v in vars(topics).items() if k.isupper()]
-    assert len(names) == len(set(names)) == 20  # 18 topics, 2 services
+    assert len(names) == len(set(names)) == 21  # 19 topics, 2 services
     assert not any(n.startswith("/") for n in names)  # relative: a node's namespace applies
     assert topics.resolve(topics.ALPHA) == "/hzd/alpha" and topics.resolve(topics.CMD_SPEED) == "/cmd_speed"
     assert topics.resolve(topics.JOINT_STATES, "/rabbit2") == "/rabbit2/joint_states"

@@ -17,6 +17,7 @@ from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.learning.warm_start import zero_residual_network
 from rabbit_policy.runtime.actions import ActionBounds, ResidualAction, policy_bounds
+from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import NetworkPolicy, RateLimitedPolicy, make_policy
@@ -33,6 +34,41 @@ def zero_residual_policy(features: str = "body", integral_gain: float = 0.0) -> 
     return NetworkPolicy(net, decision_period=20, memory=None if memory is None else SpeedMemory(memory),
                          residual=ResidualAction(LIBRARY, ActionBounds.from_library(LIBRARY),
                                                  integral_gain=integral_gain))
+
+
+def _state(pitch: float, pitch_rate: float, hip_velocity: float) -> tuple[list[float], list[float]]:
+    return [0.1, 0.8, pitch, 0.0, 0.0, 0.0, 0.0], [hip_velocity, 0.0, pitch_rate, 0.0, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.unit
+def test_the_body_state_buffer_waits_for_the_state_and_the_phase_before_it_in_any_order():
+    """policy_node's rule, as the loops': the state decided on, the phase computed on the
+    state before it; the parts may come in any order, a skipped phase is read at the newest
+    state before, a decision whose parts never come expires, a placement starts afresh."""
+    buffer = BodyStateBuffer(tick=10, horizon=5)
+    assert buffer.body_at(30) is None
+    buffer.add_phase(20, 0.25, 2.0)
+    buffer.add_phase(30, 0.27, 2.1)  # the phase on the state decided on is not the one used
+    assert buffer.body_at(30) is None  # the state is not in yet
+    buffer.add_state(30, *_state(0.05, -0.3, 1.1))
+    assert buffer.body_at(30) == (0.05, -0.3, 0.25, 2.0, 1.1)
+    buffer.add_state(40, *_state(0.06, -0.2, 1.2))
+    assert buffer.body_at(40) == (0.06, -0.2, 0.27, 2.1, 1.2)
+    buffer.add_state(60, *_state(0.07, -0.1, 1.3))  # the controller has not answered 50 yet: wait
+    assert buffer.body_at(60) is None and not buffer.expired(60)
+    buffer.add_phase(60, 0.31, 2.2)  # it skipped 50 (free-running) and answered 60: read at 40
+    assert buffer.body_at(60) == (0.07, -0.1, 0.27, 2.1, 1.3)
+    for stamp in range(70, 130, 10):  # the controller stops answering after 60
+        buffer.add_state(stamp, *_state(0.0, 0.0, 1.0))
+    assert buffer.body_at(80) is None and not buffer.expired(80)  # 4 ticks on
+    buffer.add_state(130, *_state(0.0, 0.0, 1.0))
+    assert buffer.expired(80) and not buffer.expired(90)  # 5 ticks on: given up
+    buffer.add_state(10, *_state(0.0, 0.0, 1.0))  # placed again
+    assert buffer.body_at(30) is None and buffer.body_at(10) is None
+    buffer.add_phase(0, 0.0, 0.0)
+    assert buffer.body_at(10) == (0.0, 0.0, 0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match="whole numbers"):
+        BodyStateBuffer(tick=0)
 
 
 @pytest.mark.sim
@@ -120,10 +156,11 @@ def test_the_body_observation_is_the_loops_state_and_the_residual_action_zero_is
 
 @pytest.mark.slow
 @pytest.mark.ros
-def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_and_policy_node_refuses(tmp_path):
+def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_policy_node_too(tmp_path):
     """Row d through train.py (its preset, one short generation): the checkpoint says its
     features, action and residual; the learned policy from it is the zero residual's
-    classic start moved by the trained residual; policy_node refuses it with one line."""
+    classic start moved by the trained residual; policy_node runs it (deciding every 20
+    ticks: once per step is refused with one line)."""
     out = tmp_path / "d"
     result = subprocess.run([sys.executable, "scripts/train.py", "--config", "config/train/ablation_d_es_moderate.yaml",
                              "--out", str(out), "--iterations", "1", "--pairs", "1", "--episodes", "1",
@@ -142,8 +179,12 @@ def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_and_policy_
     from ros_helpers import ros_context
 
     with ros_context() as (context, _executor):
+        node = PolicyNode(context=context, policy="learned", policy_file=str(out / "policy.pt"))
+        assert node.needs_body and node.decision_period == 20  # it builds the body state from the topics
+        assert node.count_publishers("/hzd/alpha") == 1
+        node.destroy_node()
         with pytest.raises(NodeStartError, match="reads the body state") as error:
-            PolicyNode(context=context, policy="learned", policy_file=str(out / "policy.pt"))
+            PolicyNode(context=context, policy="learned", policy_file=str(out / "policy.pt"), decision_period=0)
     assert "\n" not in str(error.value)
 
 

@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray
+from std_msgs.msg import Float64, Float64MultiArray, Header
 from std_srvs.srv import Trigger
 
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
@@ -77,10 +77,11 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
             assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
 
 
-def _residual_integral_policy_file(path) -> str:
-    """A learned policy of the final run's kind, saved as train.py saves one: memory inputs,
-    a residual on the library at v_d + 0.3 x the speed integral, and a small nonzero
-    residual (the last layer perturbed), so the network's output matters."""
+def _residual_integral_policy_file(path, features: str = "memory") -> str:
+    """A learned policy of the final run's kind, saved as train.py saves one: memory inputs
+    (or ``body``: the body state too), a residual on the library at v_d + 0.3 x the speed
+    integral, and a small nonzero residual (the last layer perturbed, and for ``body`` the
+    weights of the body inputs), so the network's output and those inputs matter."""
     import torch
 
     from rabbit_policy.learning.warm_start import zero_residual_network
@@ -88,13 +89,17 @@ def _residual_integral_policy_file(path) -> str:
     from rabbit_policy.runtime.memory import INPUTS, MemoryConfig
     from rabbit_policy.runtime.network import PolicyCheckpoint
 
-    bounds = policy_bounds("residual", GaitLibrary.load())
-    net = zero_residual_network(bounds.low, bounds.high, INPUTS["memory"], seed=5)
+    library = GaitLibrary.load()
+    bounds = policy_bounds("residual", library)
+    net = zero_residual_network(bounds.low, bounds.high, INPUTS[features], seed=5)
     with torch.no_grad():
         net.body[-1].bias.uniform_(-0.05, 0.05, generator=torch.Generator().manual_seed(5))
+        if features == "body":  # the last layer reads the hidden units, which read the five body inputs
+            net.body[-1].weight.uniform_(-0.02, 0.02, generator=torch.Generator().manual_seed(6))
     PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high,
-                     {"features": "memory", "action": "residual", "residual_scale": list(RESIDUAL_SCALE),
-                      "integral_gain": 0.3, "memory": MemoryConfig.for_features("memory", 20, 0.3, GaitLibrary.load().speed_range).to_dict(),
+                     {"features": features, "action": "residual", "residual_scale": list(RESIDUAL_SCALE),
+                      "integral_gain": 0.3,
+                      "memory": MemoryConfig.for_features(features, 20, 0.3, library.speed_range).to_dict(),
                       "config": {"decision_period": 20}}).save(path)
     return str(path)
 
@@ -120,6 +125,28 @@ def test_lockstep_runs_a_learned_memory_policy_on_the_speed_integral_as_the_ros_
     memory = nodes["policy_node"].policy.memory
     assert memory.integral > 0.0  # too slow on drives: the base gait was offset upwards
     assert nodes["hzd_controller_node"].decisions_timed_out == 0
+
+
+@pytest.mark.slow
+def test_lockstep_runs_a_body_state_policy_as_the_ros_free_loop(tmp_path):
+    """Row c/d's kind of policy through the stack: policy_node builds the body state of each
+    decision from /joint_states (torso pitch and rate, hip velocity of the state decided on)
+    and /hzd/phase (the controller's phase on the state before), and lockstep publishes
+    every state of the ROS-free loop bit for bit, through a speed change."""
+    path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
+    policy = make_policy("learned", policy_file=path)
+    assert policy.needs_body
+    schedule = ((0.0, 1.0), (1.0, 1.3))
+    reference = _reference(2.0, policy=policy, scenario=Scenario(schedule=schedule))
+    config = StackConfig(duration=2.0, schedule=schedule, controller="learned", policy_file=path)
+    states: list = []
+    report, nodes = run_in_process(config, observers=[_recorder(states)])
+    assert report.completed and not report.fell
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert unique.shape == reference.shape and np.array_equal(unique, reference)
+    node = nodes["policy_node"]
+    assert node.decisions_given_up == 0 and node.last_observation.body is not None
+    assert nodes["hzd_controller_node"].decisions_waited == 2000 // 20
 
 
 @pytest.mark.slow
@@ -799,3 +826,56 @@ def context_node(context):
     import rclpy
 
     return rclpy.create_node("reset_publisher", context=context)
+
+
+def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_up_logged(tmp_path):
+    """A controller that publishes no /hzd/phase (another one, or none): policy_node keeps
+    running, gives each due decision up once states 50 ticks newer are in (counted, logged)
+    and decides again as soon as the phase comes."""
+    from geometry_msgs.msg import TwistStamped
+
+    from rabbit_msgs_py.conversions import phase_to_msg, stamp_from_ns
+    from rabbit_msgs_py.joints import JOINT_NAMES
+
+    path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
+    with ros_context() as (context, executor):
+        policy = PolicyNode(context=context, policy="learned", policy_file=path)
+        user = context_node(context)
+        hip = user.create_publisher(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
+        states = user.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        phase = user.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
+        for node in (policy, user):
+            executor.add_node(node)
+        assert spin_until(executor, lambda: all(user.count_subscribers("/" + topic) == 1 for topic in
+                                                (topics.HIP_VELOCITY, topics.JOINT_STATES, topics.PHASE)))
+        assert policy.decisions == 1  # the start
+
+        def send(tick: int, with_phase: bool) -> None:
+            stamp = stamp_from_ns(tick * 1_000_000)
+            if with_phase:  # the controller's phase on the state before
+                phase.publish(phase_to_msg(0.5, 2.0, stamp_from_ns((tick - 1) * 1_000_000), "left_foot"))
+            states.publish(JointState(header=Header(stamp=stamp), name=list(JOINT_NAMES),
+                                      position=[0.1 * tick / 1000, 0.8, 0.05, 0.2, 0.3, -0.2, 0.4],
+                                      velocity=[1.0, 0.0, -0.1, 0.0, 0.0, 0.0, 0.0]))
+            msg = TwistStamped()
+            msg.header.stamp = stamp
+            msg.twist.linear.x = 1.0
+            hip.publish(msg)
+
+        def taken(tick: int) -> bool:  # each state taken before the next is sent: none dropped
+            return policy.body.newest_state == policy.clock.newest == tick * 1_000_000
+
+        for tick in range(1, 80):
+            send(tick, with_phase=False)
+            assert spin_until(executor, lambda: taken(tick))
+        assert spin_until(executor, lambda: policy.decisions_given_up >= 1)
+        assert policy.decisions == 1 and len(policy._awaiting) >= 1  # 40 and 60 wait, 20 was given up
+        for tick in range(80, 130):
+            send(tick, with_phase=True)
+            assert spin_until(executor, lambda: taken(tick) and policy.body.newest_phase == (tick - 1) * 1_000_000)
+        assert spin_until(executor, lambda: policy.decisions >= 2)  # 100 and 120 decided on their body state
+        assert policy.last_observation.body == (0.05, -0.1, 0.5, 2.0, 1.0)
+        assert policy.decisions_given_up == 3  # 20, 40 and 60: no phase within 50 ticks before them
+        for node in (policy, user):
+            executor.remove_node(node)
+            node.destroy_node()

@@ -106,7 +106,8 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
               "--episodes", "2", "--max-steps", "4", "--no-progress", "--checkpoint-every", "1",
               "--warm-start", "none", "--decision-period", "0", "--distribution", "paper"]
     # the warm start has tests of its own (test_env); here it only costs time
-    straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2")
+    straight = run_script(*common, "--out", str(tmp_path / "a"), "--iterations", "2", "--eval-every", "2",
+                          "--keep-evaluated")
     assert straight.returncode == 0, straight.stderr
     log = read_csv(tmp_path / "a" / "log.csv")
     assert [int(r["iteration"]) for r in log] == [1, 2]
@@ -118,6 +119,10 @@ def test_train_es_logs_checkpoints_and_resumes_exactly(tmp_path):
     assert 0 <= int(evals[0]["failures"]) <= 15 and evals[0]["passed"] in ("True", "False")
     best = PolicyCheckpoint.load(tmp_path / "a" / "best.pt").info  # the starting network is only a baseline
     assert best["iteration"] == 2 and best["acceptance"]["failures"] == int(evals[1]["failures"])
+    kept = sorted(p.name for p in (tmp_path / "a" / "evaluated").iterdir())  # --keep-evaluated: each one
+    assert kept == ["00000.pt", "00002.pt"]
+    assert [PolicyCheckpoint.load(tmp_path / "a" / "evaluated" / name).info["acceptance"]["failures"]
+            for name in kept] == [int(r["failures"]) for r in evals]
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert summary["info"]["algorithm"] == "es" and summary["info"]["parameters"] == 633
     scalars = tensorboard_scalars(tmp_path / "a" / "tb")  # the same numbers, against env steps

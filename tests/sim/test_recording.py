@@ -71,6 +71,8 @@ def test_bag_holds_every_message_the_stack_published(recorded):
     assert counts["/joint_torques"] == controller.torques_published + controller.replies_repeated
     assert counts["/push_applied"] == (2 if compression == "zstd" else 0)  # start and end of the push
     assert counts["/hzd/alpha"] == nodes["policy_node"].decisions
+    # the phase goes out while anyone subscribes: recorded from when the controller saw the recorder
+    assert 0 < counts["/hzd/phase"] <= controller.torques_published
     assert counts["/cmd_speed"] == 2 and counts["/fallen"] >= 1
     # types as documented, timestamps monotonic per topic
     types = {topic: schema for topic, _t, _m, schema in messages}

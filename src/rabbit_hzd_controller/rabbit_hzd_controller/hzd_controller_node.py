@@ -5,8 +5,9 @@ Subscribes ``/joint_states`` and the gait (``/hzd/alpha``, ``/hzd/kd``, transien
 controller started late gets the gait in force); publishes on ``/joint_torques`` one reply
 per distinct state (sensor_msgs/JointState: the four ``ACTUATED_JOINTS`` and their torques
 in ``effort``, ``header.stamp`` = the stamp of the state answered, ``header.frame_id`` = this
-controller instance's id, :attr:`HZDControllerNode.source`) and ``/hzd/step`` at each
-touchdown.
+controller instance's id, :attr:`HZDControllerNode.source`), ``/hzd/step`` at each
+touchdown and, while anyone subscribes, ``/hzd/phase`` (the gait phase and its rate on each
+state answered, before the reply: what a body-state policy reads).
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
 the ROS-free loop runs.
 
@@ -57,6 +58,7 @@ from rabbit_msgs_py.conversions import (
     alpha_from_msg,
     controller_id,
     joint_state_vectors,
+    phase_to_msg,
     short,
     stamp_to_ns,
     torques_to_msg,
@@ -155,6 +157,7 @@ class HZDControllerNode(Node):
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
         self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
+        self._phase_pub = self.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
@@ -381,6 +384,9 @@ class HZDControllerNode(Node):
         self._last_state = (q, dq)
         if controller.touchdown:  # before the reply: the policy has it before the states that follow
             self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))
+        if self._phase_pub.get_subscription_count():  # only for someone reading it (a body-state policy)
+            self._phase_pub.publish(phase_to_msg(controller.tau, controller.tau_rate, msg.header.stamp,
+                                                 FOOT_FRAMES[controller.stance]))
         torque_msg = self._torque_msg
         torque_msg.header.stamp = msg.header.stamp
         torque_msg.effort = torques

@@ -111,6 +111,30 @@ def torques_from_msg(msg: JointState) -> tuple[int, str, list[float]]:
     return stamp_to_ns(msg.header.stamp), msg.header.frame_id, data
 
 
+PHASE_JOINT = "gait_phase"
+
+
+def phase_to_msg(tau: float, tau_rate: float, stamp: Time, stance_foot: str) -> JointState:
+    """The controller's gait phase ``tau`` (1) and its rate (1/s) on the state stamped
+    ``stamp`` -> ``/hzd/phase`` (one joint ``gait_phase``; ``frame_id`` the stance foot)."""
+    msg = JointState(name=[PHASE_JOINT], position=[float(tau)], velocity=[float(tau_rate)])
+    msg.header.stamp = stamp
+    msg.header.frame_id = stance_foot
+    return msg
+
+
+def phase_from_msg(msg: JointState) -> tuple[int, float, float]:
+    """``/hzd/phase`` -> (stamp of the state in ns, tau, d tau/dt in 1/s); raises
+    :class:`MessageError` if malformed."""
+    if list(msg.name) != [PHASE_JOINT] or len(msg.position) != 1 or len(msg.velocity) != 1:
+        raise MessageError(f"a phase message names one joint {PHASE_JOINT!r} with one position and one velocity, "
+                           f"got names {short(list(msg.name), 60)}")
+    tau, rate = float(msg.position[0]), float(msg.velocity[0])
+    if not (math.isfinite(tau) and math.isfinite(rate)):
+        raise MessageError("phase contains NaN or infinite values")
+    return stamp_to_ns(msg.header.stamp), tau, rate
+
+
 def short(value: object, limit: int = 120) -> str:
     """A string as it is, anything else as ``repr``, on one line cut to ``limit`` characters:
     for log messages about bad input (:func:`rabbit_msgs_py.runtime.one_line`)."""

@@ -34,6 +34,14 @@ queues it). Parameters:
   ``decision_window`` ticks), as the paper evaluates its network. ``/hzd/gait_timing``
   tells the controller which (``at_once`` for periodic decisions).
 
+A policy that reads the body state inside the step (trained with features ``body``; it
+decides every N ticks) also subscribes ``/joint_states`` and ``/hzd/phase`` (the
+controller's phase, published while anyone subscribes): each due decision is held until the
+state it is made on and the controller's phase on the state before it are in
+(:class:`rabbit_policy.runtime.body.BodyStateBuffer`, the loops' rule: a lockstep stack runs
+it bit for bit as the ROS-free loop). A decision whose parts have not come within 50 ticks
+(a controller that publishes no phase) is given up with an error; the gait in force stays.
+
 NaN/inf commands are rejected with an error; the last good command stays in force.
 """
 
@@ -41,6 +49,8 @@ from __future__ import annotations
 
 import math
 import sys
+from collections import deque
+from dataclasses import replace
 
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -52,7 +62,7 @@ from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
-from rabbit_msgs_py.conversions import alpha_to_msg, stamp_to_ns
+from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_vectors, phase_from_msg, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
@@ -61,9 +71,11 @@ from rabbit_policy.runtime.policies import (
     GaitCommand,
     PolicyUnavailable,
     decision_period,
+    first_command,
     make_policy,
     reset_policy,
 )
+from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
 
@@ -126,10 +138,6 @@ class PolicyNode(Node):
                                       finite("max_command_step", values["max_command_step"], 0.0),
                                       None if values["decision_period"] == -1 else max(values["decision_period"], 0),
                                       finite("speed_integral", values["speed_integral"], 0.0))
-            if getattr(self.policy, "needs_body", False):
-                raise ValueError("this policy reads the body state inside the step (features body), which "
-                                 "policy_node does not build from the topics yet; run it in the ROS-free loops "
-                                 "(walk.py, evaluate.py)")
             if values["decision_period"] < -1:
                 raise ValueError(f"decision_period must be -1 (the policy's own), 0 or N > 0 ticks, "
                                  f"got {values['decision_period']}")
@@ -138,6 +146,10 @@ class PolicyNode(Node):
             if values["decision_window"] < 1:
                 raise ValueError(f"decision_window must be >= 1 tick, got {values['decision_window']}")
             self.decision_period = decision_period(self.policy)
+            self.needs_body = bool(getattr(self.policy, "needs_body", False))
+            if self.needs_body and not self.decision_period:
+                raise ValueError("this policy reads the body state inside the step and decides every N ticks; "
+                                 "decision_period 0 (once per step) cannot run it")
             # when to decide and over which samples: the closed loop's rule (stamps in ns)
             self.clock = DecisionClock(self.decision_period,
                                        values["decision_window"] if self.decision_period else values["window"],
@@ -163,7 +175,15 @@ class PolicyNode(Node):
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
         self._placements = 0
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        self._decide(Observation(self.desired_speed, self.desired_speed, 0.0))  # the start: on the command
+        # a body-state policy: the state and the controller's phase, its decisions held until both are in
+        self.body: BodyStateBuffer | None = None
+        self._awaiting: deque[tuple[int, Observation]] = deque()
+        self.decisions_given_up = 0
+        if self.needs_body:
+            self.body = BodyStateBuffer(TICK_NS)
+            self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
+            self.create_subscription(JointState, topics.PHASE, self._on_phase, qos.STREAM_QOS)
+        self._publish(first_command(self.policy, self.desired_speed))  # the start: on the command
         self.get_logger().info(
             f"policy {self.policy.name}: {self.desired_speed:.2f} m/s; "
             f"send speeds on {self.resolve_topic_name(topics.CMD_SPEED)}"
@@ -201,6 +221,7 @@ class PolicyNode(Node):
         walk of the ROS-free loop does (its first placement is the start: nothing to forget)."""
         if msg.data > 1 and msg.data != self._placements:
             reset_policy(self.policy)
+            self._awaiting.clear()  # decisions of the walk before the placement
         self._placements = msg.data
 
     def _on_cmd_speed(self, msg: Float64) -> None:
@@ -221,22 +242,73 @@ class PolicyNode(Node):
         self.desired_speed = speed
 
     def _on_hip_velocity(self, msg: TwistStamped) -> None:
+        stamp = stamp_to_ns(msg.header.stamp)
         try:
-            due = self.clock.sample(stamp_to_ns(msg.header.stamp), msg.twist.linear.x, self.desired_speed)
+            due = self.clock.sample(stamp, msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
             self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}",
                                     throttle_duration_sec=1.0)
             return
-        for observation in due:
-            self._decide(observation)
+        if self.body is None:
+            for observation in due:
+                self._decide(observation)
+            return
+        if self._awaiting and stamp < self._awaiting[-1][0]:
+            self._awaiting.clear()  # placed again: those were the last walk's
+        self._awaiting.extend((stamp, observation) for observation in due)
+        self._decide_awaiting()
+
+    def _on_joint_state(self, msg: JointState) -> None:
+        """Body-state policies: torso pitch, its rate and the hip velocity of each state."""
+        try:
+            q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
+        except MessageError as exc:
+            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
+                                    throttle_duration_sec=1.0)
+            return
+        self.body.add_state(stamp_to_ns(msg.header.stamp), q, dq)
+        self._decide_awaiting()
+
+    def _on_phase(self, msg: JointState) -> None:
+        """Body-state policies: the controller's phase on each state it answered."""
+        try:
+            stamp, tau, rate = phase_from_msg(msg)
+        except MessageError as exc:
+            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.PHASE)}: {exc}",
+                                    throttle_duration_sec=1.0)
+            return
+        self.body.add_phase(stamp, tau, rate)
+        self._decide_awaiting()
+
+    def _decide_awaiting(self) -> None:
+        """Decide, in order, the due decisions whose body state is complete; one whose state
+        or phase never comes (states ``horizon`` ticks newer are in) is given up, logged:
+        the gait in force stays."""
+        while self._awaiting:
+            stamp, observation = self._awaiting[0]
+            body = self.body.body_at(stamp)
+            if body is None and not self.body.expired(stamp):
+                return
+            self._awaiting.popleft()
+            if body is None:
+                self.decisions_given_up += 1
+                self.get_logger().error(
+                    f"no body state for the decision at t = {stamp / 1e9:.3f} s (is the controller publishing "
+                    f"{self.resolve_topic_name(topics.PHASE)}?); keeping the gait in force",
+                    throttle_duration_sec=2.0)
+                continue
+            self._decide(replace(observation, body=body))
 
     def _on_step(self, msg: Header) -> None:
         for observation in self.clock.switch(stamp_to_ns(msg.stamp), self.desired_speed):
             self._decide(observation)
 
     def _decide(self, observation: Observation) -> None:
-        command: GaitCommand = self.policy.act(observation)
         self.last_observation = observation
+        self._publish(self.policy.act(observation))
+
+    def _publish(self, command: GaitCommand) -> None:
+        """Publish a gait (alpha, Kd) and the initial state on it."""
         self._alpha_pub.publish(alpha_to_msg(command.alpha))
         self._kd_pub.publish(Float64(data=float(command.kd)))
         self.decisions += 1

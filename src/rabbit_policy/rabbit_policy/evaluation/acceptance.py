@@ -16,9 +16,9 @@ from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
 
-from rabbit_policy.experiment.loop import first_command, walk
+from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.runtime.policies import Policy, first_command
 from rabbit_sim.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))

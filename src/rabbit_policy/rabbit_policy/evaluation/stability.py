@@ -35,9 +35,9 @@ from rabbit_hzd_controller.controller import HZDController, Leg
 from rabbit_sim.model import ModelOptions
 
 from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
-from rabbit_policy.runtime.policies import Policy
+from rabbit_policy.runtime.policies import Policy, first_command
 from rabbit_policy.runtime.speed_window import Observation
-from rabbit_policy.experiment.loop import ClosedLoop, first_command
+from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
 
 STANCE_JOINTS = {Leg.LEFT: (3, 4, 5, 6), Leg.RIGHT: (5, 6, 3, 4)}  # stance hip, knee, swing hip, knee

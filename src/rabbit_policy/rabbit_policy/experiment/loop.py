@@ -39,7 +39,7 @@ from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.body import body_state
-from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period, reset_policy
+from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period, first_command, reset_policy
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
@@ -47,13 +47,6 @@ from rabbit_sim.simulation import Simulator
 
 Observer = Callable[["ClosedLoop", Sequence[float]], None]
 """Called after every tick with the loop and the torques applied (N m)."""
-
-
-def first_command(policy: Policy, speed: float) -> GaitCommand:
-    """The gait a policy starts on at ``speed`` m/s: its ``start_command`` if it has one
-    (a policy that reads the body state), else its answer to (v, v, 0)."""
-    start = getattr(policy, "start_command", None)
-    return start(speed) if start is not None else policy.act(Observation(speed, speed, 0.0))
 
 
 class ClosedLoop:

@@ -25,6 +25,9 @@ Outputs in OUT:
   worker processes are killed); ``summary.json``: when a trained policy (iteration >= 1)
   first passed the acceptance (iteration, wall time, env steps), the best result, and
   whether the warm start alone passed.
+``evaluated/ITERATION.pt`` (with ``--keep-evaluated``): every evaluated policy, to choose
+among them afterwards on checks the acceptance does not run (the tracking acceptance alone
+picked policies that lost random sequences and push margin, docs/learning.md).
 ``--stop-when-passed`` ends training at the first passing evaluation of a trained policy.
 Deterministic for a given seed and worker count (ES: exactly, also across --resume; PPO:
 a resumed run starts fresh episodes).
@@ -63,6 +66,8 @@ class TrainingConfig:
     checkpoint_every: int = option(5, "write checkpoint.pt every N iterations (and on Ctrl-C/SIGTERM)")
     eval_every: int = option(5, "acceptance evaluation every N iterations, and of the start (0: never)")
     stop_when_passed: bool = option(False, "stop at the first trained policy that passes the evaluation")
+    keep_evaluated: bool = option(False, "also save every evaluated policy as OUT/evaluated/ITERATION.pt, to "
+                                         "choose among them later on broader checks (compare_policies.py)")
     warm_start: str = option("feedback", "fit the network to the classic library first "
                                          "(rabbit_policy.learning.warm_start; none: random weights)",
                              choices=("scheduled", "nearest", "interpolate", "feedback", "none"))
@@ -209,10 +214,13 @@ def train(args: TrainingConfig) -> int:
             warm_start_result["failures"] = result["failures"]
         elif result["passed"] and first_pass is None:
             first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
+        evaluated = PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result}))
         if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
             best = {**row, "rank": list(acceptance_rank(result))}
-            PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result})).save(
-                out / "best.pt")
+            evaluated.save(out / "best.pt")
+        if args.keep_evaluated:
+            (out / "evaluated").mkdir(exist_ok=True)
+            evaluated.save(out / "evaluated" / f"{trainer.iteration:05d}.pt")
         bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
                   f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
                   f"slowest reach {row['slowest_reach_s']} s)")

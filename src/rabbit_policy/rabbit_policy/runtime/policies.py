@@ -166,6 +166,14 @@ class PeriodicPolicy:
         return self.policy.act(observation)
 
 
+def first_command(policy: Policy, speed: float) -> GaitCommand:
+    """The gait a policy starts on at ``speed`` m/s (the loops and ``policy_node``): its
+    ``start_command`` if it has one (a policy that reads the body state), else its answer to
+    (v, v, 0)."""
+    start = getattr(policy, "start_command", None)
+    return start(speed) if start is not None else policy.act(Observation(speed, speed, 0.0))
+
+
 def reset_policy(policy: Policy | None) -> None:
     """Start a policy's walk afresh: a stateful one (memory, a rate limit) has ``reset``."""
     reset = getattr(policy, "reset", None)
