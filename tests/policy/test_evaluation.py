@@ -313,3 +313,37 @@ def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, messa
     out = run_script("scripts/compare_policies.py", *args, "--quick")
     assert out.returncode == 2 and message in out.stderr, out.stderr
     assert len(out.stderr.strip().splitlines()) <= 2  # argparse: usage + the error; ours: one line
+
+
+def test_the_selection_screen_uses_none_of_the_points_of_checks_1_to_6():
+    """A policy chosen on the screen is judged on checks 1-6 without having been chosen on them."""
+    from rabbit_policy.evaluation.acceptance import BroadCriteria
+    from rabbit_policy.evaluation.robustness import RobustnessConfig, random_sequences
+    from rabbit_policy.evaluation.selection import HELD_OUT
+
+    judged = RobustnessConfig()
+    assert not set(HELD_OUT.change_phases) & set(judged.change_phases)
+    assert not set(HELD_OUT.model_speeds) & set(judged.model_speeds)
+    assert {m.name for m in HELD_OUT.model_errors} == set(BroadCriteria().judged_models)
+    seeds = []
+    random_sequences(None, HELD_OUT, lambda _job, jobs: seeds.extend(j[1] for j in jobs) or [])
+    judged_seeds = []
+    random_sequences(None, judged, lambda _job, jobs: judged_seeds.extend(j[1] for j in jobs) or [])
+    assert len(seeds) == 30 and not set(seeds) & set(judged_seeds)
+    assert HELD_OUT.transition_speeds == judged.transition_speeds  # the same changes, at other phases
+
+
+@pytest.mark.slow
+def test_screen_policies_ranks_controllers_and_appends_their_lines(tmp_path):
+    out = tmp_path / "screen.jsonl"
+    result = run_script("scripts/screen_policies.py", "--classic", "--classic-integral", "0.2", "--quick",
+                        "--workers", "1", "--no-progress", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    lines = [json.loads(line) for line in out.read_text().splitlines()]
+    assert [r["controller"] for r in lines] == ["classic HZD", "classic + integral 0.2"]
+    for r in lines:  # the quick screen: 2 changes, 1 sequence, 1 model case
+        assert r["changes"].endswith("/2") and r["random"].endswith("/1") and r["models"].endswith("/1")
+        assert r["failures"] == len(r["changes_failed"]) + len(r["random_failed"]) + len(r["models_failed"])
+    ranked = result.stdout.split("best first")[1].splitlines()[1:]
+    assert len(ranked) == 2 and [int(line.split()[0]) for line in ranked] == sorted(r["failures"] for r in lines)
+    assert run_script("scripts/screen_policies.py").returncode == 2
