@@ -879,3 +879,31 @@ def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_u
         for node in (policy, user):
             executor.remove_node(node)
             node.destroy_node()
+
+
+@pytest.mark.slow
+def test_a_body_state_policy_walks_on_through_resets(tmp_path):
+    """Resets mid-step while a body-state decision may be waiting for its parts: policy_node
+    forgets the last walk's states, phases and waiting decisions, decides again on the new
+    walk's, and gives none up."""
+    path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
+    with ros_context() as (context, executor):
+        import rclpy
+
+        nodes = {"policy": PolicyNode(context=context, policy="learned", policy_file=path),
+                 "controller": HZDControllerNode(context=context), "sim": SimNode(context=context)}
+        for node in nodes.values():
+            executor.add_node(node)
+        sim, policy = nodes["sim"], nodes["policy"]
+        user = rclpy.create_node("resetter", context=context)
+        executor.add_node(user)
+        reset = user.create_client(Trigger, topics.RESET_SERVICE)
+        assert spin_until(executor, reset.service_is_ready)
+        for until in (0.35, 0.123, 0.261):  # mid-step, between decisions
+            assert spin_until(executor, lambda: sim.time >= until, timeout=30.0), f"stuck at t = {sim.time}"
+            decided = policy.decisions
+            assert _call(executor, reset, Trigger.Request()).success
+        assert spin_until(executor, lambda: sim.time >= 0.5, timeout=30.0), f"stuck at t = {sim.time}"
+        assert policy.decisions >= decided + 20  # every 20 ticks on the new walk
+        assert policy.decisions_given_up == 0 and not sim.fallen
+        assert policy.body.newest_state <= 0.6e9  # the new walk's states only
