@@ -2,22 +2,47 @@
 
 from __future__ import annotations
 
+import sys
 import time
+import weakref
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
 import rclpy
+from rclpy.node import Node
 
 from rabbit_msgs_py.runtime import make_executor
+
+# Every node the tests create, until destroyed: a node left alive stays in the test worker's
+# ROS domain for the rest of the session (nothing collects it in time), and every later
+# run_stack there refuses to start beside "another stack". ros_context checks its own.
+_LIVE_NODES: "weakref.WeakSet[Node]" = weakref.WeakSet()
+_node_init, _node_destroy = Node.__init__, Node.destroy_node
+
+
+def _tracked_init(self, *args, **kwargs) -> None:
+    _node_init(self, *args, **kwargs)
+    _LIVE_NODES.add(self)
+
+
+def _tracked_destroy(self) -> None:
+    _LIVE_NODES.discard(self)
+    _node_destroy(self)
+
+
+Node.__init__, Node.destroy_node = _tracked_init, _tracked_destroy
 
 
 @contextmanager
 def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> Iterator[tuple[object, object]]:
     """A fresh rclpy context and executor (in ``domain_id``, default the session's); nodes
-    added to it are destroyed afterwards."""
+    added to it are destroyed afterwards. A node of this context the test left alive
+    otherwise (taken off the executor, never added) is destroyed too, and the test fails
+    saying so (unless it failed already)."""
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     executor = make_executor(context, executor_kind)
+    left_alive: list[str] = []
     try:
         yield context, executor
     finally:
@@ -30,9 +55,15 @@ def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> 
                 finally:
                     executor.remove_node(node)
                     node.destroy_node()
+            for node in [n for n in list(_LIVE_NODES) if n.context is context]:
+                left_alive.append(node.get_fully_qualified_name())
+                node.destroy_node()
         finally:  # whatever happened above: no node of this test outlives it in the domain
             if context.ok():
                 rclpy.shutdown(context=context)
+        if left_alive and sys.exc_info()[0] is None:
+            raise AssertionError(f"nodes left alive by the test (destroy them, or keep them on the executor): "
+                                 f"{', '.join(left_alive)}")
 
 
 def _executors(executor) -> tuple:

@@ -15,7 +15,7 @@ from rabbit_msgs_py.runtime import NodeStartError
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_sim.sim_node import SimNode
 
-from ros_helpers import ros_context
+from ros_helpers import ros_context, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -99,6 +99,37 @@ def test_a_node_that_fails_to_start_leaves_the_ros_graph_at_once(tmp_path):
         finally:
             gc.enable()
         observer.destroy_node()
+
+
+def test_a_node_a_test_leaves_alive_is_destroyed_and_fails_the_test():
+    """A test took its policy node off the executor (so ros_context did not destroy it) and
+    never destroyed it: the node stayed in the xdist worker's domain for the rest of the
+    session (gc.freeze in run_in_process keeps it), and every later run_stack there refused
+    to start beside "another stack" (CI under load). ros_context now destroys every node of
+    its context and fails the test that left one; a node from another context is not
+    touched."""
+    import gc
+
+    import rclpy
+
+    with ros_context() as (other, _other_executor):
+        bystander = rclpy.create_node("bystander", context=other)
+        gc.disable()  # as when a traceback or gc.freeze keeps the node: only destroying it helps
+        try:
+            with pytest.raises(AssertionError, match="left alive by the test.*/policy_node"):
+                with ros_context() as (context, executor):
+                    left = PolicyNode(context=context)
+                    executor.add_node(left)
+                    executor.remove_node(left)  # off the executor: ros_context's own cleanup misses it
+            with ros_context() as (context, _executor):
+                observer = rclpy.create_node("observer", context=context)
+                assert wait_until(lambda: "bystander" in observer.get_node_names())
+                assert "policy_node" not in observer.get_node_names()
+                observer.destroy_node()
+        finally:
+            gc.enable()
+        assert bystander.get_name() == "bystander"  # still alive: not this context's
+        bystander.destroy_node()
 
 
 def test_integer_parameters_where_doubles_are_meant():
