@@ -3,7 +3,9 @@
 Every ROS process in the tests discovers on localhost only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set) and uses a domain ID of its own, so
 concurrent runs do not cross-talk; under pytest-xdist (``make test``: two workers) each worker
-takes the next domain ID after the session's random one.
+takes the next domain ID after the session's random one. A domain where some process already
+runs a node (a stack left running by hand, another checkout's tests) is passed over, said on
+stderr: worker k of N takes the first free one of k, k + N, k + 2N, ... after the random one.
 
 Layout: ``tests/{msgs,hzd_controller,sim,policy}/`` hold the tests of the ``rabbit_*`` package of
 that name (without the prefix: ``tests/rabbit_sim`` on the path would shadow the package); ``tests/`` itself
@@ -21,16 +23,19 @@ import os
 import random
 import shutil
 import subprocess
+import warnings
 
 import pytest
 
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
-ensure_localhost_discovery()
+ensure_localhost_discovery()  # before rclpy starts (ros_helpers imports it)
+from ros_helpers import free_domain  # noqa: E402
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
-if os.environ.get("PYTEST_XDIST_WORKER", "gw0") != "gw0":  # pytest -n N: a domain per worker
-    worker = int(os.environ["PYTEST_XDIST_WORKER"][2:])
-    os.environ["ROS_DOMAIN_ID"] = str((int(os.environ["ROS_DOMAIN_ID"]) - 1 + worker) % 101 + 1)
+_worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])  # pytest -n N: a domain per worker
+_workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
+_domain, _busy = free_domain((int(os.environ["ROS_DOMAIN_ID"]) - 1 + _worker) % 101 + 1, stride=_workers)
+os.environ["ROS_DOMAIN_ID"] = str(_domain)  # worker k takes k, k + N, k + 2N, ...: never another's
 
 KINDS = ("unit", "sim", "ros")
 
@@ -42,6 +47,16 @@ def pytest_collection_modifyitems(config, items):
         if len(kinds) != 1:
             raise pytest.UsageError(f"{item.nodeid}: give it one kind of {KINDS} (its module's pytestmark or "
                                     f"its own mark), not {sorted(kinds) or 'none'}")
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _say_which_domains_were_busy():
+    """A warning in the session's summary for each busy domain passed over (pytest, under
+    xdist too, shows no output from the time this file is imported)."""
+    for domain, users in _busy.items():
+        warnings.warn(f"ROS_DOMAIN_ID={domain} is in use ({', '.join(users[:4])}); this test process "
+                      f"uses {_domain}")
+    yield
 
 
 @pytest.fixture(scope="session")

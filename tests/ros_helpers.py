@@ -33,6 +33,45 @@ def _tracked_destroy(self) -> None:
 Node.__init__, Node.destroy_node = _tracked_init, _tracked_destroy
 
 
+def domain_users(domain_id: int, wait: float = 1.0) -> list[str]:
+    """The nodes other processes (or this one) run in ROS domain ``domain_id``, after up to
+    ``wait`` s of discovery (found ones end the wait early); empty if none."""
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    try:
+        node = rclpy.create_node("test_domain_probe", context=context)
+        try:
+            deadline = time.monotonic() + wait
+            while True:
+                found = sorted(f"{ns.rstrip('/')}/{name}" for name, ns in node.get_node_names_and_namespaces()
+                               if name != "test_domain_probe")
+                if found or time.monotonic() >= deadline:
+                    return found
+                time.sleep(0.1)
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+
+
+def free_domain(first: int, stride: int = 1, tries: int = 20, wait: float = 1.0) -> tuple[int, dict[int, list[str]]]:
+    """The first ROS domain from ``first`` on (``stride`` apart, within 1-101) where nobody
+    runs a node, and the busy ones passed over with their nodes. A session that shared its
+    domain with a stack someone else left running (a manual run, another checkout's tests)
+    saw extra transient-local messages in its bags and every run_stack refused to start
+    "beside another stack"; taking an empty domain at the start avoids that. After ``tries``
+    busy domains, the last one tried."""
+    skipped: dict[int, list[str]] = {}
+    domain = first
+    for _ in range(tries):
+        users = domain_users(domain, wait)
+        if not users:
+            break
+        skipped[domain] = users
+        domain = (domain - 1 + stride) % 101 + 1
+    return domain, skipped
+
+
 @contextmanager
 def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> Iterator[tuple[object, object]]:
     """A fresh rclpy context and executor (in ``domain_id``, default the session's); nodes

@@ -1,0 +1,31 @@
+"""The test session's ROS isolation: the domain each test process takes is one nobody uses."""
+
+import os
+
+import pytest
+import rclpy
+
+from ros_helpers import domain_users, free_domain
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+
+def test_the_session_passes_over_a_domain_someone_already_uses():
+    """A node another context runs in a domain (as a stack left running by hand would) makes
+    that domain busy: the chooser names the node and moves on, stride apart, within 1-101."""
+    ours = int(os.environ["ROS_DOMAIN_ID"])
+    busy = (ours - 1 + 50) % 101 + 1  # neither ours nor another worker's (ours +- 1)
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=busy)
+    try:
+        squatter = rclpy.create_node("left_running", context=context, namespace="/someone")
+        try:
+            assert domain_users(busy, wait=10.0) == ["/someone/left_running"]
+            domain, skipped = free_domain(busy, stride=3, tries=1, wait=3.0)
+            assert skipped == {busy: ["/someone/left_running"]}
+            assert domain == (busy + 2) % 101 + 1 and 1 <= domain <= 101
+        finally:
+            squatter.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert domain_users(ours, wait=0.5) == []  # this test process's own domain is its alone
