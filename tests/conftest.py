@@ -4,8 +4,8 @@ Every ROS process in the tests discovers on localhost only
 (ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST unless set) and uses a domain ID of its own, so
 concurrent runs do not cross-talk; under pytest-xdist (``make test``: two workers) each worker
 takes the next domain ID after the session's random one. A domain where some process already
-runs a node (a stack left running by hand, another checkout's tests) is passed over, said on
-stderr: worker k of N takes the first free one of k, k + N, k + 2N, ... after the random one.
+runs a node (a stack left running by hand, another checkout's tests) is passed over, with a
+warning in the session's summary: worker k of N takes the first free one of k, k + N, k + 2N, ... after the random one.
 
 Layout: ``tests/{msgs,hzd_controller,sim,policy}/`` hold the tests of the ``rabbit_*`` package of
 that name (without the prefix: ``tests/rabbit_sim`` on the path would shadow the package); ``tests/`` itself
