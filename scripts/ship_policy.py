@@ -23,6 +23,7 @@ ship on it).
 from __future__ import annotations
 
 import argparse
+import shlex
 import shutil
 import sys
 from pathlib import Path
@@ -64,15 +65,18 @@ def evaluation_table(results: list[tuple[str, dict]], criteria) -> list[str]:
     return lines
 
 
-def train_command(info: dict) -> str:
+def train_command(info: dict, keep_evaluated: bool = False) -> str:
     """The ``scripts/train.py`` command line that reproduces a checkpoint (deterministic
-    for the seed and worker count; ``best.pt`` also depends on ``--eval-every``)."""
+    for the seed and worker count; ``best.pt`` also depends on ``--eval-every``);
+    ``keep_evaluated``: it keeps every evaluated policy (a screened file is one of them)."""
     algo = info.get("algorithm")
     parts = ["scripts/train.py", "--algo", str(algo), "--seed", str(info.get("seed")), "--workers",
              str(info.get("workers")), "--warm-start", str(info.get("warm_start")), "--iterations",
              str(info.get("iteration"))]
     if info.get("eval_every") is not None:
         parts += ["--eval-every", str(info["eval_every"])]
+    if keep_evaluated:
+        parts.append("--keep-evaluated")
     from dataclasses import fields
 
     from rabbit_msgs_py.cli import config_flag
@@ -86,20 +90,100 @@ def train_command(info: dict) -> str:
     return " ".join(parts + ["--out", "runs/X"])
 
 
+def distribution_text(name: str) -> str:
+    """What an episode of the named training distribution draws (``learning.env.DISTRIBUTIONS``)."""
+    from rabbit_policy.learning.env import DISTRIBUTIONS
+
+    d = DISTRIBUTIONS[name]
+    if d.command_interval is None:
+        parts = ["v_d uniform in [0.7, 1.5] m/s, changed once"]
+    else:
+        parts = [f"a new command every {d.command_interval[0]:g}-{d.command_interval[1]:g} s"]
+    if d.push_probability:
+        parts.append(f"a push with probability {d.push_probability:g}, {d.min_impulse:g}-{d.max_impulse:g} N s "
+                     "either way at a random time")
+    if d.frictions != (None,):
+        parts.append("friction from " + ", ".join("packaged" if f is None else f"{f:g}" for f in d.frictions))
+    if d.torso_mass_scales != (1.0,):
+        parts.append("torso mass × " + ", ".join(f"{m:g}" for m in d.torso_mass_scales))
+    if d.variants != ("paper",):
+        parts.append("model variants " + ", ".join(d.variants))
+    if d.torque_delays != (0.0,):
+        parts.append("torque delays " + ", ".join(f"{1000 * t:g}" for t in d.torque_delays) + " ms")
+    if d.observation_noise:
+        parts.append(f"speed noise σ {d.observation_noise:g} m/s")
+    return f"the {name} distribution: " + "; ".join(parts)
+
+
+def network_text(info: dict) -> list[str]:
+    """The card's first paragraphs: the network's inputs, outputs and rates, from the
+    checkpoint's ``info`` (what :class:`~rabbit_policy.runtime.policies.NetworkPolicy` runs)."""
+    from rabbit_policy.runtime.memory import INPUTS
+
+    features, action = info.get("features", "paper"), info.get("action", "direct")
+    cfg, memory = info.get("config", {}), info.get("memory") or {}
+    period = cfg.get("decision_period")
+    n_in = INPUTS.get(features, 3)
+    output = info.get("output", "sigmoid")
+    averaged = ("the mean hip speed v and the mean speed error v_d − v over the last step's duration (m/s; a "
+                "moving average up to the decision)" if period else
+                "the last step's mean hip speed v and mean speed error v_d − v (m/s; touchdown to touchdown)")
+    inputs = [f"the commanded speed v_d (m/s), {averaged}"]
+    if features in ("memory", "body"):
+        inputs.append(f"the integral of the speed error (m, clamped to ±{memory.get('limit', 0.2):g}: anti-windup"
+                      + (f"; held where v_d + {memory['gain']:g} I would leave {memory['speed_range']} m/s"
+                         if memory.get("gain") and memory.get("speed_range") else "") + ")")
+        inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
+    if features == "body":
+        inputs.append("the body state at the decision: torso pitch (rad) and rate (rad/s), phase and its rate "
+                      "(1/s), hip velocity (m/s)")
+    if action == "residual":
+        gain = info.get("integral_gain", 0.0)
+        base = (f"the calibrated library's gait for v_d + {gain:g} I (classic HZD with Westervelt's event-based "
+                f"speed integral, gain {gain:g} 1/s)" if gain else "the calibrated library's gait for v_d (classic HZD)")
+        scale = info.get("residual_scale") or []
+        bound = (f"±{scale[0]:g} rad on each coefficient, ±{scale[-1]:g} N m s/rad on Kd" if scale else "bounded")
+        outputs = (f"a residual ({output} output, {bound}) added to {base}, the sum clipped to the direct bounds: "
+                   "a zero output is that classic controller")
+    else:
+        outputs = f"the 20 free Bezier coefficients (rad) and Kd (N m s/rad), {output} output scaled to the action bounds"
+    paper = "the paper's network" if n_in == 3 else f"the paper's network widened to {n_in} inputs"
+    return [
+        f"`hzd_rl_policy.pt`: {paper} ({n_in} → 12 → 12 → 12 → 21, tanh hidden layers, "
+        f"{info.get('parameters', 633)} parameters; features `{features}`, action `{action}`). "
+        "Loaded by default by `policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned`.", "",
+        "- inputs, in order: " + "; ".join(inputs) + ".",
+        f"- outputs: {outputs}.",
+        "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait blended in at once; "
+                       if period else "a decision once per step, for the next step; ")
+        + "the PD controller tracks it at 1 kHz.",
+        "- in the ROS stack: `policy_node` builds these inputs from `/cmd_speed`, `/hip_velocity` (1 kHz)"
+        + (", `/hzd/step`, `/joint_states` and `/hzd/phase`" if features == "body" else " and `/hzd/step`")
+        + ", keeping the memory itself (`rabbit_policy.runtime.memory.SpeedMemory`, the loops' own code); "
+        "it publishes `/hzd/alpha` and `/hzd/kd`.",
+    ]
+
+
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,
-               command: str = "", criteria=None) -> str:
-    """The card's markdown; ``criteria``: the tracking checks' (default: the full ones)."""
+               command: str = "", criteria=None, screened: str = "") -> str:
+    """The card's markdown; ``criteria``: the tracking checks' (default: the full ones);
+    ``screened``: the screen command that chose this file among a run's evaluated policies
+    (``train.py --keep-evaluated``; empty: the run's ``best.pt``)."""
     from rabbit_policy.evaluation.acceptance import Criteria
 
     criteria = criteria or Criteria()
     cfg = info.get("config", {})
+    if screened:
+        selected = f"runs/X/evaluated/{int(info.get('iteration', 0)):05d}.pt"
+        selection = (f" (this file is that run's `{selected.split('/', 2)[2]}`, chosen among every evaluated "
+                     f"iteration by the held-out screen: `{screened}`)")
+    else:
+        selected = "runs/X/best.pt"
+        selection = (" (this file is that run's `best.pt`: the evaluated iteration with the fewest failed "
+                     "acceptance checks)")
     lines = [
         "# HZD-RL policy shipped with rabbit_policy", "",
-        "`hzd_rl_policy.pt`: the paper's network (3 → 12 → 12 → 12 → 21, tanh, sigmoid output "
-        f"scaled to the action bounds, {info.get('parameters', 633)} parameters: 20 free Bezier "
-        "coefficients + Kd). Inputs: commanded speed, the last step's mean hip speed and mean "
-        "speed error (m/s). Output: the gait for the next step. Loaded by default by "
-        "`policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned`.", "",
+        *network_text(info), "",
         "## Training", "",
         f"- algorithm: **{info.get('algorithm')}**, seed {info.get('seed')}, workers {info.get('workers')}, "
         f"warm start from the classic gait library: {info.get('warm_start')}",
@@ -109,11 +193,8 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         "- environment: `RabbitHZD-v0` (one env step = "
         + (f"{cfg['decision_period']} ticks" if cfg.get("decision_period") else "one walking step")
         + f"; reward −(v̄ − v_d)² per step, fall penalty {cfg.get('fall_penalty', -10.0):g}; episodes: "
-        + ("the broad distribution (a command every 2-5 s, a push, model errors, torque delays)"
-           if cfg.get("distribution") == "broad" else "v_d uniform in [0.7, 1.5] m/s, changed once") + ")",
-        f"- regenerate: `{train_command(info)}`, then `scripts/ship_policy.py runs/X/best.pt` "
-        "(this file is that run's `best.pt`: the evaluated iteration with the fewest failed "
-        "acceptance checks)",
+        + distribution_text(cfg.get("distribution", "paper")) + ")",
+        f"- regenerate: `{train_command(info, bool(screened))}`, then `scripts/ship_policy.py {selected}`{selection}",
         f"- shipped with: `{command}`" if command else "",
         "", "## Acceptance 1-6 (the learning issue; ROS-free fast path, "
         "`rabbit_policy.evaluation.acceptance.broad_acceptance`)", "",
@@ -123,8 +204,6 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
          "measured so far; see docs/evaluation.md for the numbers and what was tried.") if broad else "",
         "", "## Tracking checks (9 speeds and the speed schedule)", "",
         *evaluation_table(results, criteria), "",
-        f"Decisions: every {cfg.get('decision_period')} ticks (1 ms), the gait blended in at once"
-        if cfg.get("decision_period") else "Decisions: once per step, for the next step", "",
     ]
     return "\n".join(lines)
 
@@ -155,6 +234,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--classic-integral", type=float, metavar="KI",
+                        help="also classic HZD with the event-based speed integral of this gain (1/s) in both "
+                             "tables (the base of a residual policy trained with --integral-gain KI)")
+    parser.add_argument("--screened", default="", metavar="COMMAND",
+                        help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
+                             "policies (train.py --keep-evaluated), for the card")
     add_backend_arguments(parser, progress=True)
     args = parser.parse_args(argv)
     if args.workers < 1:
@@ -178,14 +263,19 @@ def main(argv: list[str] | None = None) -> int:
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        (_, reference), (_, learned) = broad_comparison([("learned", policy)], args.quick, map_fn, log)
-        broad = [(f"HZD-RL ({info.get('algorithm')})", learned),
-                 ("classic HZD (calibrated library, every 20 ticks)", reference)]
+        integral = ([] if args.classic_integral is None else
+                    [(f"classic HZD + speed integral {args.classic_integral:g}",
+                      make_policy("classic", speed_integral=args.classic_integral))])
+        measured = dict(broad_comparison([("learned", policy), *integral], args.quick, map_fn, log))
+        broad = [(f"HZD-RL ({info.get('algorithm')})", measured["learned"]),
+                 ("classic HZD (calibrated library, every 20 ticks)", measured["classic"]),
+                 *[(name, measured[name]) for name, _ in integral]]
         log("tracking checks")
         results = [(f"HZD-RL ({info.get('algorithm')}, shipped)", acceptance(policy, criteria, map_fn=map_fn))]
         if not args.quick:  # the fast subset: the policy's own tracking table only
             for other in others:
-                results.append((f"HZD-RL ({other.checkpoint.info.get('algorithm')})",
+                other_info = other.checkpoint.info
+                results.append((f"HZD-RL ({other_info.get('algorithm')}, iteration {other_info.get('iteration')})",
                                 acceptance(other, criteria, map_fn=map_fn)))
             start = warm_start_policy(policy.checkpoint)
             if start is not None:
@@ -194,11 +284,13 @@ def main(argv: list[str] | None = None) -> int:
             for mode in ("nearest", "interpolate"):
                 results.append((f"classic HZD ({mode})", acceptance(make_policy("classic", mode=mode), criteria,
                                                                     map_fn=map_fn)))
+            for name, controller in integral:
+                results.append((name, acceptance(controller, criteria, map_fn=map_fn)))
     finally:
         map_fn.close()
         backend.close()
-    command = "scripts/ship_policy.py " + " ".join(argv if argv is not None else sys.argv[1:])
-    card = model_card(info, results, broad, command, criteria)
+    command = shlex.join(["scripts/ship_policy.py", *(argv if argv is not None else sys.argv[1:])])
+    card = model_card(info, results, broad, command, criteria, args.screened)
     print(card)
     if not broad[0][1]["passed"] and not args.allow_failing:
         print(f"error: the policy fails acceptance checks {', '.join(broad[0][1]['failed'])}; not shipped "

@@ -16,7 +16,8 @@ import torch
 
 from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.network import PolicyCheckpoint
+from rabbit_policy.runtime.memory import INPUTS
+from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
 from rabbit_policy.runtime.policies import LearnedPolicy, LibraryPolicy, make_policy, packaged_policy_file
 from rabbit_policy.experiment.loop import walk, walk_gait
 from rabbit_policy.experiment.result import Touchdown, WalkResult
@@ -178,7 +179,12 @@ def test_a_learned_policy_is_shipped_with_a_model_card():
     policy = make_policy("learned")
     assert isinstance(policy, LearnedPolicy)
     info = policy.checkpoint.info
-    assert info["algorithm"] in ("es", "ppo") and info["parameters"] == 633
+    assert info["algorithm"] in ("es", "ppo") and info["parameters"] == parameter_count(policy.net)
+    card = (path.parent / "MODEL_CARD.md").read_text()
+    inputs = INPUTS[info.get("features", "paper")]  # the card states the network the file holds
+    assert f"({inputs} → 12 → 12 → 12 → 21, tanh hidden layers, {info['parameters']} parameters; " in card
+    assert f"features `{info.get('features', 'paper')}`, action `{info.get('action', 'direct')}`" in card
+    assert "- inputs, in order: " in card and "- outputs: " in card and "- rates: " in card
 
 
 def _shipped_tracking() -> dict:
@@ -321,10 +327,11 @@ stop_workers(Broken(), Broken())
     assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
 
 
-def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_configuration():
-    """CleanRL-style configuration: train.py's options come from the config dataclasses, so
-    its defaults are the shipped run's, and the model card's regenerate command parses back
-    to the shipped checkpoint's trainer configuration."""
+def test_train_defaults_are_the_first_shipped_run_and_the_card_command_rebuilds_the_shipped_configuration():
+    """CleanRL-style configuration: train.py's options come from the config dataclasses. Its
+    defaults are the paper's network as first shipped (config/train/first_shipped_es.yaml:
+    the three inputs, direct coefficients), and the model card's regenerate command parses
+    back to the shipped checkpoint's trainer configuration."""
     import importlib.util
     import shlex
 
@@ -332,11 +339,12 @@ def test_train_defaults_are_the_shipped_run_and_its_card_command_rebuilds_its_co
     train = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(train)
     info = PolicyCheckpoint.load(packaged_policy_file()).info
-    defaults = train.parse_config(["--algo", info["algorithm"], "--out", "runs/X"])
-    shipped = {"features": "paper", "action": "direct", "integral_gain": 0.0, **info["config"]}  # trained before these options
-    assert defaults.trainer.to_dict() == shipped
-    assert (defaults.workers, defaults.warm_start, defaults.eval_every) == (info["workers"], info["warm_start"],
-                                                                           info["eval_every"])
+    defaults = train.parse_config(["--algo", "es", "--out", "runs/X"])
+    first = train.parse_config(["--config", str(ROOT / "config/train/first_shipped_es.yaml"), "--out", "runs/X"])
+    assert (defaults.trainer, defaults.workers, defaults.warm_start, defaults.eval_every) == (
+        first.trainer, first.workers, first.warm_start, first.eval_every)
+    assert (defaults.trainer.features, defaults.trainer.action) == ("paper", "direct")
+    shipped = {"features": "paper", "action": "direct", "integral_gain": 0.0, **info["config"]}  # older files lack these
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
     assert train.parse_config(shlex.split(command)).trainer.to_dict() == shipped
