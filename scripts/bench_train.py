@@ -6,12 +6,12 @@
 
 Prints one JSON object:
 * ``env_steps_per_s_per_core``: ``RabbitHZD-v0`` steps per second in one process with the
-  shipped decision rate (one step = 20 ticks = 20 ms of simulation; the paper's episodes),
+  decision rate of every policy shipped (one step = 20 ticks = 20 ms of simulation; the paper's episodes),
   the warm-started policy acting (network forward included), resets included;
   ``per_walking_step`` the same with one env step per walking step (0.4-0.7 s).
 * ``sim_seconds_per_s_per_core``: the same in simulated seconds per wall second.
 * ``pool_env_steps_per_s``: the same with ``--workers`` processes in parallel (all cores).
-* ``backends`` (unless ``--no-backends``): ES generations (the shipped configuration, shorter
+* ``backends`` (unless ``--no-backends``): ES generations (the first shipped configuration, shorter
   episodes: :data:`BENCH_ES`) on ``local`` and ``ray`` with 1 and 2 workers — env steps
   per second (the first generation, which builds each worker's environment, untimed),
   ``identical`` (the same parameters on every backend), Ray's start-up time (a private
@@ -19,7 +19,7 @@ Prints one JSON object:
   ``efficiency_2_workers`` (rate ratio over the ideal for the generation's 2 pairs + 1 tasks)
   and ``projection``: the wall time of the shipped policy's ES generations (its checkpoint's
   generations and env steps) on N cores, from those figures (ceil(tasks/N) waves each).
-* with ``--train``: runs ``scripts/train.py`` with the shipped configuration (:data:`CONFIGS`)
+* with ``--train``: runs ``scripts/train.py`` with the first shipped configuration (:data:`CONFIGS`)
   for ``--max-iterations`` into a temporary directory, then the acceptance checks 1-6
   (``broad_acceptance``, the full evaluation) on its ``best.pt``; reports the training wall
   time, env steps, ``passes_1_6`` and the failed checks, and ``time_to_pass_1_6_s`` (the
@@ -45,7 +45,7 @@ from rabbit_policy.parallel import LocalBackend, add_backend_arguments, backend_
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The configurations of the shipped ES policy (see its model card) and of the PPO result
+# The configurations of the first shipped ES policy (config/train/first_shipped_es.yaml) and of the PPO result
 # reported beside it: warm start with speed feedback, decisions every 20 ticks, the broad
 # episode distribution.
 COMMON = ["--warm-start", "feedback", "--decision-period", "20", "--distribution", "broad", "--max-steps", "500",
@@ -87,7 +87,7 @@ def env_throughput(steps: int, seed: int = 0, decision_period: int = 20) -> tupl
     return steps / wall, (sim_time + episode_start) / wall
 
 
-# Throughput workload: the shipped ES configuration (see the packaged model card) with fewer
+# Throughput workload: the first shipped ES configuration (first_shipped_es.yaml: the paper's network) with fewer
 # pairs and shorter episodes, so that each backend's measurement takes seconds.
 BENCH_ES = {"pairs": 4, "episodes": 2, "max_steps": 500, "decision_period": 20, "distribution": "broad",
             "fall_penalty": -50.0, "seed": 0}

@@ -78,6 +78,31 @@ def test_walk_return_map_fixed_point_and_classic_stability():
     assert 0.2 < result.analysis.magnitudes.max() < 1.0  # stable, and not trivially so
 
 
+@pytest.mark.parametrize("controller", ["learned", "classic + integral"])
+def test_the_map_of_a_policy_with_memory_is_a_function_of_its_coordinates(controller):
+    """A policy that keeps a memory (the shipped one: the speed-error integral and the last
+    action; classic with the speed integral) advances it at every decision. The return map
+    restores it with the state, so the same coordinates map to the same next state however
+    often they are evaluated, and the caller's policy is not touched. Before, the memory ran
+    on across evaluations: a Poincaré test of the shipped policy stalled at 0.7 m/s in one
+    run and reported |λ| 0.32 in another."""
+    import pickle
+
+    policy = make_policy("learned") if controller == "learned" else make_policy("classic", speed_integral=0.2)
+    memory = policy.memory if controller == "learned" else policy.policy.integral  # in its PeriodicPolicy
+    assert memory is not None
+    before = pickle.dumps(memory)
+    step = WalkReturnMap(policy, 1.0, feedback=True, settle_steps=10)
+    x = step.natural_states(2)[-1]
+    nudged = x.copy()
+    nudged[1] += 0.02  # stance hip (rad)
+    first = step(nudged)
+    for _ in range(3):
+        step(x)
+    assert np.array_equal(step(nudged), first)
+    assert pickle.dumps(memory) == before
+
+
 def test_the_learned_policy_map_has_memory_coordinates():
     step = WalkReturnMap(make_policy("learned"), 1.0, feedback=True)
     x = step.natural_states(3)[-1]
@@ -347,3 +372,22 @@ def test_screen_policies_ranks_controllers_and_appends_their_lines(tmp_path):
     ranked = result.stdout.split("best first")[1].splitlines()[1:]
     assert len(ranked) == 2 and [int(line.split()[0]) for line in ranked] == sorted(r["failures"] for r in lines)
     assert run_script("scripts/screen_policies.py").returncode == 2
+
+
+def test_the_ablation_keeps_a_controller_measured_again_with_other_results(tmp_path):
+    """load_comparisons: classic HZD once; a name that another file measured with the same
+    results once; with other results a column of its own (nothing dropped silently)."""
+    from rabbit_policy.evaluation.report import load_comparisons
+
+    stored = json.loads((ROOT / "docs/learning/ablation_checks_1_6_quick.json").read_text())
+    name = next(n for n in stored["results"] if n != "classic HZD")
+    again, other = tmp_path / "again.json", tmp_path / "other.json"
+    again.write_text(json.dumps(stored))
+    changed = json.loads(json.dumps(stored))
+    changed["results"][name]["passed"] = not changed["results"][name]["passed"]
+    changed["results"][name]["checks"]["1_speed_grid"]["passed"] ^= True
+    other.write_text(json.dumps(changed))
+    columns = load_comparisons([ROOT / "docs/learning/ablation_checks_1_6_quick.json", again, other])
+    assert list(columns).count("classic HZD") == 1 and name in columns
+    assert f"{name} (other)" in columns and f"{name} (again)" not in columns
+    assert columns[f"{name} (other)"]["source"] == str(other)

@@ -241,8 +241,10 @@ def acceptance_section(verdicts: dict) -> list[str]:
 
 def load_comparisons(paths) -> dict:
     """The checks 1-6 of ``scripts/compare_policies.py --out`` files, for the report's ablation
-    section: classic HZD once (from the first file), then every other controller of every
-    file, by its column name. Raises ``ValueError`` naming a file that is not such an output."""
+    section: classic HZD once (from the first file: every file measures it as the reference),
+    then every other controller of every file, by its column name; a name that comes again
+    from another file with other results gets a column of its own, named ``name (file stem)``.
+    Raises ``ValueError`` naming a file that is not such an output."""
     import json
     from pathlib import Path
 
@@ -251,9 +253,11 @@ def load_comparisons(paths) -> dict:
         try:
             results = json.loads(Path(path).read_text())["results"]
             for name, result in results.items():
-                if name not in columns:
-                    columns[name] = {"policy": result["policy"], "checks": result["checks"],
-                                     "passed": result["passed"], "source": str(path)}
+                column = {"policy": result["policy"], "checks": result["checks"], "passed": result["passed"],
+                          "source": str(path)}
+                if name in columns and (name == "classic HZD" or columns[name]["checks"] == column["checks"]):
+                    continue
+                columns[name if name not in columns else f"{name} ({Path(path).stem})"] = column
         except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{path} is not a scripts/compare_policies.py --out file "
                              f"({type(exc).__name__}: {str(exc)[:120]})") from None

@@ -15,7 +15,11 @@ gait (applied at the next touchdown) from the last step's mean, and the current 
 running mean decides the next one. With ``feedback`` these three speeds (m/s) are
 coordinates 11-13, and every evaluation re-derives both gaits from them through the
 policy. Without it (classic HZD: the gait depends on the commanded speed only) the map
-is the 10-D map of one fixed gait.
+is the 10-D map of one fixed gait. A policy with a memory of its own (the speed-error
+integral, the last action: ``features`` memory or body, classic with ``speed_integral``)
+decides every evaluation from that memory as it was on the cycle (a copy captured with the
+state, restored with it), so the map is a function of its coordinates; the memory's own
+slow mode (the integral's) is not one of them.
 
 Every evaluation of the map restores the *full* MuJoCo state captured on the cycle
 (``mj_setState`` with ``mjSTATE_FULLPHYSICS``: time, positions, velocities, warm
@@ -35,7 +39,7 @@ from rabbit_hzd_controller.controller import HZDController, Leg
 from rabbit_sim.model import ModelOptions
 
 from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
-from rabbit_policy.runtime.policies import Policy, first_command
+from rabbit_policy.runtime.policies import Policy, first_command, reset_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
@@ -56,6 +60,7 @@ class _Capture:
     foot: np.ndarray  # stance foot site position (world, m)
     foot_velocity: np.ndarray  # its linear velocity (world, m/s)
     step_count: int  # ticks of the current step up to the section
+    policy: Policy  # the policy with its memory (speed integral, last action) as on the cycle
 
 
 @dataclass(frozen=True)
@@ -81,12 +86,13 @@ class WalkReturnMap:
 
     def __init__(self, policy: Policy, desired_speed: float, feedback: bool, model: ModelOptions = ModelOptions(),
                  section_phase: float = 0.5, settle_steps: int = 40, max_step_time: float = 2.0) -> None:
-        self.policy = policy
+        self.policy = copy.deepcopy(policy)  # its memory is the map's: the caller's policy is not touched
+        reset_policy(self.policy)  # and starts afresh, whatever walked with it before
         self.desired_speed = float(desired_speed)
         self.feedback = feedback
         # the closed loop without a policy: the map decides the gaits itself (below), because
         # the policy's memory is part of the map's state and must be set by its coordinates
-        self.loop = ClosedLoop(Scenario.constant(desired_speed, model=model), start=first_command(policy, desired_speed))
+        self.loop = ClosedLoop(Scenario.constant(desired_speed, model=model), start=first_command(self.policy, desired_speed))
         self.model = self.loop.model
         self.controller = self.loop.controller
         self.data = self.loop.data
@@ -126,7 +132,7 @@ class WalkReturnMap:
         site = self._feet[self.controller.stance]
         mujoco.mj_jacSite(self.model, self.data, self._jac, None, site)
         self._capture = _Capture(state, copy.deepcopy(self.controller), self.data.site_xpos[site].copy(),
-                                 self._jac @ self.data.qvel, self.step_count)
+                                 self._jac @ self.data.qvel, self.step_count, copy.deepcopy(self.policy))
 
     def _act(self, mean_speed: float):
         """The policy's gait for a step whose mean speed was ``mean_speed`` (m/s); a policy that
@@ -141,6 +147,7 @@ class WalkReturnMap:
         model, data, cap = self.model, self.data, self._capture
         mujoco.mj_setState(model, data, cap.state, self._spec)
         self.controller.__dict__.update(copy.deepcopy(cap.controller).__dict__)
+        self.policy = copy.deepcopy(cap.policy)  # a policy with memory decides from the cycle's memory
         stance = cap.controller.stance
         if self.feedback:
             self.active_speed, self.pending_speed, running = (float(v) for v in x[ROBOT_DIMENSION:])

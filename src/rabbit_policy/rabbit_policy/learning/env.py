@@ -199,7 +199,7 @@ def check_integral_gain(gain: float, action: str) -> None:
 @dataclass(frozen=True)
 class EpisodeConfig:
     """What one training episode is, shared by ES and PPO (each field one ``scripts/train.py``
-    option; the defaults are the shipped policy's run)."""
+    option; the defaults are the first shipped policy's run, the paper's three inputs)."""
 
     max_steps: int = option(500, "env steps per training episode (each decision_period ticks; 0 ticks: one "
                                  "walking step)")

@@ -31,7 +31,7 @@ from rabbit_policy.runtime.network import HZDPolicyNet
 
 @dataclass(frozen=True)
 class ESConfig(EpisodeConfig):
-    """ES hyper-parameters, one ``scripts/train.py`` option each (defaults: the shipped run's)."""
+    """ES hyper-parameters, one ``scripts/train.py`` option each (defaults: the first shipped run's, config/train/first_shipped_es.yaml)."""
 
     pairs: int = option(8, "antithetic pairs per generation (the population is 2 x pairs)")
     sigma: float = option(0.005, "perturbation std, parameter units")

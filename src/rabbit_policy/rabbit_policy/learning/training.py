@@ -55,7 +55,7 @@ from rabbit_policy.parallel import BackendConfig
 class TrainingConfig:
     """One training run: ``scripts/train.py`` builds its command line from these fields (and
     from the trainer's: an :class:`~.es.ESConfig` or a :class:`~.ppo.PPOConfig`, whose
-    ``seed`` and ``max_steps`` are the run's). The defaults are the shipped policy's run."""
+    ``seed`` and ``max_steps`` are the run's). The defaults are the first shipped policy's run (config/train/first_shipped_es.yaml)."""
 
     algo: str
     out: Path
