@@ -6,6 +6,9 @@ concurrent runs do not cross-talk; under pytest-xdist (``make test``: two worker
 takes the next domain ID after the session's random one. A domain where some process already
 runs a node (a stack left running by hand, another checkout's tests) is passed over, with a
 warning in the session's summary: worker k of N takes the first free one of k, k + N, k + 2N, ... after the random one.
+After every ros test the domain is probed again: if a node still runs there (a test's process
+that outlived it, or one from outside), the worker moves to its next free domain and a warning
+names the test and the nodes.
 
 Layout: ``tests/{msgs,hzd_controller,sim,policy}/`` hold the tests of the ``rabbit_*`` package of
 that name (without the prefix: ``tests/rabbit_sim`` on the path would shadow the package); ``tests/`` itself
@@ -30,7 +33,7 @@ import pytest
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 ensure_localhost_discovery()  # before rclpy starts (ros_helpers imports it)
-from ros_helpers import free_domain  # noqa: E402
+from ros_helpers import free_domain, next_domain  # noqa: E402
 os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 101)))
 _worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])  # pytest -n N: a domain per worker
 _workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
@@ -57,6 +60,22 @@ def _say_which_domains_were_busy():
         warnings.warn(f"ROS_DOMAIN_ID={domain} is in use ({', '.join(users[:4])}); this test process "
                       f"uses {_domain}")
     yield
+
+
+@pytest.fixture(autouse=True)
+def _leave_no_node_to_the_next_test(request):
+    """After each ros test: if any node runs in this process's domain (one the test left, or
+    a process from outside), the following tests move to the next free domain of this
+    worker's class, and a warning names the test and the nodes (the leak to look for)."""
+    yield
+    if request.node.get_closest_marker("ros") is None:
+        return
+    current = int(os.environ["ROS_DOMAIN_ID"])
+    new, users, _ = next_domain(current, max(_workers, 1))
+    if users:
+        os.environ["ROS_DOMAIN_ID"] = str(new)
+        warnings.warn(f"after {request.node.nodeid}: nodes still run in ROS_DOMAIN_ID={current} "
+                      f"({', '.join(users[:6])}); the next tests of this process use {new}")
 
 
 @pytest.fixture(scope="session")

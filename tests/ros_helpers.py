@@ -72,6 +72,20 @@ def free_domain(first: int, stride: int = 1, tries: int = 20, wait: float = 1.0)
     return domain, skipped
 
 
+def next_domain(domain: int, stride: int, wait: float = 0.3) -> tuple[int, list[str], dict[int, list[str]]]:
+    """After a test: ``domain`` again if nobody runs a node in it (``wait`` s of discovery),
+    else the next free one ``stride`` apart (the same worker's class, never another's), with
+    the nodes found there and the busy domains passed over. A node a test leaves running
+    (a stack's process that outlived its test, a killed node still listed) would otherwise
+    meet every later test of the worker: a stack that refuses to start "beside another
+    stack", a recording with extra messages, a walk that is not the fast path's."""
+    users = domain_users(domain, wait)
+    if not users:
+        return domain, [], {}
+    new, busy = free_domain((domain - 1 + stride) % 101 + 1, stride=stride)
+    return new, users, busy
+
+
 @contextmanager
 def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> Iterator[tuple[object, object]]:
     """A fresh rclpy context and executor (in ``domain_id``, default the session's); nodes

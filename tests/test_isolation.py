@@ -5,7 +5,7 @@ import os
 import pytest
 import rclpy
 
-from ros_helpers import domain_users, free_domain
+from ros_helpers import domain_users, free_domain, next_domain
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -29,3 +29,26 @@ def test_the_session_passes_over_a_domain_someone_already_uses():
     finally:
         rclpy.shutdown(context=context)
     assert domain_users(ours, wait=0.5) == []  # this test process's own domain is its alone
+
+
+def test_after_a_test_that_leaves_a_node_the_worker_moves_to_a_free_domain():
+    """next_domain, as the conftest runs it after every ros test: a node left running in the
+    domain moves the worker on (stride apart, its own class) and names the node; an empty
+    domain is kept."""
+    ours = int(os.environ["ROS_DOMAIN_ID"])
+    left = (ours - 1 + 40) % 101 + 1  # neither ours nor another worker's
+    assert next_domain(left, stride=2, wait=0.3)[:2] == (left, [])
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=left)
+    try:
+        leak = rclpy.create_node("leaked_stack_node", context=context, namespace="/a_test")
+        try:
+            assert domain_users(left, wait=10.0) == ["/a_test/leaked_stack_node"]
+            new, users, _ = next_domain(left, stride=2, wait=3.0)
+            assert users == ["/a_test/leaked_stack_node"]
+            assert new in {(left - 1 + 2 * k) % 101 + 1 for k in range(1, 21)}  # stride apart, not left
+            assert 1 <= new <= 101 and domain_users(new, wait=0.5) == []
+        finally:
+            leak.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
