@@ -394,9 +394,10 @@ def test_a_rogue_that_starts_mid_run_never_gets_a_torque_applied(kind):
     """A rogue publisher starts on /joint_torques while the stack walks, six times: no state
     ever shows its torque applied (every applied effort is recorded), the walk goes on.
     Simulator, rogue and controller each have a context of their own; the controller's is
-    spun only after the others had 5 ms, so an ``echo`` rogue answers states before the
-    controller does: its replies carry the right stamp and are refused for their source,
-    not merely late."""
+    spun only after the simulator has refused the ``echo`` rogue's answer to the state (or
+    0.5 s, while a new rogue is discovered), so the echo comes before the controller's: its
+    replies carry the right stamp and are refused for their source, not merely late. (A fixed
+    5 ms head start let the controller answer first on a busy machine: none refused.)"""
     with ros_context() as (context, executor), ros_context() as (ctx_r, ex_r), \
             ros_context() as (ctx_c, ex_c):
         import rclpy
@@ -419,7 +420,11 @@ def test_a_rogue_that_starts_mid_run_never_gets_a_torque_applied(kind):
             start, deadline = sim.time, time.monotonic() + 60.0
             while sim.time < start + 0.05:
                 assert time.monotonic() < deadline, f"stuck at {sim.time}"
-                spin_for((executor, ex_r), 0.005)  # the rogue's reply reaches the simulator first
+                if kind == "echo":  # the rogue's reply reaches the simulator first, however busy the CPUs
+                    rejected = sim.torques_rejected
+                    spin_until((executor, ex_r), lambda: sim.torques_rejected > rejected, timeout=0.5)
+                else:
+                    spin_for((executor, ex_r), 0.005)
                 ex_c.spin_once(timeout_sec=0.002)
             active.clear()
         if kind == "echo":
