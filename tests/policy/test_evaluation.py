@@ -340,6 +340,43 @@ def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, messa
     assert len(out.stderr.strip().splitlines()) <= 2  # argparse: usage + the error; ours: one line
 
 
+@pytest.mark.slow
+def test_check_6_measured_again_keeps_checks_1_to_5_and_judges_on_the_new_analysis():
+    """``rejudge_stability`` (compare_policies.py --recheck-stability): a stored result whose
+    Poincaré analysis came from the old return map gets a new one; checks 1-5 and their
+    figures stay as stored; check 6 follows the new moduli."""
+    from rabbit_policy.evaluation.acceptance import rejudge_stability
+    from rabbit_policy.evaluation.robustness import RobustnessConfig
+
+    stored = json.loads(Path("docs/learning/ablation_checks_1_6_quick.json").read_text())["results"]["b best"]
+    stale = json.loads(json.dumps(stored))
+    stale["stability"] = {"1.00": {"magnitudes": [1.5], "largest": 1.5, "stable": False}}  # what a broken map gave
+    stale["checks"]["6_still_hzd"]["passed"] = False
+    again = rejudge_stability(stale, make_policy("learned", policy_file="docs/learning/b_es_moderate/best.pt"), 30,
+                              RobustnessConfig.quick())
+    analysis = again["stability"]["1.00"]
+    assert list(again["stability"]) == ["1.00"] and analysis["pairs_used"] + analysis["pairs_failed"] == 30
+    assert analysis["largest"] < 1.0  # the row-b policy's cycle at 1 m/s is stable with its memory held
+    assert again["checks"]["6_still_hzd"]["passed"] is True
+    assert again["checks"]["6_still_hzd"]["detail"]["largest_moduli"] == {"1.00": analysis["largest"]}
+    for check in ("1_speed_grid", "2_transitions", "3_random_sequences", "4_pushes", "5_model_errors"):
+        assert again["checks"][check] == stored["checks"][check]
+    assert again["robustness"] == stored["robustness"] and again["failed"] == [
+        c for c in stored["failed"] if c != "6_still_hzd"]
+
+
+@pytest.mark.slow
+def test_compare_policies_recheck_refuses_a_file_of_other_controllers(tmp_path):
+    ablation = "docs/learning/ablation_checks_1_6_quick.json"
+    out = run_script("scripts/compare_policies.py", "docs/learning/a_es_moderate/best.pt", "--quick",
+                     "--recheck-stability", "--out", ablation, timeout=120)
+    assert out.returncode == 2 and "these arguments name ['classic HZD', 'docs/learning/a_es_moderate/best.pt']" in \
+        out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    missing = run_script("scripts/compare_policies.py", "--classic-integral", "0.2", "--recheck-stability",
+                         "--out", str(tmp_path / "none.json"), timeout=120)
+    assert missing.returncode == 2 and "none.json" in missing.stderr, missing.stderr
+
+
 def test_the_selection_screen_uses_none_of_the_points_of_checks_1_to_6():
     """A policy chosen on the screen is judged on checks 1-6 without having been chosen on them."""
     from rabbit_policy.evaluation.acceptance import BroadCriteria

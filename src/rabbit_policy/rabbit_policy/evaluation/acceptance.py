@@ -244,6 +244,38 @@ def policy_outputs(policy: Policy) -> int:
     return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
 
 
+def stability_analyses(policy: Policy, samples: int, config=None,
+                       map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict[str, dict]:
+    """Check 6's Poincaré analyses of ``policy`` with speed feedback, ``samples`` perturbed
+    runs each, on ``config``'s nominal model (a :class:`.robustness.RobustnessConfig`):
+    ``{"0.70": analysis, "1.00": ..., "1.30": ...}`` (m/s; 1.0 m/s alone below 100 samples),
+    an analysis being ``StabilityAnalysis.to_dict()`` or ``{"error", "stable": False}``."""
+    from rabbit_policy.evaluation.experiments import _stability_job
+    from rabbit_policy.evaluation.robustness import RobustnessConfig
+
+    model = (config or RobustnessConfig()).model_errors[0].model
+    speeds = (0.7, 1.0, 1.3) if samples >= 100 else (1.0,)
+    analyses = list(map_fn(_stability_job, [(policy, v, True, samples, model) for v in speeds]))
+    return {f"{v:.2f}": a for v, a in zip(speeds, analyses)}
+
+
+def rejudge_stability(result: dict, policy: Policy, samples: int, config=None,
+                      map_fn: Callable[[Callable, Iterable], Iterable] = map,
+                      criteria: BroadCriteria = BroadCriteria()) -> dict:
+    """``result`` (a :func:`broad_acceptance` result, e.g. read back from JSON) with check 6's
+    Poincaré analyses measured again for ``policy`` (:func:`stability_analyses`) and every
+    verdict judged again on the stored figures of checks 1-5 and the stored peak torque and
+    output count. For results measured before the return map kept a policy's memory (a
+    speed integral, the last action) with the cycle's state: their check 6 is not to be
+    trusted. ``config`` must be the one ``result`` was measured with."""
+    old6 = result["checks"]["6_still_hzd"]["detail"]
+    pushes = result["checks"]["4_pushes"]["detail"]
+    stability = stability_analyses(policy, samples, config, map_fn)
+    verdict = judge(result["robustness"], result["classic_push_margins"], pushes["scenarios"], stability,
+                    old6["peak_torque_Nm"], old6["outputs"], criteria)
+    return {**result, **verdict, "stability": stability}
+
+
 def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: BroadCriteria = BroadCriteria(),
                      stability_samples: int = 400, map_fn: Callable[[Callable, Iterable], Iterable] = map,
                      log: Callable[[str], None] = lambda _message: None,
@@ -254,7 +286,6 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
     ``classic_margins``: the reference's push margins under the same ``config`` when already
     measured (e.g. ``broad_acceptance(classic, classic, ...)["classic_push_margins"]``); by
     default they are measured here, or taken from ``policy``'s own when it is ``classic``."""
-    from rabbit_policy.evaluation.experiments import _stability_job
     from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
 
     config = config or RobustnessConfig()
@@ -267,10 +298,7 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
     speed = 1.0 if 1.0 in config.push_speeds else config.push_speeds[0]
     scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
     log(f"{policy.name}: Poincaré analysis")
-    speeds = (0.7, 1.0, 1.3) if stability_samples >= 100 else (1.0,)
-    analyses = list(map_fn(_stability_job, [(policy, v, True, stability_samples, config.model_errors[0].model)
-                                            for v in speeds]))
-    stability = {f"{v:.2f}": a for v, a in zip(speeds, analyses)}
+    stability = stability_analyses(policy, stability_samples, config, map_fn)
     peak = max(s["peak_torque"] for s in scenarios)
     verdict = judge(robust, classic_margins, [{k: s[k] for k in ("name", "impulse_Ns", "survived")} for s in scenarios],
                     stability, peak, policy_outputs(policy), criteria)
