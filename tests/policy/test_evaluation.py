@@ -340,6 +340,19 @@ def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, messa
     assert len(out.stderr.strip().splitlines()) <= 2  # argparse: usage + the error; ours: one line
 
 
+def test_check_6_judges_the_median_seed_and_keeps_the_spread():
+    from rabbit_policy.evaluation.acceptance import median_analysis
+
+    runs = [{"largest": x, "magnitudes": [x, 0.1], "stable": x < 1.0} for x in (1.02, 0.8, 0.95)]
+    median = median_analysis(runs)
+    assert median["magnitudes"] == [0.95, 0.1] and median["largest_by_seed"] == [1.02, 0.8, 0.95]
+    assert median_analysis(runs[:1])["largest"] == 1.02
+    failed = median_analysis(runs + [{"error": "no section crossing", "stable": False}, runs[0]])
+    assert failed["error"] == "no section crossing" and failed["largest_by_seed"][3] is None
+    with pytest.raises(ValueError):
+        median_analysis([])
+
+
 @pytest.mark.slow
 def test_check_6_measured_again_keeps_checks_1_to_5_and_judges_on_the_new_analysis():
     """``rejudge_stability`` (compare_policies.py --recheck-stability): a stored result whose
@@ -356,6 +369,7 @@ def test_check_6_measured_again_keeps_checks_1_to_5_and_judges_on_the_new_analys
                               RobustnessConfig.quick())
     analysis = again["stability"]["1.00"]
     assert list(again["stability"]) == ["1.00"] and analysis["pairs_used"] + analysis["pairs_failed"] == 30
+    assert len(analysis["largest_by_seed"]) == 3 and analysis["largest"] == sorted(analysis["largest_by_seed"])[1]
     assert analysis["largest"] < 1.0  # the row-b policy's cycle at 1 m/s is stable with its memory held
     assert again["checks"]["6_still_hzd"]["passed"] is True
     assert again["checks"]["6_still_hzd"]["detail"]["largest_moduli"] == {"1.00": analysis["largest"]}

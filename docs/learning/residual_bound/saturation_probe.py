@@ -88,7 +88,7 @@ if __name__ == "__main__":
         jobs = []
         for speed in (1.0, 1.3):
             times = phase_times(make_policy("learned"), speed, config.push_settle, config.push_phases)
-            jobs += [(speed, t, impulse) for t in times for impulse in (0, -6, -10, 6)]
+            jobs += [(speed, t, impulse) for t in times for impulse in (0, -6, -10, -12, -17, 6)]
         out["saturation"] = pool.map(saturation_job, jobs)
         for row in out["saturation"]:
             print(json.dumps(row), flush=True)

@@ -215,9 +215,10 @@ def limit_cycle(policy: Policy, speed: float, config: EvaluationConfig, model: M
 
 # ------------------------------------------------------------------ Poincaré
 def _stability_job(job: tuple) -> dict:
-    policy, speed, feedback, samples, model = job
+    policy, speed, feedback, samples, model, *seed = job  # seed: the perturbations' (default 0)
     try:
-        return analyse_stability(policy, speed, feedback, samples=samples, model=model).to_dict()
+        return analyse_stability(policy, speed, feedback, samples=samples, model=model, seed=seed[0] if seed else 0
+                                 ).to_dict()
     except RuntimeError as exc:  # the cycle could not be found or too many perturbed runs failed
         return {"error": str(exc), "stable": False}
 
