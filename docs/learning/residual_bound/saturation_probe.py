@@ -4,6 +4,8 @@
 # 1. Saturation: the shipped policy walks at 1.0 and 1.3 m/s and is pushed at check 4's 8 phases
 #    (0.1 s pushes after 3 s); per decision, the fraction of the 21 residual outputs within 10 %
 #    of their bound (|2 sigmoid(y) - 1| >= 0.9), in the 1 s before the push and the 1 s from its start.
+#    The walk ends 1 s after the push starts (fell_within_1_s; check 4 watches 5 s), so pushes
+#    past the margin show what the policy does while it is losing, not whether it falls.
 # 2. Counterfactual: the network's residual multiplied by 2 and 3 (and its bound with it; the
 #    memory sees the network's own output, as trained): is the learned correction right but
 #    timid? Check 4's margin procedure (whole N s, every phase) for gains 1, 2, 3, backward
@@ -67,7 +69,7 @@ def saturation_job(job):
     u = np.array(seen[-len(times):]) if len(times) else np.zeros((0, 21))
     before, after = u[(times >= t - 1.0) & (times < t)], u[times >= t]
     frac = lambda x: float(np.mean(x >= 0.9)) if len(x) else None
-    return {"speed": speed, "push_time": t, "impulse_Ns": impulse, "fell": r.failed,
+    return {"speed": speed, "push_time": t, "impulse_Ns": impulse, "fell_within_1_s": r.failed,
             "saturated_before": frac(before), "saturated_after": frac(after),
             "max_after": float(after.max()) if len(after) else None}
 
