@@ -213,6 +213,8 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     for name, dimension in (("classic", 10), ("learned", 13)):
         analysis = results["poincare"][name]["1.00"]
         assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True
+        assert len(analysis["largest_by_seed"]) == 3 and analysis["largest"] in analysis["largest_by_seed"]
+        assert sorted(analysis["largest_by_seed"])[1] == analysis["largest"]  # the median seed's analysis
         assert results["tracking"][name]["outcome"] == "walked"
         assert len(results["tracking"][name]["segments"]) == 2
     table = {row["scenario"]: row for row in results["push"]["table"]}
@@ -341,7 +343,7 @@ def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, messa
 
 
 def test_check_6_judges_the_median_seed_and_keeps_the_spread():
-    from rabbit_policy.evaluation.acceptance import median_analysis
+    from rabbit_policy.evaluation.experiments import median_analysis
 
     runs = [{"largest": x, "magnitudes": [x, 0.1], "stable": x < 1.0} for x in (1.02, 0.8, 0.95)]
     median = median_analysis(runs)

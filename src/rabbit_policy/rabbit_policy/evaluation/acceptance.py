@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
 
+from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, _stability_job, median_analysis
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
@@ -245,25 +246,9 @@ def policy_outputs(policy: Policy) -> int:
     return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
 
 
-CHECK_6_SEEDS = (0, 1, 2)
-"""Perturbation seeds of check 6's Poincaré analyses. The largest |lambda| of one analysis
-moves by 0.1-0.25 from seed to seed (classic at 1.0 m/s: 0.83-0.98 over seeds 0-3 with 400
-samples, 0.77-0.91 with 1600; 2026-11-25), and another machine's rounding acts as another
-seed: check 6 judges the median of three."""
-
-
-def median_analysis(analyses: list[dict]) -> dict:
-    """One verdict from the analyses of one speed under several perturbation seeds (pure):
-    the analysis whose largest |lambda| is the median (an odd count: a measured one), with
-    ``largest_by_seed`` (the spread) added; the first ``{"error": ...}`` if any run found
-    no cycle or failed."""
-    if not analyses:
-        raise ValueError("median_analysis needs at least one analysis")
-    failed = [a for a in analyses if a.get("error") or a.get("largest") is None]
-    if failed:
-        return {**failed[0], "largest_by_seed": [a.get("largest") for a in analyses]}
-    ranked = sorted(analyses, key=lambda a: a["largest"])
-    return {**ranked[(len(ranked) - 1) // 2], "largest_by_seed": [a["largest"] for a in analyses]}
+CHECK_6_SEEDS = POINCARE_SEEDS
+"""Perturbation seeds of check 6's Poincaré analyses: the evaluation's (judged on their
+:func:`.experiments.median_analysis`)."""
 
 
 def stability_analyses(policy: Policy, samples: int, config=None,
@@ -274,7 +259,6 @@ def stability_analyses(policy: Policy, samples: int, config=None,
     :class:`.robustness.RobustnessConfig`): ``{"0.70": analysis, "1.00": ..., "1.30": ...}``
     (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`median_analysis`
     of ``StabilityAnalysis.to_dict()`` or ``{"error", "stable": False}``."""
-    from rabbit_policy.evaluation.experiments import _stability_job
     from rabbit_policy.evaluation.robustness import RobustnessConfig
 
     model = (config or RobustnessConfig()).model_errors[0].model

@@ -77,7 +77,9 @@ def poincare_section(poincare: dict) -> list[str]:
              "coordinates. Stable when every |λ| < 1; the largest |λ| is the factor by which a small "
              "perturbation shrinks per step. `decay` is the same factor measured by walking a "
              "perturbation along the slowest eigenvector (— when it vanished into the walk's own "
-             "step-to-step jitter within three steps).", "",
+             "step-to-step jitter within three steps). Each row is the median of analyses under several "
+             "perturbation seeds (`experiments.POINCARE_SEEDS`), the seeds' largest |λ| in brackets: one "
+             "analysis moves by 0.1-0.25 from seed to seed, so differences below about 0.15 are noise.", "",
              "![eigenvalue magnitudes](poincare.png)", "",
              "| controller | speed (m/s) | dim | largest \\|λ\\| | all \\|λ\\| | stable | decay/step | pairs used (failed) |",
              "|---|---|---|---|---|---|---|---|"]
@@ -87,7 +89,9 @@ def poincare_section(poincare: dict) -> list[str]:
                 lines.append(f"| {_label(name)} | {float(speed):.1f} | — | — | error: {result['error']} | False | — | — |")
                 continue
             mags = ", ".join(f"{m:.2f}" for m in result["magnitudes"])
-            lines.append(f"| {_label(name)} | {float(speed):.1f} | {result['dimension']} | {result['largest']:.3f} | "
+            seeds = ", ".join(f"{m:.2f}" for m in result.get("largest_by_seed", []))
+            lines.append(f"| {_label(name)} | {float(speed):.1f} | {result['dimension']} | {result['largest']:.3f}"
+                         f"{f' ({seeds})' if seeds else ''} | "
                          f"{mags} | {result['stable']} | {_fmt(result['decay_per_step'], '.2f')} | "
                          f"{result['pairs_used']} ({result['pairs_failed']}) |")
     return lines + [""]
