@@ -15,7 +15,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
-
 from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, _stability_job, median_analysis
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
