@@ -15,7 +15,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
-from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, _stability_job, median_analysis
+from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, seeded_analyses
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
@@ -138,7 +138,7 @@ class BroadCriteria:
        torque delay within ``model_tolerance`` (the second learning issue: the delay at 3 ms,
        judged on its speed; 5 ms and the rest are probes, reported);
     6. still HZD: every Poincaré |lambda| < 1 at the analysed speeds (the median of
-       :data:`CHECK_6_SEEDS`' analyses, :func:`stability_analyses`), peak torque within
+       :data:`.experiments.POINCARE_SEEDS`' analyses, :func:`stability_analyses`), peak torque within
        ``torque_limit``, the outputs the paper's (20 free Bezier coefficients + Kd)."""
 
     push_factor: float = 2.0
@@ -245,32 +245,25 @@ def policy_outputs(policy: Policy) -> int:
     return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
 
 
-CHECK_6_SEEDS = POINCARE_SEEDS
-"""Perturbation seeds of check 6's Poincaré analyses: the evaluation's (judged on their
-:func:`.experiments.median_analysis`)."""
-
-
 def stability_analyses(policy: Policy, samples: int, config=None,
                        map_fn: Callable[[Callable, Iterable], Iterable] = map,
-                       seeds: tuple[int, ...] = CHECK_6_SEEDS) -> dict[str, dict]:
+                       seeds: tuple[int, ...] = POINCARE_SEEDS) -> dict[str, dict]:
     """Check 6's Poincaré analyses of ``policy`` with speed feedback, ``samples`` perturbed
     runs each, under each of ``seeds``, on ``config``'s nominal model (a
     :class:`.robustness.RobustnessConfig`): ``{"0.70": analysis, "1.00": ..., "1.30": ...}``
-    (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`median_analysis`
+    (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`.experiments.median_analysis`
     of ``StabilityAnalysis.to_dict()`` or ``{"error", "stable": False}``."""
     from rabbit_policy.evaluation.robustness import RobustnessConfig
 
     model = (config or RobustnessConfig()).model_errors[0].model
     speeds = (0.7, 1.0, 1.3) if samples >= 100 else (1.0,)
-    jobs = [(policy, v, True, samples, model, seed) for v in speeds for seed in seeds]
-    analyses = list(map_fn(_stability_job, jobs))
-    n = len(seeds)
-    return {f"{v:.2f}": median_analysis(analyses[i * n:(i + 1) * n]) for i, v in enumerate(speeds)}
+    analyses = seeded_analyses([(policy, v, True) for v in speeds], samples, model, seeds, map_fn)
+    return {f"{v:.2f}": analysis for v, analysis in zip(speeds, analyses)}
 
 
 def rejudge_stability(result: dict, policy: Policy, samples: int, config=None,
                       map_fn: Callable[[Callable, Iterable], Iterable] = map,
-                      criteria: BroadCriteria = BroadCriteria(), seeds: tuple[int, ...] = CHECK_6_SEEDS) -> dict:
+                      criteria: BroadCriteria = BroadCriteria(), seeds: tuple[int, ...] = POINCARE_SEEDS) -> dict:
     """``result`` (a :func:`broad_acceptance` result, e.g. read back from JSON) with check 6's
     Poincaré analyses measured again for ``policy`` (:func:`stability_analyses`) and every
     verdict judged again on the stored figures of checks 1-5 and the stored peak torque and

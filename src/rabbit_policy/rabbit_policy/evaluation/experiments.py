@@ -245,18 +245,26 @@ def _stability_job(job: tuple) -> dict:
         return {"error": str(exc), "stable": False}
 
 
+def seeded_analyses(cases: list[tuple[Policy, float, bool]], samples: int, model: ModelOptions,
+                    seeds: tuple[int, ...] = POINCARE_SEEDS, map_fn: MapFn = map) -> list[dict]:
+    """Per case (policy, speed m/s, speed feedback): the :func:`median_analysis` of its
+    Poincaré analyses under each of ``seeds``, ``samples`` perturbed runs each."""
+    jobs = [(policy, speed, feedback, samples, model, seed) for policy, speed, feedback in cases for seed in seeds]
+    analyses = list(map_fn(_stability_job, jobs))
+    n = len(seeds)
+    return [median_analysis(analyses[i * n:(i + 1) * n]) for i in range(len(cases))]
+
+
 def poincare(controllers: dict[str, tuple[Policy, bool]], config: EvaluationConfig, model: ModelOptions = ModelOptions(),
              map_fn: MapFn = map) -> dict:
     """``{controller: {speed: analysis}}`` for ``controllers`` = name -> (policy, feedback), an
     analysis being the :func:`median_analysis` of ``config.poincare_seeds``' analyses."""
     keys = [(name, speed) for name in controllers for speed in config.poincare_speeds]
-    seeds = config.poincare_seeds
-    jobs = [(controllers[name][0], speed, controllers[name][1], config.poincare_samples, model, seed)
-            for name, speed in keys for seed in seeds]
-    analyses = list(map_fn(_stability_job, jobs))
+    analyses = seeded_analyses([(controllers[name][0], speed, controllers[name][1]) for name, speed in keys],
+                               config.poincare_samples, model, config.poincare_seeds, map_fn)
     results: dict = {name: {} for name in controllers}
-    for i, (name, speed) in enumerate(keys):
-        results[name][f"{speed:.2f}"] = median_analysis(analyses[i * len(seeds):(i + 1) * len(seeds)])
+    for (name, speed), analysis in zip(keys, analyses):
+        results[name][f"{speed:.2f}"] = analysis
     return results
 
 
