@@ -280,4 +280,44 @@ def test_apply_now_rejects_bad_input_and_changes_nothing(gait):
         c.apply_now(gait.alpha, -1.0)
     assert c.alpha == tuple(gait.alpha) and c.kd == gait.kd
     with pytest.raises(ValueError):
-        ControllerConfig(within_step_blend=0.0)
+        ControllerConfig(within_step_blend=-0.1)
+    with pytest.raises(ValueError):
+        ControllerConfig(min_phase_rate=float("nan"))
+
+
+def test_apply_now_at_once_tracks_the_new_gait_from_the_next_tick():
+    """within_step_blend 0: no blend, no queue — the paper's alpha applied as it comes."""
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    library = GaitLibrary.load()
+    first, second = library.nearest(1.0), library.nearest(0.7)
+    config = ControllerConfig(within_step_blend=0.0, within_step_until=1.0)
+    q, dq = state_on_gait(first.alpha, 1.0, tau=0.8)
+    c = HZDController(first.alpha, 10.0, config)
+    c.compute(q, dq)
+    c.apply_now(second.alpha, 10.0)
+    assert c.alpha == second.alpha and c.pending_alpha is None  # not queued at 0.8 of phase
+    plain = HZDController(second.alpha, 10.0, config)
+    plain.tau = c.tau
+    assert c.compute(q, dq) == plain.compute(q, dq)
+    blended = HZDController(first.alpha, 10.0)
+    blended.compute(q, dq)
+    blended.apply_now(second.alpha, 10.0)
+    assert blended.pending_alpha == second.alpha  # today's rule: queued from 0.6 of phase
+
+
+def test_min_phase_rate_moves_the_phase_in_time_while_the_hip_stalls(gait):
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    q, dq = state_on_gait(gait.alpha, 1.0, tau=0.15)
+    dq = list(dq)
+    dq[0] = 0.0
+    stalled = HZDController(gait.alpha, gait.kd)
+    moving = HZDController(gait.alpha, gait.kd, ControllerConfig(min_phase_rate=2.0))
+    for _ in range(100):  # the same state every tick: the hip does not move
+        stalled.compute(q, dq)
+        moving.compute(q, dq)
+    assert stalled.tau == pytest.approx(0.15, abs=1e-6)
+    assert moving.tau == pytest.approx(0.15 + 99 * 0.002, abs=1e-9)  # 99 ticks of 1 ms at 2 / s after the first
+    assert moving.tau_rate == 2.0
+    assert moving.steps == 0  # the touchdown rule reads the hip: no step counted

@@ -73,8 +73,9 @@ class ControllerConfig:
         much phase (smoothstep; 0 = off: the new gait's outputs at once, a jump of up to
         0.5 rad between library gaits).
     within_step_blend: a gait applied within a step (:meth:`HZDController.apply_now`, the
-        policy deciding every N ticks) always blends in this way, over this much phase, so
-        the desired outputs stay continuous (> 0).
+        policy deciding every N ticks) blends in this way, over this much phase, so the
+        desired outputs stay continuous; 0 = no blend: the new gait's outputs from the next
+        tick, as the paper applies alpha (a jump in the desired outputs).
     within_step_until: a gait :meth:`HZDController.apply_now` receives at or after this
         phase waits for the next touchdown instead (and blends in there over
         ``blend_phase``): changing the swing leg's path just before it lands made the
@@ -95,6 +96,8 @@ class ControllerConfig:
     blend_phase: float = 0.2
     within_step_blend: float = 0.2
     within_step_until: float = 0.6
+    min_phase_rate: float = 0.0
+    tick: float = 0.001
 
     def __post_init__(self) -> None:
         for name in ("kp", "torque_limit", "min_step_length", "max_kd"):
@@ -105,10 +108,14 @@ class ControllerConfig:
             raise ValueError("ControllerConfig.touchdown_min_phase must be in (0, 1)")
         if not 0.0 <= self.blend_phase <= 1.0:
             raise ValueError("ControllerConfig.blend_phase must be in [0, 1]")
-        if not 0.0 < self.within_step_blend <= 1.0:
-            raise ValueError("ControllerConfig.within_step_blend must be in (0, 1]")
+        if not 0.0 <= self.within_step_blend <= 1.0:
+            raise ValueError("ControllerConfig.within_step_blend must be in [0, 1]")
         if not 0.0 < self.within_step_until <= 1.0:
             raise ValueError("ControllerConfig.within_step_until must be in (0, 1]")
+        if not (isfinite(self.min_phase_rate) and self.min_phase_rate >= 0.0):
+            raise ValueError("ControllerConfig.min_phase_rate must be finite and >= 0 (1/s)")
+        if not (isfinite(self.tick) and self.tick > 0.0):
+            raise ValueError("ControllerConfig.tick must be finite and > 0 (s)")
 
 
 @dataclass(frozen=True)
@@ -268,9 +275,12 @@ class HZDController:
         self._pending = None
         if not (isinstance(alpha, tuple) and alpha == self._active.alpha):
             digested = _digest(validate_alpha(alpha, self.config), self.config)
-            self._replaced, self._replaced_blend = self._active, self._blend
+            if self.config.within_step_blend > 0.0:
+                self._replaced, self._replaced_blend = self._active, self._blend
+                self._blend_length = self.config.within_step_blend
+            else:  # at once: the new gait's own outputs from the next tick
+                self._replaced = self._replaced_blend = self._blend = None
             self._active = digested
-            self._blend_length = self.config.within_step_blend
         if new_kd is not None:
             self.kd = new_kd
             self._pending_kd = None
@@ -338,12 +348,21 @@ class HZDController:
             dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
         else:
             dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
+        floor_rate = cfg.min_phase_rate
+        floored = False
+        if floor_rate:  # the phase keeps moving in time while the hip stalls
+            floor = (0.0 if self.touchdown else self.tau) + floor_rate * cfg.tick
+            if s < floor:
+                s, floored = floor, True
         if s <= 0.0:
             t = 0.0
             dtau = 0.0
         elif s >= 1.0:
             t = 1.0
             dtau = 0.0
+        elif floored:
+            t = s
+            dtau = floor_rate
         else:
             t = s
             dphi_f = dsh - dpitch

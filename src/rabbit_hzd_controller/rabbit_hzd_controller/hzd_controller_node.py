@@ -86,7 +86,7 @@ CONTROLLER_PARAMS = {
                                                 "that brings it, in [0, 1] (0 = off)", dynamic=True,
                          range=(0.0, 1.0)),
     "within_step_blend": Param(_DEFAULTS.within_step_blend, "gait_timing at_once: blend a new gait in over "
-                                                            "this much phase, in (0, 1]", dynamic=True,
+                                                            "this much phase, in [0, 1] (0 = at once)", dynamic=True,
                                range=(0.0, 1.0)),
     "within_step_until": Param(_DEFAULTS.within_step_until, "gait_timing at_once: a gait arriving at or after "
                                                             "this phase waits for the next touchdown, in (0, 1]",
