@@ -21,6 +21,7 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
+from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
 PARTS = ("grid", "transitions", "random", "pushes", "models")
 
@@ -28,7 +29,7 @@ PARTS = ("grid", "transitions", "random", "pushes", "models")
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--controller", nargs="+", choices=("classic", "learned", "hzd", "rl"), default=["classic"])
+    parser.add_argument("--controller", nargs="+", choices=CONTROLLER_CHOICES, default=["classic"])
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate")
     parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
     parser.add_argument("--max-command-step", type=float, default=0.0, help="command rate limit (m/s per step)")

@@ -38,13 +38,14 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
+from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
 
 def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
     parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
-    parser.add_argument("--controller", choices=("classic", "learned", "hzd", "rl"), default="classic",
+    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
                         help="classic: the classic HZD gait library; learned: the HZD-RL policy (hzd, rl: aliases)")
     parser.add_argument("--mode", choices=("lockstep", "paced", "realtime"), default="lockstep",
                         help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "

@@ -70,6 +70,7 @@ from rabbit_policy.runtime.policies import (
     DEFAULT_DECISION_WINDOW,
     GaitCommand,
     PolicyUnavailable,
+    controller_settings,
     decision_period,
     first_command,
     make_policy,
@@ -88,7 +89,8 @@ def clamp_speed(value: float, low: float, high: float) -> float:
 
 
 POLICY_PARAMS = {
-    "policy": Param("classic", "classic (the HZD gait library; alias library) or learned (the HZD-RL network)"),
+    "policy": Param("classic", "classic (the HZD gait library; alias library), learned (the HZD-RL network) or "
+                               "recovery (classic plus the model-based push-recovery rule)"),
     "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) "
                                          "or nearest gait"),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
@@ -150,6 +152,11 @@ class PolicyNode(Node):
             if self.needs_body and not self.decision_period:
                 raise ValueError("this policy reads the body state inside the step and decides every N ticks; "
                                  "decision_period 0 (once per step) cannot run it")
+            settings = controller_settings(self.policy)
+            if settings:  # the controller is a node of its own: say what it must run with
+                self.get_logger().info(f"{self.policy.name} needs hzd_controller_node to run with "
+                                       + " ".join(f"{k}:={v}" for k, v in settings.items())
+                                       + " (run_stack sets them)")
             # when to decide and over which samples: the closed loop's rule (stamps in ns)
             self.clock = DecisionClock(self.decision_period,
                                        values["decision_window"] if self.decision_period else values["window"],

@@ -8,7 +8,7 @@ import re
 from dataclasses import dataclass
 
 from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
-from rabbit_policy.runtime.policies import controller_name
+from rabbit_policy.runtime.policies import controller_name, required_controller_settings
 from rabbit_sim.simulation import StopRules
 
 
@@ -79,7 +79,8 @@ class StackConfig:
                 "speed_integral": self.speed_integral,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
-            "hzd_controller_node": {"decision_sync": self.mode != "realtime"},
+            "hzd_controller_node": {"decision_sync": self.mode != "realtime",
+                                    **required_controller_settings(self.controller)},
             "sim_node": {
                 "model": self.model,
                 "mode": self.mode,

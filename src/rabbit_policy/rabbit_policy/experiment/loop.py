@@ -39,7 +39,8 @@ from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.body import body_state
-from rabbit_policy.runtime.policies import GaitCommand, Policy, decision_period, first_command, reset_policy
+from rabbit_policy.runtime.policies import (GaitCommand, Policy, controller_settings, decision_period, first_command,
+                                            reset_policy)
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
@@ -53,7 +54,8 @@ class ClosedLoop:
     """Simulator + HZD controller (+ gait policy) for one scenario; see the module docstring.
 
     ``start``: the gait in force at t = 0 (default: the policy's :func:`first_command`).
-    ``controller``: the controller's configuration (None: ``ControllerConfig()``); ``kp``
+    ``controller``: the controller's configuration (None: ``ControllerConfig()``), with the
+    settings the policy needs (:func:`controller_settings`) over it; ``kp``
     overrides its proportional gain (None: keep it). ``model``:
     a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
@@ -78,7 +80,7 @@ class ClosedLoop:
         self.sim = Simulator(self.model, scenario.rules.fall)
         self.data = self.sim.data
         self._qpos, self._qvel = self.data.qpos, self.data.qvel  # views, kept (MjData makes one per access)
-        config = controller or ControllerConfig()
+        config = replace(controller or ControllerConfig(), **controller_settings(policy))
         if kp is not None:
             config = replace(config, kp=kp)
         self.controller = HZDController(start.alpha, start.kd, config, Leg.LEFT)

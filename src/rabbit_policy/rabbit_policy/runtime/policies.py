@@ -10,6 +10,10 @@ everywhere (CLI, parameters, results):
   bounded integral of the speed error (:mod:`.speed_integral`).
 * ``learned``: HZD-RL, the network (:mod:`.network`) from a checkpoint file (default: the
   packaged ``rabbit_policy/trained/hzd_rl_policy.pt``).
+* ``recovery``: the model-based push-recovery baseline (:mod:`.recovery`): classic HZD plus
+  a hand-designed rule that bends the stance knee and swings the swing leg forward, at once,
+  when the hip falls behind its gait. It reads the body state and runs the controller with
+  gaits applied at once (``controller_settings``).
 
 Older names are accepted as aliases (:data:`CONTROLLER_ALIASES`): ``hzd`` and ``library``
 for classic, ``rl`` for learned.
@@ -30,9 +34,10 @@ from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, Integral
                                                   decision_dt, integral_limit)
 from rabbit_policy.runtime.speed_window import Observation
 
-CONTROLLERS = ("classic", "learned")
+CONTROLLERS = ("classic", "learned", "recovery")
 CONTROLLER_ALIASES = {"hzd": "classic", "library": "classic", "rl": "learned"}
-POLICY_KINDS = CONTROLLERS
+CONTROLLER_CHOICES = CONTROLLERS + tuple(CONTROLLER_ALIASES)
+"""What a script's ``--controller`` accepts: the names and their aliases."""
 LIBRARY_MODES = ("nearest", "interpolate")
 
 
@@ -107,6 +112,7 @@ class RateLimitedPolicy:
         self.needs_body = getattr(policy, "needs_body", False)
         if self.needs_body:  # it starts on its own gait (no body state before the walk)
             self.start_command = policy.start_command
+        self.controller_settings = controller_settings(policy)
         self.command: float | None = None
         if decision_period(policy):  # a learned policy trained to decide every N ticks: keep its rate
             self.decision_period, self.decision_window = policy.decision_period, policy.decision_window
@@ -179,6 +185,23 @@ def reset_policy(policy: Policy | None) -> None:
     reset = getattr(policy, "reset", None)
     if reset is not None:
         reset()
+
+
+def controller_settings(policy: Policy | None) -> dict[str, float]:
+    """The ``ControllerConfig`` fields a policy needs the controller to run with (the
+    recovery controller: gaits applied at once); {} for the rest. The loops apply them, and
+    the stack gives them to ``hzd_controller_node`` as parameters."""
+    return dict(getattr(policy, "controller_settings", {}))
+
+
+def required_controller_settings(kind: str) -> dict[str, float]:
+    """The controller settings the controller named ``kind`` needs, without building it (the
+    stack's configuration gives them to ``hzd_controller_node``)."""
+    if controller_name(kind) == "recovery":
+        from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
+
+        return dict(CONTROLLER_SETTINGS)
+    return {}
 
 
 def decision_period(policy: Policy | None) -> int:
@@ -303,28 +326,45 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
         raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {decision_period!r}")
     check_gain(speed_integral, "the speed integral gain")
     kind = controller_name(kind)
-    if kind == "learned" and speed_integral:
+    if kind != "classic" and speed_integral:
         raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "
                          "policy with memory features carries its own")
-    if kind == "classic" and policy_file:
+    if kind != "learned" and policy_file:
         raise ValueError("a policy file is a learned policy's checkpoint: it is for the learned controller "
                          "(policy:=learned, --controller learned); the classic one uses gait_dir")
     if kind == "learned" and gait_dir:
         raise ValueError("a gait directory is the classic controller's library: the learned one takes a policy "
                          "file (policy_file, --policy-file)")
     period = None
-    if kind == "classic":
+    if kind in ("classic", "recovery"):
         try:
             library = GaitLibrary.load(gait_dir or None)
         except (FileNotFoundError, ValueError) as exc:
             raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
         period = CLASSIC_DECISION_PERIOD if decision_period is None else decision_period
         policy: Policy = LibraryPolicy(library, mode, speed_integral, decision_dt(period), integral_offset_limit)
+        if kind == "recovery":
+            policy = _recovery(policy, library, gait_dir, period)
+            period = None  # it decides every CLASSIC_DECISION_PERIOD ticks itself
     else:
         policy = _learned(policy_file, decision_period)  # it carries its decision period
     if max_command_step:
         policy = RateLimitedPolicy(policy, max_command_step)
     return PeriodicPolicy(policy, period) if period else policy
+
+
+def _recovery(classic: Policy, library: GaitLibrary, gait_dir: str | Path | None, period: int) -> Policy:
+    """The recovery controller on ``classic`` (:mod:`.recovery`); it decides every ``period`` > 0 ticks."""
+    from rabbit_policy.runtime.gait_library import packaged_gait_dir
+    from rabbit_policy.runtime.recovery import HipSpeedProfile, RecoveryPolicy
+
+    if period < 1:
+        raise ValueError("the recovery controller acts within the step: its decision period must be >= 1 tick")
+    try:
+        profile = HipSpeedProfile.load(gait_dir or packaged_gait_dir())
+    except (FileNotFoundError, ValueError) as exc:
+        raise PolicyUnavailable(f"cannot load the recovery controller: {exc}") from exc
+    return RecoveryPolicy(classic, library, profile, decision_period=period)
 
 
 def _learned(policy_file: str | Path | None, decision_period: int | None) -> "LearnedPolicy":
