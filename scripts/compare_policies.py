@@ -7,7 +7,8 @@ classic reference, measured once: the ablation's table.
 
 For classic HZD (the calibrated library, every 20 ticks), each policy file and each
 ``--classic-integral`` gain (classic HZD with Westervelt's event-based speed integral, a
-second baseline: what an integral alone buys), runs
+second baseline: what an integral alone buys) and with ``--recovery`` the recovery controller
+(the model-based push-recovery baseline), runs
 ``rabbit_policy.evaluation.acceptance.broad_acceptance`` (every speed, every ordered change
 at every phase, random command sequences, push margins against classic's and the paper's
 scenarios beyond them, model errors and torque delays, Poincaré), prints one JSON line per
@@ -37,6 +38,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
     parser.add_argument("--classic-integral", nargs="+", type=float, default=[], metavar="KI",
                         help="also classic HZD with the event-based speed integral of this gain (1/s), one column each")
+    parser.add_argument("--recovery", action="store_true",
+                        help="also the recovery controller (the model-based push-recovery baseline), a column")
     parser.add_argument("--names", nargs="+", help="a column name per policy (default: the file paths)")
     parser.add_argument("--quick", action="store_true", help="the fast subset (RobustnessConfig.quick(), 30 "
                                                              "Poincaré samples): a first look only")
@@ -52,8 +55,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     if args.names is not None and len(args.names) != len(args.policies):
         parser.error(f"--names gives {len(args.names)} names for {len(args.policies)} policies")
-    if not args.policies and not args.classic_integral:
-        parser.error("give policy files, --classic-integral gains, or both")
+    if not args.policies and not args.classic_integral and not args.recovery:
+        parser.error("give policy files, --classic-integral gains or --recovery")
 
     from rabbit_policy.evaluation.acceptance import broad_comparison, broad_table
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
@@ -61,11 +64,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         policies = [make_policy("learned", policy_file=p) for p in args.policies]
         policies += [make_policy("classic", speed_integral=ki) for ki in args.classic_integral]
+        policies += [make_policy("recovery")] if args.recovery else []
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     names = (args.names or [str(p) for p in args.policies]) + [f"classic + integral {ki:g}"
                                                               for ki in args.classic_integral]
+    names += ["recovery"] if args.recovery else []
 
     def log(message: str) -> None:
         print(message, file=sys.stderr, flush=True)

@@ -38,15 +38,17 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
-from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES  # here: after main() took Ctrl-C over
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
     parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
     parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
-                        help="classic: the classic HZD gait library; learned: the HZD-RL policy (hzd, rl: aliases)")
+                        help="classic: the classic HZD gait library; learned: the HZD-RL policy; recovery: classic plus the "
+                             "model-based push-recovery rule (hzd, rl: aliases)")
     parser.add_argument("--mode", choices=("lockstep", "paced", "realtime"), default="lockstep",
                         help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "
                              "held to the wall clock (--rtf), slower if the machine cannot keep up; realtime: "
@@ -106,12 +108,20 @@ def print_report(report, config) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
+    # Ctrl-C / SIGTERM at any moment end the run cleanly: before the stack starts (the
+    # imports, the checks, the probe for another stack) with exit 3 and an "interrupted"
+    # report; during the run the loop sees the flag, stops the nodes and prints what was
+    # measured so far
+    interrupted: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: interrupted.append(signum))
     parser = build_parser()
     args = parser.parse_args(argv)
 
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_policy.experiment.scenario import parse_pushes, parse_schedule
     from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
+    from rabbit_policy.bringup.supervisor import RunReport
 
     try:
         schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
@@ -151,7 +161,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    present = other_stack(namespace=config.namespace)
+    if interrupted:
+        return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
+    present = other_stack(namespace=config.namespace, stop=lambda: bool(interrupted))
+    if interrupted:
+        return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
     if present:
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         print(f"error: another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} "
@@ -160,17 +174,18 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 2
 
-    # Ctrl-C / SIGTERM end the run cleanly: the loop sees the flag, stops the nodes and
-    # prints what was measured so far
-    interrupted: list[int] = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda signum, _frame: interrupted.append(signum))
     stop = lambda: bool(interrupted)  # noqa: E731
     if args.in_process:
         report, _nodes = run_in_process(config, stop=stop)
     else:
         report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
-    if args.json:
+    return _report_and_exit(report, config, args.json)
+
+
+def _report_and_exit(report, config, as_json: bool) -> int:
+    """Print the report (JSON or text); the exit status: 1 fell or stalled, 3 not completed
+    (interrupted, a node died), else 0."""
+    if as_json:
         print(strict_json.dumps(report.summary()))
     else:
         print_report(report, config)

@@ -38,7 +38,6 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
-from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
 
 def positive(text: str) -> float:
@@ -56,9 +55,12 @@ def non_negative(text: str) -> float:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES  # here: after main() took Ctrl-C over
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
-                        help="classic HZD or the learned HZD-RL policy (hzd, rl: aliases)")
+                        help="classic HZD, the learned HZD-RL policy, or recovery: classic plus the model-based "
+                             "push-recovery rule (hzd, rl: aliases)")
     command = parser.add_mutually_exclusive_group()
     command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
     command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",

@@ -84,6 +84,27 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     assert "Traceback" not in err and "FATAL" not in err
 
 
+@pytest.mark.parametrize("delay", [1.5, 3.0])
+def test_ctrl_c_during_start_up_gives_exit_3_and_an_interrupted_report(delay):
+    """Ctrl-C while run_stack starts (its checks, the 3 s probe for another stack, the nodes
+    coming up: the moment depends on the machine, the outcome must not)."""
+    proc = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(delay)
+        children = _node_processes(proc.pid)
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 3, err[-2000:]
+    report = json.loads(out)
+    assert report["error"] == "interrupted" and report["completed"] is False
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert _alive(children + _node_processes(proc.pid)) == []
+
+
 def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace_is_refused():
     """One domain: a stack in /rabbit1 walks at 0.8 m/s; a second in /rabbit1 is refused with
     one line; a stack in /rabbit2 walks at 1.3 m/s beside the first (every topic and service

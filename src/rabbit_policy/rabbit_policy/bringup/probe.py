@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from typing import Callable
 
 from rabbit_msgs_py import topics
 from rabbit_msgs_py.runtime import init_context
@@ -11,12 +12,13 @@ from rabbit_msgs_py.runtime import init_context
 STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
 
 
-def other_stack(wait: float = 3.0, namespace: str = "") -> list[str]:
+def other_stack(wait: float = 3.0, namespace: str = "", stop: Callable[[], bool] = lambda: False) -> list[str]:
     """Nodes of another rabbit-hzd stack visible in ``namespace`` ("" = the root) of this ROS
     domain (after ``wait`` s of discovery; found ones end the wait early; 1.5 s missed a
     running stack once on a loaded machine), or publishers of its topics there; empty if
     none. Two stacks in one namespace cross-talk (one's cmd_speed moves the other), so a
-    launch refuses to start beside one; stacks in other namespaces do not count."""
+    launch refuses to start beside one; stacks in other namespaces do not count. ``stop()``
+    true (Ctrl-C) ends the wait early with what was found."""
     import rclpy
 
     context = init_context()
@@ -25,7 +27,7 @@ def other_stack(wait: float = 3.0, namespace: str = "") -> list[str]:
         node = rclpy.create_node("run_stack_probe", context=context, namespace=full)
         deadline = time.monotonic() + wait
         found: list[str] = []
-        while time.monotonic() < deadline and not found:
+        while time.monotonic() < deadline and not found and not stop():
             time.sleep(0.1)
             found = sorted({name for name, ns in node.get_node_names_and_namespaces()
                             if name in STACK_NODE_NAMES and ns == full})

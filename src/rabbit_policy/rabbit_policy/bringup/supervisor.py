@@ -58,6 +58,18 @@ class RunReport:
     def rtf(self) -> float:
         return self.sim_time / self.wall_time if self.wall_time > 0 else float("nan")
 
+    @classmethod
+    def not_started(cls, config: StackConfig, error: str) -> "RunReport":
+        """The report of a run that ended before any node started (``error``: why, e.g.
+        ``interrupted``): nothing simulated, not completed."""
+        scenario = Scenario(schedule=config.schedule, pushes=config.pushes, model=ModelOptions(config.model),
+                            rules=config.rules)
+        empty = WalkResult(scenario=scenario, fell=False, fall_time=None, stalled=False, stall_time=None,
+                           start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]), touchdowns=[],
+                           peak_torque=0.0, planned_duration=config.duration)
+        return cls(controller=config.controller, policy=None, result=empty, wall_time=0.0, completed=False,
+                   error=error)
+
     def summary(self) -> dict[str, object]:
         return {**run_summary(self.controller, self.policy, self.result, self.wall_time, self.completed, self.error),
                 "rejected": self.rejected}
