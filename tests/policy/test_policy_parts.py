@@ -14,7 +14,7 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import LibraryPolicy, PolicyUnavailable, make_policy
 from rabbit_policy.policy_node import clamp_speed
 from rabbit_policy.runtime.speed_window import SpeedWindow
-from rabbit_policy.experiment.scenario import Push, parse_pushes, parse_schedule
+from rabbit_policy.experiment.scenario import Push, Scenario, parse_pushes, parse_schedule
 from rabbit_policy.bringup.stack import StackConfig, ros_arguments
 
 pytestmark = pytest.mark.unit
@@ -77,6 +77,12 @@ def test_schedule_and_push_parsing():
         StackConfig(duration=5.0, schedule=((1.0, 0.8),))
     with pytest.raises(ValueError):
         StackConfig(duration=5.0, schedule=((0.0, 0.8), (0.0, 1.0)))
+    # one spacing rule on every path (walk.py's Scenario, run_stack's StackConfig): 0.1 s
+    crowded = tuple((round(k * 0.0002, 4), 0.8 + 0.1 * (k % 2)) for k in range(8000))
+    for build in (lambda s: Scenario(schedule=s), lambda s: StackConfig(duration=5.0, schedule=s)):
+        with pytest.raises(ValueError, match="at least 0.1 s apart"):
+            build(crowded)
+        build(((0.0, 0.8), (0.1, 1.0)))  # exactly the spacing is fine
 
 
 def test_ros_arguments():
