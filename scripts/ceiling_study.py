@@ -25,7 +25,7 @@ def _job(job: tuple) -> dict:
     speed, phase, push_time, family, impulses, config = job
     start = time.perf_counter()
     row = ceiling(speed, phase, push_time, FAMILIES[family], impulses, config)
-    return {**row, "seconds": round(time.perf_counter() - start, 1)}
+    return {**row, "budget": config.budget, "seconds": round(time.perf_counter() - start, 1)}
 
 
 def _pairs(text: str) -> dict[float, float]:

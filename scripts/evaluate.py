@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Reproduce the paper's section IV for classic HZD and HZD-RL, with figures and a report.
+"""Reproduce the paper's section IV for classic HZD, HZD-RL and the model-based recovery
+controller, with figures and a report.
 
     scripts/evaluate.py [--out DIR] [--quick] [--workers 2] [--policy-file P] [--no-video] [--ablation JSON ...]
 
@@ -36,8 +37,6 @@ from rabbit_sim.gl_backend import choose_headless_gl
 # MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
 # unless the user chose one
 choose_headless_gl()
-
-CONTROLLERS = ("classic", "learned")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -105,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         policies = {"classic": make_policy("classic", args.gait_dir),
-                    "learned": make_policy("learned", policy_file=args.policy_file)}
+                    "learned": make_policy("learned", policy_file=args.policy_file),
+                    "recovery": make_policy("recovery", args.gait_dir)}
         ablation = load_comparisons(args.ablation)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         figures.convergence_figure(cycles, out / "convergence.png")
 
         log("Poincaré test")
-        feedback = {"classic": False, "learned": True}
+        feedback = {"classic": False, "learned": True, "recovery": True}  # decisions read the measured state
         poincare = evaluation.poincare({n: (p, feedback[n]) for n, p in policies.items()}, config, model, map_fn)
         figures.poincare_figure(poincare, out / "poincare.png")
 

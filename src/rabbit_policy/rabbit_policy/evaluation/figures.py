@@ -16,8 +16,8 @@ import numpy as np  # noqa: E402
 
 from rabbit_policy.experiment.result import WalkResult  # noqa: E402
 
-COLORS = {"classic": "tab:blue", "learned": "tab:orange"}
-LABELS = {"classic": "classic HZD", "learned": "HZD-RL (learned)"}
+COLORS = {"classic": "tab:blue", "learned": "tab:orange", "recovery": "tab:green"}
+LABELS = {"classic": "classic HZD", "learned": "HZD-RL (learned)", "recovery": "recovery (model-based)"}
 JOINTS = {3: "left hip", 4: "left knee"}
 
 
