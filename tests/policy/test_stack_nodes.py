@@ -915,3 +915,30 @@ def test_a_body_state_policy_walks_on_through_resets(tmp_path):
         assert policy.decisions >= decided + 20  # every 20 ticks on the new walk
         assert policy.decisions_given_up == 0 and not sim.fallen
         assert policy.body.newest_state <= 0.6e9  # the new walk's states only
+
+
+def test_a_use_sim_time_node_follows_the_simulation_clock():
+    """The stack's /clock is the clock a node started with use_sim_time reads (no remap in the
+    default namespace): its now() follows the states' sim-time stamps, not the wall clock."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    samples: list[tuple[float, float]] = []  # (state stamp, the node's now()) in s
+
+    def factory(context):
+        node = rclpy.create_node("sim_time_user", context=context,
+                                 parameter_overrides=[Parameter("use_sim_time", Parameter.Type.BOOL, True)])
+
+        def on_state(msg: JointState) -> None:
+            stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+            samples.append((stamp, node.get_clock().now().nanoseconds * 1e-9))
+        node.create_subscription(JointState, topics.JOINT_STATES, on_state, qos.STREAM_QOS)
+        return node
+
+    report, _nodes = run_in_process(StackConfig(duration=2.0, schedule=((0.0, 1.0),)), observers=[factory])
+    assert report.completed
+    late = [(stamp, now) for stamp, now in samples if stamp > 1.0]
+    assert len(late) > 100
+    # the ROS clock is the newest /clock: within a few ticks of the state being read, never the wall clock (~1.8e9 s)
+    assert all(abs(now - stamp) < 0.05 for stamp, now in late), late[:5]
+    assert late[-1][1] > 1.9
