@@ -15,6 +15,7 @@ import sys
 import time
 from pathlib import Path
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_policy.evaluation.ceiling import FAMILIES, CeilingConfig, ceiling, ladder, summarize
 from rabbit_policy.evaluation.robustness import phase_times
 from rabbit_policy.parallel import add_backend_arguments, open_backend
@@ -43,7 +44,7 @@ def _floats(text: str) -> tuple[float, ...]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, required=True, help="JSON-lines file (appended; cases in it are skipped)")
     parser.add_argument("--classic-margins", type=_pairs, default=_pairs("0.7:5,1.0:9,1.3:14"),
                         help="classic HZD's backward margin (N s) per speed: the ladder's unit "

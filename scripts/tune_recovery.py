@@ -12,21 +12,22 @@ import argparse
 import json
 import sys
 
+from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_policy.gait_design.recovery_tuning import TuningConfig, tune
 from rabbit_policy.parallel import add_backend_arguments, open_backend
 from rabbit_policy.runtime.policies import make_policy
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--generations", type=int, default=6)
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--iterations", type=int, default=6, help="CMA-ES generations (as optimize_gaits.py)")
     parser.add_argument("--popsize", type=int, default=8)
     parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
-    if args.generations < 1 or args.popsize < 2:
-        parser.error("--generations >= 1 and --popsize >= 2")
-    config = TuningConfig(generations=args.generations, popsize=args.popsize)
+    if args.iterations < 1 or args.popsize < 2:
+        parser.error("--iterations >= 1 and --popsize >= 2")
+    config = TuningConfig(generations=args.iterations, popsize=args.popsize)
     backend = open_backend(parser, args)
     try:
         result = tune(make_policy("recovery"), config, backend.map, log=lambda m: print(m, file=sys.stderr, flush=True))
