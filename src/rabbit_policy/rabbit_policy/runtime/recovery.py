@@ -21,9 +21,13 @@ The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`
    for a push;
 2. w = clip(d / ``full``, 0, 1) while the phase is inside the step (0 < tau < 1: at its
    ends the hip phase is clamped and says nothing of the hip's progress), else 0;
-3. the gait is classic's for v_d with ``w * offsets`` (rad) added to rows 1-4 of the four
-   outputs (stance hip, stance knee, swing hip, swing knee), applied at once: no blend, no
-   queue (:data:`CONTROLLER_SETTINGS`, which the loops and the stack give the controller).
+3. the gait is classic's with ``w * offsets`` (rad) added to rows 1-4 of the four outputs
+   (stance hip, stance knee, swing hip, swing knee), applied at once: no blend, no queue
+   (:data:`CONTROLLER_SETTINGS`, which the loops and the stack give the controller).
+   Classic's gait is the library's for the command rate-limited to ``command_rate`` m/s per
+   decision: applied at once, a library gait that jumps with the command made 12 of 72
+   ordered speed changes fall or stall (decelerations from 1.4-1.5 m/s at the start of a
+   step); a ramp of 0.5 m/s per second made none of those fail.
 
 Undisturbed, w stays 0 and the gait is classic's (the limit cycle is classic's). The rule
 never speeds up: a forward push (the hip ahead of its gait) leaves classic alone.
@@ -55,11 +59,13 @@ class RecoveryConfig:
         knee) at full deficit (w = 1).
     threshold: the deficit (fraction of v_d) below which nothing is done.
     full: the deficit beyond the threshold (fraction of v_d) at which w reaches 1.
+    command_rate: m/s per decision (20 ticks) the base gait's speed follows the command by.
     """
 
-    offsets: tuple[float, float, float, float] = (0.0, 0.1, 0.1, 0.0)
+    offsets: tuple[float, float, float, float] = (-0.11, 0.01, 0.08, -0.23)
     threshold: float = 0.1
-    full: float = 0.3
+    full: float = 0.24
+    command_rate: float = 0.01
 
     def __post_init__(self) -> None:
         if len(self.offsets) != N_OUTPUTS or not all(np.isfinite(self.offsets)):
@@ -68,6 +74,8 @@ class RecoveryConfig:
             raise ValueError(f"RecoveryConfig.threshold must be finite and >= 0, got {self.threshold}")
         if not (np.isfinite(self.full) and self.full > 0.0):
             raise ValueError(f"RecoveryConfig.full must be finite and > 0, got {self.full}")
+        if not (np.isfinite(self.command_rate) and self.command_rate > 0.0):
+            raise ValueError(f"RecoveryConfig.command_rate must be finite and > 0 m/s, got {self.command_rate}")
 
 
 @dataclass(frozen=True)
@@ -141,7 +149,10 @@ class RecoveryPolicy:
     def __init__(self, classic, library: GaitLibrary, profile: HipSpeedProfile,
                  config: RecoveryConfig = RecoveryConfig(), decision_period: int = 20,
                  decision_window: int = 1000) -> None:
+        from rabbit_policy.runtime.policies import RateLimitedPolicy
+
         self.classic = classic
+        self._base = RateLimitedPolicy(classic, config.command_rate)
         self.library = library
         self.profile = profile
         self.config = config
@@ -157,9 +168,7 @@ class RecoveryPolicy:
                               self.decision_window)
 
     def reset(self) -> None:
-        reset = getattr(self.classic, "reset", None)
-        if reset is not None:
-            reset()
+        self._base.reset()
 
     def start_command(self, speed: float):
         """Classic's gait at ``speed`` (no body state exists before the walk)."""
@@ -178,7 +187,7 @@ class RecoveryPolicy:
     def act(self, observation: Observation):
         from rabbit_policy.runtime.policies import GaitCommand
 
-        command = self.classic.act(observation)
+        command = self._base.act(observation)
         if observation.body is None:
             raise ValueError("the recovery controller needs the body state (observation.body)")
         _, _, tau, _, hip_velocity = observation.body
