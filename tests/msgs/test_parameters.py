@@ -44,6 +44,9 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
     (["rabbit_policy.policy_node", "-p", "window:=0", "-p", "decision_period:=20"],
      "parameter window must be in [1, 100000], got 0"),
     (["rabbit_policy.policy_node", "-p", "window:=-5"], "parameter window must be in [1, 100000], got -5"),
+    (["rabbit_policy.policy_node", "-p", "policy:=bogus"], "parameter policy must be one of classic, learned, recovery"),
+    (["rabbit_sim.recorder_node", "-p", "output:=/tmp/x", "-p", "compression:=lz4"],
+     "parameter compression must be one of none, zstd, got 'lz4'"),
 ])
 def test_bad_parameters_stop_a_node_with_one_line(args, message):
     module, *params = args
@@ -194,6 +197,31 @@ def test_numeric_parameters_carry_their_range_in_the_descriptor_and_rclpy_enforc
             assert not result.successful and "range" in result.reason and controller.config.kp == 3000.0
         finally:
             for node, _params in nodes.values():
+                close = getattr(node, "close", None)
+                if close:
+                    close()
+                node.destroy_node()
+
+
+def test_string_parameters_with_fixed_values_list_them_in_the_descriptor():
+    """``ros2 param describe`` shows the allowed values of policy, library_mode, mode, model,
+    gait_timing (additional_constraints), the very tuples the nodes check against."""
+    from rabbit_hzd_controller.hzd_controller_node import GAIT_TIMINGS
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES, LIBRARY_MODES
+    from rabbit_sim.model import MODEL_VARIANTS
+    from rabbit_sim.settings import MODES
+
+    with ros_context() as (context, _executor):
+        nodes = {"hzd_controller_node": HZDControllerNode(context=context), "policy_node": PolicyNode(context=context),
+                 "sim_node": SimNode(context=context)}
+        try:
+            expected = {("policy_node", "policy"): CONTROLLER_CHOICES, ("policy_node", "library_mode"): LIBRARY_MODES,
+                        ("sim_node", "mode"): MODES, ("sim_node", "model"): MODEL_VARIANTS,
+                        ("hzd_controller_node", "gait_timing"): ("policy",) + GAIT_TIMINGS}
+            for (name, key), choices in expected.items():
+                assert nodes[name].describe_parameter(key).additional_constraints == "one of: " + ", ".join(choices)
+        finally:
+            for node in nodes.values():
                 close = getattr(node, "close", None)
                 if close:
                     close()

@@ -97,7 +97,7 @@ GAIT_TIMINGS = ("next_step", "at_once")
 NODE_PARAMS = {
     "gait_timing": Param("policy", "when a new gait applies: policy (as /hzd/gait_timing says; next_step until "
                                    "it does), next_step (queued to the next touchdown) or at_once (blended in "
-                                   "within the step)"),
+                                   "within the step)", choices=("policy",) + GAIT_TIMINGS),
     "decision_sync": Param(False, "lockstep/paced: hold the reply to a state the policy decides on (every N ticks, "
                                   "/hzd/gait_timing at_once:N) until that decision's gait is in (the ROS-free loop "
                                   "bit for bit); not for realtime"),

@@ -33,11 +33,15 @@ class Param:
     description: str
     dynamic: bool = False
     range: tuple[float, float] | None = None  # closed [low, high] of a number, in the descriptor
+    choices: tuple[str, ...] | None = None  # a string's allowed values, in the descriptor's additional_constraints
 
     def descriptor(self) -> ParameterDescriptor:
-        """The ROS descriptor: description, read-only unless dynamic, the range of a number."""
+        """The ROS descriptor: description, read-only unless dynamic, the range of a number,
+        a string's allowed values (``additional_constraints``: ``ros2 param describe`` shows them)."""
         descriptor = ParameterDescriptor(description=self.description, read_only=not self.dynamic,
                                          dynamic_typing=True)
+        if self.choices is not None:
+            descriptor.additional_constraints = "one of: " + ", ".join(self.choices)
         if self.range is not None:
             low, high = self.range
             if isinstance(self.default, bool) or not isinstance(self.default, (int, float)):
@@ -85,6 +89,8 @@ def declare(node, params: dict[str, Param], overrides: dict[str, Any]) -> dict[s
                                  f"{spec.range[1]:g}], got {value!r}") from None
         try:
             values[name] = coerce(name, node.get_parameter(name).value, spec.default)
+            if spec.choices is not None and values[name] not in spec.choices:
+                raise ValueError(f"parameter {name} must be one of {', '.join(spec.choices)}, got {values[name]!r}")
         except ValueError as exc:
             raise NodeStartError(f"{node.get_name()}: {exc}") from None
     unknown = sorted(name for name in overrides_given(node) if not node.has_parameter(name))

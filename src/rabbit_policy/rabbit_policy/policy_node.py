@@ -67,7 +67,9 @@ from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from rabbit_policy.runtime.policies import (
+    CONTROLLER_CHOICES,
     DEFAULT_DECISION_WINDOW,
+    LIBRARY_MODES,
     GaitCommand,
     PolicyUnavailable,
     controller_settings,
@@ -90,9 +92,9 @@ def clamp_speed(value: float, low: float, high: float) -> float:
 
 POLICY_PARAMS = {
     "policy": Param("classic", "classic (the HZD gait library; alias library), learned (the HZD-RL network) or "
-                               "recovery (classic plus the model-based push-recovery rule)"),
+                               "recovery (classic plus the model-based push-recovery rule)", choices=CONTROLLER_CHOICES),
     "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) "
-                                         "or nearest gait"),
+                                         "or nearest gait", choices=LIBRARY_MODES),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "

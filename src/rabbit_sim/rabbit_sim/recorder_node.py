@@ -94,8 +94,8 @@ RECORDER_PARAMS = {
     "output": Param("", "bag directory to create (required)"),
     "topics": Param([""], "topics to record, relative to the node's namespace or fully qualified ([''] = every "
                           "stack topic)"),
-    "compression": Param("none", "none or zstd (MCAP chunk compression)"),
-    "log_time": Param("receive", "message log time: receive (wall clock) or sim (/clock)"),
+    "compression": Param("none", "none or zstd (MCAP chunk compression)", choices=COMPRESSIONS),
+    "log_time": Param("receive", "message log time: receive (wall clock) or sim (/clock)", choices=LOG_TIMES),
     "overwrite": Param(False, "replace an existing bag directory (never anything else)"),
     "stats_file": Param("", "write the recording statistics as JSON here when closing ('' = don't)"),
 }
@@ -128,10 +128,6 @@ class RecorderNode(Node):
                 raise ValueError("parameter 'output' (the bag directory) is required")
             if unknown:
                 raise ValueError(f"unknown topics {unknown}; known: {sorted(resolved)}")
-            if value("log_time") not in LOG_TIMES:
-                raise ValueError(f"log_time must be one of {LOG_TIMES}")
-            if value("compression") not in COMPRESSIONS:
-                raise ValueError(f"compression must be one of {COMPRESSIONS}")
             self.bag = BagWriter(output, value("compression"), bool(value("overwrite")))
         except (ValueError, BagError) as exc:
             raise NodeStartError(f"recorder_node: {exc}") from exc

@@ -10,6 +10,8 @@ from pathlib import Path
 from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
+from .model import MODEL_VARIANTS
+
 MODES = ("lockstep", "paced", "realtime")
 REPLY_MODES = ("lockstep", "paced")
 """Modes that step once per torque reply (never without the torque for the state)."""
@@ -21,10 +23,11 @@ class SimSettings:
     table :data:`SIM_PARAMS` is made from; ``ros2 param describe`` shows it). Units: s of sim
     time unless said wall, N, N m s/rad."""
 
-    model: str = option("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)")
+    model: str = option("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)",
+                        choices=MODEL_VARIANTS)
     mode: str = option("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), "
                                    "paced (lockstep held to the wall clock times rtf) or realtime (free-running "
-                                   "1 kHz wall clock)")
+                                   "1 kHz wall clock)", choices=MODES)
     rtf: float = option(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot "
                              "keep up)", range=(0.0, 1000.0))
     push_duration: float = option(0.1, "how long a /push wrench is held, s of sim time, > 0 (may change at run time)",
