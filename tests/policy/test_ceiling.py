@@ -23,6 +23,7 @@ def push_time() -> float:
     return phase_times(make_policy("classic"), 1.0, CONFIG.settle, [0.875])[0]
 
 
+@pytest.mark.slow
 def test_a_cloned_loop_goes_on_exactly_as_the_original(push_time):
     case = prepare(1.0, 0.875, -9.0, CONFIG, push_time)
     first, second = clone_loop(case.loop), clone_loop(case.loop)
@@ -33,6 +34,7 @@ def test_a_cloned_loop_goes_on_exactly_as_the_original(push_time):
     assert first.touchdowns == second.touchdowns
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("impulse", [9.0, 10.0])
 def test_a_rollout_without_actions_is_classic_hzd(push_time, impulse):
     case = prepare(1.0, 0.875, -impulse, CONFIG, push_time)
@@ -43,6 +45,7 @@ def test_a_rollout_without_actions_is_classic_hzd(push_time, impulse):
     assert rollout(case, FAMILIES["b_at_once"], zeros, CONFIG)["survived"] == (not reference.failed)
 
 
+@pytest.mark.slow
 def test_the_oracle_finds_a_recovery_where_classic_stalls(push_time):
     case = prepare(1.0, 0.875, -14.0, CONFIG, push_time)
     assert not rollout(case, FAMILIES["b_at_once"], None, CONFIG)["survived"]

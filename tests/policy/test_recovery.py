@@ -60,6 +60,7 @@ def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs(tmp
 
 
 @pytest.mark.sim
+@pytest.mark.slow
 def test_undisturbed_it_walks_exactly_as_classic_hzd():
     for speed in (1.0, 1.3):
         classic = walk(make_policy("classic"), Scenario.constant(speed), 5.0)
@@ -68,6 +69,7 @@ def test_undisturbed_it_walks_exactly_as_classic_hzd():
 
 
 @pytest.mark.sim
+@pytest.mark.slow
 def test_it_survives_a_backward_push_classic_hzd_stalls_on():
     """1.0 m/s, -12 N s at 0.875 of a step (classic's binding phase there; its margin is 9 N s)."""
     from rabbit_policy.evaluation.robustness import phase_times
@@ -93,6 +95,7 @@ def test_the_packaged_hip_profile_is_what_calibration_measures():
 
 
 @pytest.mark.ros
+@pytest.mark.slow
 def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
     """Through a push that makes the rule act: policy_node builds the body state, run_stack's
     configuration gives the controller node the at-once settings, and every state is the

@@ -917,6 +917,7 @@ def test_a_body_state_policy_walks_on_through_resets(tmp_path):
         assert policy.body.newest_state <= 0.6e9  # the new walk's states only
 
 
+@pytest.mark.slow
 def test_a_use_sim_time_node_follows_the_simulation_clock():
     """The stack's /clock is the clock a node started with use_sim_time reads (no remap in the
     default namespace): its now() follows the states' sim-time stamps, not the wall clock."""
