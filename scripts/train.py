@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Train the HZD-RL policy on ``RabbitHZD-v0`` with Evolution Strategies or PPO.
 
-    scripts/train.py --algo es --out runs/es0             # the shipped policy's run (the defaults)
+    scripts/train.py --algo es --out runs/es0             # the first shipped run (the defaults)
     scripts/train.py --algo ppo --out runs/ppo0 --iterations 200
     scripts/train.py ... --resume                          # continue from OUT/checkpoint.pt
     scripts/train.py --config config/train/shipped_es.yaml --out runs/X   # a preset (rl-zoo style)
@@ -9,8 +9,9 @@
 Every option is a field of one configuration dataclass, its default and help written once
 there (as CleanRL's ``Args``): the run's ``TrainingConfig`` (``rabbit_policy.learning.
 training``), the episodes' ``EpisodeConfig`` (``learning.env``) and the algorithm's
-``ESConfig`` (``learning.es``) or ``PPOConfig`` (``learning.ppo``). The defaults are the run
-that trained the shipped policy (its model card's command). The training loop is
+``ESConfig`` (``learning.es``) or ``PPOConfig`` (``learning.ppo``). The defaults are the
+first shipped run (``config/train/first_shipped_es.yaml``); the policy shipped now was
+trained with ``--config config/train/shipped_es.yaml`` (its model card's command). The training loop is
 ``rabbit_policy.learning.training`` (its docstring: the warm start, ES and PPO, and what OUT
 holds: ``log.csv``, ``eval.csv``, ``policy.pt``, ``best.pt``, ``checkpoint.pt``,
 ``summary.json``).

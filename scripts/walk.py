@@ -6,10 +6,12 @@
     scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
     scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
 
-``--controller classic`` is classic HZD (the packaged gait library: the gait nearest the
-command, or ``--library-mode interpolate``); ``--controller learned`` is HZD-RL (the
-shipped policy or ``--policy-file``). Either picks alpha and Kd at every touchdown exactly
-as ``policy_node`` does, on the closed loop every experiment runs
+``--controller classic`` is classic HZD (the packaged gait library: the calibrated blend
+that walks at the command, or ``--library-mode nearest``); ``--controller learned`` is
+HZD-RL (the shipped policy or ``--policy-file``); ``--controller recovery`` is classic plus
+the model-based push-recovery rule (``rabbit_policy.runtime.recovery``). Each picks alpha
+and Kd as ``policy_node`` does (classic and recovery every 20 ticks, learned as trained;
+``--decision-period`` overrides), on the closed loop every experiment runs
 (``rabbit_policy.experiment.loop``). ``hzd`` and ``rl`` are accepted as aliases.
 
 The robot starts on the gait for the first commanded speed, moving at it. Pushes are
@@ -23,7 +25,8 @@ null after a fall or stall), ``peak_torque`` (N m), ``rejected``, ``touchdowns``
 times, s), ``segments`` (``command``, ``start``, ``end``, ``mean_speed`` over the
 segment's second half, ``reach_time``: s from the change to the end of the first whole
 step within ``--tolerance`` of the command, or null), plus ``controller``, ``policy``,
-``scenario`` and ``real_time_factor``. No NaN: null instead.
+``scenario``, ``real_time_factor``, ``wall_time`` (s), ``completed`` and ``error``. No NaN:
+null instead.
 Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 """
 

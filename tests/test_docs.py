@@ -293,3 +293,15 @@ def test_every_test_the_docs_name_exists():
         missing += [f"{doc.name}: {p}" for p in re.findall(r"\btests/[\w/]+\.py", text) if not (ROOT / p).is_file()]
         missing += [f"{doc.name}: {name}" for name in re.findall(r"`(test_\w+)`", text) if name not in defined]
     assert not missing, missing
+
+
+@pytest.mark.unit
+def test_the_readme_lists_every_script_and_no_other():
+    """README's layout table names each ``scripts/*.py`` (the benchmarks as ``bench_*.py``)."""
+    row = next(line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| `scripts/` |"))
+    listed = set(re.findall(r"`(\w+)\.py`", row))
+    present = {p.stem for p in (ROOT / "scripts").glob("*.py")}
+    assert listed - present == set(), f"README names scripts that do not exist: {listed - present}"
+    missing = {name for name in present - listed if not name.startswith("bench_")}
+    assert not missing, f"README's scripts row omits {sorted(missing)}"
+    assert "`bench_*.py`" in row

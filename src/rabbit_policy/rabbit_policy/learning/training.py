@@ -3,8 +3,8 @@ acceptance evaluations, checkpoints, ``--resume`` and clean interruption
 (:func:`train` with a :class:`TrainingConfig`).
 
 Both start from the same network warm-started on the classic gait library
-(``rabbit_policy.learning.warm_start``, 5-15 s: ``--warm-start scheduled``, the default, or
-``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.learning.es`` (antithetic pairs, centred ranks, Adam; one iteration =
+(``rabbit_policy.learning.warm_start``, 5-15 s: ``--warm-start feedback``, the default, or
+``scheduled``, ``nearest``, ``interpolate``; ``none`` starts from random weights). ES: ``rabbit_policy.learning.es`` (antithetic pairs, centred ranks, Adam; one iteration =
 one generation; ``--workers`` processes evaluate the population). PPO:
 ``rabbit_policy.learning.ppo`` (CleanRL-style clipped objective, GAE; one iteration = one rollout
 of ``--envs`` environments x ``--steps`` steps + update; ``--envs`` processes).
