@@ -290,7 +290,59 @@ def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
         alpha_pub.publish(huge)
         assert spin_until(executor, lambda: controller.rejected_gaits == 8)
     logged = [line for line in capfd.readouterr().err.splitlines() if "rejected /hzd/alpha" in line]
-    assert len(logged) == 5 and all(len(line) < 300 for line in logged)
+    assert 1 <= len(logged) <= 5 and all(len(line) < 300 for line in logged)  # at most one a second (below)
+
+
+def test_a_burst_of_bad_input_is_counted_in_full_and_logged_at_most_once_a_second(capfd):
+    """10,000-message bursts (issue 39: 848 error lines and a 0.2 s lockstep stall for 10k bad
+    Kd): every rejection that arrives (the subscriptions' depth drops the rest, as QoS says)
+    is counted, and each kind (bad Kd, bad alpha, a speed clamped, a speed rejected) logs at
+    most one line per wall second, saying how many it did not log."""
+    gait = GaitLibrary.load().nearest(1.0)
+    burst = 1000
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)
+        policy = PolicyNode(context=context)
+        user = rclpy.create_node("flooder", context=context)
+        for node in (controller, policy, user):
+            executor.add_node(node)
+        def deep(profile):  # the nodes' QoS, with room for the whole burst
+            return rclpy.qos.QoSProfile(depth=burst + 10, reliability=profile.reliability,
+                                        durability=profile.durability)
+        kd_pub = user.create_publisher(Float64, topics.KD, deep(qos.GAIT_QOS))
+        alpha_pub = user.create_publisher(Float64MultiArray, topics.ALPHA, deep(qos.GAIT_QOS))
+        speed_pub = user.create_publisher(Float64, topics.CMD_SPEED, deep(qos.COMMAND_QOS))
+        assert spin_until(executor, lambda: kd_pub.get_subscription_count() and speed_pub.get_subscription_count()
+                          and alpha_pub.get_subscription_count())
+        capfd.readouterr()
+        start = time.monotonic()
+        bad_alpha = alpha_to_msg([a + 3.0 for a in gait.alpha])
+        for i in range(burst):  # the gait topics keep one message (depth 1): let each be taken
+            kd_pub.publish(Float64(data=-1.0))
+            alpha_pub.publish(bad_alpha)
+            speed_pub.publish(Float64(data=math.nan if i % 2 else 9.0))
+            for _ in range(3):
+                executor.spin_once(timeout_sec=0.0)
+        # what the nodes' subscription depth let through, until nothing more comes for 1 s
+        seen, quiet_since = (-1, -1), time.monotonic()
+        while time.monotonic() - quiet_since < 1.0 and time.monotonic() - start < 120:
+            spin_for(executor, 0.1)
+            now_seen = (controller.rejected_gaits, policy.rejected_commands)
+            if now_seen != seen:
+                seen, quiet_since = now_seen, time.monotonic()
+        elapsed = time.monotonic() - start
+        assert controller.rejected_gaits >= 100 and policy.rejected_commands >= 100, seen
+        spin_for(executor, 2.5)  # the nodes' 1 s timers say the tail of the burst
+    err = capfd.readouterr().err.splitlines()
+    allowed = 1 + math.ceil(elapsed)  # one line at once, then one per second of the burst
+    for pattern in ("rejected /hzd/kd", "rejected /hzd/alpha", "rejected /cmd_speed", "/cmd_speed 9"):
+        lines = [line for line in err if pattern in line]
+        assert 1 <= len(lines) <= allowed, (pattern, len(lines), allowed)
+    for kind in ("kd", "alpha", "reject /cmd_speed", "clamp /cmd_speed"):  # the unlogged ones are said, counted
+        assert any(f"more {kind} rejections like the last one logged" in line or "more like it" in line
+                   for line in err if kind.split()[-1].strip("/") in line), kind
 
 
 def _start_stack(context, executor, **sim_params):

@@ -65,6 +65,7 @@ from rabbit_msgs_py.conversions import (
 )
 from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
@@ -141,6 +142,8 @@ class HZDControllerNode(Node):
         self.replies_repeated = 0  # replies sent again for a state sent again
         self.rejected_gaits = 0
         self.rejected_states = 0
+        self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
+        self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
         # decision_sync: the due states (None: not holding for decisions), the gaits not yet
         # taken (None for a rejected one), the state waiting for its decision
         self._due: PeriodicDecisions | None = None
@@ -166,6 +169,10 @@ class HZDControllerNode(Node):
         self.create_timer(0.05, self._check_held)  # wall clock: decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
+
+    def _flush_rejections(self) -> None:
+        for line in self._rejections.flush():
+            self.get_logger().warning(line)
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """``kp``, ``max_kd``, ``blend_phase`` at run time, validated as at start (read-only
         ones are refused by rclpy before this is called)."""
@@ -199,8 +206,10 @@ class HZDControllerNode(Node):
             alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
         except (MessageError, ValueError) as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.ALPHA)}: {short(str(exc), 200)}; "
-                                    "keeping the last good gait")
+            line = self._rejections.line("alpha", f"rejected {self.resolve_topic_name(topics.ALPHA)}: "
+                                                  f"{short(str(exc), 200)}; keeping the last good gait")
+            if line is not None:
+                self.get_logger().error(line)
             self._take("alpha", None)
             return
         self._alpha = alpha
@@ -212,8 +221,10 @@ class HZDControllerNode(Node):
             kd = validate_kd(msg.data, self.config)
         except ValueError as exc:
             self.rejected_gaits += 1
-            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.KD)}: {short(str(exc), 200)}; "
-                                    "keeping the last good value")
+            line = self._rejections.line("kd", f"rejected {self.resolve_topic_name(topics.KD)}: "
+                                               f"{short(str(exc), 200)}; keeping the last good value")
+            if line is not None:
+                self.get_logger().error(line)
             self._take("kd", None)
             return
         self._kd = kd
@@ -258,8 +269,11 @@ class HZDControllerNode(Node):
             return
         timing, _, period = msg.data.partition(":")
         if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
-            self.get_logger().error(f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} {short(repr(msg.data), 60)}: "
-                                    f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
+            line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
+                                                        f"{short(repr(msg.data), 60)}: not one of {GAIT_TIMINGS}, or "
+                                                        f"at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
+            if line is not None:
+                self.get_logger().error(line)
             return
         if timing != self.gait_timing:
             self.get_logger().info(f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")

@@ -64,6 +64,7 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_vectors, phase_from_msg, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from rabbit_policy.runtime.policies import (
@@ -171,6 +172,8 @@ class PolicyNode(Node):
 
         self.decisions = 0
         self.rejected_commands = 0
+        self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
+        self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
         self.last_observation: Observation | None = None
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
@@ -198,6 +201,10 @@ class PolicyNode(Node):
             f"send speeds on {self.resolve_topic_name(topics.CMD_SPEED)}"
         )
 
+
+    def _flush_rejections(self) -> None:
+        for line in self._rejections.flush():
+            self.get_logger().warning(line)
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """``min_speed``/``max_speed`` at run time, validated as at start (the command in
         force is clamped into the new range); read-only ones are refused by rclpy."""
@@ -237,17 +244,26 @@ class PolicyNode(Node):
         self._command(msg.data, self.resolve_topic_name(topics.CMD_SPEED))
 
     def _command(self, value: float, topic: str) -> None:
-        """A commanded speed (m/s) from ``topic``: clamped into range, rejected if not finite."""
+        """A commanded speed (m/s) from ``topic``: clamped into range, rejected if not finite
+        (each kind of line at most once a second: :class:`RejectionLog`)."""
         try:
             speed = clamp_speed(value, self.min_speed, self.max_speed)
         except ValueError as exc:
             self.rejected_commands += 1
-            self.get_logger().error(f"rejected {topic}: {exc}; keeping {self.desired_speed:.2f} m/s")
+            line = self._rejections.line(f"reject {topic}", f"rejected {topic}: {exc}; keeping "
+                                                             f"{self.desired_speed:.2f} m/s")
+            if line is not None:
+                self.get_logger().error(line)
             return
         if speed != value:
-            self.get_logger().warning(clamp_message(value, self.min_speed, self.max_speed, speed, topic))
+            line = self._rejections.line(f"clamp {topic}", clamp_message(value, self.min_speed, self.max_speed, speed,
+                                                                         topic))
+            if line is not None:
+                self.get_logger().warning(line)
         if speed != self.desired_speed:
-            self.get_logger().info(f"commanded speed {speed:.2f} m/s")
+            line = self._rejections.line("command", f"commanded speed {speed:.2f} m/s")
+            if line is not None:
+                self.get_logger().info(line)
         self.desired_speed = speed
 
     def _on_hip_velocity(self, msg: TwistStamped) -> None:
