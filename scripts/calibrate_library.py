@@ -1,9 +1,7 @@
 #!/usr/bin/env python3
-"""Calibrate the gait library's interpolation (``interpolation.json`` beside the gaits), then
-the recovery controller's hip speed profile (``hip_speed_profile.json``), which depends on it.
+"""Calibrate the gait library's interpolation (``interpolation.json`` beside the gaits).
 
     scripts/calibrate_library.py [--gait-dir DIR] [--weights 11] [--duration 20] [--workers 2]
-    scripts/calibrate_library.py --hip-profile      # the hip speed profile only
 
 Walks blends of each two neighbouring gaits at evenly spaced weights and writes the mean
 speed each walked at (``rabbit_policy.gait_design.calibration``); ``GaitLibrary.interpolate``
@@ -28,12 +26,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--weights", type=int, default=11, help="blend weights per pair (>= 2)")
     parser.add_argument("--duration", type=float, default=20.0, help="walk per blend, s of sim time")
     parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--hip-profile", action="store_true",
-                        help="only the recovery controller's hip speed profile (rabbit_policy.runtime.recovery)")
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
-    from rabbit_policy.gait_design.calibration import CalibrationConfig, calibrate, calibrate_hip_profile
-    from rabbit_policy.runtime.gait_library import CALIBRATION_FILE, PROFILE_FILE, GaitLibrary, packaged_gait_dir
+    from rabbit_policy.gait_design.calibration import CalibrationConfig, calibrate
+    from rabbit_policy.runtime.gait_library import CALIBRATION_FILE, GaitLibrary, packaged_gait_dir
 
     directory = args.gait_dir or packaged_gait_dir()
     try:
@@ -45,20 +41,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     backend = open_backend(parser, args)
     try:
-        if not args.hip_profile:
-            calibration = calibrate(library, config, backend.map)
-            (directory / CALIBRATION_FILE).write_text(strict_json.dumps(calibration.to_dict(), indent=1) + "\n")
-            for speeds, rows in zip(zip(library.speeds, library.speeds[1:]), calibration.pairs):
-                cells = " ".join("fail" if v is None else f"{v:.2f}" for _, v in rows)
-                print(f"{speeds[0]:.2f}-{speeds[1]:.2f} m/s: {cells}")
-            print(f"wrote {directory / CALIBRATION_FILE}", file=sys.stderr)
-        profile = calibrate_hip_profile(GaitLibrary.load(directory), str(directory), map_fn=backend.map)
-    except RuntimeError as exc:
-        parser.exit(1, f"error: {exc}\n")
+        calibration = calibrate(library, config, backend.map)
     finally:
         backend.close()
-    (directory / PROFILE_FILE).write_text(strict_json.dumps(profile.to_dict(), indent=1) + "\n")
-    print(f"wrote {directory / PROFILE_FILE}", file=sys.stderr)
+    (directory / CALIBRATION_FILE).write_text(strict_json.dumps(calibration.to_dict(), indent=1) + "\n")
+    for speeds, rows in zip(zip(library.speeds, library.speeds[1:]), calibration.pairs):
+        cells = " ".join("fail" if v is None else f"{v:.2f}" for _, v in rows)
+        print(f"{speeds[0]:.2f}-{speeds[1]:.2f} m/s: {cells}")
+    print(f"wrote {directory / CALIBRATION_FILE}", file=sys.stderr)
     return 0
 
 

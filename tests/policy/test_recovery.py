@@ -1,50 +1,47 @@
-"""The recovery controller (rabbit_policy.runtime.recovery): its rule, its calibration, that it
+"""The recovery controller (rabbit_policy.runtime.recovery): its rule and step memory, that it
 is classic HZD when nothing pushes, that it acts on a push, and that the ROS stack runs it as
 the ROS-free loop does."""
 
 from __future__ import annotations
-
-import json
 
 import numpy as np
 import pytest
 
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.runtime.gait_library import GaitLibrary, packaged_gait_dir
-from rabbit_policy.runtime.policies import (PolicyUnavailable, controller_settings, make_policy,
-                                            required_controller_settings)
-from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, HipSpeedProfile, RecoveryConfig
+from rabbit_policy.runtime.policies import controller_settings, make_policy, required_controller_settings
+from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig, StepMemory
 
 
 @pytest.mark.unit
-def test_profile_interpolates_in_speed_and_phase_and_refuses_bad_tables():
-    profile = HipSpeedProfile((1.0, 2.0), ((1.0, 3.0), (2.0, 4.0)))
-    assert profile.nominal(1.0, 0.25) == pytest.approx(1.0)  # the first bin's centre
-    assert profile.nominal(1.0, 0.5) == pytest.approx(2.0)
-    assert profile.nominal(1.5, 0.75) == pytest.approx(3.5)
-    assert profile.nominal(9.0, 2.0) == pytest.approx(4.0)  # clamped in speed and phase
-    assert HipSpeedProfile.from_dict(profile.to_dict()) == profile
-    with pytest.raises(ValueError):
-        HipSpeedProfile((2.0, 1.0), ((1.0, 3.0), (2.0, 4.0)))
-    with pytest.raises(ValueError):
-        HipSpeedProfile((1.0,), ((float("nan"), 1.0),))
+def test_step_memory_gives_the_slower_of_the_two_previous_steps_at_the_phase():
+    memory = StepMemory(bins=4)
+    for step, speeds in enumerate(([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4])):  # two whole steps
+        for b, v in enumerate(speeds):
+            assert memory.observe(0.125 + 0.25 * b, v) is None  # not two whole steps yet
+    assert memory.observe(0.1, 0.5) == 0.9  # a touchdown (the phase fell back): min(1.0, 0.9) in bin 0
+    assert memory.observe(0.6, 0.5) == 1.0  # bin 2: min(1.2, 1.0)
+    memory.reset()
+    assert memory.observe(0.5, 1.0) is None
     with pytest.raises(ValueError):
         RecoveryConfig(offsets=(0.1, 0.1))
+    with pytest.raises(ValueError):
+        RecoveryConfig(bins=1)
 
 
 @pytest.mark.unit
 def test_the_rule_acts_only_inside_the_step_and_only_when_the_hip_falls_behind():
     policy = make_policy("recovery")
-    nominal = policy.profile.nominal(1.0, 0.3)
-    assert policy.weight(1.0, 0.3, nominal) == 0.0  # on the profile
-    assert policy.weight(1.0, 0.3, nominal + 0.5) == 0.0  # ahead of it (a forward push): classic
-    assert policy.weight(1.0, 0.3, nominal - 2.0) == 1.0  # far behind: saturated
-    assert policy.weight(1.0, 0.0, 0.0) == 0.0 and policy.weight(1.0, 1.0, 0.0) == 0.0  # phase clamped
+    assert policy.weight(1.0, 0.3, 1.0, None) == 0.0  # no reference yet
+    assert policy.weight(1.0, 0.3, 1.0, 1.0) == 0.0  # as fast as a step ago
+    assert policy.weight(1.0, 0.3, 1.5, 1.0) == 0.0  # faster (a forward push): classic
+    assert policy.weight(1.0, 0.3, 0.0, 1.0) == 1.0  # far behind: saturated
+    assert 0.0 < policy.weight(1.0, 0.3, 0.8, 1.0) < 1.0
+    assert policy.weight(1.0, 0.0, 0.0, 1.0) == 0.0 and policy.weight(1.0, 1.0, 0.0, 1.0) == 0.0  # phase clamped
 
 
 @pytest.mark.unit
-def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs(tmp_path):
+def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs():
     policy = make_policy("recovery")
     assert policy.needs_body and policy.decision_period == 20
     assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("recovery")
@@ -53,10 +50,6 @@ def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs(tmp
         make_policy("recovery", decision_period=0)
     with pytest.raises(ValueError, match="speed integral"):
         make_policy("recovery", speed_integral=0.2)
-    for gait in GaitLibrary.load().gaits[:2]:  # a library without a hip speed profile: one line, what to run
-        gait.save(tmp_path / f"gait_{gait.speed:.2f}.json")
-    with pytest.raises(PolicyUnavailable, match="calibrate_library.py --hip-profile"):
-        make_policy("recovery", gait_dir=tmp_path)
 
 
 @pytest.mark.sim
@@ -81,17 +74,6 @@ def test_it_survives_a_backward_push_classic_hzd_stalls_on():
     assert loop.controller.config.within_step_blend == 0.0  # the loop runs the settings it needs
     loop.run(time + 5.0)
     assert not loop.failed
-
-
-@pytest.mark.sim
-@pytest.mark.slow
-def test_the_packaged_hip_profile_is_what_calibration_measures():
-    from rabbit_policy.gait_design.calibration import calibrate_hip_profile
-
-    stored = json.loads((packaged_gait_dir() / "hip_speed_profile.json").read_text())
-    fresh = calibrate_hip_profile(GaitLibrary.load()).to_dict()
-    assert fresh["speeds"] == stored["speeds"]
-    np.testing.assert_allclose(fresh["table"], stored["table"], atol=1e-3)
 
 
 @pytest.mark.ros

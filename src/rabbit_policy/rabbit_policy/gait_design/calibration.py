@@ -8,8 +8,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
-import numpy as np
-
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.gait_library import Calibration, GaitLibrary
@@ -49,39 +47,3 @@ def calibrate(library: GaitLibrary, config: CalibrationConfig = CalibrationConfi
     return Calibration(pairs, {"weights": config.weights, "duration_s": config.duration,
                                "gait_speeds": library.speeds, "mean_speed": "hip displacement over the second half"})
 
-
-def _hip_profile_row(job: tuple) -> tuple[float, ...]:
-    from rabbit_policy.experiment.loop import ClosedLoop
-    from rabbit_policy.runtime.policies import make_policy
-
-    gait_dir, speed, bins, settle, duration = job
-    loop = ClosedLoop(Scenario.constant(speed), make_policy("classic", gait_dir=gait_dir))
-    sums, counts = [0.0] * bins, [0] * bins
-    settle_ticks = int(round(settle / loop.model.opt.timestep))
-
-    def observe(l, _torques) -> None:
-        if l.ticks > settle_ticks:
-            b = min(int(l.controller.tau * bins), bins - 1)
-            sums[b] += float(l.data.qvel[0])
-            counts[b] += 1
-
-    loop.observer = observe
-    if loop.run(settle + duration):
-        raise RuntimeError(f"classic HZD does not walk at {speed} m/s: no hip speed profile")
-    filled = [s / c if c else None for s, c in zip(sums, counts)]
-    known = [(b, v) for b, v in enumerate(filled) if v is not None]
-    if len(known) < 2:
-        raise RuntimeError(f"the walk at {speed} m/s visited fewer than 2 phase bins")
-    xs, vs = zip(*known)
-    return tuple(float(v) for v in np.interp(range(bins), xs, vs))  # a bin the phase skipped: its neighbours'
-
-
-def calibrate_hip_profile(library: GaitLibrary, gait_dir: str | None = None, bins: int = 20, settle: float = 2.0,
-                          duration: float = 6.0, map_fn: MapFn = map):
-    """The undisturbed hip velocity by phase at each of the library's speeds, walked by classic
-    HZD (:class:`~rabbit_policy.runtime.recovery.HipSpeedProfile`): the mean over ``duration``
-    s after ``settle`` s, in ``bins`` equal phase bins."""
-    from rabbit_policy.runtime.recovery import HipSpeedProfile
-
-    rows = list(map_fn(_hip_profile_row, [(gait_dir, s, bins, settle, duration) for s in library.speeds]))
-    return HipSpeedProfile(tuple(library.speeds), tuple(rows))

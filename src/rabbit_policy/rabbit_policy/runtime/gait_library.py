@@ -31,7 +31,6 @@ from rabbit_hzd_controller.gait import Gait
 
 
 CALIBRATION_FILE = "interpolation.json"
-PROFILE_FILE = "hip_speed_profile.json"  # the recovery controller's (runtime.recovery), not a gait
 
 
 @dataclass(frozen=True)
@@ -91,7 +90,7 @@ class GaitLibrary:
         """Load every ``*.json`` gait in ``directory`` (default: the packaged library) and
         its ``interpolation.json`` calibration, if there is one."""
         directory = Path(directory) if directory else packaged_gait_dir()
-        paths = sorted(p for p in directory.glob("*.json") if p.name not in (CALIBRATION_FILE, PROFILE_FILE))
+        paths = sorted(p for p in directory.glob("*.json") if p.name != CALIBRATION_FILE)
         if not paths:
             raise FileNotFoundError(f"no gait files (*.json) in {directory}")
         gaits = tuple(Gait.load(p) for p in paths)

@@ -344,7 +344,7 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
         period = CLASSIC_DECISION_PERIOD if decision_period is None else decision_period
         policy: Policy = LibraryPolicy(library, mode, speed_integral, decision_dt(period), integral_offset_limit)
         if kind == "recovery":
-            policy = _recovery(policy, library, gait_dir, period)
+            policy = _recovery(policy, period)
             period = None  # it decides every CLASSIC_DECISION_PERIOD ticks itself
     else:
         policy = _learned(policy_file, decision_period)  # it carries its decision period
@@ -353,18 +353,13 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     return PeriodicPolicy(policy, period) if period else policy
 
 
-def _recovery(classic: Policy, library: GaitLibrary, gait_dir: str | Path | None, period: int) -> Policy:
+def _recovery(classic: Policy, period: int) -> Policy:
     """The recovery controller on ``classic`` (:mod:`.recovery`); it decides every ``period`` > 0 ticks."""
-    from rabbit_policy.runtime.gait_library import packaged_gait_dir
-    from rabbit_policy.runtime.recovery import HipSpeedProfile, RecoveryPolicy
+    from rabbit_policy.runtime.recovery import RecoveryPolicy
 
     if period < 1:
         raise ValueError("the recovery controller acts within the step: its decision period must be >= 1 tick")
-    try:
-        profile = HipSpeedProfile.load(gait_dir or packaged_gait_dir())
-    except (FileNotFoundError, ValueError) as exc:
-        raise PolicyUnavailable(f"cannot load the recovery controller: {exc}") from exc
-    return RecoveryPolicy(classic, library, profile, decision_period=period)
+    return RecoveryPolicy(classic, decision_period=period)
 
 
 def _learned(policy_file: str | Path | None, decision_period: int | None) -> "LearnedPolicy":
