@@ -14,22 +14,25 @@ step's start and end postures, and the impact equalities, stay as they are).
 
 The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`):
 
-1. the hip's deficit d = (v_prev(tau) - v_x) / v_d - ``threshold``: v_x is the hip velocity
-   now (m/s, world x), v_prev(tau) the slower of the hip velocities the two previous steps
-   had at the same phase (:class:`StepMemory`, ``bins`` phase bins), v_d the command. The reference is the robot's
-   own last step, so nothing needs calibrating, a model error (friction, masses, drives)
-   moves the reference with the walk, and a commanded speed change (ramped, below) changes
-   one step from the next by less than the threshold;
+1. the hip's deficit d = r_prev(tau) - v_x / v_c - ``threshold``: v_x is the hip velocity
+   now (m/s, world x), v_c the ramped command (below), r_prev(tau) the slowest v_x / v_c of
+   the four previous steps at the same phase (:class:`StepMemory`, ``bins`` phase bins).
+   The reference is the robot's own recent steps, so nothing needs calibrating and a model
+   error (friction, masses, drives) moves it with the walk;
 2. w = clip(d / ``full``, 0, 1) while the phase is inside the step (0 < tau < 1: at its
-   ends the hip phase is clamped and says nothing of the hip's progress) and the previous
-   step is known, else 0;
+   ends the hip phase is clamped and says nothing of the hip's progress), the previous
+   steps are known and the command is not ramping, else 0 (a commanded deceleration is
+   not a push: judged on checks 1-6 without this gate, 9 of 72 decelerations fell);
 3. the gait is classic's with ``w * offsets`` (rad) added to rows 1-4 of the four outputs
    (stance hip, stance knee, swing hip, swing knee), applied at once: no blend, no queue
    (:data:`CONTROLLER_SETTINGS`, which the loops and the stack give the controller).
    Classic's gait is the library's for the command rate-limited to ``command_rate`` m/s per
-   decision: applied at once, a library gait that jumps with the command made 12 of 72
-   ordered speed changes fall or stall (decelerations from 1.4-1.5 m/s at the start of a
-   step); a ramp of 0.5 m/s per second made none of those fail.
+   decision, the ramp held from ``hold_from`` of phase to the touchdown: applied at once, a
+   library gait that jumps with the command made 12 of 72 ordered speed changes fall or stall
+   (decelerations from 1.4-1.5 m/s at the start of a step), and one that keeps changing late
+   in the step moves the swing leg's path just before it lands (decelerations from 1.5 m/s
+   commanded at mid-step fell; classic queues such a gait for the touchdown for the same
+   reason, ``ControllerConfig.within_step_until``).
 
 Undisturbed, w stays 0 and the gait is classic's (the limit cycle is classic's). The rule
 never speeds up: a forward push (the hip ahead of its last step) leaves classic alone.
@@ -58,13 +61,15 @@ class RecoveryConfig:
     threshold: the deficit (fraction of v_d) below which nothing is done.
     full: the deficit beyond the threshold (fraction of v_d) at which w reaches 1.
     command_rate: m/s per decision (20 ticks) the base gait's speed follows the command by.
+    hold_from: phase from which the base gait is held until the touchdown.
     bins: phase bins of the step memory.
     """
 
     offsets: tuple[float, float, float, float] = (-0.11, 0.01, 0.08, -0.23)
     threshold: float = 0.1
     full: float = 0.24
-    command_rate: float = 0.01
+    command_rate: float = 0.015
+    hold_from: float = 0.6
     bins: int = 20
 
     def __post_init__(self) -> None:
@@ -81,33 +86,36 @@ class RecoveryConfig:
 
 
 class StepMemory:
-    """The hip velocity (m/s) at each phase bin of the step now and of the two steps before
-    (one of each leg); a touchdown (the phase falling back by more than half a step) shifts
-    them. The reference at a phase is the slower of the two steps before there, so a walk
-    whose legs alternate (a period-two gait, common at 0.7 m/s and on low friction) is not
-    taken for a pushed one."""
+    """Per phase bin, the hip velocity as a fraction of the (ramped) command, for the step now
+    and the ``depth`` steps before; a touchdown (the phase falling back by more than half a
+    step) shifts them. The reference at a phase is the slowest of the steps before there:
+    so a walk whose legs alternate (a period-two gait, common at 0.7 m/s and on low friction)
+    is not taken for a pushed one, nor is the return to speed after a forward push (the steps
+    before the push are slower than those after it), and a commanded speed change moves the
+    fraction little."""
 
-    def __init__(self, bins: int) -> None:
+    def __init__(self, bins: int, depth: int = 4) -> None:
         self.bins = bins
+        self.depth = depth
         self.reset()
 
     def reset(self) -> None:
-        self.steps = [np.full(self.bins, np.nan) for _ in range(3)]  # now, one before, two before
+        self.steps = [np.full(self.bins, np.nan) for _ in range(self.depth + 1)]  # now, then the steps before
         self._last_tau: float | None = None
 
-    def observe(self, tau: float, hip_velocity: float) -> float | None:
-        """Record the hip velocity at phase ``tau``; the slower of the two previous steps' at
-        this phase (each at its bin, or its nearest recorded one), None before two whole steps
-        are known."""
+    def observe(self, tau: float, fraction: float) -> float | None:
+        """Record the hip velocity fraction at phase ``tau``; the slowest of the previous
+        steps' at this phase (each at its bin, or its nearest recorded one), None before
+        ``depth`` whole steps are known."""
         if self._last_tau is not None and tau < self._last_tau - 0.5:
-            self.steps = [np.full(self.bins, np.nan)] + self.steps[:2]
+            self.steps = [np.full(self.bins, np.nan)] + self.steps[:self.depth]
         self._last_tau = tau
         b = min(max(int(tau * self.bins), 0), self.bins - 1)
-        self.steps[0][b] = hip_velocity
+        self.steps[0][b] = fraction
         references = []
         for step in self.steps[1:]:
             known = np.flatnonzero(~np.isnan(step))
-            if known.size < self.bins // 2:  # not a whole step (the walk's first two)
+            if known.size < self.bins // 2:  # not a whole step (the walk's first ones)
                 return None
             references.append(float(step[known[np.argmin(np.abs(known - b))]]))
         return min(references)
@@ -135,6 +143,7 @@ class RecoveryPolicy:
         self.name = f"recovery@{decision_period}ticks"
         self._offsets = np.zeros((5, N_OUTPUTS))
         self._offsets[1:, :] = np.asarray(config.offsets)
+        self._held = None  # the base gait held late in the step
 
     def with_config(self, config: RecoveryConfig) -> "RecoveryPolicy":
         """The same controller with other constants (tuning)."""
@@ -143,28 +152,34 @@ class RecoveryPolicy:
     def reset(self) -> None:
         self._base.reset()
         self.memory.reset()
+        self._held = None
 
     def start_command(self, speed: float):
         """Classic's gait at ``speed`` (no body state exists before the walk)."""
         return self.classic.act(Observation(speed, speed, 0.0))
 
-    def weight(self, desired_speed: float, tau: float, hip_velocity: float, reference: float | None) -> float:
-        """w in [0, 1]: how much of the offsets apply (the module docstring); ``reference``:
-        the previous step's hip velocity at this phase (m/s), None if unknown."""
+    def weight(self, tau: float, fraction: float, reference: float | None) -> float:
+        """w in [0, 1]: how much of the offsets apply (the module docstring); ``fraction``:
+        the hip velocity over the ramped command now, ``reference`` the previous steps'
+        slowest at this phase (None: unknown)."""
         if reference is None or not 0.0 < tau < 1.0:
             return 0.0
-        deficit = (reference - hip_velocity) / max(desired_speed, 0.1) - self.config.threshold
+        deficit = reference - fraction - self.config.threshold
         return min(max(deficit / self.config.full, 0.0), 1.0)
 
     def act(self, observation: Observation):
         from rabbit_policy.runtime.policies import GaitCommand
 
-        command = self._base.act(observation)
         if observation.body is None:
             raise ValueError("the recovery controller needs the body state (observation.body)")
         _, _, tau, _, hip_velocity = observation.body
-        reference = self.memory.observe(tau, hip_velocity)
-        w = self.weight(observation.desired_speed, tau, hip_velocity, reference)
+        if tau < self.config.hold_from or self._held is None:
+            self._held = self._base.act(observation)  # the ramp advances early in the step only
+        command = self._held
+        ramped = self._base.command  # the command the base gait is for (m/s), ramping to v_d
+        reference = self.memory.observe(tau, hip_velocity / max(ramped, 0.1))
+        ramping = abs(ramped - observation.desired_speed) > 1e-9
+        w = 0.0 if ramping else self.weight(tau, hip_velocity / max(ramped, 0.1), reference)
         if w <= 0.0:
             return command
         free = reduce_alpha(command.alpha).reshape(5, N_OUTPUTS) + w * self._offsets
