@@ -14,9 +14,9 @@ from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig, 
 
 
 @pytest.mark.unit
-def test_step_memory_gives_the_slower_of_the_two_previous_steps_at_the_phase():
-    memory = StepMemory(bins=4)
-    for step, speeds in enumerate(([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4])):  # two whole steps
+def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
+    memory = StepMemory(bins=4, depth=2)
+    for speeds in ([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4]):  # two whole steps
         for b, v in enumerate(speeds):
             assert memory.observe(0.125 + 0.25 * b, v) is None  # not two whole steps yet
     assert memory.observe(0.1, 0.5) == 0.9  # a touchdown (the phase fell back): min(1.0, 0.9) in bin 0
@@ -32,12 +32,12 @@ def test_step_memory_gives_the_slower_of_the_two_previous_steps_at_the_phase():
 @pytest.mark.unit
 def test_the_rule_acts_only_inside_the_step_and_only_when_the_hip_falls_behind():
     policy = make_policy("recovery")
-    assert policy.weight(1.0, 0.3, 1.0, None) == 0.0  # no reference yet
-    assert policy.weight(1.0, 0.3, 1.0, 1.0) == 0.0  # as fast as a step ago
-    assert policy.weight(1.0, 0.3, 1.5, 1.0) == 0.0  # faster (a forward push): classic
-    assert policy.weight(1.0, 0.3, 0.0, 1.0) == 1.0  # far behind: saturated
-    assert 0.0 < policy.weight(1.0, 0.3, 0.8, 1.0) < 1.0
-    assert policy.weight(1.0, 0.0, 0.0, 1.0) == 0.0 and policy.weight(1.0, 1.0, 0.0, 1.0) == 0.0  # phase clamped
+    assert policy.weight(0.3, 1.0, None) == 0.0  # no reference yet
+    assert policy.weight(0.3, 1.0, 1.0) == 0.0  # as fast as the steps before
+    assert policy.weight(0.3, 1.5, 1.0) == 0.0  # faster (a forward push): classic
+    assert policy.weight(0.3, 0.0, 1.0) == 1.0  # far behind: saturated
+    assert 0.0 < policy.weight(0.3, 0.8, 1.0) < 1.0
+    assert policy.weight(0.0, 0.0, 1.0) == 0.0 and policy.weight(1.0, 0.0, 1.0) == 0.0  # phase clamped
 
 
 @pytest.mark.unit
