@@ -95,3 +95,19 @@ def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
     unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
     assert unique.shape == reference.shape and np.array_equal(unique, reference)
     assert nodes["policy_node"].decisions_given_up == 0
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_the_tuning_counts_the_pushes_and_the_offsets_are_what_saves_them():
+    """1.0 m/s, 14 N s backward (1.5x classic's margin) at 0.875 of a step: the tuned rule
+    survives it; the same controller with zero offsets (classic's ramped gait, at once) does not."""
+    from rabbit_policy.gait_design.recovery_tuning import TuningConfig, push_cases, survivals
+
+    policy = make_policy("recovery")
+    config = TuningConfig(margins=((1.0, 9.0),), phases=(0.875,), factors=(1.5,))
+    cases = push_cases(policy, config)
+    assert [impulse for _, _, impulse in cases] == [-14.0]
+    assert survivals(policy, cases, config) == 1
+    idle = policy.with_config(RecoveryConfig(offsets=(0.0, 0.0, 0.0, 0.0)))
+    assert survivals(idle, cases, config) == 0

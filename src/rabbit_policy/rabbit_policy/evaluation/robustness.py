@@ -208,7 +208,10 @@ def random_sequences(policy: Policy, config: RobustnessConfig, map_fn: MapFn = m
 
 
 # ------------------------------------------------------------------ push margins
-def _push_job(job: tuple) -> bool:
+def push_survived(job: tuple) -> bool:
+    """``(policy, speed m/s, push time s, impulse N s signed, config)``: True if the walk at
+    ``speed`` pushed once (``config.push_duration`` s) neither falls nor stalls within
+    ``config.push_horizon`` s after the push (the margin's rule; the recovery tuning's too)."""
     policy, speed, time, impulse, config = job
     push = Push(time, impulse / config.push_duration, config.push_duration)
     return not walk(policy, Scenario.constant(speed, pushes=(push,)), time + config.push_horizon).failed
@@ -225,7 +228,7 @@ def push_margin(policy: Policy, speed: float, direction: int, config: Robustness
                 "largest_survived_Ns": 0, "capped": False, "first_failing_phases": list(config.push_phases),
                 "start_failed": True}
     for impulse in range(1, config.max_impulse + 1):
-        ok = list(map_fn(_push_job, [(policy, speed, t, direction * impulse, config) for t in times]))
+        ok = list(map_fn(push_survived, [(policy, speed, t, direction * impulse, config) for t in times]))
         if not all(ok):
             failed_phases = [p for p, good in zip(config.push_phases, ok) if not good]
             break

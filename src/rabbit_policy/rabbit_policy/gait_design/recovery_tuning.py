@@ -12,8 +12,6 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from rabbit_policy.experiment.loop import walk
-from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 
 MapFn = Callable[[Callable, Iterable], Iterable]
@@ -30,7 +28,7 @@ class TuningConfig:
     generations: int = 6
     popsize: int = 8
     sigma: float = 0.05
-    horizon: float = 5.0
+    push_horizon: float = 5.0
     settle: float = 3.0
     push_duration: float = 0.1
     seed: int = 3
@@ -50,15 +48,11 @@ def push_cases(policy, config: TuningConfig) -> list[tuple[float, float, float]]
     return cases
 
 
-def _survives(job: tuple) -> bool:
-    policy, speed, time, impulse, config = job
-    push = Push(time, impulse / config.push_duration, config.push_duration)
-    return not walk(policy, Scenario.constant(speed, pushes=(push,)), time + config.horizon).failed
-
-
 def survivals(policy: RecoveryPolicy, cases, config: TuningConfig, map_fn: MapFn = map) -> int:
-    """How many of ``cases`` the controller survives."""
-    return sum(map_fn(_survives, [(policy, s, t, i, config) for s, t, i in cases]))
+    """How many of ``cases`` the controller survives (the push margin's rule)."""
+    from rabbit_policy.evaluation.robustness import push_survived
+
+    return sum(map_fn(push_survived, [(policy, s, t, i, config) for s, t, i in cases]))
 
 
 def _decode(x: np.ndarray) -> RecoveryConfig:
