@@ -14,7 +14,7 @@ import pytest
 
 from rabbit_policy.evaluation.experiments import convergence, filtered_speed, settling_time
 from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.runtime.policies import CONTROLLERS, make_policy
 from rabbit_policy.evaluation.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
 
 pytestmark = pytest.mark.sim
@@ -210,7 +210,7 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert list(results["ablation"]) == ["classic HZD", "a best", "b best", "c best", "d best", "c final", "d final"]
     assert "## The ablation" in report and "| check | classic HZD | a best |" in report
     assert results["meta"]["command"].endswith(f"--ablation {ablation}")
-    for name, dimension in (("classic", 10), ("learned", 13)):
+    for name, dimension in (("classic", 10), ("learned", 13), ("recovery", 13)):
         analysis = results["poincare"][name]["1.00"]
         assert len(analysis["magnitudes"]) == dimension and analysis["stable"] is True
         assert len(analysis["largest_by_seed"]) == 3 and analysis["largest"] in analysis["largest_by_seed"]
@@ -219,20 +219,20 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
         assert len(results["tracking"][name]["segments"]) == 2
     table = {row["scenario"]: row for row in results["push"]["table"]}
     assert set(table) == {"small_forward", "small_backward", "large_backward"}
-    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in ("classic", "learned"))
-    assert set(results["push_sweep"]) == {"classic", "learned"}
-    assert set(results["robustness"]) == {"classic", "learned"}
-    for name in ("classic", "learned"):
+    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in CONTROLLERS)
+    assert set(results["push_sweep"]) == set(CONTROLLERS)
+    assert set(results["robustness"]) == set(CONTROLLERS)
+    for name in CONTROLLERS:
         robust = results["robustness"][name]
         assert robust["speed_grid"]["total"] == 2 and robust["transitions"]["total"] == 2
         assert robust["random_sequences"]["total"] == 2 and len(robust["push_margins"]) == 2
     assert "## Robustness" in report
-    for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "convergence", "poincare", "push",
-                   "sweep", "transitions"):
+    for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "limit_cycle_recovery", "convergence",
+                   "poincare", "push", "sweep", "transitions"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
     assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {
-        ("classic", "large_backward"), ("learned", "large_backward")}
+        (name, "large_backward") for name in CONTROLLERS}
     for video in results["videos"]:
         assert (tmp_path / video["file"]).is_file() and f"({video['file']})" in report
     bad = run_script("scripts/evaluate.py", "--quick", "--out", str(tmp_path), "--policy-file", "/nonexistent.pt")
