@@ -25,7 +25,7 @@ def push_time() -> float:
 
 @pytest.mark.slow
 def test_a_cloned_loop_goes_on_exactly_as_the_original(push_time):
-    case = prepare(1.0, 0.875, -9.0, CONFIG, push_time)
+    case = prepare(1.0, -9.0, CONFIG, push_time)
     first, second = clone_loop(case.loop), clone_loop(case.loop)
     first.run(max_ticks=1500)
     assert case.loop.ticks == case.push_tick  # the case itself is not moved by its clones
@@ -37,7 +37,7 @@ def test_a_cloned_loop_goes_on_exactly_as_the_original(push_time):
 @pytest.mark.slow
 @pytest.mark.parametrize("impulse", [9.0, 10.0])
 def test_a_rollout_without_actions_is_classic_hzd(push_time, impulse):
-    case = prepare(1.0, 0.875, -impulse, CONFIG, push_time)
+    case = prepare(1.0, -impulse, CONFIG, push_time)
     push = Push(push_time, -impulse / CONFIG.push_duration, CONFIG.push_duration)
     reference = walk(make_policy("classic"), Scenario.constant(1.0, pushes=(push,)), push_time + CONFIG.horizon)
     assert rollout(case, FAMILIES["a_blended"], None, CONFIG)["survived"] == (not reference.failed)
@@ -47,7 +47,7 @@ def test_a_rollout_without_actions_is_classic_hzd(push_time, impulse):
 
 @pytest.mark.slow
 def test_the_oracle_finds_a_recovery_where_classic_stalls(push_time):
-    case = prepare(1.0, 0.875, -14.0, CONFIG, push_time)
+    case = prepare(1.0, -14.0, CONFIG, push_time)
     assert not rollout(case, FAMILIES["b_at_once"], None, CONFIG)["survived"]
     found = search(case, FAMILIES["b_at_once"], CONFIG, seed=1)
     assert found["found"]

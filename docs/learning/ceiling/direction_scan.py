@@ -25,8 +25,8 @@ def main() -> None:
     phases = [i / 8 for i in range(8)]
     cases = []
     for speed, margin in MARGINS:
-        for phase, time in zip(phases, phase_times(classic, speed, config.settle, phases)):
-            cases.append(prepare(speed, phase, -float(np.ceil(1.5 * margin)), config, time))
+        for time in phase_times(classic, speed, config.settle, phases):
+            cases.append(prepare(speed, -float(np.ceil(1.5 * margin)), config, time))
     family = FAMILIES["b_at_once"]
 
     def survived(offsets: dict[str, float]) -> int:

@@ -348,26 +348,19 @@ class HZDController:
             dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
         else:
             dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
-        floor_rate = cfg.min_phase_rate
-        floored = False
-        if floor_rate:  # the phase keeps moving in time while the hip stalls
-            floor = (0.0 if self.touchdown else self.tau) + floor_rate * cfg.tick
-            if s < floor:
-                s, floored = floor, True
         if s <= 0.0:
             t = 0.0
             dtau = 0.0
         elif s >= 1.0:
             t = 1.0
             dtau = 0.0
-        elif floored:
-            t = s
-            dtau = floor_rate
         else:
             t = s
             dphi_f = dsh - dpitch
             dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
             dtau = dp_hip / span
+        if cfg.min_phase_rate:  # off by default: one attribute read on the hot path
+            t, dtau = self._phase_in_time(t, dtau)
         self.tau = t
         self.tau_rate = dtau
         if self._replaced is not None:
@@ -417,6 +410,15 @@ class HZDController:
         if self.stance is _LEFT:
             return torques
         return [torques[2], torques[3], torques[0], torques[1]]
+
+    def _phase_in_time(self, t: float, dtau: float) -> tuple[float, float]:
+        """``min_phase_rate``: the phase (and its rate) no slower than that rate in time
+        since the last tick's phase (0 right after a touchdown), saturated at 1."""
+        rate = self.config.min_phase_rate
+        floor = (0.0 if self.touchdown else self.tau) + rate * self.config.tick
+        if t >= floor:
+            return t, dtau
+        return (1.0, 0.0) if floor >= 1.0 else (floor, rate)
 
     def _start_blend(self, tau: float, outputs: tuple[float, ...], p_hip: float) -> None:
         """Right after the gait changed (a touchdown with ``blend_phase``, or

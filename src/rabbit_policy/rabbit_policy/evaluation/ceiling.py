@@ -166,9 +166,9 @@ class Case:
     end_tick: int
 
 
-def prepare(speed: float, phase: float, impulse: float, config: CeilingConfig, push_time: float) -> Case:
-    """Classic HZD walking at ``speed`` m/s, stopped at ``push_time`` s (``phase`` of the
-    step), where a backward-or-forward push of ``impulse`` N s (signed) starts."""
+def prepare(speed: float, impulse: float, config: CeilingConfig, push_time: float) -> Case:
+    """Classic HZD walking at ``speed`` m/s, stopped at ``push_time`` s, where a push of
+    ``impulse`` N s (signed: negative backward) starts."""
     oracle = OracleGaits(make_policy("classic"))
     push = Push(push_time, impulse / config.push_duration, config.push_duration)
     loop = ClosedLoop(Scenario.constant(speed, pushes=(push,)), oracle)
@@ -266,7 +266,7 @@ def ceiling(speed: float, phase: float, push_time: float, family: Family, impuls
     none)."""
     ladder, reached = [], 0.0
     for k, impulse in enumerate(impulses):
-        case = prepare(speed, phase, -impulse, config, push_time)
+        case = prepare(speed, -impulse, config, push_time)
         classic = rollout(case, family, None, config)["survived"]
         found = {"found": True, "rollouts": 0} if classic else search(case, family, config, config.seed + k)
         ladder.append({"impulse_Ns": impulse, "classic_survives": classic, **found})

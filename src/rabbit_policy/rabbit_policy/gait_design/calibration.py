@@ -46,4 +46,3 @@ def calibrate(library: GaitLibrary, config: CalibrationConfig = CalibrationConfi
                   for k in range(len(library.gaits) - 1))
     return Calibration(pairs, {"weights": config.weights, "duration_s": config.duration,
                                "gait_speeds": library.speeds, "mean_speed": "hip displacement over the second half"})
-
