@@ -53,6 +53,7 @@ def test_reward_terms_are_in_info_and_sum_to_the_reward():
     env.reset(seed=1)
     _obs, reward, _te, _tr, info = env.step(np.zeros(21, np.float32))
     assert reward == info["reward_tracking"] + info["reward_fall"] and info["reward_fall"] == 0.0
+    assert info["reward_alive"] == 0.0  # no survival term by default
     assert info["reward_tracking"] == -((info["mean_speed"] - info["desired_speed"]) ** 2)
     falling = RabbitHZDEnv(max_steps=60, decision_period=20, fall_penalty=-7.0)
     falling.reset(seed=1)
@@ -348,3 +349,32 @@ def test_a_reset_whose_drawn_model_stalls_on_the_first_step_draws_again_and_star
     assert info["desired_speed"] == pytest.approx(0.716, abs=1e-3)
     again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
     assert np.array_equal(again.reset(seed=1092)[0], obs) and again.loop.scenario == env.loop.scenario
+
+
+def test_recovery_episodes_push_at_a_phase_of_a_step_around_classics_margin_mostly_backward():
+    from rabbit_policy.evaluation.push_recovery import classic_margin
+
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="recovery")
+    directions = []
+    for seed in range(24):
+        env.reset(seed=seed)
+        scenario = env.loop.scenario
+        assert scenario.pushes == () and len(scenario.phase_pushes) == 1
+        (push,) = scenario.phase_pushes
+        assert 1.0 - 1e-9 <= push.after <= 9.0 + 1e-9 and 0.0 <= push.phase < 1.0
+        command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
+        direction = 1 if push.impulse > 0 else -1
+        ratio = abs(push.impulse) / classic_margin(command, direction)
+        assert 0.8 - 1e-9 <= ratio <= 2.5 + 1e-9
+        directions.append(direction)
+    assert 12 <= directions.count(-1) < 24 and directions.count(1) >= 1
+
+
+def test_the_survival_term_pays_every_step_survived_and_is_checked():
+    env = RabbitHZDEnv(max_steps=60, decision_period=20, alive_bonus=0.25)
+    env.reset(seed=1)
+    _obs, reward, terminated, _tr, info = env.step(np.zeros(21, np.float32))
+    assert not terminated and info["reward_alive"] == 0.25
+    assert reward == info["reward_tracking"] + info["reward_fall"] + info["reward_alive"]
+    with pytest.raises(ValueError, match="alive_bonus"):
+        RabbitHZDEnv(alive_bonus=-1.0)

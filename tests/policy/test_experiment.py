@@ -11,7 +11,7 @@ import pytest
 
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.result import json_number
-from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import LibraryPolicy
 from rabbit_sim.model import ModelOptions, load_model
@@ -98,6 +98,35 @@ def test_a_scheduled_push_acts_from_its_time_for_its_duration():
     loop.run(max_ticks=20)
     pushed = [t for t, fx in seen if fx]
     assert pushed == [0.011, 0.012, 0.013]  # due at 10.5 ms: applied after the step that reaches 11 ms, 3 steps
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"after": -1.0}, "after"), ({"phase": 1.0}, "phase"), ({"phase": -0.1}, "phase"),
+    ({"force_x": math.nan}, "force_x"), ({"duration": 0.0}, "duration"),
+])
+def test_a_phase_push_rejects_bad_input(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        PhasePush(**{"after": 1.0, "phase": 0.5, "force_x": -50.0, "duration": 0.1, **kwargs})
+
+
+@pytest.mark.sim
+def test_a_phase_push_lands_at_its_phase_of_the_first_step_after_its_time():
+    phases = (0.25, 0.75)
+    pushes = tuple(PhasePush(2.0 + 2.0 * k, phase, -60.0, 0.1) for k, phase in enumerate(phases))
+    seen = []
+    loop = ClosedLoop(Scenario.constant(1.0, phase_pushes=pushes), CLASSIC,
+                      observer=lambda lp, _t: seen.append((lp.time, lp.sim.push_wrench[0])))
+    loop.run(7.0)
+    touchdowns = [loop.start_time] + [td.time for td in loop.touchdowns]
+    assert len(loop.placed_pushes) == 2
+    for push, placed, phase in zip(pushes, loop.placed_pushes, phases):
+        k = next(i for i, t in enumerate(touchdowns) if i and t >= push.after - 1e-9)  # the step it lands in
+        start, previous = touchdowns[k], touchdowns[k] - touchdowns[k - 1]
+        assert placed.time == pytest.approx(start + phase * previous)
+        assert start < placed.time < touchdowns[k + 1]  # inside that step
+        acting = [t for t, fx in seen if fx == -60.0 and placed.time - 1e-9 <= t <= placed.time + 0.2]
+        assert len(acting) == 100  # 0.1 s of 1 ms ticks, from its time
+    assert loop.sim.pushes_started == 2
 
 
 @pytest.mark.sim

@@ -111,3 +111,57 @@ def test_the_tuning_counts_the_pushes_and_the_offsets_are_what_saves_them():
     assert survivals(policy, cases, config) == 1
     idle = policy.with_config(RecoveryConfig(offsets=(0.0, 0.0, 0.0, 0.0)))
     assert survivals(idle, cases, config) == 0
+
+
+def _zero_residual_on_recovery_file(path) -> None:
+    """A checkpoint of the zero residual on the recovery controller, as train.py writes one."""
+    from rabbit_policy.learning.warm_start import zero_residual_network
+    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, policy_bounds
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.memory import INPUTS, MemoryConfig
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+
+    library = GaitLibrary.load()
+    bounds = policy_bounds("residual", library)
+    net = zero_residual_network(bounds.low, bounds.high, INPUTS["body"], seed=1)
+    info = {"features": "body", "action": "residual", "output": "tanh", "residual_scale": list(RESIDUAL_SCALE),
+            "integral_gain": 0.0, "residual_base": "recovery", "config": {"decision_period": 20},
+            "memory": MemoryConfig.for_features("body", 20, 0.0, library.speed_range).to_dict()}
+    PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info).save(path)
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_a_zero_residual_on_the_recovery_base_is_the_recovery_controller_bit_for_bit(tmp_path):
+    """The push-recovery issue's fallback: the learned policy as a residual on the recovery
+    controller. Its checkpoint says so, the loops and the stack give the controller the at-once
+    settings, and the zero residual walks the recovery controller's very trajectory through a
+    push the rule acts on."""
+    path = tmp_path / "zero.pt"
+    _zero_residual_on_recovery_file(path)
+    learned = make_policy("learned", policy_file=path)
+    assert learned.needs_body and learned.decision_period == 20
+    assert controller_settings(learned) == CONTROLLER_SETTINGS == required_controller_settings("learned", path)
+    scenario = Scenario(schedule=((0.0, 1.0), (2.0, 1.2)), pushes=(Push(3.0, -110.0, 0.1),))
+    final = []
+    for policy in (learned, make_policy("recovery")):
+        loop = ClosedLoop(scenario, policy)
+        loop.run(5.0)
+        assert not loop.failed
+        final.append(loop.data.qpos.copy())
+    assert np.array_equal(final[0], final[1])
+
+
+@pytest.mark.unit
+def test_a_residual_base_is_checked_where_it_enters():
+    from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+
+    with pytest.raises(ValueError, match="needs action residual"):
+        EpisodeConfig(residual_base="recovery", decision_period=20)
+    with pytest.raises(ValueError, match="decision period"):
+        EpisodeConfig(residual_base="recovery", action="residual", decision_period=0)
+    with pytest.raises(ValueError, match="residual_base must be one of"):
+        RabbitHZDEnv(residual_base="raibert", action="residual", decision_period=20)
+    env = RabbitHZDEnv(residual_base="recovery", action="residual", decision_period=20, max_steps=20)
+    env.reset(seed=0)
+    assert env.loop.controller.config.within_step_blend == 0.0  # the base's controller settings

@@ -107,6 +107,11 @@ class Simulator:
         self._schedule = tuple(sorted(pushes, key=lambda p: p.time))
         self._rearm()
 
+    def add_pushes(self, pushes: Iterable[Push]) -> None:
+        """Add pushes to the schedule (those whose time has passed are dropped)."""
+        self._schedule = tuple(sorted((*self._schedule, *pushes), key=lambda p: p.time))
+        self._rearm()
+
     def _rearm(self) -> None:
         now = self.data.time
         self._scheduled = [p for p in self._schedule if p.time >= now - 1e-9]

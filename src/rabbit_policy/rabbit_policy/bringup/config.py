@@ -80,7 +80,7 @@ class StackConfig:
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime",
-                                    **required_controller_settings(self.controller)},
+                                    **required_controller_settings(self.controller, self.policy_file or None)},
             "sim_node": {
                 "model": self.model,
                 "mode": self.mode,

@@ -7,6 +7,16 @@
   the change whose mean hip speed (touchdown to touchdown, the one-step average) is
   within 0.05 m/s of the new speed; the time is that step's touchdown minus the change.
 
+With ``recovery=True`` (training's ``--validate-recovery``: the push-recovery issue's
+validation, so that best.pt is not picked on tracking alone) two more:
+
+* Pushes: at 0.7, 1.0 and 1.3 m/s, a 0.1 s push at each of 4 phases (0, 0.25, 0.5, 0.75) of
+  the first step after 3 s (:class:`~rabbit_policy.experiment.scenario.PhasePush`): backward
+  :data:`PUSH_FACTORS`\[-1] (1.5) x classic HZD's margin, forward 1.0 x
+  (:data:`~.push_recovery.CLASSIC_MARGINS`); each survived (no fall or stall within 5 s).
+* Settling: in the speed-change schedule every segment's mean over its second half (5-10 s
+  after the change) within ``settle_tolerance`` (0.03 m/s) of its command.
+
 Every check returns plain dicts (JSON-ready) with the measured figures and a ``passed``.
 """
 
@@ -17,12 +27,18 @@ from typing import Callable, Iterable, Iterator
 
 from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, seeded_analyses
 from rabbit_policy.experiment.loop import walk
-from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.evaluation.push_recovery import classic_margin
+from rabbit_policy.experiment.scenario import PhasePush, Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
 from rabbit_sim.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
 ACCEPTANCE_SEQUENCE = (0.8, 1.2, 0.9, 1.5, 0.7)  # m/s, one segment each
+PUSH_SPEEDS = (0.7, 1.0, 1.3)  # m/s, the validation pushes'
+PUSH_PHASES = (0.0, 0.25, 0.5, 0.75)
+PUSH_FACTORS = {-1: 1.5, 1: 1.0}
+"""The validation pushes' impulse per direction (-1 backward), as a multiple of classic HZD's
+margin: the push-recovery issue's bars (backward 1.5x, forward at least classic's)."""
 
 
 @dataclass(frozen=True)
@@ -34,6 +50,9 @@ class Criteria:
     speed_tolerance: float = 0.05
     segment_duration: float = 10.0
     reach_within: float = 4.0
+    settle_tolerance: float = 0.03
+    push_after: float = 3.0
+    push_horizon: float = 5.0
 
     @classmethod
     def quick(cls) -> "Criteria":
@@ -86,31 +105,57 @@ def schedule_check(policy: Policy, schedule: tuple[tuple[float, float], ...] | N
     }
 
 
+def push_check(policy: Policy, speed: float, direction: int, phase: float, criteria: Criteria = Criteria(),
+               model: ModelOptions = ModelOptions()) -> dict:
+    """One validation push (see the module docstring): survived or not."""
+    impulse = direction * PUSH_FACTORS[direction] * classic_margin(speed, direction)
+    push = PhasePush(criteria.push_after, phase, impulse / 0.1, 0.1)
+    result = walk(policy, Scenario.constant(speed, phase_pushes=(push,), model=model),
+                  criteria.push_after + 1.0 + criteria.push_horizon)
+    return {"speed": speed, "direction": direction, "phase": phase, "impulse_Ns": impulse, "fell": result.fell,
+            "stalled": result.stalled, "passed": not result.failed}
+
+
 def _check(job: tuple) -> dict:
     """One acceptance walk (a module-level function so a process pool can run it)."""
     kind, policy, value, criteria, model = job
     if kind == "constant":
         return constant_speed_check(policy, value, criteria, model)
+    if kind == "push":
+        return push_check(policy, *value, criteria, model)
     return schedule_check(policy, value, criteria, model)
 
 
 def acceptance(policy: Policy, criteria: Criteria = Criteria(), model: ModelOptions = ModelOptions(),
                speeds: tuple[float, ...] = ACCEPTANCE_SPEEDS,
-               map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict:
+               map_fn: Callable[[Callable, Iterable], Iterable] = map, recovery: bool = False) -> dict:
     """All checks: ``{"constant": [...], "schedule": {...}, "passed", "failures",
-    "total_error"}``. ``map_fn`` runs the independent walks (e.g. a process pool's
-    ``map``; the policy must then pickle)."""
+    "total_error"}``, with ``recovery`` also ``"pushes": [...]`` and each segment's
+    ``settled`` (see the module docstring; their failures count). ``map_fn`` runs the
+    independent walks (e.g. a process pool's ``map``; the policy must then pickle)."""
     jobs = [("constant", policy, v, criteria, model) for v in speeds]
+    if recovery:
+        jobs += [("push", policy, (v, d, phase), criteria, model) for v in PUSH_SPEEDS for d in (-1, 1)
+                 for phase in PUSH_PHASES]
     jobs.append(("schedule", policy, criteria.schedule(), criteria, model))
-    *constant, schedule = list(map_fn(_check, jobs))
+    *walks, schedule = list(map_fn(_check, jobs))
+    constant, pushes = walks[:len(speeds)], walks[len(speeds):]
     never_begun = len(criteria.schedule()) - len(schedule["segments"])  # the walk ended before them
     checks = [c["passed"] for c in constant] + [s["passed"] for s in schedule["segments"]] + [False] * never_begun
+    if recovery:
+        for segment in schedule["segments"]:
+            mean = segment["mean_speed"]
+            segment["settled"] = mean is not None and abs(mean - segment["command"]) <= criteria.settle_tolerance
+        checks += [p["passed"] for p in pushes] + [s["settled"] for s in schedule["segments"]]
     failures = sum(not ok for ok in checks) + int(schedule["fell"])
     total_error = sum(abs(c["error"]) if c["error"] is not None else 1.0 for c in constant) + sum(
         s["reach_time"] / criteria.segment_duration if s["reach_time"] is not None else 1.0
         for s in schedule["segments"]) + never_begun
-    return {"policy": policy.name, "constant": constant, "schedule": schedule,
-            "passed": failures == 0, "failures": failures, "total_error": total_error}
+    result = {"policy": policy.name, "constant": constant, "schedule": schedule,
+              "passed": failures == 0, "failures": failures, "total_error": total_error}
+    if recovery:
+        result["pushes"] = pushes
+    return result
 
 
 def acceptance_rank(result: dict) -> tuple[int, float]:

@@ -29,6 +29,21 @@ from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_sim.model import ModelOptions
 
 
+CLASSIC_MARGINS = {-1: ((0.7, 5.0), (1.0, 9.0), (1.3, 14.0)), 1: ((0.7, 25.0), (1.0, 16.0), (1.3, 11.0))}
+"""Classic HZD's push margins (N s; direction -1 backward, +1 forward) at 0.7, 1.0 and 1.3 m/s,
+check 4 of checks 1-6 (docs/learning.md; the largest 0.1 s push survived at all 8 phases of a
+step): the scale of the training curriculum
+(:attr:`~rabbit_policy.learning.env.EpisodeDistribution.relative_impulse`) and of the
+validation pushes (:mod:`.acceptance`), linear between the speeds and held beyond them."""
+
+
+def classic_margin(speed: float, direction: int) -> float:
+    """Classic HZD's push margin (N s) at ``speed`` m/s pushing ``direction`` (+1 forward,
+    -1 backward), interpolated in :data:`CLASSIC_MARGINS`."""
+    speeds, margins = zip(*CLASSIC_MARGINS[direction])
+    return float(np.interp(speed, speeds, margins))
+
+
 @dataclass(frozen=True)
 class PushScenario:
     """Pushes of ``force_x`` N (positive: forward) lasting ``duration`` s at ``times`` s."""

@@ -87,6 +87,8 @@ class ClosedLoop:
         speed = scenario.initial_speed if start_speed is None else start_speed
         self.sim.reset(*state_on_gait(start.alpha, speed, config.geometry))
         self.sim.schedule_pushes(scenario.pushes)
+        self._phase_pushes = list(scenario.phase_pushes)  # placed in time at a touchdown (_touchdown)
+        self.placed_pushes: list = []  # the phase pushes as placed (rabbit_msgs_py.pushes.Push)
         self.observer = observer
         self.record_state = record_state
         self._period = decision_period(policy) if policy is not None else observe_period
@@ -230,10 +232,21 @@ class ClosedLoop:
         data = self.data
         foot = data.site_xpos[self._feet[int(self.controller.stance)]]
         self.touchdowns.append(Touchdown(t, float(foot[0]), float(data.qpos[0])))
+        if self._phase_pushes and t >= self._phase_pushes[0].after - 1e-9:
+            self._place_phase_pushes(t)
         self._last_touchdown_time = t
         if self.clock is not None:
             for observation in self.clock.switch(i, self.desired_speed):  # once per step
                 self._decide(observation, t)
+
+    def _place_phase_pushes(self, t: float) -> None:
+        """At a touchdown at ``t`` s: the phase pushes now due start in this step, at their
+        phase of it, the step taken to last as long as the one just ended."""
+        due = [p for p in self._phase_pushes if t >= p.after - 1e-9]
+        self._phase_pushes = self._phase_pushes[len(due):]
+        placed = [p.place(t, t - self._last_touchdown_time) for p in due]
+        self.sim.add_pushes(placed)
+        self.placed_pushes.extend(placed)
 
     def _decide(self, observation: Observation, t: float) -> None:
         """The policy's decision on ``observation``: the gait for the next step (once per step)

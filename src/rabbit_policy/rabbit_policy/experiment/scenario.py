@@ -14,7 +14,7 @@ from rabbit_msgs_py.pushes import Push, format_pushes, parse_pushes
 from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
 
-__all__ = ["Push", "Scenario", "Schedule", "format_pushes", "parse_pushes", "parse_schedule", "validate_schedule"]
+__all__ = ["PhasePush", "Push", "Scenario", "Schedule", "format_pushes", "parse_pushes", "parse_schedule", "validate_schedule"]
 
 Schedule = tuple[tuple[float, float], ...]  # (start time s, commanded speed m/s)
 
@@ -56,11 +56,48 @@ def parse_schedule(text: str) -> Schedule:
 
 
 @dataclass(frozen=True)
+class PhasePush:
+    """A push placed by the walk's own steps (the fast path only: training and evaluations):
+    at ``phase`` of the first step that starts at or after ``after`` s of sim time, force
+    ``force_x`` N (world x, + forward) for ``duration`` s. The phase is a fraction of the
+    step's duration, taken as the duration of the step before it (touchdown to touchdown), so
+    a push lands at the same point of a step whatever the gait's step time: the common random
+    numbers of a training population hold in phase, not only in time. The closed loop turns it
+    into a :class:`Push` at that touchdown (``ClosedLoop.placed_pushes``)."""
+
+    after: float
+    phase: float
+    force_x: float
+    duration: float
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.after) and self.after >= 0.0):
+            raise ValueError(f"PhasePush.after must be a finite time >= 0 s, got {self.after}")
+        if not (math.isfinite(self.phase) and 0.0 <= self.phase < 1.0):
+            raise ValueError(f"PhasePush.phase must be in [0, 1), got {self.phase}")
+        if not math.isfinite(self.force_x):
+            raise ValueError(f"PhasePush.force_x must be finite (N), got {self.force_x}")
+        if not (math.isfinite(self.duration) and self.duration > 0.0):
+            raise ValueError(f"PhasePush.duration must be finite and > 0 s, got {self.duration}")
+
+    @property
+    def impulse(self) -> float:
+        """N s."""
+        return self.force_x * self.duration
+
+    def place(self, touchdown: float, step_duration: float) -> Push:
+        """The push in time, for a step that starts at ``touchdown`` s and is taken to last
+        ``step_duration`` s."""
+        return Push(touchdown + self.phase * step_duration, self.force_x, self.duration)
+
+
+@dataclass(frozen=True)
 class Scenario:
     """One experiment's conditions (times s, speeds m/s).
 
     schedule: commanded speed from each start time on (first at t = 0).
     pushes: pushes on the torso at sim times (:class:`~rabbit_msgs_py.pushes.Push`).
+    phase_pushes: pushes at a phase of a step (:class:`PhasePush`; the fast path only).
     model: the model and its errors (:class:`~rabbit_sim.model.ModelOptions`).
     torque_delay: the torques computed at a tick are applied this many seconds later
         (a multiple of the 1 ms timestep; until then the first torques are held).
@@ -70,6 +107,7 @@ class Scenario:
 
     schedule: Schedule = ((0.0, 1.0),)
     pushes: tuple[Push, ...] = ()
+    phase_pushes: tuple[PhasePush, ...] = ()
     model: ModelOptions = field(default_factory=ModelOptions)
     torque_delay: float = 0.0
     rules: StopRules = field(default_factory=StopRules)
@@ -79,6 +117,7 @@ class Scenario:
         validate_schedule(self.schedule)
         object.__setattr__(self, "schedule", tuple((float(t), float(v)) for t, v in self.schedule))
         object.__setattr__(self, "pushes", tuple(sorted(self.pushes, key=lambda p: p.time)))
+        object.__setattr__(self, "phase_pushes", tuple(sorted(self.phase_pushes, key=lambda p: p.after)))
         if not (math.isfinite(self.torque_delay) and self.torque_delay >= 0.0):
             raise ValueError(f"torque_delay must be a finite number >= 0 s, got {self.torque_delay}")
         if self.window < 1:
@@ -97,5 +136,7 @@ class Scenario:
     def to_dict(self) -> dict:
         """JSON-ready."""
         return {"schedule": [list(s) for s in self.schedule], "pushes": format_pushes(self.pushes),
+                "phase_pushes": [{"after_s": p.after, "phase": p.phase, "force_N": p.force_x, "duration_s": p.duration}
+                                 for p in self.phase_pushes],
                 "model": self.model.to_dict(), "torque_delay_s": self.torque_delay,
                 "stall_after_s": self.rules.stall_after}

@@ -59,6 +59,7 @@ v_d + gain x the memory's integral (index 3, then bounded so that the offset sta
 |---------------------|-------|
 | ``reward_tracking`` | ``-(mean hip speed - v_d)^2`` per env step (the paper; the true speed, without noise) |
 | ``reward_fall`` | ``fall_penalty`` once, when the episode ends by a fall or stall (0 otherwise): with only negative rewards an early end would otherwise pay |
+| ``reward_alive`` | ``alive_bonus`` per env step that did not end the episode (0 by default): a survival term, so that a fall forfeits the rest of the episode's bonus and a survived push pays more than its tracking costs |
 
 The reward is their sum. ``info`` also holds ``desired_speed``, ``mean_speed`` (m/s), ``fell``,
 ``stalled``, ``rejected`` and ``time`` (sim s).
@@ -69,7 +70,7 @@ The robot starts at phase 0 of the classic gait nearest v_d, on it, at its first
 v_d is drawn uniformly from ``speed_range`` and redrawn once, at a step drawn uniformly from
 the middle half of the episode (the paper's episodes); ``reset(options={"desired_speed": v0,
 "next_speed": v1})`` fixes the two commands. ``distribution`` (:class:`EpisodeDistribution`,
-:data:`DISTRIBUTIONS`: ``paper``, ``broad``, ``moderate``, ``robust``, ``pushes``) widens that: a new command every 2-5 s
+:data:`DISTRIBUTIONS`: ``paper``, ``broad``, ``moderate``, ``robust``, ``pushes``, ``recovery``) widens that: a new command every 2-5 s
 of sim time, a push of random impulse, direction and time, a model drawn from foot
 frictions, torso masses, the ``drives`` variant and torque delays, observation noise.
 Where a drawn model and delay stall or fall on the very first step (about 1 in 750 robust
@@ -94,6 +95,7 @@ max_episode_steps=500)``.
 | ``max_steps`` | 60 | env steps per episode (see Episode end) |
 | ``window`` | 1000 | speed-window length (ticks) |
 | ``fall_penalty`` | -10.0 | see Rewards |
+| ``alive_bonus`` | 0.0 | see Rewards |
 | ``rules`` | ``StopRules()`` | fall and stall limits |
 | ``margin`` | 0.15 | widening of the coefficient bounds (rad) |
 | ``decision_period`` | 0 | ticks per env step (0: one walking step) |
@@ -101,6 +103,7 @@ max_episode_steps=500)``.
 | ``features`` | ``"paper"`` | the observation: the paper's three, ``"memory"`` or ``"body"`` (see Observation space) |
 | ``action`` | ``"direct"`` | the action: the gait, or ``"residual"`` on the library (see Observation space) |
 | ``integral_gain`` | 0.0 | residual only: the base gait at v_d + gain x the speed integral (1/s; see Observation space) |
+| ``residual_base`` | ``"classic"`` | residual only: what it adds to, the library's gait (``classic``) or the recovery controller's decision (``recovery``; needs a decision period; the controller then applies gaits at once) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
 ## Version history
@@ -111,21 +114,24 @@ max_episode_steps=500)``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import gymnasium as gym
 import numpy as np
 
-from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
+from rabbit_hzd_controller.alpha import N_FREE, expand_alpha, reduce_alpha
+from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import option
+from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.loop import ClosedLoop
-from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
-from rabbit_policy.runtime.actions import ACTIONS, ActionBounds, ResidualAction  # noqa: F401  (ActionBounds re-exported)
+from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds,  # noqa: F401  (ActionBounds re-exported)
+                                           ResidualAction, residual_sum_bounds)
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
 from rabbit_policy.runtime.speed_integral import check_gain
-from rabbit_policy.runtime.policies import GaitCommand
+from rabbit_policy.runtime.policies import GaitCommand, controller_settings, reset_policy, residual_base_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
@@ -148,6 +154,16 @@ class EpisodeDistribution:
         push on the torso, impulse uniform in [-max, max] (with ``min_impulse`` > 0: a
         magnitude uniform in [min, max], either way), at a uniform time from 1 s to 1 s
         before the episode's nominal end.
+    push_timing: ``time`` (the push at that sim time) or ``phase`` (a
+        :class:`~rabbit_policy.experiment.scenario.PhasePush`: at a uniform phase of the first
+        step after that time, the phase measured on the episode's own touchdowns, so every
+        member of an ES population is hit at the same point of its step: common random
+        numbers in phase, not only in time).
+    relative_impulse: min/max impulse are multiples of classic HZD's push margin
+        (:data:`~rabbit_policy.evaluation.push_recovery.CLASSIC_MARGINS`) at the command in force at the push's time, in its direction:
+        a curriculum around the margin at every speed.
+    backward_fraction: with ``relative_impulse``, the probability that the push is backward
+        (else forward; otherwise either way is equally likely).
     frictions, torso_mass_scales, variants, torque_delays: the model and the delay, each
         drawn uniformly from its tuple (repeat an entry to weight it; None friction: the
         packaged one).
@@ -159,11 +175,23 @@ class EpisodeDistribution:
     max_impulse: float = 0.0
     min_impulse: float = 0.0
     push_duration: float = 0.1
+    push_timing: str = "time"
+    relative_impulse: bool = False
+    backward_fraction: float = 0.5
     frictions: tuple[float | None, ...] = (None,)
     torso_mass_scales: tuple[float, ...] = (1.0,)
     variants: tuple[str, ...] = ("paper",)
     torque_delays: tuple[float, ...] = (0.0,)
     observation_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.push_timing not in ("time", "phase"):
+            raise ValueError(f"push_timing must be time or phase, got {self.push_timing!r}")
+        if not 0.0 <= self.backward_fraction <= 1.0:
+            raise ValueError(f"backward_fraction must be in [0, 1], got {self.backward_fraction}")
+        if not 0.0 <= self.min_impulse <= self.max_impulse:
+            raise ValueError(f"impulses must satisfy 0 <= min_impulse <= max_impulse, got {self.min_impulse}, "
+                             f"{self.max_impulse}")
 
 
 DISTRIBUTIONS = {
@@ -185,6 +213,14 @@ DISTRIBUTIONS = {
     # backward pushes of about 8-10 N s, forward about 24), commands every 2-5 s, the nominal model
     "pushes": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, min_impulse=6.0,
                                   max_impulse=20.0, observation_noise=0.02),
+    # the push-recovery issue's training signal: a push in every episode at a phase of a step
+    # (common random numbers in phase), 0.8-2.5x classic's margin at the speed in force (two
+    # thirds backward, where the margin binds), commands every 2-5 s, mild model errors
+    "recovery": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
+                                    relative_impulse=True, min_impulse=0.8, max_impulse=2.5, backward_fraction=2 / 3,
+                                    frictions=(None, None, 0.6, 0.5), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),
+                                    variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.001, 0.003),
+                                    observation_noise=0.02),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
 
@@ -208,10 +244,13 @@ class EpisodeConfig:
     distribution: str = option("broad", "episodes: paper (one command change), broad (commands every 2-5 s, "
                                         "pushes, model errors, torque delays), moderate (pushes up to 12 N s, delays up "
                                         "to 2 ms, noisy speeds), robust (pushes up to 20 N s, delays up to 4 ms, "
-                                        "noisy speeds) or pushes (a 6-20 N s push either way in every episode); "
-                                        "DISTRIBUTIONS",
+                                        "noisy speeds), pushes (a 6-20 N s push either way in every episode) or "
+                                        "recovery (a push at a phase of a step in every episode, 0.8-2.5x classic's "
+                                        "margin); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
+    alive_bonus: float = option(0.0, "reward per env step survived, >= 0 (a survival term: a fall forfeits the "
+                                     "rest of the episode's)")
     features: str = option("paper", "the policy's inputs: paper (the three speeds), memory (+ the integral of "
                                     "the speed error and the last action; rabbit_policy.runtime.memory) or body "
                                     "(+ torso pitch and rate, phase and rate, hip velocity; needs a decision period)",
@@ -219,6 +258,10 @@ class EpisodeConfig:
     action: str = option("direct", "the policy's output: direct (the gait) or residual (a bounded residual on the "
                                    "calibrated library at the command; zero = classic HZD; "
                                    "rabbit_policy.runtime.actions)", choices=ACTIONS)
+    residual_base: str = option("classic", "action residual: what it adds to, the library's gait at the command "
+                                           "(classic) or the recovery controller's decision every decision period "
+                                           "(recovery: classic plus the push-recovery rule, gaits applied at once)",
+                                choices=RESIDUAL_BASES)
     integral_gain: float = option(0.0, "action residual with memory or body features: the base gait is the "
                                        "library's at v_d + this (1/s) x the memory's speed integral (zero residual = "
                                        "classic HZD with that speed integral; 0 = none)")
@@ -233,10 +276,35 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
+        if not (np.isfinite(self.alive_bonus) and self.alive_bonus >= 0.0):
+            raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
         check_integral_gain(self.integral_gain, self.action)
         check_features(self.features, self.decision_period, self.integral_gain)
+        check_residual_base(self.residual_base, self.action, self.decision_period, self.integral_gain)
+
+    def env_kwargs(self) -> dict:
+        """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
+        return {"max_steps": self.max_steps, "decision_period": self.decision_period,
+                "distribution": self.distribution, "fall_penalty": self.fall_penalty,
+                "alive_bonus": self.alive_bonus, "features": self.features, "action": self.action,
+                "residual_base": self.residual_base, "integral_gain": self.integral_gain}
+
+
+def check_residual_base(base: str, action: str, decision_period: int, integral_gain: float) -> None:
+    """Raise ``ValueError`` unless ``base`` is one of :data:`RESIDUAL_BASES` and, if not
+    ``classic``, the action is a residual decided every N > 0 ticks without a speed integral
+    (the recovery controller acts within the step and has no integral)."""
+    if base not in RESIDUAL_BASES:
+        raise ValueError(f"residual_base must be one of {RESIDUAL_BASES}, got {base!r}")
+    if base != "classic":
+        if action != "residual":
+            raise ValueError(f"residual_base {base} is what a residual adds to: it needs action residual")
+        if not decision_period:
+            raise ValueError(f"residual_base {base} acts within the step: it needs a decision period > 0 ticks")
+        if integral_gain:
+            raise ValueError(f"residual_base {base} has no speed integral: integral_gain must be 0")
 
 
 class RabbitHZDEnv(gym.Env):
@@ -246,9 +314,11 @@ class RabbitHZDEnv(gym.Env):
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
+                 alive_bonus: float = 0.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
-                 features: str = "paper", action: str = "direct", integral_gain: float = 0.0) -> None:
+                 features: str = "paper", action: str = "direct", integral_gain: float = 0.0,
+                 residual_base: str = "classic") -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -269,7 +339,12 @@ class RabbitHZDEnv(gym.Env):
         self.action = action
         check_integral_gain(integral_gain, action)
         direct = ActionBounds.from_library(self.library, margin)
-        self.residual = ResidualAction(self.library, direct, integral_gain=integral_gain) if action == "residual" else None
+        check_residual_base(residual_base, action, decision_period, integral_gain)
+        self.residual = (ResidualAction(self.library, residual_sum_bounds(self.library, residual_base, margin),
+                                        integral_gain=integral_gain) if action == "residual" else None)
+        self.residual_base = residual_base
+        self.base = residual_base_policy(residual_base, self.library, decision_period)  # None: the library's gait
+        self._controller = ControllerConfig(**controller_settings(self.base))
         self.bounds = self.residual.bounds if self.residual is not None else direct
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.features = features
@@ -288,6 +363,9 @@ class RabbitHZDEnv(gym.Env):
         self.max_steps = max_steps
         self.window_size = window
         self.fall_penalty = fall_penalty
+        if not (np.isfinite(alive_bonus) and alive_bonus >= 0.0):
+            raise ValueError(f"alive_bonus must be finite and >= 0, got {alive_bonus}")
+        self.alive_bonus = alive_bonus
         self.rules = rules
         self.model_options = ModelOptions(model) if isinstance(model, str) else model
         self._models = {self.model_options: load_model(self.model_options)}
@@ -351,7 +429,7 @@ class RabbitHZDEnv(gym.Env):
                                                                                        load_model(scenario.model))
             self._loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd), start_speed=gait.speed,
                                     kp=gait.kp, model=self._model, observe_speed=True,
-                                    observe_period=self.decision_period)
+                                    observe_period=self.decision_period, controller=self._controller)
             self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
             fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
             if not (fell or stalled):
@@ -360,6 +438,7 @@ class RabbitHZDEnv(gym.Env):
             raise RuntimeError(f"the starting gait at {self.desired_speed:.3f} m/s did not reach its first touchdown "
                                f"in {START_ATTEMPTS} drawn scenarios")
         self._steps = 0
+        reset_policy(self.base)
         if self.memory is not None:  # the last action: the gait it starts on (a residual: zero)
             self.memory.reset(None if self.residual is not None
                               else self.bounds.to_normalised(np.append(gait.free, gait.kd)))
@@ -379,20 +458,29 @@ class RabbitHZDEnv(gym.Env):
             while t < horizon:
                 schedule.append((t, speed))
                 t, speed = t + float(rng.uniform(*d.command_interval)), float(rng.uniform(lo, hi))
-        pushes = ()
+        pushes, phase_pushes = (), ()
         if d.push_probability > 0.0 and rng.random() < d.push_probability and horizon > 2.0:
-            if d.min_impulse > 0.0:
+            time = float(rng.uniform(1.0, horizon - 1.0))
+            if d.relative_impulse:
+                direction = -1 if rng.random() < d.backward_fraction else 1
+                command = next(v for t, v in reversed(schedule) if t <= time)
+                impulse = direction * float(rng.uniform(d.min_impulse, d.max_impulse)) * classic_margin(command, direction)
+            elif d.min_impulse > 0.0:
                 impulse = float(rng.choice((-1.0, 1.0)) * rng.uniform(d.min_impulse, d.max_impulse))
             else:
                 impulse = float(rng.uniform(-d.max_impulse, d.max_impulse))
-            pushes = (Push(float(rng.uniform(1.0, horizon - 1.0)), impulse / d.push_duration, d.push_duration),)
+            if d.push_timing == "phase":
+                phase_pushes = (PhasePush(time, float(rng.uniform(0.0, 1.0)), impulse / d.push_duration,
+                                          d.push_duration),)
+            else:
+                pushes = (Push(time, impulse / d.push_duration, d.push_duration),)
         model = ModelOptions(d.variants[int(rng.integers(len(d.variants)))],
                              friction=d.frictions[int(rng.integers(len(d.frictions)))],
                              torso_mass_scale=d.torso_mass_scales[int(rng.integers(len(d.torso_mass_scales)))])
         if d.variants == ("paper",) and d.frictions == (None,) and d.torso_mass_scales == (1.0,):
             model = self.model_options  # the env's own model (the paper's distribution)
         delay = d.torque_delays[int(rng.integers(len(d.torque_delays)))]
-        return Scenario(schedule=tuple(schedule), pushes=pushes, model=model, torque_delay=delay, rules=self.rules,
+        return Scenario(schedule=tuple(schedule), pushes=pushes, phase_pushes=phase_pushes, model=model, torque_delay=delay, rules=self.rules,
                         window=self.window_size)
 
     def step(self, action):
@@ -401,7 +489,10 @@ class RabbitHZDEnv(gym.Env):
         if self.memory is not None:
             self.memory.record(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
         action = self.bounds.to_physical(action)
-        if self.residual is not None:
+        if self.base is not None:  # on the base controller's decision now (it reads the body state)
+            base = self.base.act(replace(self._loop.observation(moving=True), body=self._loop.body_state()))
+            action = self.residual.compose_on(action, np.append(reduce_alpha(base.alpha), base.kd))
+        elif self.residual is not None:
             action = self.residual.compose(action, self.desired_speed,
                                            self.memory.integral if self.memory is not None else 0.0)
         try:
@@ -417,8 +508,9 @@ class RabbitHZDEnv(gym.Env):
         mean_speed = float(clean.mean_speed)  # noise-free
         terminated = fell or stalled
         terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
-                 "reward_fall": self.fall_penalty if terminated else 0.0}
-        reward = terms["reward_tracking"] + terms["reward_fall"]
+                 "reward_fall": self.fall_penalty if terminated else 0.0,
+                 "reward_alive": 0.0 if terminated else self.alive_bonus}
+        reward = terms["reward_tracking"] + terms["reward_fall"] + terms["reward_alive"]
         truncated = not terminated and self._steps >= self.max_steps
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time, **terms}

@@ -9,7 +9,8 @@ Per generation, from the current parameters theta (flat vector of the network's 
 2. replace the returns by centred ranks in [-0.5, 0.5] (rank normalisation: robust to
    the fall penalty's scale);
 3. gradient estimate g = sum_i (rank+_i - rank-_i) eps_i / (2 pairs sigma), plus weight
-   decay; Adam step on theta.
+   decay; Adam step on theta. With ``top`` = b > 0 (ARS V2-t) only the b pairs whose better
+   member ranked highest enter the sum (divided by 2 b sigma).
 Evaluations run on a :mod:`rabbit_policy.parallel` backend (a local process pool of
 ``workers``, or Ray); every evaluation is a pure function of (parameters, episodes) and
 results come back in order, so a run is deterministic for a given seed whatever the
@@ -38,12 +39,15 @@ class ESConfig(EpisodeConfig):
     lr: float = option(0.001, "Adam step size, parameter units")
     weight_decay: float = option(0.005, "L2 weight decay added to the gradient estimate")
     episodes: int = option(6, "episodes per population member (the same for every member)")
+    top: int = option(0, "ARS's top-b: the update uses only the b pairs whose better member did best (0: all pairs)")
     workers: int = option(1, "processes or Ray CPUs for the rollouts (the run's --workers)", cli=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if min(self.pairs, self.episodes, self.workers) < 1:
             raise ValueError("pairs, episodes and workers must be >= 1")
+        if not 0 <= self.top <= self.pairs:
+            raise ValueError(f"top must be in [0, pairs], got {self.top}")
         if not (self.sigma > 0.0 and self.lr > 0.0 and self.weight_decay >= 0.0):
             raise ValueError("sigma and lr must be > 0, weight_decay >= 0")
 
@@ -60,8 +64,8 @@ def set_flat(net: torch.nn.Module, theta: np.ndarray) -> None:
 
 
 # ---------------------------------------------------------------- rollouts (per worker)
-EnvKey = tuple[int, int, str, float, str, str, float]
-"""(max_steps, decision_period, distribution, fall_penalty, features, action, integral_gain)"""
+EnvKey = tuple[tuple[str, object], ...]
+"""The env's arguments as sorted (name, value) pairs (:meth:`EpisodeConfig.env_kwargs`)."""
 _WORKER: dict[EnvKey, tuple[RabbitHZDEnv, HZDPolicyNet]] = {}
 
 
@@ -70,11 +74,10 @@ def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
     worker process, local or Ray, keeps its own)."""
     if key not in _WORKER:
         torch.set_num_threads(1)
-        max_steps, decision_period, distribution, fall_penalty, features, action, integral_gain = key
-        env = RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                           fall_penalty=fall_penalty, features=features, action=action, integral_gain=integral_gain)
+        kwargs = dict(key)
+        env = RabbitHZDEnv(**kwargs)
         _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0],
-                                          output="tanh" if action == "residual" else "sigmoid"))
+                                          output="tanh" if kwargs["action"] == "residual" else "sigmoid"))
     return _WORKER[key]
 
 
@@ -176,8 +179,7 @@ class EvolutionStrategy:
         self.adam = Adam(config.lr)
         self.generation = 0
         self.env_steps = 0
-        self.env_key: EnvKey = (config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                                config.features, config.action, config.integral_gain)
+        self.env_key: EnvKey = tuple(sorted(config.env_kwargs().items()))
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
 
@@ -200,7 +202,11 @@ class EvolutionStrategy:
         self.env_steps += sum(r.steps for member in results for r in member)
         centre = results[-1]
         ranks = centred_ranks(returns)
-        grad = (ranks[: cfg.pairs] - ranks[cfg.pairs:]) @ eps / (2 * cfg.pairs * cfg.sigma)
+        plus, minus = ranks[: cfg.pairs], ranks[cfg.pairs:]
+        chosen = np.arange(cfg.pairs)
+        if cfg.top:  # ARS V2-t: the directions whose better member did best
+            chosen = np.argsort(-np.maximum(plus, minus), kind="stable")[: cfg.top]
+        grad = (plus[chosen] - minus[chosen]) @ eps[chosen] / (2 * len(chosen) * cfg.sigma)
         grad -= cfg.weight_decay * self.theta
         self.theta = self.adam.step(self.theta, grad)
         set_flat(self.net, self.theta)

@@ -105,14 +105,12 @@ def _tracking_errors(info: dict, ended: np.ndarray) -> list[float]:
     return errors
 
 
-def _make_env(max_steps: int, decision_period: int = 0, distribution: str = "paper", fall_penalty: float = -10.0,
-              features: str = "paper", action: str = "direct", integral_gain: float = 0.0):
+def _make_env(kwargs: dict):
+    """A factory of the env with ``kwargs`` (:meth:`EpisodeConfig.env_kwargs`)."""
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
-        return RabbitHZDEnv(max_steps=max_steps, decision_period=decision_period, distribution=distribution,
-                            fall_penalty=fall_penalty, features=features, action=action,
-                            integral_gain=integral_gain)
+        return RabbitHZDEnv(**kwargs)
 
     return make
 
@@ -133,8 +131,7 @@ class PPOTrainer:
                                           lr=config.lr, eps=1e-5)
         self.generator = torch.Generator().manual_seed(config.seed)
         self.rng = np.random.default_rng(config.seed)
-        factory = _make_env(config.max_steps, config.decision_period, config.distribution, config.fall_penalty,
-                            config.features, config.action, config.integral_gain)
+        factory = _make_env(config.env_kwargs())
         self.envs = make_vector_env([factory] * config.envs, backend)
         self.iteration = 0
         self.env_steps = 0

@@ -66,6 +66,10 @@ class TrainingConfig:
     checkpoint_every: int = option(5, "write checkpoint.pt every N iterations (and on Ctrl-C/SIGTERM)")
     eval_every: int = option(5, "acceptance evaluation every N iterations, and of the start (0: never)")
     stop_when_passed: bool = option(False, "stop at the first trained policy that passes the evaluation")
+    validate_recovery: bool = option(False, "the evaluation also pushes (0.7/1.0/1.3 m/s, 4 phases, backward 1.5x "
+                                            "and forward 1x classic's margin) and checks settling within 0.03 m/s, "
+                                            "so best.pt is picked on recovery too (rabbit_policy.evaluation."
+                                            "acceptance)")
     keep_evaluated: bool = option(False, "also save every evaluated policy as OUT/evaluated/ITERATION.pt, to "
                                          "choose among them later on broader checks (compare_policies.py)")
     warm_start: str = option("feedback", "fit the network to the classic library first "
@@ -128,10 +132,10 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ActionBounds, ResidualAction, policy_bounds
+    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ResidualAction, policy_bounds, residual_sum_bounds
     from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
-    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.runtime.policies import NetworkPolicy, residual_base_policy
     from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
 
     try:  # before anything slow: a backend that cannot start is a one-line error at once
@@ -148,9 +152,9 @@ def train(args: TrainingConfig) -> int:
     bounds = policy_bounds(action, library)
     gain = args.trainer.integral_gain
     memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain, library.speed_range)
-    residual = (ResidualAction(library, ActionBounds.from_library(library), integral_gain=gain)
+    residual = (ResidualAction(library, residual_sum_bounds(library, args.trainer.residual_base), integral_gain=gain)
                 if action == "residual" else None)
-    if residual is not None:  # a zero residual: the classic controller
+    if residual is not None:  # a zero residual: the classic controller (or the residual's base)
         net, mse = zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), None
         if args.warm_start != "none" and not args.resume:
             print(f"action residual: starts from the zero residual (classic HZD); --warm-start {args.warm_start} "
@@ -188,7 +192,8 @@ def train(args: TrainingConfig) -> int:
                 "warm_start": args.warm_start, "eval_every": args.eval_every,
                 "parameters": parameter_count(net), "features": features, "action": action, "output": net.output,
                 **({"memory": memory.to_dict()} if memory is not None else {}),
-                **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain} if residual is not None else {}),
+                **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain,
+                    "residual_base": args.trainer.residual_base} if residual is not None else {}),
                 **(extra or {})}
 
     def save_checkpoint() -> None:
@@ -202,9 +207,11 @@ def train(args: TrainingConfig) -> int:
 
     def evaluate() -> None:
         nonlocal best, first_pass
+        base = residual_base_policy(args.trainer.residual_base, library, args.trainer.decision_period)
         policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
-                               memory=SpeedMemory(memory) if memory is not None else None, residual=residual)
-        result = acceptance(policy, map_fn=backend.map)
+                               memory=SpeedMemory(memory) if memory is not None else None, residual=residual,
+                               base=base)
+        result = acceptance(policy, map_fn=backend.map, recovery=args.validate_recovery)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
         scalars.evaluation(row)

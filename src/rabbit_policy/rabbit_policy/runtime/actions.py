@@ -9,7 +9,9 @@
   controller, so training starts exactly from it. With ``integral_gain`` > 0 (1/s) the
   library's gait is the one for ``v_d + integral_gain * I``, I the memory's integral of the
   speed error (:mod:`.speed_integral`: Westervelt's event-based integral), so a zero
-  residual is the classic controller with that speed integral.
+  residual is the classic controller with that speed integral. With the ``recovery`` base
+  (:data:`RESIDUAL_BASES`) the residual adds to the recovery controller's decision instead
+  (:meth:`ResidualAction.compose_on`), so a zero residual is that controller.
 
 :class:`ResidualAction` is the one implementation, run by the learning environment and by
 :class:`~rabbit_policy.runtime.policies.NetworkPolicy` (walk.py, the evaluations, policy_node).
@@ -27,6 +29,11 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_integral import check_gain
 
 ACTIONS = ("direct", "residual")
+RESIDUAL_BASES = ("classic", "recovery")
+"""What a residual adds to: the calibrated library's gait at the command (``classic``), or the
+recovery controller's decision (``recovery``: classic plus the push-recovery rule,
+:mod:`.recovery`, applied at once; the push-recovery issue's residual on the model-based
+baseline)."""
 RESIDUAL_SCALE = (0.1,) * N_FREE + (20.0,)
 """Default residual bounds: +-0.1 rad per coefficient, +-20 N m s/rad on Kd."""
 
@@ -91,9 +98,24 @@ class ResidualAction:
         with ``integral_gain``)."""
         speed = desired_speed + self.integral_gain * integral if self.integral_gain else desired_speed
         gait = self.library.interpolate(speed)
-        base = np.append(gait.free, gait.kd)
+        return self.compose_on(residual, np.append(gait.free, gait.kd))
+
+    def compose_on(self, residual: np.ndarray, base: np.ndarray) -> np.ndarray:
+        """The physical action for a physical ``residual`` on the physical action ``base`` (20
+        coefficients in rad, Kd; e.g. the recovery controller's decision): their sum, the
+        residual within its bounds and the sum within the direct ones."""
         r = np.clip(np.asarray(residual, dtype=float), -np.asarray(self.scale), np.asarray(self.scale))
         return np.clip(base + r, self.direct.low, self.direct.high)
+
+
+def residual_sum_bounds(library: GaitLibrary, base: str = "classic", margin: float = 0.15) -> ActionBounds:
+    """What a residual's sum is clipped to (:attr:`ResidualAction.direct`): on the ``classic``
+    base the direct action's bounds (the library's range widened by ``margin`` rad); on the
+    ``recovery`` base the controller's own coefficient limits, since the recovery rule's
+    offsets reach beyond the library's range (a zero residual must be that controller)."""
+    if base not in RESIDUAL_BASES:
+        raise ValueError(f"residual base must be one of {RESIDUAL_BASES}, got {base!r}")
+    return ActionBounds.from_library(library, margin if base == "classic" else float("inf"))
 
 
 def policy_bounds(action: str, library: GaitLibrary, margin: float = 0.15) -> ActionBounds:

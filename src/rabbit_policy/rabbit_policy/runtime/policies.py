@@ -194,14 +194,37 @@ def controller_settings(policy: Policy | None) -> dict[str, float]:
     return dict(getattr(policy, "controller_settings", {}))
 
 
-def required_controller_settings(kind: str) -> dict[str, float]:
+def required_controller_settings(kind: str, policy_file: str | Path | None = None) -> dict[str, float]:
     """The controller settings the controller named ``kind`` needs, without building it (the
-    stack's configuration gives them to ``hzd_controller_node``)."""
-    if controller_name(kind) == "recovery":
-        from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
+    stack's configuration gives them to ``hzd_controller_node``): the recovery controller's,
+    and a learned policy's whose residual adds to it (read from the checkpoint's ``info``,
+    ``policy_file`` or the packaged one; {} if there is none to read)."""
+    from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
 
+    kind = controller_name(kind)
+    if kind == "recovery":
         return dict(CONTROLLER_SETTINGS)
+    if kind == "learned":
+        path = Path(policy_file) if policy_file else packaged_policy_file()
+        if path.is_file():
+            from rabbit_policy.runtime.network import PolicyCheckpoint
+
+            if PolicyCheckpoint.load(path).info.get("residual_base", "classic") == "recovery":
+                return dict(CONTROLLER_SETTINGS)
     return {}
+
+
+def residual_base_policy(base: str, library: GaitLibrary, decision_period: int) -> Policy | None:
+    """What a residual adds to (:data:`~.actions.RESIDUAL_BASES`): None for ``classic`` (the
+    library's gait, :class:`~.actions.ResidualAction` itself), the recovery controller on the
+    interpolated library deciding every ``decision_period`` ticks for ``recovery``."""
+    from rabbit_policy.runtime.actions import RESIDUAL_BASES
+
+    if base not in RESIDUAL_BASES:
+        raise ValueError(f"residual base must be one of {RESIDUAL_BASES}, got {base!r}")
+    if base == "classic":
+        return None
+    return _recovery(LibraryPolicy(library, "interpolate"), decision_period)
 
 
 def decision_period(policy: Policy | None) -> int:
@@ -223,14 +246,22 @@ class NetworkPolicy:
     :mod:`.memory`'s inputs keeps its integral and last action here (:meth:`reset` at the
     start of a walk; ``ClosedLoop`` and ``policy_node`` call it); with the body state it
     reads ``observation.body`` (``needs_body``). ``residual``: the network's output is a
-    residual on the library (:class:`~.actions.ResidualAction`), not the gait itself."""
+    residual on the library (:class:`~.actions.ResidualAction`), not the gait itself;
+    ``base``: on that policy's decision instead (:func:`residual_base_policy`: the recovery
+    controller, whose body state and controller settings it then needs too)."""
 
-    def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None, residual=None) -> None:
+    def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None, residual=None,
+                 base: Policy | None = None) -> None:
+        if base is not None and residual is None:
+            raise ValueError("a base policy is what a residual adds to: give the residual too")
         self.net = net
         self.name = name
         self.memory = memory
         self.residual = residual
-        self.needs_body = bool(memory is not None and memory.config.body)
+        self.base = base
+        self.needs_body = bool(memory is not None and memory.config.body) or bool(getattr(base, "needs_body", False))
+        if base is not None and controller_settings(base):
+            self.controller_settings = controller_settings(base)
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW
@@ -240,11 +271,14 @@ class NetworkPolicy:
         zero, or none)."""
         if self.memory is not None:
             self.memory.reset()
+        reset_policy(self.base)
 
     def start_command(self, speed: float) -> GaitCommand:
         """The gait a walk starts on at ``speed`` m/s (before any state exists): the answer
         to (v, v, 0); a policy that reads the body state starts on the calibrated library's
         gait at ``speed`` (its residual's zero; the last action remembered as that)."""
+        if self.base is not None:  # the base's own start (a zero residual)
+            return self.base.start_command(speed)
         if not self.needs_body:
             return self.act(Observation(speed, speed, 0.0))
         gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
@@ -267,7 +301,12 @@ class NetworkPolicy:
         else:
             action = act(self.net, self.memory.inputs(observation.as_tuple(), observation.body))
             self._remember(action)
-        if self.residual is not None:
+        if self.base is not None:
+            from rabbit_hzd_controller.alpha import reduce_alpha
+
+            base = self.base.act(observation)
+            action = self.residual.compose_on(action, np.append(reduce_alpha(base.alpha), base.kd))
+        elif self.residual is not None:
             action = self.residual.compose(action, observation.desired_speed,
                                            self.memory.integral if self.memory is not None else 0.0)
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
@@ -293,12 +332,15 @@ class LearnedPolicy(NetworkPolicy):
             memory = SpeedMemory(MemoryConfig(**info["memory"]))
         residual = None
         if info.get("action", "direct") == "residual":
-            from rabbit_policy.runtime.actions import ActionBounds, ResidualAction
+            from rabbit_policy.runtime.actions import ResidualAction, residual_sum_bounds
 
             library = GaitLibrary.load()
-            residual = ResidualAction(library, ActionBounds.from_library(library), tuple(info["residual_scale"]),
-                                      float(info.get("integral_gain", 0.0)))
-        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual)
+            residual = ResidualAction(library, residual_sum_bounds(library, info.get("residual_base", "classic")),
+                                      tuple(info["residual_scale"]), float(info.get("integral_gain", 0.0)))
+        base = None
+        if info.get("residual_base", "classic") != "classic":
+            base = residual_base_policy(info["residual_base"], residual.library, decision_period)
+        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base)
 
 
 def controller_name(name: str) -> str:
