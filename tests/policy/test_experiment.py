@@ -130,6 +130,24 @@ def test_a_phase_push_lands_at_its_phase_of_the_first_step_after_its_time():
 
 
 @pytest.mark.sim
+def test_the_roll_back_rule_declares_a_certain_stall_early_and_leaves_walks_alone():
+    """The training env's early failure rule: a backward push classic HZD stalls on is
+    declared a stall once the hip has rolled back behind its stance foot for 0.2 s, long
+    before the 2 s without a touchdown; an undisturbed walk is the same walk with the rule."""
+    early = StopRules(roll_back_after=0.2)
+    pushed = (Push(2.0, -150.0, 0.1),)
+    late = walk(CLASSIC, Scenario.constant(0.7, pushes=pushed), 8.0)
+    soon = walk(CLASSIC, Scenario.constant(0.7, pushes=pushed, rules=early), 8.0)
+    assert late.stalled and soon.stalled and not soon.fell
+    assert soon.stall_time < late.stall_time - 1.0
+    plain = walk(CLASSIC, Scenario.constant(1.0), 5.0)
+    ruled = walk(CLASSIC, Scenario.constant(1.0, rules=early), 5.0)
+    assert not ruled.failed and np.array_equal(plain.hip_x, ruled.hip_x)
+    with pytest.raises(ValueError, match="roll_back_after"):
+        StopRules(roll_back_after=-1.0)
+
+
+@pytest.mark.sim
 def test_stall_ends_the_walk_and_is_reported():
     # a strong backward push stops the classic gait at 0.7 m/s upright or throws it over
     result = walk(CLASSIC, Scenario.constant(0.7, pushes=(Push(2.0, -150.0, 0.1),)), 8.0)

@@ -10,6 +10,7 @@ control tick.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -42,14 +43,21 @@ class StopRules:
     """What ends a walk, defined once for the fast path, training, the evaluation and the
     ROS stack's supervisor: a fall (:class:`FallLimits`), or a stall — no touchdown for
     ``stall_after`` s of sim time (a step takes 0.4-0.7 s; a robot stopped upright by a
-    push stalls)."""
+    push stalls). ``roll_back_after`` > 0 (s; off by default, the training env's early
+    failure rule): a stall is declared as soon as the hip has been behind its stance foot and
+    moving backward for that long, the robot rolling back over its heel, which no walk that
+    recovered ever did (docs/learning.md); the closed loop applies it, the ROS stack's
+    supervisor does not (it refuses it)."""
 
     fall: FallLimits = field(default_factory=FallLimits)
     stall_after: float = 2.0
+    roll_back_after: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.stall_after > 0.0:
             raise ValueError(f"stall_after must be > 0 s, got {self.stall_after}")
+        if not (math.isfinite(self.roll_back_after) and self.roll_back_after >= 0.0):
+            raise ValueError(f"roll_back_after must be a finite number >= 0 s, got {self.roll_back_after}")
 
     def stalled(self, time: float, last_touchdown: float) -> bool:
         """True when no touchdown came for more than ``stall_after`` s (times in s)."""

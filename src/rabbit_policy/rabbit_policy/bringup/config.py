@@ -58,6 +58,9 @@ class StackConfig:
         object.__setattr__(self, "namespace", valid_namespace(self.namespace))
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
+        if self.rules.roll_back_after:
+            raise ValueError("rules.roll_back_after is the training env's early stall rule (the closed loop's); the "
+                             "stack's supervisor declares a stall after rules.stall_after s without a touchdown only")
         if not (math.isfinite(self.recorder_timeout) and self.recorder_timeout > 0.0):
             raise ValueError(f"recorder_timeout must be a finite number > 0 s, got {self.recorder_timeout}")
         if not (math.isfinite(self.rtf) and self.rtf > 0.0):

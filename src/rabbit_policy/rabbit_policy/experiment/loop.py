@@ -12,7 +12,8 @@ One tick (:meth:`ClosedLoop.tick`):
 1. the controller turns the state into four torques (delayed by the scenario's
    ``torque_delay`` if any) and the simulator steps once, starting and ending pushes;
 2. the commanded speed follows the schedule; the hip speed joins the policy's speed window;
-3. the stop rules: a fall, or no touchdown for ``stall_after`` s (a stall);
+3. the stop rules: a fall, or no touchdown for ``stall_after`` s (a stall; with
+   ``roll_back_after`` also the hip rolling back behind its stance foot that long);
 4. at a touchdown the policy sees the window's observation over the step just ended and
    its gait (alpha, Kd) is queued for the next touchdown — as ``policy_node`` answers
    ``/hzd/step``. Without a policy the gait in force stays (a fixed gait; the learning
@@ -99,6 +100,8 @@ class ClosedLoop:
         self.window = None if self.clock is None else self.clock.window
         self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._stall_after = scenario.rules.stall_after
+        self._roll_back_ticks = int(round(scenario.rules.roll_back_after / self.model.opt.timestep))
+        self._rolling = 0  # ticks the hip has been behind its stance foot, moving backward
         fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
         self._min_height, self._max_height, self._max_pitch = fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch
         self._changes = list(scenario.schedule[1:])
@@ -220,13 +223,22 @@ class ClosedLoop:
             if not self.fell:
                 self.fell, self.fall_time = True, t
             stop = True
-        if t - self._last_touchdown_time > self._stall_after:
+        if t - self._last_touchdown_time > self._stall_after or (self._roll_back_ticks and self._rolled_back(x)):
             if not self.stalled:
                 self.stalled, self.stall_time = True, t
             stop = True
         if controller.touchdown:
             self._touchdown(i, t)
         return stop
+
+    def _rolled_back(self, x: float) -> bool:
+        """The early stall rule (``StopRules.roll_back_after``): True once the hip (``x``, m)
+        has been behind the stance foot and moving backward for that many ticks running."""
+        if self._qvel[0] < 0.0 and x < self.data.site_xpos[self._feet[int(self.controller.stance)]][0]:
+            self._rolling += 1
+            return self._rolling >= self._roll_back_ticks
+        self._rolling = 0
+        return False
 
     def _touchdown(self, i: int, t: float) -> None:
         data = self.data

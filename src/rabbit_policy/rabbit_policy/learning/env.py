@@ -80,7 +80,9 @@ episode starts walking.
 ## Episode end
 
 Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5 rad or the hip height
-leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s). Truncated after ``max_steps`` env
+leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s; with ``rules=StopRules(roll_back_after=T)``
+also as soon as the hip has rolled back behind its stance foot for T s, the early failure rule
+the recovery preset trains with). Truncated after ``max_steps`` env
 steps (60), the spec's ``max_episode_steps`` too. ``max_steps`` also places the command change
 and the push inside the episode, and Gymnasium does not pass ``max_episode_steps`` to the env:
 for another length give both, ``gymnasium.make("RabbitHZD-v0", max_steps=500,
@@ -251,6 +253,9 @@ class EpisodeConfig:
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     alive_bonus: float = option(0.0, "reward per env step survived, >= 0 (a survival term: a fall forfeits the "
                                      "rest of the episode's)")
+    roll_back_after: float = option(0.0, "s: end the episode as a stall once the hip has been behind its stance "
+                                         "foot and moving backward this long (the early failure rule, "
+                                         "StopRules.roll_back_after; 0 = only no touchdown for 2 s)")
     features: str = option("paper", "the policy's inputs: paper (the three speeds), memory (+ the integral of "
                                     "the speed error and the last action; rabbit_policy.runtime.memory) or body "
                                     "(+ torso pitch and rate, phase and rate, hip velocity; needs a decision period)",
@@ -278,6 +283,7 @@ class EpisodeConfig:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
         if not (np.isfinite(self.alive_bonus) and self.alive_bonus >= 0.0):
             raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
+        StopRules(roll_back_after=self.roll_back_after)  # raises for a bad value
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
         check_integral_gain(self.integral_gain, self.action)
@@ -289,7 +295,8 @@ class EpisodeConfig:
         return {"max_steps": self.max_steps, "decision_period": self.decision_period,
                 "distribution": self.distribution, "fall_penalty": self.fall_penalty,
                 "alive_bonus": self.alive_bonus, "features": self.features, "action": self.action,
-                "residual_base": self.residual_base, "integral_gain": self.integral_gain}
+                "residual_base": self.residual_base, "integral_gain": self.integral_gain,
+                "rules": StopRules(roll_back_after=self.roll_back_after)}
 
 
 def check_residual_base(base: str, action: str, decision_period: int, integral_gain: float) -> None:
