@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import replace
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -378,3 +379,32 @@ def test_the_survival_term_pays_every_step_survived_and_is_checked():
     assert reward == info["reward_tracking"] + info["reward_fall"] + info["reward_alive"]
     with pytest.raises(ValueError, match="alive_bonus"):
         RabbitHZDEnv(alive_bonus=-1.0)
+
+
+def test_the_registered_presets_are_the_runs_we_ship_and_train():
+    """``RabbitHZD-Shipped-v0`` and ``RabbitHZD-Recovery-v0``: the episodes of the shipped
+    policy's preset and the recovery residual's, read from the YAML files themselves, and of
+    the shipped checkpoint's stored configuration."""
+    import yaml
+
+    from rabbit_policy.learning.env import PRESETS, EpisodeConfig
+    from rabbit_policy.runtime.policies import packaged_policy_file
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+
+    root = Path(__file__).resolve().parents[2] / "config" / "train"
+    fields = set(EpisodeConfig.__dataclass_fields__) - {"seed"}
+    for name, preset_file in (("shipped", "shipped_es.yaml"), ("recovery", "recovery_residual_es.yaml")):
+        values = yaml.safe_load((root / preset_file).read_text())
+        expected = EpisodeConfig(**{k: v for k, v in values.items() if k in fields})
+        assert PRESETS[name] == expected, name
+    stored = PolicyCheckpoint.load(packaged_policy_file()).info["config"]
+    assert PRESETS["shipped"] == EpisodeConfig(**{k: v for k, v in stored.items() if k in fields})
+    for env_id, name in (("RabbitHZD-Shipped-v0", "shipped"), ("RabbitHZD-Recovery-v0", "recovery")):
+        env = gym.make(env_id)
+        assert env.spec.max_episode_steps == env.unwrapped.max_steps == 500
+        unwrapped = env.unwrapped
+        assert (unwrapped.features, unwrapped.action, unwrapped.decision_period) == (
+            PRESETS[name].features, PRESETS[name].action, PRESETS[name].decision_period)
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+    assert gym.make("RabbitHZD-Recovery-v0").unwrapped.rules.roll_back_after == 0.6

@@ -1,4 +1,7 @@
-"""``RabbitHZD-v0`` in Gymnasium's registry once ``rabbit_policy`` is imported, at no cost to
+"""``RabbitHZD-v0`` (the paper's problem) and the ids of the runs we ship and train
+(:data:`PRESET_IDS`: ``RabbitHZD-Shipped-v0``, the shipped policy's episodes;
+``RabbitHZD-Recovery-v0``, the push-recovery residual's) in Gymnasium's registry once
+``rabbit_policy`` is imported, at no cost to
 what does not use Gymnasium (``policy_node``): the id is registered by entry-point string
 (the env module is imported only by ``gymnasium.make``), at once if Gymnasium is imported
 already, else as soon as it is (a one-shot import hook on ``sys.meta_path``)."""
@@ -13,12 +16,19 @@ ENV_ID = "RabbitHZD-v0"
 ENTRY_POINT = "rabbit_policy.learning.env:RabbitHZDEnv"
 MAX_EPISODE_STEPS = 60
 """The spec's episode length (env steps), the env's own default (``learning.env.DEFAULT_MAX_STEPS``)."""
+PRESET_IDS = {"RabbitHZD-Shipped-v0": "shipped", "RabbitHZD-Recovery-v0": "recovery"}
+"""id -> ``learning.env.PRESETS`` name; their episodes are 500 env steps (10 s of sim time)."""
+PRESET_EPISODE_STEPS = 500
 
 
 def register(gymnasium_module) -> None:
-    """Register :data:`ENV_ID` with this Gymnasium (once)."""
+    """Register :data:`ENV_ID` and :data:`PRESET_IDS` with this Gymnasium (once)."""
     if ENV_ID not in gymnasium_module.registry:
         gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS)
+    for env_id, preset in PRESET_IDS.items():
+        if env_id not in gymnasium_module.registry:
+            gymnasium_module.register(id=env_id, entry_point="rabbit_policy.learning.env:make_preset",
+                                      kwargs={"preset": preset}, max_episode_steps=PRESET_EPISODE_STEPS)
 
 
 class _RegisterWhenImported(importlib.abc.MetaPathFinder):

@@ -83,10 +83,12 @@ Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5 rad or 
 leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s; with ``rules=StopRules(roll_back_after=T)``
 also as soon as the hip has rolled back behind its stance foot for T s, the early failure rule
 the recovery preset trains with). Truncated after ``max_steps`` env
-steps (60), the spec's ``max_episode_steps`` too. ``max_steps`` also places the command change
-and the push inside the episode, and Gymnasium does not pass ``max_episode_steps`` to the env:
-for another length give both, ``gymnasium.make("RabbitHZD-v0", max_steps=500,
-max_episode_steps=500)``.
+steps (60), the spec's ``max_episode_steps`` too. ``max_steps`` also places the command changes
+and the push inside the episode, and Gymnasium's ``make`` gives ``max_episode_steps`` to its
+TimeLimit wrapper only, never to the env (the env's own spec says None): for another length
+give both, ``gymnasium.make("RabbitHZD-v0", max_steps=500, max_episode_steps=500)``. The
+presets' ids (``RabbitHZD-Shipped-v0``, ``RabbitHZD-Recovery-v0``: :data:`PRESETS`) are
+registered with 500 for both and need neither.
 
 ## Arguments
 
@@ -312,6 +314,27 @@ def check_residual_base(base: str, action: str, decision_period: int, integral_g
             raise ValueError(f"residual_base {base} acts within the step: it needs a decision period > 0 ticks")
         if integral_gain:
             raise ValueError(f"residual_base {base} has no speed integral: integral_gain must be 0")
+
+
+PRESETS = {
+    "shipped": EpisodeConfig(max_steps=500, decision_period=20, distribution="moderate", fall_penalty=-50.0,
+                             features="memory", action="residual", integral_gain=0.2),
+    "recovery": EpisodeConfig(max_steps=500, decision_period=20, distribution="recovery", fall_penalty=-50.0,
+                              alive_bonus=0.05, roll_back_after=0.6, features="body", action="residual",
+                              residual_base="recovery"),
+}
+"""The episodes of the runs we ship and train, by name (``config/train/shipped_es.yaml``, the
+shipped policy's; ``config/train/recovery_residual_es.yaml``, the push-recovery residual's;
+tested equal), registered as ``RabbitHZD-Shipped-v0`` and ``RabbitHZD-Recovery-v0``
+(:func:`make_preset`)."""
+
+
+def make_preset(preset: str, **overrides) -> "RabbitHZDEnv":
+    """The env of :data:`PRESETS` ``[preset]`` (what ``gymnasium.make("RabbitHZD-Shipped-v0")``
+    builds), with ``overrides`` of its keyword arguments (e.g. ``render_mode``)."""
+    if preset not in PRESETS:
+        raise ValueError(f"preset must be one of {sorted(PRESETS)}, got {preset!r}")
+    return RabbitHZDEnv(**{**PRESETS[preset].env_kwargs(), **overrides})
 
 
 class RabbitHZDEnv(gym.Env):
