@@ -164,6 +164,34 @@ def network_text(info: dict) -> list[str]:
     ]
 
 
+def card_header(info: dict, broad: list[tuple[str, dict]] | None = None) -> list[str]:
+    """The model hubs' metadata header (YAML front matter, as Hugging Face's model cards
+    carry it): licence, tags, the environment id the policy was trained on, and checks 1-6's
+    verdicts as the model index's results (``broad``: the shipped policy's first)."""
+    from rabbit_policy.learning.env import PRESETS, EpisodeConfig
+    from rabbit_policy.registration import ENV_ID, PRESET_IDS
+
+    fields = set(EpisodeConfig.__dataclass_fields__) - {"seed"}
+    config = EpisodeConfig(**{k: v for k, v in info.get("config", {}).items() if k in fields})
+    env_id = next((i for i, name in PRESET_IDS.items() if PRESETS[name] == config), ENV_ID)
+    lines = ["---", "license: apache-2.0", "library_name: pytorch", "pipeline_tag: reinforcement-learning",
+             "tags:", *(f"  - {t}" for t in ("reinforcement-learning", "robotics", "bipedal-locomotion",
+                                              "hybrid-zero-dynamics", "mujoco", "ros2", info.get("algorithm", "es"),
+                                              env_id)),
+             "model-index:", "  - name: hzd_rl_policy", "    results:", "      - task:",
+             "          type: reinforcement-learning", "          name: RABBIT walking with HZD",
+             "        dataset:", f"          type: {env_id}", f"          name: {env_id}", "        metrics:"]
+    if broad:
+        checks = broad[0][1]["checks"]
+        for name, check in checks.items():
+            lines += [f"          - type: check_{name}", f"            value: {'pass' if check['passed'] else 'fail'}",
+                      f"            name: acceptance check {name.replace('_', ' ', 1)}"]
+        lines += ["          - type: acceptance_checks_passed",
+                  f"            value: {sum(c['passed'] for c in checks.values())}/{len(checks)}",
+                  "            name: checks 1-6 passed"]
+    return lines + ["---", ""]
+
+
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,
                command: str = "", criteria=None, screened: str = "") -> str:
     """The card's markdown; ``criteria``: the tracking checks' (default: the full ones);
@@ -182,6 +210,7 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         selection = (" (this file is that run's `best.pt`: the evaluated iteration with the fewest failed "
                      "acceptance checks)")
     lines = [
+        *card_header(info, broad),
         "# HZD-RL policy shipped with rabbit_policy", "",
         *network_text(info), "",
         "## Training", "",

@@ -215,6 +215,34 @@ def test_the_shipped_policy_walks_as_its_card_says_over_a_short_horizon(speed):
 
 
 @pytest.mark.slow
+def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy():
+    """YAML front matter a model hub reads: licence, tags, the registered env id the policy
+    was trained on, and checks 1-6's verdicts as stored in evaluation.json (ship_policy's
+    ``card_header`` of the shipped checkpoint, line for line)."""
+    import gymnasium
+    import yaml
+
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from ship_policy import card_header
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    assert card.startswith("---\n")
+    header = card.split("---\n")[1]
+    stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["acceptance_1_6"]
+    info = make_policy("learned").checkpoint.info
+    assert "---\n" + header + "---\n\n" == "\n".join(card_header(info, list(stored.items()))) + "\n"
+    meta = yaml.safe_load(header)
+    assert meta["license"] == "apache-2.0" and "reinforcement-learning" in meta["tags"]
+    (result,) = meta["model-index"][0]["results"]
+    env_id = result["dataset"]["type"]
+    assert env_id == "RabbitHZD-Shipped-v0" and env_id in gymnasium.registry
+    verdicts = {m["type"]: m["value"] for m in result["metrics"]}
+    first = next(iter(stored.values()))["checks"]
+    assert all(verdicts[f"check_{name}"] == ("pass" if c["passed"] else "fail") for name, c in first.items())
+
+
 def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(tmp_path):
     target = packaged_policy_file()
     before = target.read_bytes()

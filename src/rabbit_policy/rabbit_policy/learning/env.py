@@ -218,12 +218,14 @@ DISTRIBUTIONS = {
     "pushes": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, min_impulse=6.0,
                                   max_impulse=20.0, observation_noise=0.02),
     # the push-recovery issue's training signal: a push in every episode at a phase of a step
-    # (common random numbers in phase), 0.8-2.5x classic's margin at the speed in force (two
-    # thirds backward, where the margin binds), commands every 2-5 s, mild model errors
+    # (common random numbers in phase), 0.8-2.2x classic's margin at the speed in force (two
+    # thirds backward, where the margin binds), commands every 2-5 s, mild model errors (with
+    # the moderate ones, friction 0.5 and 3 ms delays, the recovery controller fell or stalled in
+    # 7 of 24 unpushed episodes and classic in 4: noise in the ranks that says nothing of pushes)
     "recovery": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
-                                    relative_impulse=True, min_impulse=0.8, max_impulse=2.5, backward_fraction=2 / 3,
-                                    frictions=(None, None, 0.6, 0.5), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),
-                                    variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.001, 0.003),
+                                    relative_impulse=True, min_impulse=0.8, max_impulse=2.2, backward_fraction=2 / 3,
+                                    frictions=(None, None, 0.6), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),
+                                    variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.001, 0.002),
                                     observation_noise=0.02),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
@@ -249,7 +251,7 @@ class EpisodeConfig:
                                         "pushes, model errors, torque delays), moderate (pushes up to 12 N s, delays up "
                                         "to 2 ms, noisy speeds), robust (pushes up to 20 N s, delays up to 4 ms, "
                                         "noisy speeds), pushes (a 6-20 N s push either way in every episode) or "
-                                        "recovery (a push at a phase of a step in every episode, 0.8-2.5x classic's "
+                                        "recovery (a push at a phase of a step in every episode, 0.8-2.2x classic's "
                                         "margin); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
