@@ -41,7 +41,8 @@ from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES  # here: after main() took Ctrl-C over
+    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
@@ -58,7 +59,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='speed changes at sim times, e.g. "0:0.8,10:1.2,20:1.0"')
     parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
                         help='pushes on the torso, e.g. "5:60:0.1" (s, N, s)')
-    parser.add_argument("--model", choices=("paper", "drives"), default="paper")
+    add_model_options(parser)
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "
                              "stacks in different namespaces run side by side in one domain (default: the root)")
@@ -128,7 +129,8 @@ def main(argv: list[str] | None = None) -> int:
         pushes = parse_pushes(args.push) if args.push else ()
         config = StackConfig(
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
-            model=args.model, library_mode=args.library_mode, gait_dir=args.gait_dir,
+            model=args.model, friction=args.friction or 0.0, torso_mass_scale=args.torso_mass_scale,
+            torque_delay=args.torque_delay, library_mode=args.library_mode, gait_dir=args.gait_dir,
             policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
             decision_period=args.decision_period, speed_integral=args.speed_integral,
             record=os.path.abspath(args.record) if args.record else "",

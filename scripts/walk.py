@@ -33,32 +33,18 @@ Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, non_negative, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
-def positive(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, got {text}")
-    return value
-
-
-def non_negative(text: str) -> float:
-    value = float(text)
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
-    return value
-
-
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES  # here: after main() took Ctrl-C over
+    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
@@ -70,10 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help='speed schedule "0:0.8,8:1.2" (s:m/s)')
     parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
     parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
-    parser.add_argument("--model", choices=("paper", "drives"), default="paper", help="model variant")
-    parser.add_argument("--friction", type=positive, default=None, help="foot friction coefficient (default 0.8)")
-    parser.add_argument("--torso-mass-scale", type=positive, default=1.0, help="factor on the torso mass and inertia")
-    parser.add_argument("--torque-delay", type=non_negative, default=0.0, help="torque delay (s, whole ms)")
+    add_model_options(parser)
     parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic: nearest gait or blend of the two around the command")
@@ -117,13 +100,13 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Scenario, parse_pushes, parse_schedule
+    from rabbit_policy.experiment.options import model_options
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
-    from rabbit_sim.model import ModelOptions
 
     try:
         schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
         scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
-                            model=ModelOptions(args.model, args.friction, args.torso_mass_scale))
+                            model=model_options(args))
     except ValueError as exc:
         parser.error(str(exc))
     controller = controller_name(args.controller)

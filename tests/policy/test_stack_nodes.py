@@ -77,6 +77,29 @@ def test_lockstep_and_paced_runs_match_the_ros_free_loop_bit_for_bit():
             assert nodes["sim_node"].statistics()["achieved_rtf"] <= 4.0 * 1.05
 
 
+@pytest.mark.slow
+def test_the_stack_runs_walk_pys_model_error_scenarios_as_the_ros_free_loop():
+    """Foot friction, torso mass and a torque delay as sim_node parameters (run_stack's
+    --friction, --torso-mass-scale, --torque-delay): lockstep publishes every state of the
+    ROS-free loop on the same scenario (walk.py's), bit for bit, and the report says which model
+    it ran."""
+    config = StackConfig(duration=1.5, schedule=((0.0, 1.0),), friction=0.5, torso_mass_scale=1.15,
+                         torque_delay=0.003)
+    scenario = config.scenario()
+    assert (scenario.model.friction, scenario.model.torso_mass_scale, scenario.torque_delay) == (0.5, 1.15, 0.003)
+    assert config.node_parameters()["sim_node"]["torque_delay"] == 0.003
+    reference = _reference(1.5, scenario=scenario)
+    assert not np.array_equal(reference, _reference(1.5))  # the model errors change the walk
+    states: list = []
+    report, _nodes = run_in_process(config, observers=[_recorder(states)])
+    assert report.completed and not report.fell
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert unique.shape == reference.shape and np.array_equal(unique, reference)
+    assert report.summary()["scenario"]["model"] == {"variant": "paper", "friction": 0.5, "torso_mass_scale": 1.15}
+    with pytest.raises(ValueError, match="torque_delay"):
+        StackConfig(duration=1.0, schedule=((0.0, 1.0),), torque_delay=0.0025)
+
+
 def _residual_integral_policy_file(path, features: str = "memory") -> str:
     """A learned policy of the final run's kind, saved as train.py saves one: memory inputs
     (or ``body``: the body state too), a residual on the library at v_d + 0.3 x the speed

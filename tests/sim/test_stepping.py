@@ -5,6 +5,7 @@ lateness, the recorder gate and the statistics."""
 from __future__ import annotations
 
 import json
+import math
 import re
 
 import pytest
@@ -226,6 +227,11 @@ def test_sim_settings_are_checked_without_ros():
 
     assert SimSettings().mode == "lockstep"
     for bad, message in (({"mode": "fast"}, "mode must be one of"), ({"rtf": 0.0}, "rtf must be"),
-                         ({"push_schedule": "1:5e6:0.1"}, "within"), ({"max_late_fraction": 2.0}, "(0, 1]")):
+                         ({"push_schedule": "1:5e6:0.1"}, "within"), ({"max_late_fraction": 2.0}, "(0, 1]"),
+                         ({"friction": -0.1}, "friction must be"), ({"torso_mass_scale": 0.0}, "torso_mass_scale"),
+                         ({"torque_delay": 0.0015}, "whole number of ms"), ({"torque_delay": math.nan}, "torque_delay")):
         with pytest.raises(ValueError, match=re.escape(message)):
             SimSettings(**bad)
+    settings = SimSettings(friction=0.4, torso_mass_scale=1.2, torque_delay=0.003)
+    assert settings.model_options.friction == 0.4 and settings.delay_ticks == 3
+    assert SimSettings().model_options.friction is None  # 0: the model's own

@@ -10,7 +10,10 @@ from pathlib import Path
 from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
-from .model import MODEL_VARIANTS
+from .model import MODEL_VARIANTS, ModelOptions
+
+TIMESTEP = 0.001
+"""s: the model's timestep, one control tick."""
 
 MODES = ("lockstep", "paced", "realtime")
 REPLY_MODES = ("lockstep", "paced")
@@ -25,6 +28,12 @@ class SimSettings:
 
     model: str = option("paper", "model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)",
                         choices=MODEL_VARIANTS)
+    friction: float = option(0.0, "foot-ground sliding friction coefficient, > 0 (0 = the model's own, 0.8)",
+                             range=(0.0, 10.0))
+    torso_mass_scale: float = option(1.0, "factor on the torso's mass and inertia, > 0 (1 = the paper's 12 kg)",
+                                     range=(0.0, 10.0))
+    torque_delay: float = option(0.0, "apply each torque reply this many s of sim time later, whole ms, >= 0 (until "
+                                      "then the first reply), as walk.py --torque-delay", range=(0.0, 1.0))
     mode: str = option("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), "
                                    "paced (lockstep held to the wall clock times rtf) or realtime (free-running "
                                    "1 kHz wall clock)", choices=MODES)
@@ -61,6 +70,13 @@ class SimSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"{name} must be a finite number > 0, got {value}")
+        if not (math.isfinite(self.friction) and self.friction >= 0.0):
+            raise ValueError(f"friction must be a finite number > 0, or 0 for the model's own, got {self.friction}")
+        if not (math.isfinite(self.torso_mass_scale) and self.torso_mass_scale > 0.0):
+            raise ValueError(f"torso_mass_scale must be a finite number > 0, got {self.torso_mass_scale}")
+        ticks = self.torque_delay / TIMESTEP if math.isfinite(self.torque_delay) else -1.0
+        if not (ticks >= 0.0 and abs(ticks - round(ticks)) < 1e-6):
+            raise ValueError(f"torque_delay must be a whole number of ms >= 0 s, got {self.torque_delay}")
         for name in ("stop_time", "damping", "markers_rate"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -75,6 +91,16 @@ class SimSettings:
             raise ValueError(f"push_schedule: {exc}") from None
         if any(abs(p.force_x) > self.max_push_force for p in pushes):
             raise ValueError(f"push_schedule: forces must be within +-{self.max_push_force} N")
+
+    @property
+    def model_options(self) -> ModelOptions:
+        """The model to simulate: the variant with the foot friction and torso mass."""
+        return ModelOptions(self.model, self.friction or None, self.torso_mass_scale)
+
+    @property
+    def delay_ticks(self) -> int:
+        """The torque delay in ticks (1 ms each)."""
+        return int(round(self.torque_delay / TIMESTEP))
 
     @property
     def pushes(self) -> tuple[Push, ...]:

@@ -94,7 +94,7 @@ class SimNode(Node):
         values = declare(self, SIM_PARAMS, overrides)
         try:
             self.settings = SimSettings(**values)
-            self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model)),
+            self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model_options)),
                                     shapes=bool(self.settings.markers_rate), namespace=self.get_namespace())
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"sim_node: {exc}") from exc
@@ -142,7 +142,11 @@ class SimNode(Node):
         if mode == "realtime":
             self.create_timer(self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
         self.get_logger().info(
-            f"RABBIT simulation ({self.settings.model} model, {mode} mode"
+            f"RABBIT simulation ({self.settings.model} model"
+            + (f", foot friction {self.settings.friction:g}" if self.settings.friction else "")
+            + (f", torso mass x{self.settings.torso_mass_scale:g}" if self.settings.torso_mass_scale != 1.0 else "")
+            + (f", torque delay {self.settings.torque_delay * 1000:g} ms" if self.settings.torque_delay else "")
+            + f", {mode} mode"
             + (f", rtf {self.settings.rtf:g}" if mode == "paced" else "")
             + f") waiting for a state on {self.resolve_topic_name(topics.INITIAL_STATE)}"
         )

@@ -7,8 +7,9 @@ import math
 import re
 from dataclasses import dataclass
 
-from rabbit_policy.experiment.scenario import Push, format_pushes, validate_schedule
+from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, validate_schedule
 from rabbit_policy.runtime.policies import controller_name, required_controller_settings
+from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
 
 
@@ -34,6 +35,9 @@ class StackConfig:
     mode: str = "lockstep"
     rtf: float = 1.0
     model: str = "paper"
+    friction: float = 0.0  # foot friction coefficient (0 = the model's own 0.8)
+    torso_mass_scale: float = 1.0  # factor on the torso's mass and inertia
+    torque_delay: float = 0.0  # s, whole ms: each torque reply applied that much later (sim_node)
     library_mode: str = "interpolate"
     gait_dir: str = ""
     policy_file: str = ""
@@ -58,6 +62,7 @@ class StackConfig:
         object.__setattr__(self, "namespace", valid_namespace(self.namespace))
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
+        self.scenario()  # raises for a bad model option or torque delay, before any node starts
         if self.rules.roll_back_after:
             raise ValueError("rules.roll_back_after is the training env's early stall rule (the closed loop's); the "
                              "stack's supervisor declares a stall after rules.stall_after s without a touchdown only")
@@ -68,6 +73,12 @@ class StackConfig:
         if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
             raise ValueError(f"decision_period must be -1 (the policy's own), 0 or a whole number of ticks, "
                              f"got {self.decision_period!r}")
+
+    def scenario(self) -> Scenario:
+        """The run as a fast-path scenario (the report's; walk.py runs the same one)."""
+        return Scenario(schedule=self.schedule, pushes=self.pushes,
+                        model=ModelOptions(self.model, self.friction or None, self.torso_mass_scale),
+                        torque_delay=self.torque_delay, rules=self.rules)
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
         """The ROS parameters of each node for this run (the recorder only if recording)."""
@@ -86,6 +97,9 @@ class StackConfig:
                                     **required_controller_settings(self.controller, self.policy_file or None)},
             "sim_node": {
                 "model": self.model,
+                "friction": self.friction,
+                "torso_mass_scale": self.torso_mass_scale,
+                "torque_delay": self.torque_delay,
                 "mode": self.mode,
                 "rtf": self.rtf,
                 "stop_time": self.duration,

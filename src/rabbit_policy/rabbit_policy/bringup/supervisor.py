@@ -19,8 +19,6 @@ from rabbit_msgs_py.conversions import stamp_to_seconds
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
-from rabbit_policy.experiment.scenario import Scenario
-from rabbit_sim.model import ModelOptions
 
 from .config import StackConfig
 
@@ -62,8 +60,7 @@ class RunReport:
     def not_started(cls, config: StackConfig, error: str) -> "RunReport":
         """The report of a run that ended before any node started (``error``: why, e.g.
         ``interrupted``): nothing simulated, not completed."""
-        scenario = Scenario(schedule=config.schedule, pushes=config.pushes, model=ModelOptions(config.model),
-                            rules=config.rules)
+        scenario = config.scenario()
         empty = WalkResult(scenario=scenario, fell=False, fall_time=None, stalled=False, stall_time=None,
                            start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]), touchdowns=[],
                            peak_torque=0.0, planned_duration=config.duration)
@@ -220,8 +217,7 @@ class Supervisor(Node):
         tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
         with that state's hip x; the foot's x is on no topic (NaN)."""
         config = self.config
-        scenario = Scenario(schedule=config.schedule, pushes=config.pushes, model=ModelOptions(config.model),
-                            rules=config.rules)
+        scenario = config.scenario()
         t0, x0 = self._start or (0.0, 0.0)
         times, xs = np.array(self._times), np.array(self._xs)
         if self.stalled:  # the walk ended at the stall, as the fast path's does (later states came in the grace)

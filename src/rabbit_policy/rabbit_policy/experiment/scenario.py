@@ -118,8 +118,9 @@ class Scenario:
         object.__setattr__(self, "schedule", tuple((float(t), float(v)) for t, v in self.schedule))
         object.__setattr__(self, "pushes", tuple(sorted(self.pushes, key=lambda p: p.time)))
         object.__setattr__(self, "phase_pushes", tuple(sorted(self.phase_pushes, key=lambda p: p.after)))
-        if not (math.isfinite(self.torque_delay) and self.torque_delay >= 0.0):
-            raise ValueError(f"torque_delay must be a finite number >= 0 s, got {self.torque_delay}")
+        ticks = self.torque_delay * 1000.0 if math.isfinite(self.torque_delay) else -1.0
+        if not (ticks >= 0.0 and abs(ticks - round(ticks)) < 1e-6):
+            raise ValueError(f"torque_delay must be a whole number of ms >= 0 s (1 ms ticks), got {self.torque_delay}")
         if self.window < 1:
             raise ValueError(f"window must be >= 1 tick, got {self.window}")
 

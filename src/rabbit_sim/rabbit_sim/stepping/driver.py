@@ -16,6 +16,7 @@ Stamps are ns of sim time; wall times are seconds of ``clock`` (``time.perf_coun
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -137,6 +138,7 @@ class SimDriver:
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
         self.realtime = RealtimeClock(sim.timestep, clock=clock)
+        self._delayed: deque[list[float]] = deque()  # torque_delay: the replies still to apply
         self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
         self._latest_torque_wall = -1.0
         self._held_ticks = 0
@@ -356,6 +358,7 @@ class SimDriver:
             self._push_applied()
         self.started, self.halted, self.halt_reason, self.pace_pending = True, False, "", False
         self.lockstep.restart()
+        self._delayed.clear()
         if self.pacer is not None:
             self.pacer.restart(0.0)
         self.stats.forget()
@@ -400,6 +403,12 @@ class SimDriver:
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
+        delay = self.settings.delay_ticks
+        if delay:  # the fast path's rule (ClosedLoop): the first reply held until the delayed ones come
+            if not self._delayed:
+                self._delayed.extend([list(torques)] * delay)
+            self._delayed.append(list(torques))
+            torques = self._delayed.popleft()
         sim.step(torques)
         self.stats.tick(self.clock())
         if self._marker_period and round(sim.time / sim.timestep) % self._marker_period == 0:
