@@ -21,6 +21,9 @@ NODES = (
     ("rabbit_sim", "recorder_node"),
     ("rabbit_hzd_controller", "hzd_controller_node"),
     ("rabbit_policy", "policy_node"),
+    ("rabbit_policy", "walk"),  # the command lines too: ros2 run rabbit_policy walk / run_stack / set_speed
+    ("rabbit_policy", "run_stack"),
+    ("rabbit_policy", "set_speed"),
 )
 
 
@@ -58,6 +61,20 @@ def test_ament_index_lists_the_packages_and_nodes(install_space):
             del os.environ["AMENT_PREFIX_PATH"]
         else:
             os.environ["AMENT_PREFIX_PATH"] = old
+
+
+def test_the_installed_walk_command_walks(install_space):
+    """``ros2 run rabbit_policy walk ...``: the installed command line is scripts/walk.py's."""
+    executable = install_space / "rabbit_policy" / "lib" / "rabbit_policy" / "walk"
+    # as `source install/setup.bash` would: the install space's packages first on the path
+    site = [str(p) for p in sorted(install_space.glob("*/lib/python3*/site-packages"))]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(site + [os.environ.get("PYTHONPATH", "")])}
+    result = subprocess.run([str(executable), "--duration", "1", "--json"], capture_output=True, text=True,
+                            timeout=120, env=env)
+    assert result.returncode == 0, result.stderr
+    assert '"fell": false' in result.stdout
+    bad = subprocess.run([str(executable), "--speed", "nan"], capture_output=True, text=True, timeout=120, env=env)
+    assert bad.returncode == 2 and bad.stderr.count("\n") == 1
 
 
 def test_installed_executable_runs_and_reports_bad_parameters(install_space):

@@ -19,5 +19,8 @@ setup(
     maintainer_email="maintainers@rabbit-hzd.invalid",
     description="Gait policies for RABBIT: the classic HZD gait library and the learned HZD-RL policy.",
     license="Apache-2.0",
-    entry_points={"console_scripts": ["policy_node = rabbit_policy.policy_node:main"]},
+    entry_points={"console_scripts": ["policy_node = rabbit_policy.policy_node:main",
+                                      "walk = rabbit_policy.commands.walk:main",
+                                      "run_stack = rabbit_policy.commands.run_stack:main",
+                                      "set_speed = rabbit_policy.commands.set_speed:main"]},
 )

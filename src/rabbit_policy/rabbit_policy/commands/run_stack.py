@@ -1,0 +1,200 @@
+"""Run the RABBIT ROS 2 stack (simulator, HZD controller, policy) in place of a launch file.
+
+    scripts/run_stack.py --speed 1.0 --duration 30
+    scripts/run_stack.py --speed-schedule "0:0.8,10:1.2,20:1.0" --duration 30
+    scripts/run_stack.py --speed 1.0 --duration 20 --push "5:60:0.1" --mode paced
+    scripts/run_stack.py --speed 1.0 --duration 10 --in-process --json
+    scripts/run_stack.py --speed 1.0 --duration 30 --record runs/walk1   # rosbag2 (MCAP) bag
+
+By default the three nodes start as separate processes (``python -m <package>.<node>
+--ros-args -p ...``, as ``ros2 run`` would) and this script supervises the run: it sends
+the speed schedule on ``/cmd_speed`` at its sim times (the pushes are sim_node's
+``push_schedule``, applied at their exact sim times), and at the end prints, per schedule segment, the commanded speed and the mean hip speed over
+the segment's second half, the steps, whether RABBIT fell, and the real-time factor
+(sim time / wall time). ``--in-process`` runs all nodes in this process on one
+EventsExecutor instead (the fastest choice measured here; see README "Executors").
+Ctrl-C stops the nodes cleanly and prints what was measured so far.
+
+With ``--json``: one object, the same keys as ``walk.py --json`` for the same scenario
+(``rabbit_policy.experiment.result.run_summary``: ``fell``, ``steps``, ``segments`` with
+``mean_speed`` and ``reach_time``, ``real_time_factor``, ``completed``, ``error``, ...);
+node logs go to stderr.
+Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments or another
+stack already running in this ROS_DOMAIN_ID (they would cross-talk), 3 the run did not complete
+(a node died, no progress, interrupted).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import sys
+from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
+    parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
+    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
+                        help="classic: the classic HZD gait library; learned: the HZD-RL policy; recovery: classic plus the "
+                             "model-based push-recovery rule (hzd, rl: aliases)")
+    parser.add_argument("--mode", choices=("lockstep", "paced", "realtime"), default="lockstep",
+                        help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "
+                             "held to the wall clock (--rtf), slower if the machine cannot keep up; realtime: "
+                             "free-running 1 kHz wall clock (latency studies; halts if it falls behind)")
+    parser.add_argument("--rtf", type=float, default=1.0, help="--mode paced: target real-time factor (default 1)")
+    parser.add_argument("--speed-schedule", default=None, metavar="T:V,...",
+                        help='speed changes at sim times, e.g. "0:0.8,10:1.2,20:1.0"')
+    parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
+                        help='pushes on the torso, e.g. "5:60:0.1" (s, N, s)')
+    add_model_options(parser)
+    parser.add_argument("--namespace", default="", metavar="NS",
+                        help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "
+                             "stacks in different namespaces run side by side in one domain (default: the root)")
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
+                        help="classic policy: nearest gait or blend of the two around the speed")
+    parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
+    parser.add_argument("--policy-file", default="", help="--controller learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--decision-period", type=int, default=-1, metavar="TICKS",
+                        help="-1: the policy's own (classic: every 20 ticks; learned: as trained; the default), 0: "
+                             "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
+    parser.add_argument("--speed-integral", type=float, default=0.0, metavar="KI",
+                        help=SPEED_INTEGRAL_HELP)
+    parser.add_argument("--record", default="", metavar="DIR",
+                        help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
+    parser.add_argument("--compression", "--record-compression", choices=("none", "zstd"), default="none",
+                        help="--record: chunk compression (as record.py's)")
+    parser.add_argument("--recorder-timeout", type=float, default=10.0, metavar="S",
+                        help="--record: fail the run when the simulation waited this long (wall s) for a recorder "
+                             "that has stopped writing (default 10; its first state may take up to 30 s)")
+    parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
+    parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--viewer", action="store_true", help="sim_node opens MuJoCo's viewer (needs a display)")
+    parser.add_argument("--markers-rate", type=float, default=30.0, metavar="HZ",
+                        help="/rabbit/markers (RViz/Foxglove 3D view) per s of sim time; 0 = off (default 30)")
+    return parser
+
+
+def print_report(report, config) -> None:
+    print(f"controller   {config.controller}, {config.mode} mode, {'ok' if report.completed else 'incomplete'}"
+          + (f" ({report.error})" if report.error else ""))
+    print(f"fell         {report.fell}" + (f" at t = {report.fall_time:.3f} s" if report.fell else ""))
+    if report.stalled:
+        print(f"stalled      at t = {report.stall_time:.3f} s (no touchdown for {config.rules.stall_after} s)")
+    print(f"steps        {report.steps}")
+    print("segment         command   mean speed (2nd half)   reached in")
+    for seg in report.segments:
+        mean = "   n/a" if seg["mean_speed"] is None else f"{seg['mean_speed']:6.3f}"
+        reach = "never" if seg["reach_time"] is None else f"{seg['reach_time']:.2f} s"
+        print(f"{seg['start']:6.1f}-{seg['end']:6.1f} s  {seg['command']:5.2f}     {mean} m/s              {reach}")
+    if report.sim_time > 0.0:
+        print(f"simulated    {report.sim_time:.2f} s in {report.wall_time:.2f} s wall "
+              f"(real-time factor {report.rtf:.2f})")
+    else:
+        print("simulated    nothing")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    # Ctrl-C / SIGTERM at any moment end the run cleanly: before the stack starts (the
+    # imports, the checks, the probe for another stack) with exit 3 and an "interrupted"
+    # report; during the run the loop sees the flag, stops the nodes and prints what was
+    # measured so far
+    interrupted: list[int] = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda signum, _frame: interrupted.append(signum))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.experiment.scenario import parse_pushes, parse_schedule
+    from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
+    from rabbit_policy.bringup.supervisor import RunReport
+
+    try:
+        schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
+        pushes = parse_pushes(args.push) if args.push else ()
+        config = StackConfig(
+            duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
+            model=args.model, friction=args.friction or 0.0, torso_mass_scale=args.torso_mass_scale,
+            torque_delay=args.torque_delay, library_mode=args.library_mode, gait_dir=args.gait_dir,
+            policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
+            decision_period=args.decision_period, speed_integral=args.speed_integral,
+            record=os.path.abspath(args.record) if args.record else "",
+            record_compression=args.compression, record_overwrite=args.overwrite,
+            markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
+            recorder_timeout=args.recorder_timeout, namespace=args.namespace,
+        )
+        if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
+            raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
+        if args.viewer:
+            from rabbit_sim.viewer import ViewerUnavailable, require_display
+
+            try:
+                require_display()
+            except ViewerUnavailable as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return 2
+        if args.record and os.path.exists(args.record):
+            from rabbit_sim.bag import is_bag_directory
+
+            if not args.overwrite:
+                raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
+            if not is_bag_directory(Path(args.record)):
+                raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
+        make_policy(args.controller, args.gait_dir or None, args.library_mode,
+                    args.policy_file or None, speed_integral=args.speed_integral)
+    except ValueError as exc:
+        parser.error(str(exc))
+    except PolicyUnavailable as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+    if interrupted:
+        return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
+    present = other_stack(namespace=config.namespace, stop=lambda: bool(interrupted))
+    if interrupted:
+        return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
+    if present:
+        domain = os.environ.get("ROS_DOMAIN_ID", "0")
+        print(f"error: another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} "
+              f"({', '.join(present)}); stop it, or start this one in another namespace (--namespace rabbit2) or "
+              f"domain (ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} scripts/run_stack.py ...)",
+              file=sys.stderr)
+        return 2
+
+    stop = lambda: bool(interrupted)  # noqa: E731
+    if args.in_process:
+        report, _nodes = run_in_process(config, stop=stop)
+    else:
+        report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
+    return _report_and_exit(report, config, args.json)
+
+
+def _report_and_exit(report, config, as_json: bool) -> int:
+    """Print the report (JSON or text); the exit status: 1 fell or stalled, 3 not completed
+    (interrupted, a node died), else 0."""
+    if as_json:
+        print(strict_json.dumps(report.summary()))
+    else:
+        print_report(report, config)
+    if report.fell or report.stalled:
+        return 1
+    return 0 if report.completed else 3
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    sys.exit(main())

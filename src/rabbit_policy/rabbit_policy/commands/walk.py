@@ -1,0 +1,148 @@
+"""Walk RABBIT in MuJoCo without ROS: the one experiment command.
+
+    scripts/walk.py --controller classic --speed 1.0 --duration 60
+    scripts/walk.py --controller learned --speed-schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
+    scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
+    scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
+
+``--controller classic`` is classic HZD (the packaged gait library: the calibrated blend
+that walks at the command, or ``--library-mode nearest``); ``--controller learned`` is
+HZD-RL (the shipped policy or ``--policy-file``); ``--controller recovery`` is classic plus
+the model-based push-recovery rule (``rabbit_policy.runtime.recovery``). Each picks alpha
+and Kd as ``policy_node`` does (classic and recovery every 20 ticks, learned as trained;
+``--decision-period`` overrides), on the closed loop every experiment runs
+(``rabbit_policy.experiment.loop``). ``hzd`` and ``rl`` are accepted as aliases.
+
+The robot starts on the gait for the first commanded speed, moving at it. Pushes are
+``T:FX:DUR`` (sim time s, force N along world x on the torso, duration s). Model errors:
+``--model drives`` (the real robot's gears and joint friction), ``--friction`` (foot
+friction coefficient, 0.8 by default), ``--torso-mass-scale``, ``--torque-delay`` (s).
+
+``--json`` prints one object, always with the same keys: ``fell``, ``stalled``,
+``fall_time``, ``stall_time``, ``duration``, ``steps``, ``mean_speed`` (m/s, last half;
+null after a fall or stall), ``peak_torque`` (N m), ``rejected``, ``touchdowns`` (sim
+times, s), ``segments`` (``command``, ``start``, ``end``, ``mean_speed`` over the
+segment's second half, ``reach_time``: s from the change to the end of the first whole
+step within ``--tolerance`` of the command, or null), plus ``controller``, ``policy``,
+``scenario``, ``real_time_factor``, ``wall_time`` (s), ``completed`` and ``error``. No NaN:
+null instead.
+Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser, non_negative, positive
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
+                        help="classic HZD, the learned HZD-RL policy, or recovery: classic plus the model-based "
+                             "push-recovery rule (hzd, rl: aliases)")
+    command = parser.add_mutually_exclusive_group()
+    command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
+    command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",
+                         help='speed schedule "0:0.8,8:1.2" (s:m/s)')
+    parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
+    parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
+    add_model_options(parser)
+    parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
+                        help="classic: nearest gait or blend of the two around the command")
+    parser.add_argument("--policy-file", default=None, help="learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--max-command-step", type=non_negative, default=0.0,
+                        help="command rate limit (m/s per step; 0: none, the default)")
+    parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
+                        help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
+                             "once (default: the policy's own; classic 20, learned as trained)")
+    parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI",
+                        help=SPEED_INTEGRAL_HELP)
+    parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.add_argument("--viewer", action="store_true",
+                        help="watch the walk in MuJoCo's viewer, at real time (needs a display; results unchanged)")
+    return parser
+
+
+def print_summary(summary: dict) -> None:
+    print(f"controller      {summary['controller']} ({summary['policy']})")
+    ended = "fell" if summary["fell"] else "stalled" if summary["stalled"] else None
+    when = summary["fall_time"] if summary["fell"] else summary["stall_time"]
+    print(f"outcome         {ended} at t = {when:.3f} s" if ended else "outcome         walked")
+    print(f"steps           {summary['steps']}")
+    if summary["mean_speed"] is not None:
+        print(f"mean speed      {summary['mean_speed']:.3f} m/s (last half)")
+    print(f"peak torque     {summary['peak_torque']:.1f} N m")
+    for seg in summary["segments"]:
+        reach = "not reached" if seg["reach_time"] is None else f"reached in {seg['reach_time']:.2f} s"
+        mean = "—" if seg["mean_speed"] is None else f"{seg['mean_speed']:.3f} m/s"
+        print(f"  {seg['start']:6.1f}-{seg['end']:6.1f} s  {seg['command']:.2f} m/s  {reach}, second-half mean {mean}")
+    rtf = summary["real_time_factor"]
+    print(f"simulated       {summary['duration']:.1f} s" + (f" ({rtf:.0f}x real time)" if rtf else ""))
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    parser = build_parser()
+    args = parser.parse_args(argv)
+
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.result import run_summary
+    from rabbit_policy.experiment.scenario import Scenario, parse_pushes, parse_schedule
+    from rabbit_policy.experiment.options import model_options
+    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
+
+    try:
+        schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
+        scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
+                            model=model_options(args))
+    except ValueError as exc:
+        parser.error(str(exc))
+    controller = controller_name(args.controller)
+    try:
+        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step,
+                             args.decision_period, args.speed_integral)
+    except (PolicyUnavailable, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    viewer = None
+    if args.viewer:
+        from rabbit_sim.viewer import ViewerObserver, ViewerUnavailable
+
+        try:
+            viewer = ViewerObserver(realtime=True)
+        except ViewerUnavailable as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+    start = time.perf_counter()  # the walk, not loading torch and the policy
+    try:
+        result = walk(policy, scenario, args.duration, observer=viewer)
+    except Exception as exc:  # noqa: BLE001 - the viewer's window failed to open on the first tick
+        if viewer is None or type(exc).__name__ != "ViewerUnavailable":
+            raise
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if viewer is not None:
+            viewer.close()
+    wall = time.perf_counter() - start
+    summary = run_summary(controller, policy.name, result, wall, tolerance=args.tolerance)
+    if args.json:
+        print(strict_json.dumps(summary))
+    else:
+        print_summary(summary)
+    return 1 if result.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
