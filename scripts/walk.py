@@ -5,6 +5,7 @@
     scripts/walk.py --controller learned --speed-schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
     scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
     scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
+    scripts/walk.py --controller recovery --speed 1.0 --push "3.875:-180:0.1" --duration 8 --video walk.gif
 
 ``--controller classic`` is classic HZD (the packaged gait library: the calibrated blend
 that walks at the command, or ``--library-mode nearest``); ``--controller learned`` is
@@ -18,6 +19,8 @@ The robot starts on the gait for the first commanded speed, moving at it. Pushes
 ``T:FX:DUR`` (sim time s, force N along world x on the torso, duration s). Model errors:
 ``--model drives`` (the real robot's gears and joint friction), ``--friction`` (foot
 friction coefficient, 0.8 by default), ``--torso-mass-scale``, ``--torque-delay`` (s).
+``--video FILE.gif``: the walk as an animated GIF (offscreen, 25 frames per s of sim time,
+320 x 240; on a machine without a display MuJoCo's EGL or OSMesa backend is chosen by itself).
 
 ``--json`` prints one object, always with the same keys: ``fell``, ``stalled``,
 ``fall_time``, ``stall_time``, ``duration``, ``steps``, ``mean_speed`` (m/s, last half;

@@ -109,6 +109,12 @@ def test_rgb_array_renders_offscreen_and_the_checker_passes_every_render_mode(di
         out = subprocess.run([sys.executable, "-c", RENDER_CHECK.format(full=full)], capture_output=True, text=True,
                              timeout=180, env=env)
         assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-2000:]
+    # a process that renders and exits without closing its env: no EGLError tracebacks at exit
+    unclosed = ("import gymnasium, rabbit_policy; env = gymnasium.make('RabbitHZD-v0', render_mode='rgb_array'); "
+                "env.reset(seed=0); env.render(); print('ok')")
+    out = subprocess.run([sys.executable, "-c", unclosed], capture_output=True, text=True, timeout=180,
+                         env={**headless, "MUJOCO_GL": "egl"})
+    assert out.returncode == 0 and out.stdout.split() == ["ok"] and "Traceback" not in out.stderr, out.stderr[-2000:]
 
 
 def test_human_rendering_without_a_display_is_one_clear_error(monkeypatch):

@@ -187,3 +187,24 @@ def test_walk_script_model_errors_reach_the_scenario():
     assert summary["scenario"]["model"] == {"variant": "drives", "friction": 0.6, "torso_mass_scale": 1.1}
     assert summary["scenario"]["torque_delay_s"] == 0.002 and summary["scenario"]["pushes"] == "1.0:20.0:0.1"
     assert out.returncode == (1 if summary["fell"] or summary["stalled"] else 0)
+
+
+def test_walk_writes_an_offscreen_video_of_the_walk(tmp_path):
+    """``walk.py --video FILE.gif`` on a machine without a display: MuJoCo's offscreen
+    renderer picked by itself, 25 frames per s of sim time, no traceback at exit; any other
+    suffix or a missing directory is one line, exit 2, before the walk."""
+    import os
+
+    from PIL import Image
+
+    headless = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL")}
+    video = tmp_path / "walk.gif"
+    out = subprocess.run([sys.executable, str(ROOT / "scripts" / "walk.py"), "--duration", "1", "--video", str(video)],
+                         capture_output=True, text=True, timeout=300, env=headless)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "Traceback" not in out.stderr
+    with Image.open(video) as gif:
+        assert gif.size == (320, 240) and gif.n_frames == 25
+    for bad in (str(tmp_path / "walk.mp4"), str(tmp_path / "missing" / "walk.gif")):
+        refused = _walk_script("--duration", "1", "--video", bad, check=False)
+        assert refused.returncode == 2 and refused.stderr.count("\n") == 1 and "--video" in refused.stderr

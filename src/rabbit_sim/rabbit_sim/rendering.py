@@ -14,6 +14,7 @@ display; Debian packages ``libegl1 libegl-mesa0 libgl1-mesa-dri``) or ``osmesa``
 from __future__ import annotations
 
 import os
+import weakref
 from pathlib import Path
 from typing import Sequence
 
@@ -67,6 +68,9 @@ class FrameRenderer:
                                        f"MUJOCO_GL=egl before importing mujoco): {exc}") from exc
         self.model = model
         self.camera = camera or side_camera()
+        # closed at the latest when the interpreter exits, while EGL can still free the context
+        # (a renderer left to its __del__ then prints two EGLError tracebacks)
+        self._closer = weakref.finalize(self, self.renderer.close)
 
     def render(self, data: mujoco.MjData) -> np.ndarray:
         """The frame of ``data``'s state (its kinematics must be current: after a step or
@@ -76,7 +80,7 @@ class FrameRenderer:
         return self.renderer.render().copy()
 
     def close(self) -> None:
-        self.renderer.close()  # an explicit close avoids an EGL error at interpreter exit
+        self._closer()  # once: an explicit close, or at exit
 
 
 def render_frames(model: mujoco.MjModel, qpos: np.ndarray, width: int = 320, height: int = 240,

@@ -4,6 +4,7 @@
     scripts/walk.py --controller learned --speed-schedule "0:0.8,10:1.2,20:0.9" --duration 30 --json
     scripts/walk.py --controller learned --speed 1.0 --push "3:-100:0.1" --friction 0.4 --json
     scripts/walk.py --controller classic --speed 1.2 --model drives --torque-delay 0.005
+    scripts/walk.py --controller recovery --speed 1.0 --push "3.875:-180:0.1" --duration 8 --video walk.gif
 
 ``--controller classic`` is classic HZD (the packaged gait library: the calibrated blend
 that walks at the command, or ``--library-mode nearest``); ``--controller learned`` is
@@ -17,6 +18,8 @@ The robot starts on the gait for the first commanded speed, moving at it. Pushes
 ``T:FX:DUR`` (sim time s, force N along world x on the torso, duration s). Model errors:
 ``--model drives`` (the real robot's gears and joint friction), ``--friction`` (foot
 friction coefficient, 0.8 by default), ``--torso-mass-scale``, ``--torque-delay`` (s).
+``--video FILE.gif``: the walk as an animated GIF (offscreen, 25 frames per s of sim time,
+320 x 240; on a machine without a display MuJoCo's EGL or OSMesa backend is chosen by itself).
 
 ``--json`` prints one object, always with the same keys: ``fell``, ``stalled``,
 ``fall_time``, ``stall_time``, ``duration``, ``steps``, ``mean_speed`` (m/s, last half;
@@ -32,8 +35,10 @@ Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
+from pathlib import Path
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser, non_negative, positive
@@ -67,6 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "once (default: the policy's own; classic 20, learned as trained)")
     parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI",
                         help=SPEED_INTEGRAL_HELP)
+    parser.add_argument("--video", default=None, metavar="FILE.gif",
+                        help="also write the walk as an animated GIF, rendered offscreen from the recorded motion "
+                             "(25 frames per s of sim time, 320 x 240; MUJOCO_GL=egl or osmesa, chosen by itself "
+                             "on a machine without a display)")
     parser.add_argument("--tolerance", type=positive, default=0.05, help="reached = a step within this (m/s)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true",
@@ -91,10 +100,38 @@ def print_summary(summary: dict) -> None:
     print(f"simulated       {summary['duration']:.1f} s" + (f" ({rtf:.0f}x real time)" if rtf else ""))
 
 
+VIDEO_FPS = 25.0  # frames per s of sim time
+
+
+def write_video(result, scenario, path: Path) -> str:
+    """The walk as an animated GIF at ``path`` (its fall held 1.5 s); an error line, or ''."""
+    from rabbit_sim.model import load_model
+    from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
+
+    try:
+        frames = render_frames(load_model(scenario.model), result.qpos[frame_indices(result.times, VIDEO_FPS)])
+    except RenderingUnavailable as exc:
+        return f"--video: {exc}"
+    save_gif(frames, path, VIDEO_FPS, hold_last=1.5 if result.failed else 0.0)
+    print(f"video: {path} ({len(frames)} frames)", file=sys.stderr)
+    return ""
+
+
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
+    given = sys.argv[1:] if argv is None else argv
+    if not os.environ.get("DISPLAY") and any(a == "--video" or a.startswith("--video=") for a in given):
+        from rabbit_sim.gl_backend import choose_headless_gl
+
+        choose_headless_gl()  # offscreen rendering: before anything imports mujoco (build_parser does)
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.video is not None:
+        video = Path(args.video)
+        if video.suffix.lower() != ".gif":
+            parser.error(f"--video writes an animated GIF: give a FILE.gif, got {args.video}")
+        if not video.resolve().parent.is_dir():
+            parser.error(f"--video {args.video}: its directory does not exist")
 
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
@@ -126,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     start = time.perf_counter()  # the walk, not loading torch and the policy
     try:
-        result = walk(policy, scenario, args.duration, observer=viewer)
+        result = walk(policy, scenario, args.duration, observer=viewer, record_state=args.video is not None)
     except Exception as exc:  # noqa: BLE001 - the viewer's window failed to open on the first tick
         if viewer is None or type(exc).__name__ != "ViewerUnavailable":
             raise
@@ -136,6 +173,11 @@ def main(argv: list[str] | None = None) -> int:
         if viewer is not None:
             viewer.close()
     wall = time.perf_counter() - start
+    if args.video is not None:
+        error = write_video(result, scenario, Path(args.video))
+        if error:
+            print(f"error: {error}", file=sys.stderr)
+            return 2
     summary = run_summary(controller, policy.name, result, wall, tolerance=args.tolerance)
     if args.json:
         print(strict_json.dumps(summary))
