@@ -11,6 +11,8 @@ STAMP := $(VENV)/.installed
 # pytest-xdist workers for make test / test-fast (each its own ROS_DOMAIN_ID, tests/conftest.py);
 # TEST_WORKERS=0 runs the suite in one process
 TEST_WORKERS ?= 2
+# where torch's CPU build comes from when the default index serves the CUDA one (requirements.txt)
+TORCH_INDEX ?=
 PACKAGES := src/rabbit_msgs_py src/rabbit_sim src/rabbit_hzd_controller src/rabbit_policy
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
@@ -19,10 +21,11 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
 setup: $(STAMP)
 
-$(STAMP): requirements.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xml)
+$(STAMP): requirements.txt requirements-extras.txt $(foreach p,$(PACKAGES),$(p)/setup.py $(p)/package.xml)
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -r requirements.txt
+	$(if $(TORCH_INDEX),$(PY) -m pip install --quiet torch==2.13.0 --index-url $(TORCH_INDEX))
+	$(PY) -m pip install --quiet -r requirements.txt -r requirements-extras.txt
 	$(PY) -m pip install --quiet $(foreach p,$(PACKAGES),-e $(p))
 	touch $@
 

@@ -44,6 +44,11 @@ def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, Backend
 
 def main(argv: list[str] | None = None) -> int:
     config, out, progress, backend = parse_config(argv)
+    try:
+        import stable_baselines3  # noqa: F401  (an optional dependency: requirements-extras.txt)
+    except ImportError:
+        print("error: train_sb3.py needs stable-baselines3 (pip install -r requirements-extras.txt)", file=sys.stderr)
+        return 2
     from rabbit_msgs_py import strict_json
     from rabbit_policy.learning.sb3 import train_sb3
 

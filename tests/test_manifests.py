@@ -29,10 +29,10 @@ ROSDEP_KEYS = {
 }
 
 
-# pip-only, no rosdep key in rosdistro: pinned in requirements.txt and imported only where
-# needed (rabbit_policy.parallel for --backend ray; the gait optimizer for CMA-ES; the SB3
-# baseline, rabbit_policy.learning.sb3), so the packages run without them on a ROS install
-# (README: pip install -r requirements.txt)
+# pip-only, no rosdep key in rosdistro: pinned in requirements.txt (cma) or
+# requirements-extras.txt (ray, stable-baselines3) and imported only where needed
+# (rabbit_policy.parallel for --backend ray; the gait optimizer for CMA-ES; the SB3 baseline,
+# rabbit_policy.learning.sb3), so the packages run without them on a ROS install
 OPTIONAL = {"ray", "cma", "stable_baselines3"}
 ROSDISTRO_EXCERPT = Path(__file__).resolve().parent / "data" / "rosdep_python_excerpt.yaml"
 
@@ -93,3 +93,52 @@ def test_every_python_rosdep_key_is_one_rosdistro_defines():
         for key in declared(package) - ros - {"python3-pytest"}:
             assert key in entries, f"{package}/package.xml: {key} is not a rosdep key in rosdistro"
             assert {"debian", "ubuntu"} <= set(entries[key]), f"{key} does not resolve on Debian and Ubuntu"
+
+
+# what a pinned distribution is imported as, where the names differ; and the pins that are
+# tools (run, not imported) or that come in through another import
+IMPORT_NAMES = {"PyYAML": "yaml", "pillow": "PIL", "stable-baselines3": "stable_baselines3",
+                "mcap-ros2-support": "mcap_ros2", "tensorboard": "torch.utils.tensorboard"}
+TOOLS = {"colcon-common-extensions", "pytest", "pytest-xdist", "ros-jazzy-rclpy", "ros-rclpy",
+         "ros-jazzy-common-interfaces"}
+
+
+def test_every_pin_is_imported_somewhere():
+    """requirements*.txt pin nothing unused (a scipy pin once stood there, imported nowhere):
+    every pinned distribution but the tools is imported by the packages, scripts or tests."""
+    root = SRC.parent
+    pins = []
+    for name in ("requirements.txt", "requirements-extras.txt"):
+        for line in (root / name).read_text().splitlines():
+            line = line.split("#")[0].strip()
+            if line:
+                pins.append(line.split("==")[0].split("[")[0])
+    imported: set[str] = set()
+    for path in [*SRC.rglob("*.py"), *(root / "scripts").glob("*.py"), *(root / "tests").rglob("*.py")]:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Import):
+                imported.update(alias.name for alias in node.names)
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                imported.add(node.module)
+    prefixes = {m.split(".")[0] for m in imported} | imported
+    unused = [p for p in pins if p not in TOOLS and IMPORT_NAMES.get(p, p) not in prefixes]
+    assert not unused, f"pinned but imported nowhere: {unused}"
+    from rabbit_policy.parallel import RAY_PIN
+
+    assert RAY_PIN in (root / "requirements-extras.txt").read_text()  # the pin --backend ray's error names
+
+
+def test_a_command_that_needs_a_missing_optional_dependency_says_so_in_one_line(tmp_path):
+    """stable-baselines3 and Ray are optional (requirements-extras.txt): without them
+    train_sb3.py and --backend ray are one line and exit 2."""
+    import subprocess
+
+    root = SRC.parent
+    code = ("import runpy, sys; sys.modules['stable_baselines3'] = None; sys.modules['ray'] = None; "
+            "sys.argv = sys.argv[1:]; runpy.run_path(sys.argv[0], run_name='__main__')")
+    for script, args in (("train_sb3.py", ["--out", str(tmp_path / "sb3")]),
+                         ("train.py", ["--algo", "es", "--out", str(tmp_path / "es"), "--backend", "ray", "--iterations", "1"])):
+        out = subprocess.run([sys.executable, "-c", code, str(root / "scripts" / script), *args],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 2 and out.stderr.count("\n") == 1, (script, out.stderr[-1500:])
+        assert ("stable-baselines3" if script == "train_sb3.py" else "ray") in out.stderr
