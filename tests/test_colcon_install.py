@@ -99,7 +99,7 @@ def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
         [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "-p", "min_speed:=2.0"],
         capture_output=True, text=True, timeout=60,
     )
-    assert result.returncode == 1 and "min_speed (2.0) must be below max_speed" in result.stdout
+    assert result.returncode == 1 and "min_speed (2.0) must not be above max_speed" in result.stdout
 
 
 def test_the_install_space_carries_the_package_data(install_space):

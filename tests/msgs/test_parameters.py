@@ -33,14 +33,14 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
     (["rabbit_policy.policy_node", "-p", "policy:=learned", "-p", "policy_file:=/etc/passwd"],
      "not a policy checkpoint"),
     (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "it is for the learned controller"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "parameter initial_speed must be in [0, 3], got inf"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "parameter initial_speed must be in [0.1, 3], got inf"),
     (["rabbit_policy.policy_node", "-p", "initial_speed:=2.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0"], "parameter initial_speed must be in [0, 3], got 5.0"),
-    (["rabbit_sim.sim_node", "-p", "max_late_fraction:=1.5"], "parameter max_late_fraction must be in [0, 1]"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0"], "parameter initial_speed must be in [0.1, 3], got 5.0"),
+    (["rabbit_sim.sim_node", "-p", "max_late_fraction:=1.5"], "parameter max_late_fraction must be in [0.001, 1]"),
     (["rabbit_sim.sim_node", "-p", "damping:=nan"], "parameter damping must be in [0, 10000], got nan"),
     (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "parameter stop_time must be in [0, 1e+09], got nan"),
     (["rabbit_sim.sim_node", "-p", "stats_file:=/nonexistent/dir/stats.json"], "does not exist"),
-    (["rabbit_sim.sim_node", "-p", "mode:=paced", "-p", "rtf:=0.0"], "rtf must be a finite number > 0"),
+    (["rabbit_sim.sim_node", "-p", "mode:=paced", "-p", "rtf:=0.0"], "parameter rtf must be in [0.001, 1000], got 0.0"),
     (["rabbit_policy.policy_node", "-p", "window:=0", "-p", "decision_period:=20"],
      "parameter window must be in [1, 100000], got 0"),
     (["rabbit_policy.policy_node", "-p", "window:=-5"], "parameter window must be in [1, 100000], got -5"),
@@ -261,3 +261,50 @@ def test_importing_a_node_sets_nothing_and_starting_ros_sets_the_discovery_defau
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.split() == ["None", "LOCALHOST"]
+
+
+# parameters whose accepted values also depend on another one: set so that the range's ends are reachable
+_COMPANIONS = {("policy_node", "initial_speed"): {"min_speed": 0.1, "max_speed": 3.0},
+               ("policy_node", "min_speed"): {"max_speed": 3.0, "initial_speed": 3.0},
+               ("policy_node", "max_speed"): {"min_speed": 0.1, "initial_speed": 0.1}}
+
+
+def _starts(node_class, context, overrides: dict) -> bool:
+    """Whether the node starts with these parameter values (a refused one: NodeStartError)."""
+    try:
+        node = node_class(context=context, **overrides)
+    except NodeStartError:
+        return False
+    close = getattr(node, "close", None)
+    if close:
+        close()
+    node.destroy_node()
+    return True
+
+
+@pytest.mark.slow
+def test_every_numeric_descriptor_range_is_exactly_what_the_node_accepts():
+    """``ros2 param describe``'s range is the whole truth: each end of every numeric parameter's
+    range starts the node, and a value just outside either end is refused (one source: the
+    descriptor's range is the check; a stricter check inside the node would make an end fail)."""
+    from rabbit_hzd_controller.hzd_controller_node import CONTROLLER_PARAMS, NODE_PARAMS
+    from rabbit_policy.policy_node import POLICY_PARAMS
+    from rabbit_sim.sim_node import SIM_PARAMS
+
+    nodes = {"hzd_controller_node": (HZDControllerNode, {**CONTROLLER_PARAMS, **NODE_PARAMS}),
+             "policy_node": (PolicyNode, POLICY_PARAMS), "sim_node": (SimNode, SIM_PARAMS)}
+    wrong = []
+    with ros_context() as (context, _executor):
+        for name, (node_class, params) in nodes.items():
+            for key, spec in params.items():
+                if spec.range is None:
+                    continue
+                companions = _COMPANIONS.get((name, key), {})
+                low, high = spec.range
+                integer = isinstance(spec.default, int)
+                step = 1 if integer else max(abs(low) * 1e-3, 1e-6)
+                for value, accepted in ((low, True), (high, True), (low - step, False),
+                                        (high + (1 if integer else max(abs(high) * 1e-3, 1e-6)), False)):
+                    if _starts(node_class, context, {**companions, key: value}) != accepted:
+                        wrong.append(f"{name} {key}={value!r}: {'refused' if accepted else 'accepted'}")
+    assert not wrong, "\n".join(wrong)

@@ -75,14 +75,14 @@ FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
 _DEFAULTS = ControllerConfig()
 CONTROLLER_PARAMS = {
-    "kp": Param(_DEFAULTS.kp, "proportional gain of the PD law, N m/rad, finite > 0", dynamic=True, range=(0.0, 1e5)),
+    "kp": Param(_DEFAULTS.kp, "proportional gain of the PD law, N m/rad, finite > 0", dynamic=True, range=(0.001, 1e5)),
     "torque_limit": Param(_DEFAULTS.torque_limit, "torque saturation, N m, finite > 0 (RABBIT: 150)",
-                          range=(0.0, 1000.0)),
+                          range=(0.001, 1000.0)),
     "touchdown_min_phase": Param(_DEFAULTS.touchdown_min_phase,
                                  "phase the swing foot must pass before a touchdown counts, in (0, 1)",
-                                 range=(0.0, 1.0)),
+                                 range=(0.001, 0.999)),
     "max_kd": Param(_DEFAULTS.max_kd, "largest Kd accepted on /hzd/kd, N m s/rad, finite > 0", dynamic=True,
-                    range=(0.0, 1e4)),
+                    range=(0.001, 1e4)),
     "blend_phase": Param(_DEFAULTS.blend_phase, "blend a new gait in over this much phase after a touchdown "
                                                 "that brings it, in [0, 1] (0 = off)", dynamic=True,
                          range=(0.0, 1.0)),
@@ -91,7 +91,7 @@ CONTROLLER_PARAMS = {
                                range=(0.0, 1.0)),
     "within_step_until": Param(_DEFAULTS.within_step_until, "gait_timing at_once: a gait arriving at or after "
                                                             "this phase waits for the next touchdown, in (0, 1]",
-                               dynamic=True, range=(0.0, 1.0)),
+                               dynamic=True, range=(0.001, 1.0)),
 }
 
 GAIT_TIMINGS = ("next_step", "at_once")
@@ -103,7 +103,7 @@ NODE_PARAMS = {
                                   "/hzd/gait_timing at_once:N) until that decision's gait is in (the ROS-free loop "
                                   "bit for bit); not for realtime"),
     "decision_timeout": Param(2.0, "decision_sync: wall s to wait for a due decision before answering with the "
-                                   "gait in force, finite > 0", range=(0.0, 3600.0)),
+                                   "gait in force, finite > 0", range=(0.001, 3600.0)),
 }
 
 

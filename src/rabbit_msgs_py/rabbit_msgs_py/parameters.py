@@ -33,6 +33,7 @@ class Param:
     description: str
     dynamic: bool = False
     range: tuple[float, float] | None = None  # closed [low, high] of a number, in the descriptor
+    step: float = 0.0  # a float range's step (values low + k step; 0 = any), in the descriptor
     choices: tuple[str, ...] | None = None  # a string's allowed values, in the descriptor's additional_constraints
 
     def descriptor(self) -> ParameterDescriptor:
@@ -50,7 +51,7 @@ class Param:
                 descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
             else:
                 descriptor.floating_point_range = [FloatingPointRange(from_value=float(low), to_value=float(high),
-                                                                      step=0.0)]
+                                                                      step=float(self.step))]
         return descriptor
 
 

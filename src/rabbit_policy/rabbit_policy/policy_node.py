@@ -99,11 +99,13 @@ POLICY_PARAMS = {
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
-                                "within [min_speed, max_speed]", range=(0.0, 3.0)),
+                                "within [min_speed, max_speed]", range=(0.1, 3.0)),
     "speed_integral": Param(0.0, "classic: event-based speed integral gain, 1/s (0 = off): the gait for the command "
                                  "plus the bounded integral of the speed error", range=(0.0, 100.0)),
-    "min_speed": Param(0.7, "lowest command, m/s; /cmd_speed below is clamped", dynamic=True, range=(0.0, 3.0)),
-    "max_speed": Param(1.5, "highest command, m/s; /cmd_speed above is clamped", dynamic=True, range=(0.0, 3.0)),
+    "min_speed": Param(0.7, "lowest command, m/s, not above max_speed; /cmd_speed below is clamped", dynamic=True,
+                       range=(0.1, 3.0)),
+    "max_speed": Param(1.5, "highest command, m/s, not below min_speed; /cmd_speed above is clamped", dynamic=True,
+                       range=(0.1, 3.0)),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
@@ -134,10 +136,10 @@ class PolicyNode(Node):
         super().__init__("policy_node", context=context, namespace=namespace)
         values = declare(self, POLICY_PARAMS, overrides)
         try:
-            self.min_speed = finite("min_speed", values["min_speed"], 0.1, 3.0)
-            self.max_speed = finite("max_speed", values["max_speed"], 0.1, 3.0)
-            if not self.min_speed < self.max_speed:
-                raise ValueError(f"min_speed ({self.min_speed}) must be below max_speed ({self.max_speed})")
+            self.min_speed = finite("min_speed", values["min_speed"], *POLICY_PARAMS["min_speed"].range)
+            self.max_speed = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
+            if not self.min_speed <= self.max_speed:
+                raise ValueError(f"min_speed ({self.min_speed}) must not be above max_speed ({self.max_speed})")
             self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
                                       values["policy_file"] or None,
                                       finite("max_command_step", values["max_command_step"], 0.0),
@@ -205,6 +207,7 @@ class PolicyNode(Node):
     def _flush_rejections(self) -> None:
         for line in self._rejections.flush():
             self.get_logger().warning(line)
+
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """``min_speed``/``max_speed`` at run time, validated as at start (the command in
         force is clamped into the new range); read-only ones are refused by rclpy."""
@@ -213,12 +216,13 @@ class PolicyNode(Node):
             if param.name not in ("min_speed", "max_speed"):
                 continue
             try:
-                value = finite(param.name, coerce(param.name, param.value, 0.0), 0.1, 3.0)
+                value = finite(param.name, coerce(param.name, param.value, 0.0), *POLICY_PARAMS[param.name].range)
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
             low, high = (value, high) if param.name == "min_speed" else (low, value)
-        if not low < high:
-            return SetParametersResult(successful=False, reason=f"min_speed ({low}) must be below max_speed ({high})")
+        if not low <= high:
+            return SetParametersResult(successful=False,
+                                       reason=f"min_speed ({low}) must not be above max_speed ({high})")
         self.min_speed, self.max_speed = low, high
         self.desired_speed = min(max(self.desired_speed, low), high)
         return SetParametersResult(successful=True)

@@ -31,27 +31,27 @@ class SimSettings:
     friction: float = option(0.0, "foot-ground sliding friction coefficient, > 0 (0 = the model's own, 0.8)",
                              range=(0.0, 10.0))
     torso_mass_scale: float = option(1.0, "factor on the torso's mass and inertia, > 0 (1 = the paper's 12 kg)",
-                                     range=(0.0, 10.0))
+                                     range=(0.001, 10.0))
     torque_delay: float = option(0.0, "apply each torque reply this many s of sim time later, whole ms, >= 0 (until "
-                                      "then the first reply), as walk.py --torque-delay", range=(0.0, 1.0))
+                                      "then the first reply), as walk.py --torque-delay", range=(0.0, 1.0), step=0.001)
     mode: str = option("lockstep", "lockstep (one state, one torque reply; deterministic, as fast as it goes), "
                                    "paced (lockstep held to the wall clock times rtf) or realtime (free-running "
                                    "1 kHz wall clock)", choices=MODES)
     rtf: float = option(1.0, "paced: target real-time factor, sim s per wall s, > 0 (slower if the machine cannot "
-                             "keep up)", range=(0.0, 1000.0))
+                             "keep up)", range=(0.001, 1000.0))
     push_duration: float = option(0.1, "how long a /push wrench is held, s of sim time, > 0 (may change at run time)",
-                                  range=(0.0, 10.0))
+                                  range=(0.001, 10.0))
     push_schedule: str = option("", "pushes the simulator applies itself at exact sim times, again after a reset, "
                                     "'T:FX:DUR,...' (s, N, s); '' = none")
-    max_push_force: float = option(2000.0, "larger push components are rejected, N, > 0", range=(0.0, 1.0e5))
+    max_push_force: float = option(2000.0, "larger push components are rejected, N, > 0", range=(0.001, 1.0e5))
     stop_time: float = option(0.0, "halt the physics at this sim time, s, >= 0 (0 = never)", range=(0.0, 1.0e9))
     resend_timeout: float = option(0.2, "lockstep: wall s without a torque before the state is re-sent, > 0",
-                                   range=(0.0, 60.0))
+                                   range=(0.001, 60.0))
     watchdog_timeout: float = option(0.008, "realtime: wall s without a torque before damping takes over, > 0 "
-                                            "(the gaits go unstable at about 10 ms of torque delay)", range=(0.0, 10.0))
+                                            "(the gaits go unstable at about 10 ms of torque delay)", range=(0.001, 10.0))
     damping: float = option(20.0, "realtime watchdog damping gain, N m s/rad, >= 0", range=(0.0, 1.0e4))
     max_late_fraction: float = option(0.5, "realtime: halt the physics when more than this share of a second's "
-                                           "ticks ran on a stale torque, in (0, 1]", range=(0.0, 1.0))
+                                           "ticks ran on a stale torque, in (0, 1]", range=(0.001, 1.0))
     start_paused: bool = option(False, "start with the physics paused (/sim/pause false runs it; run_stack starts "
                                        "the run so once every node is connected)")
     wait_for_recorder: bool = option(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) "

@@ -80,7 +80,8 @@ default depth 10 requests beyond 10 at once were dropped; docs/faults.md)."""
 
 
 SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS,
-                            range=f.metadata.get("range"), choices=f.metadata.get("choices"))
+                            range=f.metadata.get("range"), step=f.metadata.get("step", 0.0),
+                            choices=f.metadata.get("choices"))
               for f in fields(SimSettings)}
 """sim_node's parameters, declared from :class:`SimSettings` (one place for each default)."""
 
