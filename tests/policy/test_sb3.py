@@ -36,7 +36,8 @@ def test_the_sb3_presets_parse(tmp_path):
     presets = sorted((ROOT / "config" / "train").glob("sb3*.yaml"))
     assert presets
     for path in presets:
-        config, out, _, _ = script.parse_config(["--config", str(path), "--out", str(tmp_path / "x")])
+        config, out, _, _, resume = script.parse_config(["--config", str(path), "--out", str(tmp_path / "x")])
+        assert not resume
         assert config.algo in ("ppo", "sac") and out == tmp_path / "x"
 
 
@@ -50,7 +51,7 @@ def test_the_exported_actor_acts_as_sb3s_deterministic_policy(algo):
     model = build_model(config, env)
     bounds = ActionBounds.from_library(GaitLibrary.load())
     if algo == "ppo":  # the warm start (12 s on a slow machine) is the same code for both actors
-        mse = warm_start_actor(model, algo, bounds.low, bounds.high, seed=0)
+        mse = warm_start_actor(model, config, bounds.low, bounds.high)
         assert mse < 1e-3  # the classic library, as our runs start
     net = export_actor(model, algo, bounds.low, bounds.high, {}).network()
     rng = np.random.default_rng(0)
@@ -92,3 +93,54 @@ def test_a_short_sb3_ppo_run_logs_like_train_py_and_its_policy_walks(tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert walked.returncode in (0, 1), walked.stderr[-2000:]  # walked (0) or fell (1): a judged outcome
     assert json.loads(walked.stdout)["policy"].startswith("learned/best.pt")
+
+
+@pytest.mark.slow
+def test_sb3_trains_the_shipped_configuration_checkpoints_and_resumes(tmp_path):
+    """The shipped policy's episodes (memory inputs, a residual on classic + the speed
+    integral) under SB3's PPO: the actor starts at the zero residual, its checkpoint runs as a
+    learned policy with those inputs and outputs, and a run stopped at 256 env steps resumes
+    from its checkpoint to 512 in all."""
+    out = tmp_path / "sb3"
+    common = ["scripts/train_sb3.py", "--config", "config/train/sb3_shipped_ppo.yaml", "--out", str(out),
+              "--envs", "1", "--n-steps", "128", "--batch-size", "64", "--max-steps", "50", "--log-every", "128",
+              "--eval-every", "0", "--checkpoint-every", "128", "--workers", "1", "--no-progress"]
+    first = subprocess.run([sys.executable, *common, "--timesteps", "256"], cwd=ROOT, capture_output=True, text=True,
+                           timeout=600)
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert (out / "sb3_checkpoint.zip").is_file()
+    again = subprocess.run([sys.executable, *common, "--timesteps", "512"], cwd=ROOT, capture_output=True, text=True,
+                           timeout=600)
+    assert again.returncode == 2 and "--resume" in again.stderr  # a used --out needs --resume
+    resumed = subprocess.run([sys.executable, *common, "--timesteps", "512", "--resume"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert json.loads(resumed.stdout.strip().splitlines()[-1])["info"]["env_steps"] == 512
+    with (out / "log.csv").open() as f:
+        assert [int(r["env_steps"]) for r in csv.DictReader(f)] == [128, 256, 384, 512]  # one log, continued
+    policy = make_policy("learned", policy_file=out / "policy.pt")
+    info = policy.checkpoint.info
+    assert (info["features"], info["action"], info["integral_gain"]) == ("memory", "residual", 0.2)
+    assert policy.residual is not None and policy.memory is not None and policy.net.body[0].in_features == 25
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.experiment.scenario import Scenario
+
+    assert not walk(policy, Scenario.constant(1.0), 3.0).failed
+
+
+def test_the_sb3_actor_of_a_residual_starts_at_the_zero_residual():
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from rabbit_policy.runtime.actions import policy_bounds
+
+    config = SB3Config(envs=1, max_steps=5, decision_period=20, distribution="paper", features="memory",
+                       action="residual", integral_gain=0.2)
+    env = make_vec_env(lambda: gym.make("RabbitHZD-v0", **config.env_kwargs()), n_envs=1, seed=0)
+    model = build_model(config, env)
+    bounds = policy_bounds("residual", GaitLibrary.load())
+    assert warm_start_actor(model, config, bounds.low, bounds.high) is None
+    net = export_actor(model, "ppo", bounds.low, bounds.high, config.policy_info()).network()
+    obs = np.random.default_rng(0).uniform(-1.0, 1.0, (20, 25)).astype(np.float32)
+    with torch.no_grad():
+        assert np.array_equal(net(torch.as_tensor(obs)).numpy(), np.zeros((20, 21), np.float32))
+    env.close()

@@ -12,7 +12,7 @@ validation, so that best.pt is not picked on tracking alone) two more:
 
 * Pushes: at 0.7, 1.0 and 1.3 m/s, a 0.1 s push at each of 4 phases (0, 0.25, 0.5, 0.75) of
   the first step after 3 s (:class:`~rabbit_policy.experiment.scenario.PhasePush`): backward
-  :data:`PUSH_FACTORS`\[-1] (1.5) x classic HZD's margin, forward 1.0 x
+  :data:`PUSH_FACTORS` (1.5 for -1) x classic HZD's margin, forward 1.0 x
   (:data:`~.push_recovery.CLASSIC_MARGINS`); each survived (no fall or stall within 5 s).
 * Settling: in the speed-change schedule every segment's mean over its second half (5-10 s
   after the change) within ``settle_tolerance`` (0.03 m/s) of its command.
