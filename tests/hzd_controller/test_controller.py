@@ -67,6 +67,28 @@ def test_compute_matches_the_written_out_law(gait, stance):
         assert c.stance == stance  # swing foot far above ground: no switch
 
 
+@pytest.mark.parametrize("stance", [Leg.LEFT, Leg.RIGHT])
+def test_the_reference_is_what_the_pd_law_tracked(gait, stance):
+    """``reference()`` (the /hzd/reference topic's source, off the hot path): the desired
+    outputs and rates of the last tick, per leg; unsaturated torques are Kp (y_d - y) + Kd
+    (dy_d - dy) of them, also while a within-step blend is running."""
+    rng = np.random.default_rng(3)
+    cfg = ControllerConfig(kp=gait.kp, torque_limit=1e9)
+    other = GaitLibrary.load().nearest(1.3)
+    for k in range(100):
+        c = HZDController(gait.alpha, gait.kd, cfg, stance=stance)
+        q = [0.0, 0.9, *rng.uniform([-0.2, -0.5, 0.1, -0.5, 0.1], [0.2, 0.6, 1.0, 0.6, 1.0])]
+        dq = list(rng.normal(size=7))
+        if k % 2:  # a gait applied within the step, blended in from the outputs in force
+            c.compute(q, dq)
+            c.apply_now(other.alpha, other.kd)
+        torques = c.compute(q, dq)
+        yd, dyd = c.reference()
+        y, dy = q[3:7], dq[3:7]
+        want = [c.config.kp * (a - b) + c.kd * (da - db) for a, b, da, db in zip(yd, y, dyd, dy)]
+        np.testing.assert_allclose(torques, want, rtol=1e-9, atol=1e-6)
+
+
 def test_saturated_phase_has_no_rate_and_the_pd_law_saturates(gait):
     """The controller holds tau in [0, 1] with a zero rate outside the step, and clips
     u = Kp e + Kd de at the torque limit."""

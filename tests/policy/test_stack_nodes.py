@@ -100,6 +100,37 @@ def test_the_stack_runs_walk_pys_model_error_scenarios_as_the_ros_free_loop():
         StackConfig(duration=1.0, schedule=((0.0, 1.0),), torque_delay=0.0025)
 
 
+@pytest.mark.slow
+def test_the_controller_publishes_its_reference_and_tracking_error_when_asked():
+    """``reference_rate`` (run_stack --reference-rate): /hzd/reference and /hzd/tracking_error
+    at that rate of sim time, the four actuated joints, errors a walking robot keeps small;
+    off by default (no such publisher)."""
+    from sensor_msgs.msg import JointState as Joints
+
+    seen: dict[str, list] = {topics.REFERENCE: [], topics.TRACKING_ERROR: []}
+
+    def listener(context):
+        import rclpy
+
+        node = rclpy.create_node("reference_listener", context=context)
+        for topic, store in seen.items():
+            node.create_subscription(Joints, topic, lambda m, s=store: s.append(m), qos.STREAM_QOS)
+        return node
+
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),), reference_rate=100.0)
+    report, nodes = run_in_process(config, observers=[listener])
+    assert report.completed and not report.fell
+    reference, error = seen[topics.REFERENCE], seen[topics.TRACKING_ERROR]
+    assert 150 <= len(reference) <= 201 and len(error) == len(reference)  # 100 per s of sim time
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in reference]
+    assert np.allclose(np.diff(stamps), 0.01, atol=1e-6)
+    assert list(reference[0].name) == ["left_hip", "left_knee", "right_hip", "right_knee"]
+    late = np.array([m.position for m in error if m.header.stamp.sec >= 1])
+    assert np.abs(late).max() < 0.2  # rad: tracked
+    default = StackConfig(duration=1.0, schedule=((0.0, 1.0),))
+    assert default.node_parameters()["hzd_controller_node"]["reference_rate"] == 0.0
+
+
 def _residual_integral_policy_file(path, features: str = "memory") -> str:
     """A learned policy of the final run's kind, saved as train.py saves one: memory inputs
     (or ``body``: the body state too), a residual on the library at v_d + 0.3 x the speed

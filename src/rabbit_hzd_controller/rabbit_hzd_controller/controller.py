@@ -411,6 +411,25 @@ class HZDController:
             return torques
         return [torques[2], torques[3], torques[0], torques[1]]
 
+    def reference(self) -> tuple[list[float], list[float]]:
+        """The desired outputs of the last :meth:`compute` (off the hot path, for plotting):
+        (y_d in rad, dy_d/dt in rad/s), four each in ``ACTUATED_JOINTS`` order (left hip, left
+        knee, right hip, right knee: the stance and swing outputs mapped back to the legs),
+        from the phase and its rate of that tick and the gait (and blend) in force."""
+        t, dtau = self.tau, self.tau_rate
+        out, blend = self._active, self._blend
+        w = dw = h = dh = 0.0
+        offsets = rates = (0.0,) * 4
+        if blend is not None:
+            w, dw, h, dh = _blend_shape(min((t - blend[0]) / blend[3], 1.0), blend[3])
+            offsets, rates = blend[1], blend[2]
+        yd = [bezier(c, t) + off * w + rate * h for c, off, rate in zip(out.coeffs, offsets, rates)]
+        dyd = [(bezier_derivative(c, t) + off * dw + rate * dh) * dtau
+               for c, off, rate in zip(out.coeffs, offsets, rates)]
+        if self.stance is _LEFT:
+            return yd, dyd
+        return yd[2:] + yd[:2], dyd[2:] + dyd[:2]
+
     def _phase_in_time(self, t: float, dtau: float) -> tuple[float, float]:
         """``min_phase_rate``: the phase (and its rate) no slower than that rate in time
         since the last tick's phase (0 right after a touchdown), saturated at 1."""

@@ -7,7 +7,9 @@ per distinct state (sensor_msgs/JointState: the four ``ACTUATED_JOINTS`` and the
 in ``effort``, ``header.stamp`` = the stamp of the state answered, ``header.frame_id`` = this
 controller instance's id, :attr:`HZDControllerNode.source`), ``/hzd/step`` at each
 touchdown and, while anyone subscribes, ``/hzd/phase`` (the gait phase and its rate on each
-state answered, before the reply: what a body-state policy reads).
+state answered, before the reply: what a body-state policy reads); with ``reference_rate`` > 0
+also ``/hzd/reference`` and ``/hzd/tracking_error`` (the desired outputs and the tracking
+error, for tuning Kp and Kd).
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
 the ROS-free loop runs.
 
@@ -64,6 +66,7 @@ from rabbit_msgs_py.conversions import (
     torques_to_msg,
 )
 from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
+from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
@@ -104,6 +107,9 @@ NODE_PARAMS = {
                                   "bit for bit); not for realtime"),
     "decision_timeout": Param(2.0, "decision_sync: wall s to wait for a due decision before answering with the "
                                    "gait in force, finite > 0", range=(0.001, 3600.0)),
+    "reference_rate": Param(0.0, "publish /hzd/reference (the desired outputs y_d, dy_d/dt) and "
+                                 "/hzd/tracking_error (y - y_d, dy/dt - dy_d/dt) this many times per s of sim time, "
+                                 "on the states answered (0 = off; at most 1000, every state)", range=(0.0, 1000.0)),
 }
 
 
@@ -121,6 +127,8 @@ class HZDControllerNode(Node):
         self.decision_sync = bool(values.pop("decision_sync"))
         try:
             self.decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
+            rate = values.pop("reference_rate")
+            self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
             if self.gait_timing not in GAIT_TIMINGS:
                 raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
             self.config = ControllerConfig(**values)
@@ -161,6 +169,9 @@ class HZDControllerNode(Node):
         self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
         self._phase_pub = self.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
+        if self._reference_every:
+            self._reference_pub = self.create_publisher(JointState, topics.REFERENCE, qos.STREAM_QOS)
+            self._error_pub = self.create_publisher(JointState, topics.TRACKING_ERROR, qos.STREAM_QOS)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
@@ -173,6 +184,7 @@ class HZDControllerNode(Node):
     def _flush_rejections(self) -> None:
         for line in self._rejections.flush():
             self.get_logger().warning(line)
+
     def _on_set_parameters(self, parameters: list) -> SetParametersResult:
         """``kp``, ``max_kd``, ``blend_phase`` at run time, validated as at start (read-only
         ones are refused by rclpy before this is called)."""
@@ -406,6 +418,21 @@ class HZDControllerNode(Node):
         torque_msg.effort = torques
         self._torque_pub.publish(torque_msg)
         self.torques_published += 1
+        if self._reference_every and (stamp + TICK_NS // 2) % self._reference_every < TICK_NS:
+            self._publish_reference(msg, q, dq)
+
+    def _publish_reference(self, msg: JointState, q: list[float], dq: list[float]) -> None:
+        """``/hzd/reference`` and ``/hzd/tracking_error`` of the state just answered (for a
+        user tuning Kp and Kd: plot them in Foxglove or PlotJuggler)."""
+        yd, dyd = self.controller.reference()
+        y, dy = q[3:7], dq[3:7]  # the actuated joints, ACTUATED_JOINTS order
+        for publisher, position, velocity in (
+                (self._reference_pub, yd, dyd),
+                (self._error_pub, [a - b for a, b in zip(y, yd)], [a - b for a, b in zip(dy, dyd)])):
+            out = JointState(name=list(ACTUATED_JOINTS), position=position, velocity=velocity)
+            out.header.stamp = msg.header.stamp
+            out.header.frame_id = FOOT_FRAMES[self.controller.stance]
+            publisher.publish(out)
 
 
 def main(args: list[str] | None = None) -> int:

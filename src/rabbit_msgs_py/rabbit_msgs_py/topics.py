@@ -52,6 +52,15 @@ subscribes: one joint ``gait_phase``, ``position`` = the phase tau of the step (
 touchdown, 1 at the next; unitless), ``velocity`` = d tau/dt (1/s), ``header.stamp`` = the
 stamp of the state it was computed on, ``frame_id`` = the stance foot. A policy reading the
 body state inside the step (features ``body``) takes it from here."""
+REFERENCE = "hzd/reference"
+"""sensor_msgs/JointState, hzd_controller_node with ``reference_rate`` > 0 (off by default), on
+the states answered that often per s of sim time: the four ``ACTUATED_JOINTS``, ``position``
+= the desired outputs y_d (rad), ``velocity`` = dy_d/dt (rad/s) of the virtual constraints,
+``header.stamp`` = the state's, ``frame_id`` = the stance foot."""
+TRACKING_ERROR = "hzd/tracking_error"
+"""sensor_msgs/JointState beside :data:`REFERENCE`: ``position`` = y - y_d (rad),
+``velocity`` = dy/dt - dy_d/dt (rad/s), what the PD law acts on (torque = -Kp e - Kd de/dt
+before saturation)."""
 
 INITIAL_STATE = "sim/initial_state"
 """sensor_msgs/JointState (transient local), the 7 joints' positions and velocities the

@@ -51,6 +51,7 @@ class StackConfig:
     record_overwrite: bool = False
     record_stats_file: str = ""
     markers_rate: float = 30.0
+    reference_rate: float = 0.0  # /hzd/reference and /hzd/tracking_error per s of sim time (0 = off)
     viewer: bool = False
     recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
@@ -93,7 +94,7 @@ class StackConfig:
                 "speed_integral": self.speed_integral,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
-            "hzd_controller_node": {"decision_sync": self.mode != "realtime",
+            "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
                                     **required_controller_settings(self.controller, self.policy_file or None)},
             "sim_node": {
                 "model": self.model,

@@ -82,6 +82,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true", help="sim_node opens MuJoCo's viewer (needs a display)")
+    parser.add_argument("--reference-rate", type=float, default=0.0, metavar="HZ",
+                        help="the controller publishes /hzd/reference and /hzd/tracking_error this often per s of sim "
+                             "time (0 = off), to plot when tuning Kp and Kd")
     parser.add_argument("--markers-rate", type=float, default=30.0, metavar="HZ",
                         help="/rabbit/markers (RViz/Foxglove 3D view) per s of sim time; 0 = off (default 30)")
     return parser
@@ -134,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
             decision_period=args.decision_period, speed_integral=args.speed_integral,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.compression, record_overwrite=args.overwrite,
-            markers_rate=args.markers_rate, viewer=args.viewer, rtf=args.rtf,
+            markers_rate=args.markers_rate, reference_rate=args.reference_rate, viewer=args.viewer, rtf=args.rtf,
             recorder_timeout=args.recorder_timeout, namespace=args.namespace,
         )
         if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
