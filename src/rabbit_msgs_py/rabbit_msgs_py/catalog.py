@@ -45,6 +45,8 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.JOINT_TORQUES, JointState, qos.STREAM_QOS),
         TopicSpec(topics.STEP, Header, qos.EVENT_QOS),
         TopicSpec(topics.PHASE, JointState, qos.STREAM_QOS),
+        TopicSpec(topics.REFERENCE, JointState, qos.STREAM_QOS),
+        TopicSpec(topics.TRACKING_ERROR, JointState, qos.STREAM_QOS),
         TopicSpec(topics.ALPHA, Float64MultiArray, qos.GAIT_QOS),
         TopicSpec(topics.KD, Float64, qos.GAIT_QOS),
         TopicSpec(topics.GAIT_TIMING, String, qos.GAIT_QOS),
