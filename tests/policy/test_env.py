@@ -387,6 +387,20 @@ def test_the_survival_term_pays_every_step_survived_and_is_checked():
         RabbitHZDEnv(alive_bonus=-1.0)
 
 
+def test_one_episode_length_from_either_spelling():
+    """Gymnasium gives ``max_episode_steps`` to its TimeLimit only; the registered
+    EpisodeLength wrapper makes the env's own length (which places the command change) the
+    same, and ``max_steps`` alone sets the TimeLimit's."""
+    for kwargs, steps in (({"max_episode_steps": 5}, 5), ({"max_steps": 7}, 7), ({}, 60)):
+        env = gym.make("RabbitHZD-v0", decision_period=20, **kwargs)
+        assert env.unwrapped.max_steps == env.spec.max_episode_steps == steps, kwargs
+        env.reset(seed=0)
+        ends = [env.step(np.zeros(21, np.float32))[3] for _ in range(steps)]
+        assert ends == [False] * (steps - 1) + [True], kwargs
+    both = gym.make("RabbitHZD-v0", max_steps=4, max_episode_steps=6)
+    assert (both.unwrapped.max_steps, both.spec.max_episode_steps) == (4, 6)  # both given: as given
+
+
 def test_the_registered_presets_are_the_runs_we_ship_and_train():
     """``RabbitHZD-Shipped-v0`` and ``RabbitHZD-Recovery-v0``: the episodes of the shipped
     policy's preset and the recovery residual's, read from the YAML files themselves, and of

@@ -22,13 +22,19 @@ PRESET_EPISODE_STEPS = 500
 
 
 def register(gymnasium_module) -> None:
-    """Register :data:`ENV_ID` and :data:`PRESET_IDS` with this Gymnasium (once)."""
+    """Register :data:`ENV_ID` and :data:`PRESET_IDS` with this Gymnasium (once), each with the
+    :class:`~rabbit_policy.learning.env.EpisodeLength` wrapper after its TimeLimit."""
+    from gymnasium.envs.registration import WrapperSpec
+
+    length = (WrapperSpec("EpisodeLength", "rabbit_policy.learning.env:EpisodeLength", {}),)
     if ENV_ID not in gymnasium_module.registry:
-        gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS)
+        gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS,
+                                  additional_wrappers=length)
     for env_id, preset in PRESET_IDS.items():
         if env_id not in gymnasium_module.registry:
             gymnasium_module.register(id=env_id, entry_point="rabbit_policy.learning.env:make_preset",
-                                      kwargs={"preset": preset}, max_episode_steps=PRESET_EPISODE_STEPS)
+                                      kwargs={"preset": preset}, max_episode_steps=PRESET_EPISODE_STEPS,
+                                      additional_wrappers=length)
 
 
 class _RegisterWhenImported(importlib.abc.MetaPathFinder):

@@ -83,12 +83,12 @@ Terminated by the closed loop's stop rules: a fall (|torso pitch| >= 0.5 rad or 
 leaves (0.6, 0.8] m) or a stall (no touchdown for 2 s; with ``rules=StopRules(roll_back_after=T)``
 also as soon as the hip has rolled back behind its stance foot for T s, the early failure rule
 the recovery preset trains with). Truncated after ``max_steps`` env
-steps (60), the spec's ``max_episode_steps`` too. ``max_steps`` also places the command changes
-and the push inside the episode, and Gymnasium's ``make`` gives ``max_episode_steps`` to its
-TimeLimit wrapper only, never to the env (the env's own spec says None): for another length
-give both, ``gymnasium.make("RabbitHZD-v0", max_steps=500, max_episode_steps=500)``. The
-presets' ids (``RabbitHZD-Shipped-v0``, ``RabbitHZD-Recovery-v0``: :data:`PRESETS`) are
-registered with 500 for both and need neither.
+steps (60), the spec's ``max_episode_steps`` too; ``max_steps`` also places the command changes
+and the push inside the episode. Gymnasium's ``make`` gives ``max_episode_steps`` to its
+TimeLimit wrapper only, so every id carries :class:`EpisodeLength`, which makes the two one:
+``gymnasium.make("RabbitHZD-v0", max_episode_steps=500)`` or ``max_steps=500`` alone gives
+500-step episodes (both given: both as given). The presets' ids (``RabbitHZD-Shipped-v0``,
+``RabbitHZD-Recovery-v0``: :data:`PRESETS`) are registered with 500.
 
 ## Arguments
 
@@ -581,6 +581,35 @@ class RabbitHZDEnv(gym.Env):
         if self._view is not None:
             self._view.close()
             self._view = None
+
+
+class EpisodeLength(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """One episode length for ``gymnasium.make``: the env's own (``max_steps``, which also
+    places the command changes and the push) and its TimeLimit's (``max_episode_steps``), which
+    Gymnasium keeps apart (``make`` never gives ``max_episode_steps`` to the env). Registered
+    as an additional wrapper of every id, applied after the TimeLimit: ``max_episode_steps``
+    alone sets the env's length too, and ``max_steps`` alone the TimeLimit's; given both, both
+    stay as given."""
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+        limit, inner = None, env
+        while isinstance(inner, gym.Wrapper):
+            if isinstance(inner, gym.wrappers.TimeLimit):
+                limit = inner
+                break
+            inner = inner.env
+        unwrapped, spec = env.unwrapped, env.unwrapped.spec
+        if limit is None or spec is None:
+            return
+        registered = gym.registry[spec.id].max_episode_steps
+        if "max_steps" in spec.kwargs and limit._max_episode_steps == registered:
+            limit._max_episode_steps = unwrapped.max_steps  # max_steps alone: the TimeLimit follows
+            limit._cached_spec = None
+            self._cached_spec = None
+        elif "max_steps" not in spec.kwargs:
+            unwrapped.max_steps = limit._max_episode_steps  # max_episode_steps alone (or the id's): the env follows
 
 
 register(gym)  # also here: gymnasium.make("rabbit_policy.learning.env:RabbitHZD-v0") imports this module
