@@ -26,6 +26,9 @@ from rabbit_policy.experiment.scenario import Push, Scenario
 pytestmark = pytest.mark.sim
 
 ROOT = Path(__file__).resolve().parents[2]
+NEWER_FIELDS = {"features": "paper", "action": "direct", "integral_gain": 0.0, "alive_bonus": 0.0,
+                "roll_back_after": 0.0, "residual_base": "classic", "top": 0}
+"""ES options newer than a checkpoint, at the defaults that keep its run as it was."""
 LIBRARY = GaitLibrary.load()
 
 
@@ -372,7 +375,7 @@ def test_train_defaults_are_the_first_shipped_run_and_the_card_command_rebuilds_
     assert (defaults.trainer, defaults.workers, defaults.warm_start, defaults.eval_every) == (
         first.trainer, first.workers, first.warm_start, first.eval_every)
     assert (defaults.trainer.features, defaults.trainer.action) == ("paper", "direct")
-    shipped = {"features": "paper", "action": "direct", "integral_gain": 0.0, **info["config"]}  # older files lack these
+    shipped = {**NEWER_FIELDS, **info["config"]}  # older files lack these
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
     assert train.parse_config(shlex.split(command)).trainer.to_dict() == shipped
@@ -394,8 +397,7 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = {"features": "paper", "action": "direct", "integral_gain": 0.0,
-               **make_policy("learned").checkpoint.info["config"]}  # what trained it
+    trained = {**NEWER_FIELDS, **make_policy("learned").checkpoint.info["config"]}  # what trained it
     assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])
