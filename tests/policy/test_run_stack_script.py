@@ -166,17 +166,14 @@ def test_a_run_stack_killed_outright_takes_its_nodes_with_it():
 def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
     """The report of a run stopped before the simulation moved (a node that never came up,
     Ctrl-C at once) says what happened and prints no nan: no real-time factor, no mean."""
-    import importlib.util
-
     import numpy as np
 
     from rabbit_policy.bringup.stack import RunReport, StackConfig
     from rabbit_policy.experiment.result import WalkResult
     from rabbit_policy.experiment.scenario import Scenario
 
-    spec = importlib.util.spec_from_file_location("run_stack", SCRIPT)
-    run_stack = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(run_stack)
+    from rabbit_policy.commands import run_stack  # scripts/run_stack.py's own code
+
     nothing = WalkResult(Scenario.constant(1.0), fell=False, fall_time=None, stalled=False, stall_time=None,
                          start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]))
     report = RunReport("classic", None, nothing, wall_time=0.0, completed=False, error="interrupted")
