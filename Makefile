@@ -3,6 +3,7 @@
 #               changing speed (down from 1.4 m/s too) and pushed
 #   make test   set up .venv if needed, then run the whole test suite (CI's command)
 #   make test-fast  the edit-loop tier: every test not marked slow
+#   make lint   ruff (pyflakes and pycodestyle; ruff.toml), as CI runs it
 #   make bench  the benchmarks (simulation, ROS stack, training throughput), JSON lines
 PYTHON ?= python3
 VENV := .venv
@@ -17,7 +18,7 @@ PACKAGES := src/rabbit_msgs_py src/rabbit_sim src/rabbit_hzd_controller src/rabb
 
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: setup demo test test-fast bench clean
+.PHONY: setup demo test test-fast lint bench clean
 
 setup: $(STAMP)
 
@@ -34,6 +35,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
 
 test-fast: $(STAMP)
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup -m "not slow" -q

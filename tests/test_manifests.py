@@ -99,7 +99,7 @@ def test_every_python_rosdep_key_is_one_rosdistro_defines():
 # tools (run, not imported) or that come in through another import
 IMPORT_NAMES = {"PyYAML": "yaml", "pillow": "PIL", "stable-baselines3": "stable_baselines3",
                 "mcap-ros2-support": "mcap_ros2", "tensorboard": "torch.utils.tensorboard"}
-TOOLS = {"colcon-common-extensions", "pytest", "pytest-xdist", "ros-jazzy-rclpy", "ros-rclpy",
+TOOLS = {"colcon-common-extensions", "pytest", "pytest-xdist", "ruff", "ros-jazzy-rclpy", "ros-rclpy",
          "ros-jazzy-common-interfaces"}
 
 

@@ -18,12 +18,12 @@ from mcap_ros2.decoder import DecoderFactory
 
 from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS
+from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.experiment.scenario import Push
+from rabbit_sim.bag import BagError, BagWriter, QosSpec, is_bag_directory
 
 RECORDED = {topic_names.resolve(name): spec for name, spec in STACK_TOPICS.items()}  # a root-namespace stack's
-from rabbit_msgs_py.runtime import NodeStartError
-from rabbit_policy.experiment.scenario import Push
-from rabbit_policy.bringup.stack import StackConfig, run_in_process
-from rabbit_sim.bag import BagError, BagWriter, QosSpec, is_bag_directory
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
