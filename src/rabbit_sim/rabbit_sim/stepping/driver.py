@@ -138,6 +138,7 @@ class SimDriver:
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
         self.realtime = RealtimeClock(sim.timestep, clock=clock)
+        self._delay_ticks = settings.delay_ticks
         self._delayed: deque[list[float]] = deque()  # torque_delay: the replies still to apply
         self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
         self._latest_torque_wall = -1.0
@@ -403,7 +404,7 @@ class SimDriver:
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
-        delay = self.settings.delay_ticks
+        delay = self._delay_ticks
         if delay:  # the fast path's rule (ClosedLoop): the first reply held until the delayed ones come
             if not self._delayed:
                 self._delayed.extend([list(torques)] * delay)
