@@ -11,6 +11,7 @@ control tick.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -62,6 +63,30 @@ class StopRules:
     def stalled(self, time: float, last_touchdown: float) -> bool:
         """True when no touchdown came for more than ``stall_after`` s (times in s)."""
         return time - last_touchdown > self.stall_after
+
+
+class TorqueDelay:
+    """Torques applied ``ticks`` ticks after they were computed, until then the first ones
+    held: the one rule of a torque delay, run by the ROS-free loop and by ``sim_node``
+    (``torque_delay``), so the two walk the same."""
+
+    def __init__(self, ticks: int) -> None:
+        if not (isinstance(ticks, int) and ticks >= 1):
+            raise ValueError(f"a torque delay is a whole number of ticks >= 1, got {ticks!r}")
+        self.ticks = ticks
+        self._queue: deque[Sequence[float]] = deque()
+
+    def clear(self) -> None:
+        """Forget the torques in flight (the robot was placed again)."""
+        self._queue.clear()
+
+    def __call__(self, torques: Sequence[float]) -> Sequence[float]:
+        """The torques to apply this tick, given the ones computed for it (N m)."""
+        queue = self._queue
+        if not queue:
+            queue.extend([torques] * self.ticks)
+        queue.append(torques)
+        return queue.popleft()
 
 
 class Simulator:

@@ -27,7 +27,6 @@ scenario's first commanded speed (or ``start_speed``), as ``sim_node`` places it
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import replace
 from typing import Callable, Sequence
 
@@ -45,7 +44,7 @@ from rabbit_policy.runtime.policies import (GaitCommand, Policy, controller_sett
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
-from rabbit_sim.simulation import Simulator
+from rabbit_sim.simulation import Simulator, TorqueDelay
 
 Observer = Callable[["ClosedLoop", Sequence[float]], None]
 """Called after every tick with the loop and the torques applied (N m)."""
@@ -109,11 +108,7 @@ class ClosedLoop:
         self.desired_speed = scenario.initial_speed
         dt = self.model.opt.timestep
         delay = int(round(scenario.torque_delay / dt))
-        self._delay: deque | None = None
-        if delay:
-            first = self.controller.compute(self.data.qpos.tolist(), self.data.qvel.tolist())
-            self.controller.reset(start.alpha, start.kd, Leg.LEFT)  # that look ahead must not count
-            self._delay = deque([first] * delay)
+        self._delay = TorqueDelay(delay) if delay else None
         # what happened
         self.ticks = 0
         self.start_time = float(self.data.time)
@@ -189,8 +184,7 @@ class ClosedLoop:
         qpos, qvel = self._qpos, self._qvel
         torques = controller.compute(qpos.tolist(), qvel.tolist())
         if self._delay is not None:
-            self._delay.append(torques)
-            torques = self._delay.popleft()
+            torques = self._delay(torques)
         t = self.sim.step(torques)
         i = self.ticks
         self.ticks = i + 1

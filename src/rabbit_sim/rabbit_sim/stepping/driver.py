@@ -16,7 +16,6 @@ Stamps are ns of sim time; wall times are seconds of ``clock`` (``time.perf_coun
 from __future__ import annotations
 
 import time
-from collections import deque
 from dataclasses import dataclass
 from typing import Callable
 
@@ -25,7 +24,7 @@ from rabbit_msgs_py.joints import N_ACTUATED
 
 from ..markers import RobotShapes, marker_period_ticks
 from ..settings import REPLY_MODES, SimSettings
-from ..simulation import Simulator
+from ..simulation import Simulator, TorqueDelay
 from .rules import (
     RECORDER_LAG,
     RECORDER_RESEND,
@@ -138,8 +137,7 @@ class SimDriver:
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
         self.realtime = RealtimeClock(sim.timestep, clock=clock)
-        self._delay_ticks = settings.delay_ticks
-        self._delayed: deque[list[float]] = deque()  # torque_delay: the replies still to apply
+        self._delay = TorqueDelay(settings.delay_ticks) if settings.delay_ticks else None  # the fast path's rule
         self._latest_torques = [0.0] * N_ACTUATED  # realtime: zero-order hold on the newest torque
         self._latest_torque_wall = -1.0
         self._held_ticks = 0
@@ -359,7 +357,8 @@ class SimDriver:
             self._push_applied()
         self.started, self.halted, self.halt_reason, self.pace_pending = True, False, "", False
         self.lockstep.restart()
-        self._delayed.clear()
+        if self._delay is not None:
+            self._delay.clear()
         if self.pacer is not None:
             self.pacer.restart(0.0)
         self.stats.forget()
@@ -404,12 +403,8 @@ class SimDriver:
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
-        delay = self._delay_ticks
-        if delay:  # the fast path's rule (ClosedLoop): the first reply held until the delayed ones come
-            if not self._delayed:
-                self._delayed.extend([list(torques)] * delay)
-            self._delayed.append(list(torques))
-            torques = self._delayed.popleft()
+        if self._delay is not None:
+            torques = self._delay(torques)
         sim.step(torques)
         self.stats.tick(self.clock())
         if self._marker_period and round(sim.time / sim.timestep) % self._marker_period == 0:
