@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 
 from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_msgs_py.pairing import PairingKey, new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_sim.model import load_model
 from rabbit_sim.settings import SimSettings
@@ -59,13 +60,40 @@ def test_lockstep_places_the_robot_then_steps_once_per_reply_to_the_due_state(in
 
 def test_a_reply_while_paused_steps_when_resumed_and_a_reset_places_again(initial_state):
     driver = _driver(initial_state, start_paused=True)
-    assert driver.on_torques(0, C, ZERO, 100.0) == []  # held: the step may not run
+    actions = driver.on_torques(0, C, ZERO, 100.0)  # held: the step may not run
+    assert [a.text for a in actions] == [f"paired with controller {C} at t = 0.000 s"]
     message, actions = driver.on_pause(False)
     assert message == "running" and _states(actions) == [MS]
     ok, message, actions = driver.on_reset("/sim/initial_state")
     assert ok and message == "reset at the next tick" and actions == []  # the reply to t = 1 ms comes first
     actions = driver.on_torques(MS, C, ZERO, 100.0)
     assert [type(a) for a in actions][:1] == [Placed] and _states(actions) == [0] and driver.sim.time == 0.0
+
+
+def test_with_a_pairing_key_only_signed_torques_move_the_robot_in_every_mode(initial_state):
+    key = new_key()
+    signer = PairingKey.parse(key)
+    for mode in ("lockstep", "realtime"):
+        clock = FakeClock()
+        driver = _driver(initial_state, clock, mode=mode, pairing_key=key)
+        refused = driver.on_torques(0, C, [37.0] * 4, clock.now)  # unsigned, the right stamp
+        assert _states(refused) == [] and driver.stats.torques_rejected == 1
+        assert "not signed with this stack's pairing key" in refused[-1].text
+        actions = driver.on_torques(0, signer.sign(C, 0, ZERO), ZERO, clock.now)
+        assert any("paired with controller" in getattr(a, "text", "") for a in actions) and driver.controller == C
+        if mode == "lockstep":
+            assert _states(actions) == [MS]
+        ok, message, _ = driver.on_release_controller()
+        assert not ok and "pairing key" in message and driver.controller == C
+
+
+def test_release_controller_pairs_the_next_to_answer_and_says_so(initial_state):
+    driver = _driver(initial_state)
+    driver.on_torques(0, C, ZERO, 100.0)
+    assert driver.on_torques(MS, "other/dddd", ZERO, 100.0)[-1].level == "error"  # refused
+    ok, message, actions = driver.on_release_controller()
+    assert ok and C in message and actions[0].level == "warning"
+    assert _states(driver.on_torques(MS, "other/dddd", ZERO, 100.0)) == [2 * MS] and driver.controller == "other/dddd"
 
 
 def test_an_overdue_reply_makes_the_supervisor_send_the_state_again(initial_state):

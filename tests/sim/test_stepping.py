@@ -1,5 +1,5 @@
 """sim_node's stepping rules without ROS (rabbit_sim.stepping): lockstep replies (stamps,
-pairing, takeover), resets and pauses, resends, paced and realtime pacing, the watchdog,
+pairing by key or by first answer), resets and pauses, resends, paced and realtime pacing, the watchdog,
 lateness, the recorder gate and the statistics."""
 
 from __future__ import annotations
@@ -10,9 +10,10 @@ import re
 
 import pytest
 
+from rabbit_msgs_py.pairing import PairingKey, new_key
 from rabbit_sim.stepping import (
-    LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, StreamPairing, TickStatistics, Watchdog,
-    WatchdogEvent)
+    Admit, ControllerPairing, LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, TickStatistics,
+    Watchdog, WatchdogEvent)
 
 pytestmark = pytest.mark.unit
 
@@ -33,44 +34,13 @@ T = [1.0] * 4
 
 def test_lockstep_applies_exactly_one_reply_per_state_and_only_to_that_state():
     lock = Lockstep(0.2, clock=FakeClock())
-    assert lock.on_reply(0, A, T, hold=False) is Reply.IGNORE  # nothing was due
+    assert not lock.answers_due(0)  # nothing was due
     lock.published(5_000_000)
-    assert lock.on_reply(4_000_000, A, T, hold=False) is Reply.IGNORE  # answers an earlier state
-    assert lock.on_reply(0, A, T, hold=False) is Reply.IGNORE  # a made-up stamp
-    assert lock.on_reply(5_000_000, A, T, hold=False) is Reply.STEP
-    assert lock.controller == A  # the first to answer is paired
-    assert lock.on_reply(5_000_000, A, [2.0] * 4, hold=False) is Reply.IGNORE  # a duplicate
-
-
-def test_lockstep_refuses_a_second_controller_even_with_the_right_stamp():
-    lock = Lockstep(0.2, takeover_after=1.0, clock=FakeClock())
-    lock.published(1)
-    assert lock.on_reply(1, A, T, hold=False) is Reply.STEP
-    lock.published(2)
-    assert lock.on_reply(2, B, [37.0] * 4, hold=False) is Reply.FOREIGN  # before A answers: refused
-    assert lock.on_reply(2, A, T, hold=False) is Reply.STEP
-    assert lock.controller == A and lock.offers == {}
-
-
-def test_a_silent_paired_controller_is_replaced_by_the_one_other_that_answers():
-    clock = FakeClock()
-    lock = Lockstep(0.2, takeover_after=1.0, clock=clock)
-    lock.published(1)
-    lock.on_reply(1, A, T, hold=False)
-    lock.published(2)
-    assert lock.on_reply(2, B, [3.0] * 4, hold=False) is Reply.FOREIGN
-    clock.now += 0.5
-    assert lock.takeover(hold=False) is None  # A may still answer
-    clock.now += 0.6
-    assert lock.takeover(hold=False) == (A, B, Reply.STEP, [3.0] * 4)
-    assert lock.controller == B and not lock.awaiting_reply
-    lock.published(3)
-    lock.on_reply(3, B, T, hold=False)
-    lock.published(4)
-    lock.on_reply(4, A, T, hold=False)
-    lock.on_reply(4, "third/cccc", T, hold=False)
-    clock.now += 2.0
-    assert lock.takeover(hold=False) is None  # two others answer: neither is trusted
+    assert not lock.answers_due(4_000_000)  # answers an earlier state
+    assert not lock.answers_due(0)  # a made-up stamp
+    assert lock.answers_due(5_000_000)
+    assert lock.on_reply(T, hold=False) is Reply.STEP
+    assert not lock.answers_due(5_000_000)  # a duplicate
 
 
 def test_a_reset_requested_while_a_reply_is_due_waits_for_it():
@@ -78,19 +48,19 @@ def test_a_reset_requested_while_a_reply_is_due_waits_for_it():
     assert lock.request_reset() is False  # nothing due: reset now
     lock.published(7)
     assert lock.request_reset() is True
-    assert lock.on_reply(7, A, [0.0] * 4, hold=False) is Reply.RESET
+    assert lock.on_reply([0.0] * 4, hold=False) is Reply.RESET
     assert not lock.awaiting_reply and not lock.reset_requested
 
 
 def test_a_reply_while_the_step_may_not_run_is_held_until_it_may():
     lock = Lockstep(0.2, clock=FakeClock())
     lock.published(1)
-    assert lock.on_reply(1, A, [3.0] * 4, hold=True) is Reply.HOLD
+    assert lock.on_reply([3.0] * 4, hold=True) is Reply.HOLD
     assert lock.take_held() == [3.0] * 4
     assert lock.take_held() is None
     lock.published(2)
-    lock.restart()  # a reset drops what was due and held, keeps the pairing
-    assert not lock.awaiting_reply and lock.held_torques is None and lock.controller == A
+    lock.restart()  # a reset drops what was due and held
+    assert not lock.awaiting_reply and lock.held_torques is None
 
 
 def test_an_overdue_reply_makes_the_state_go_out_again():
@@ -106,12 +76,42 @@ def test_an_overdue_reply_makes_the_state_go_out_again():
     assert lock.resends == 1
 
 
-def test_realtime_takes_torques_from_one_controller_until_it_falls_silent():
-    pairing = StreamPairing(takeover_after=1.0)
-    assert pairing.accepts(A, 10.0) and pairing.controller == A
-    assert not pairing.accepts(B, 10.5)  # a rogue while A talks
-    assert pairing.accepts(A, 11.0)
-    assert pairing.accepts(B, 12.1) and pairing.controller == B  # A silent for 1.1 s
+def test_without_a_key_the_first_controller_is_paired_until_released_never_by_silence():
+    pairing = ControllerPairing()
+    assert pairing.admit(A, 1, T) == (Admit.PAIR, A)
+    assert pairing.admit(B, 2, [37.0] * 4) == (Admit.REFUSE, B)  # a second controller, the right stamp or not
+    assert pairing.admit(A, 2, T) == (Admit.ACCEPT, A)
+    for stamp in range(3, 10_000):  # A silent for ever: B is never paired by that
+        assert pairing.admit(B, stamp, T)[0] is Admit.REFUSE
+    assert pairing.release() == (True, f"released controller {A}: the next controller to answer is paired")
+    assert pairing.admit(B, 10_000, T) == (Admit.PAIR, B)
+    assert pairing.admit(A, 10_001, T) == (Admit.REFUSE, A)
+
+
+def test_with_a_key_only_signed_replies_are_applied_and_a_new_signed_instance_is_paired_at_once():
+    key = PairingKey.parse(new_key())
+    pairing = ControllerPairing(key)
+    assert pairing.admit(A, 1, T) == (Admit.REFUSE, A)  # unsigned
+    assert pairing.admit(key.sign(A, 1, T), 1, T) == (Admit.PAIR, A)
+    assert pairing.admit(key.sign(A, 2, T), 2, T) == (Admit.ACCEPT, A)
+    seen = key.sign(A, 2, T)  # a rogue that copies a real reply's frame_id...
+    assert pairing.admit(seen, 3, T)[0] is Admit.REFUSE  # ...for another stamp
+    assert pairing.admit(seen, 2, [37.0] * 4)[0] is Admit.REFUSE  # ...or other torques
+    other = PairingKey.parse(new_key())  # another stack's controller
+    assert pairing.admit(other.sign(B, 3, T), 3, T) == (Admit.REFUSE, B)
+    assert pairing.admit(A + "#" + "0" * 16, 3, T)[0] is Admit.REFUSE  # a made-up tag
+    assert pairing.admit(key.sign(B, 3, T), 3, T) == (Admit.PAIR, B)  # the stack restarted it with the key
+    assert pairing.admit(key.sign(A, 4, T), 4, T) == (Admit.PAIR, A)  # (the old one, still signing: logged again)
+    assert pairing.release()[0] is False  # with a key: nothing to release
+
+
+def test_a_pairing_key_is_checked_where_it_enters():
+    assert PairingKey.parse("") is None
+    with pytest.raises(ValueError, match="16 to 64 characters"):
+        PairingKey.parse("short")
+    with pytest.raises(ValueError, match="16 to 64 characters"):
+        PairingKey.parse("x" * 65)
+    assert re.fullmatch(r"pair-[0-9a-f]{32}", new_key()) and new_key() != new_key()
 
 
 def test_pacer_holds_states_to_the_wall_clock_and_runs_slower_when_behind():

@@ -5,7 +5,8 @@ Subscribes ``/joint_states`` and the gait (``/hzd/alpha``, ``/hzd/kd``, transien
 controller started late gets the gait in force); publishes on ``/joint_torques`` one reply
 per distinct state (sensor_msgs/JointState: the four ``ACTUATED_JOINTS`` and their torques
 in ``effort``, ``header.stamp`` = the stamp of the state answered, ``header.frame_id`` = this
-controller instance's id, :attr:`HZDControllerNode.source`), ``/hzd/step`` at each
+controller instance's id, :attr:`HZDControllerNode.source`, signed with ``pairing_key`` where
+the stack gave one: ``rabbit_msgs_py.pairing``), ``/hzd/step`` at each
 touchdown and, while anyone subscribes, ``/hzd/phase`` (the gait phase and its rate on each
 state answered, before the reply: what a body-state policy reads); with ``reference_rate`` > 0
 also ``/hzd/reference`` and ``/hzd/tracking_error`` (the desired outputs and the tracking
@@ -67,7 +68,8 @@ from rabbit_msgs_py.conversions import (
 )
 from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
+from rabbit_msgs_py.pairing import PairingKey
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
@@ -110,7 +112,13 @@ NODE_PARAMS = {
     "reference_rate": Param(0.0, "publish /hzd/reference (the desired outputs y_d, dy_d/dt) and "
                                  "/hzd/tracking_error (y - y_d, dy/dt - dy_d/dt) this many times per s of sim time, "
                                  "on the states answered (0 = off; at most 1000, every state)", range=(0.0, 1000.0)),
+    "pairing_key": Param("", "sign every torque reply with this key, so that a simulator given the same key applies "
+                             "this controller's torques and no other node's (16-64 characters; run_stack makes one "
+                             "per stack; read once at start, then removed so ros2 param get cannot read it). '' = "
+                             "unsigned replies", dynamic=True),
 }
+SECRET_PARAMS = ("pairing_key",)
+"""Read once at start and then removed (``rabbit_msgs_py.parameters.forget_secrets``)."""
 
 
 class HZDControllerNode(Node):
@@ -122,11 +130,13 @@ class HZDControllerNode(Node):
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context, namespace=namespace)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
+        forget_secrets(self, SECRET_PARAMS)
         self.follow_policy_timing = values.pop("gait_timing") == "policy"
         self.gait_timing = "next_step" if self.follow_policy_timing else self.get_parameter("gait_timing").value
         self.decision_sync = bool(values.pop("decision_sync"))
         try:
             self.decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
+            self.pairing = PairingKey.parse(values.pop("pairing_key"))
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
             if self.gait_timing not in GAIT_TIMINGS:
@@ -191,6 +201,8 @@ class HZDControllerNode(Node):
         changes = {}
         for param in parameters:
             if param.name not in CONTROLLER_PARAMS:
+                if param.name in NODE_PARAMS:  # (pairing_key is removed at start: cannot be set again)
+                    return SetParametersResult(successful=False, reason=f"{param.name} is fixed at start-up")
                 continue
             try:
                 changes[param.name] = coerce(param.name, param.value, CONTROLLER_PARAMS[param.name].default)
@@ -358,6 +370,11 @@ class HZDControllerNode(Node):
             stance = infer_stance(q, self.config.geometry)
             if controller is None:
                 controller = self.controller = HZDController(self._alpha, self._kd, self.config, stance)
+                if self._due is not None and stamp > 0:
+                    # joined mid-run (the stack restarted this controller): the gait in force is the
+                    # policy's newest decision (transient local); a decision on this state went to the
+                    # old instance, so it is answered at once instead of waiting out decision_timeout
+                    self._due.join(stamp)
             else:
                 controller.reset(self._alpha, self._kd, stance)
                 self.get_logger().info("simulation reset: controller restarted on the gait")
@@ -416,6 +433,8 @@ class HZDControllerNode(Node):
         torque_msg = self._torque_msg
         torque_msg.header.stamp = msg.header.stamp
         torque_msg.effort = torques
+        if self.pairing is not None:
+            torque_msg.header.frame_id = self.pairing.sign(self.source, stamp, torque_msg.effort)
         self._torque_pub.publish(torque_msg)
         self.torques_published += 1
         if self._reference_every and (stamp + TICK_NS // 2) % self._reference_every < TICK_NS:

@@ -40,13 +40,14 @@ def non_negative(text: str) -> float:
 # ------------------------------------------------------------------ a command line from a dataclass
 def option(default, help: str, *, flag: str | None = None, aliases: tuple[str, ...] = (),
            choices: tuple | None = None, type=None, cli: bool = True, range: tuple[float, float] | None = None,
-           step: float = 0.0):
+           step: float = 0.0, secret: bool = False):
     """A configuration dataclass field that documents itself and becomes one command-line
     option (CleanRL's ``Args`` style: one place for each default): ``help`` says what it is
     and its unit; ``flag`` overrides ``--field-name``; ``aliases`` are older spellings;
     ``cli=False`` keeps it off the command line; ``range`` (closed) and ``step`` go into a
-    node parameter's descriptor where the field is one."""
-    return dataclasses.field(default=default, metadata={"help": help, "flag": flag, "aliases": aliases,
+    node parameter's descriptor where the field is one; ``secret`` keeps the value out of the
+    dataclass's repr (a key)."""
+    return dataclasses.field(default=default, repr=not secret, metadata={"help": help, "flag": flag, "aliases": aliases,
                                                         "choices": choices, "type": type, "cli": cli,
                                                         "range": range, "step": step})
 

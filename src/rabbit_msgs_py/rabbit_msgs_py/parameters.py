@@ -101,6 +101,14 @@ def declare(node, params: dict[str, Param], overrides: dict[str, Any]) -> dict[s
     return values
 
 
+def forget_secrets(node, names: tuple[str, ...]) -> None:
+    """Remove the parameters ``names`` once read (a key given at start): ``ros2 param get``
+    and ``ros2 param dump`` cannot read them afterwards. They must be declared dynamic
+    (rclpy cannot remove a read-only parameter)."""
+    for name in names:
+        node.undeclare_parameter(name)
+
+
 def overrides_given(node) -> list[str]:
     """Names of the parameters set for ``node`` on its command line (``-p name:=value``,
     parameter files), before anything was declared."""

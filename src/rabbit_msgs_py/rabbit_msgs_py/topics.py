@@ -95,6 +95,10 @@ RESET_SERVICE = "sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
 PAUSE_SERVICE = "sim/pause"
 """std_srvs/SetBool: data=true pauses the physics, false resumes."""
+RELEASE_CONTROLLER_SERVICE = "sim/release_controller"
+"""std_srvs/Trigger: a simulator without a pairing key forgets the controller it takes
+torques from; the next controller to answer is paired (logged). With a key it refuses: a
+controller started with the stack's key is paired when it answers (``rabbit_msgs_py.pairing``)."""
 
 
 def resolve(name: str, namespace: str = "/") -> str:

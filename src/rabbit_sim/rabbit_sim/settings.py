@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rabbit_msgs_py.cli import option
+from rabbit_msgs_py.pairing import PairingKey
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
 from .model import MODEL_VARIANTS, ModelOptions
@@ -57,6 +58,10 @@ class SimSettings:
     wait_for_recorder: bool = option(False, "lockstep/paced: step only while the recorder (/recorder/recorded_until) "
                                             "is at most a few states behind, so a recording loses nothing under any "
                                             "load (run_stack sets it when recording)")
+    pairing_key: str = option("", "apply torques only from a controller that signs its replies with this key (16-64 "
+                                  "characters; run_stack makes one per stack and gives it to the controller too; read "
+                                  "once at start, then removed so ros2 param get cannot read it). '' = the first "
+                                  "controller to answer, until /sim/release_controller", secret=True)
     stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
     markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
                                        "one also goes out whenever RABBIT is placed", range=(0.0, 1000.0))
@@ -85,6 +90,7 @@ class SimSettings:
             raise ValueError(f"max_late_fraction must be in (0, 1], got {self.max_late_fraction}")
         if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
             raise ValueError(f"stats_file {self.stats_file}: its directory does not exist")
+        PairingKey.parse(self.pairing_key)
         try:
             pushes = parse_pushes(self.push_schedule)
         except ValueError as exc:
@@ -103,10 +109,17 @@ class SimSettings:
         return int(round(self.torque_delay / TIMESTEP))
 
     @property
+    def pairing(self) -> PairingKey | None:
+        """``pairing_key`` parsed (None: no key)."""
+        return PairingKey.parse(self.pairing_key)
+
+    @property
     def pushes(self) -> tuple[Push, ...]:
         """``push_schedule`` parsed, by time."""
         return parse_pushes(self.push_schedule)
 
 
+SECRET_PARAMS = ("pairing_key",)
+"""Parameters read once at start and then removed (``ros2 param get`` must not show them)."""
 RUN_TIME_PARAMS = ("push_duration",)
 """Parameters that may change while the node runs (``ros2 param set``); the rest are fixed."""

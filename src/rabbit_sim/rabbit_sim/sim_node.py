@@ -2,7 +2,8 @@
 
 Publishes ``/joint_states`` (7 joints: position, velocity, applied effort), ``/hip_velocity``
 and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes; applies the
-four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset`` and ``/sim/pause``;
+four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and
+``/sim/release_controller``;
 publishes the URDF of its model once on ``/robot_description`` (transient local, as
 robot_state_publisher does: ``rabbit_sim.urdf``).
 
@@ -12,12 +13,14 @@ Modes (parameter ``mode``):
   torque reply, applies it for one step and publishes tick n+1. Runs as fast as the
   loop allows and is deterministic: the same stack gives the same trajectory as the
   ROS-free ``ClosedLoop`` (``scripts/walk.py``). A reply is applied only if it carries the
-  stamp of the state now due and comes from the controller the node is paired with (the
-  first to answer; ``header.frame_id`` of the reply): a rogue publisher, a second
-  controller or a late duplicate never moves the robot. Another controller takes over
-  only after the paired one has left a state unanswered for 1 s (a restarted controller
-  is a new instance). If no reply arrives within ``resend_timeout`` s (wall) the state
-  is re-sent; a live controller ignores the duplicate (it answers each distinct state
+  stamp of the state now due and comes from the controller the node is paired with
+  (``header.frame_id`` of the reply): with ``pairing_key`` (run_stack sets one per stack)
+  a reply signed with that key, without one the first controller to answer
+  (``rabbit_msgs_py.pairing``). A rogue publisher, a second controller or a late duplicate
+  never moves the robot, and silence never hands the robot to another node: the
+  controller changes only by an explicit act (a controller the stack started with the
+  key; ``/sim/release_controller`` without one). If no reply arrives within
+  ``resend_timeout`` s (wall) the state is re-sent; a live controller ignores the duplicate (it answers each distinct state
   once). A reset or pause requested while a reply is due takes effect when it arrives.
 * ``paced``: lockstep held back to the wall clock: a state goes out no earlier than its
   sim time divided by ``rtf`` (target real-time factor, default 1.0) after the start.
@@ -63,12 +66,12 @@ from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
     MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 
 from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
-from .settings import RUN_TIME_PARAMS, SimSettings
+from .settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
 from .simulation import Simulator
 from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State
 from .urdf import urdf_from_model
@@ -79,7 +82,7 @@ SERVICE_QOS = QoSProfile(depth=1000)
 default depth 10 requests beyond 10 at once were dropped; docs/faults.md)."""
 
 
-SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS,
+SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS + SECRET_PARAMS,
                             range=f.metadata.get("range"), step=f.metadata.get("step", 0.0),
                             choices=f.metadata.get("choices"))
               for f in fields(SimSettings)}
@@ -93,6 +96,7 @@ class SimNode(Node):
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("sim_node", context=context, namespace=namespace)
         values = declare(self, SIM_PARAMS, overrides)
+        forget_secrets(self, SECRET_PARAMS)
         try:
             self.settings = SimSettings(**values)
             self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model_options)),
@@ -127,9 +131,11 @@ class SimNode(Node):
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=SERVICE_QOS)
         self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, topics.RELEASE_CONTROLLER_SERVICE, self._on_release_controller,
+                            qos_profile=SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        # lockstep/paced: a 20 Hz supervisor (re-sends, takeovers, the recorder), paced also
+        # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also
         # a 1 ms wake-up for states that wait for their wall time; realtime: the physics steps
         # in the thread that spins this node, woken by a 1 ms timer and paced by the wall
         # clock: no second thread, so a tick never waits for the GIL
@@ -210,13 +216,13 @@ class SimNode(Node):
     def _on_torques(self, msg: JointState) -> None:
         now = time.perf_counter()
         try:
-            stamp, source, torques = torques_from_msg(msg)
+            stamp, frame_id, torques = torques_from_msg(msg)
         except MessageError as exc:
             self.driver.on_malformed_torques()
             self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_TORQUES)}: {exc}",
                                     throttle_duration_sec=1.0)
             return
-        self._run(self.driver.on_torques, stamp, source, torques, now)
+        self._run(self.driver.on_torques, stamp, frame_id, torques, now)
 
     def _on_push(self, msg: Wrench) -> None:
         self._run(self.driver.on_push, msg.force.x, msg.force.z, msg.torque.y,
@@ -237,6 +243,12 @@ class SimNode(Node):
             response.message, actions = self.driver.on_pause(bool(request.data))
             self._do(actions)
         response.success = True
+        return response
+
+    def _on_release_controller(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        with self._lock:
+            response.success, response.message, actions = self.driver.on_release_controller()
+            self._do(actions)
         return response
 
     # ---------------------------------------------------------------- actions

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+
+from rabbit_msgs_py.pairing import new_key
 
 from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, validate_schedule
 from rabbit_policy.runtime.policies import controller_name, required_controller_settings
@@ -56,6 +58,7 @@ class StackConfig:
     recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
     namespace: str = ""  # every node's ROS namespace ("" = the root); two stacks in two namespaces run side by side
+    pairing_key: str = field(default_factory=new_key, repr=False)  # sim and controller: rabbit_msgs_py.pairing
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
@@ -95,6 +98,7 @@ class StackConfig:
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
+                                    "pairing_key": self.pairing_key,
                                     **required_controller_settings(self.controller, self.policy_file or None)},
             "sim_node": {
                 "model": self.model,
@@ -111,6 +115,7 @@ class StackConfig:
                 "stats_file": self.stats_file,
                 "markers_rate": self.markers_rate,
                 "viewer": self.viewer,
+                "pairing_key": self.pairing_key,
             },
         }
         if self.record:

@@ -5,10 +5,11 @@ events and returning what to publish and log). Every rule is unit-tested without
 
 from .driver import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State
 from .rules import (
+    Admit,
+    ControllerPairing,
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
-    TAKEOVER_AFTER,
     Lateness,
     LatenessMonitor,
     Lockstep,
@@ -16,14 +17,13 @@ from .rules import (
     RealtimeClock,
     RecorderGate,
     Reply,
-    StreamPairing,
     TickStatistics,
     Watchdog,
     WatchdogEvent,
 )
 
 __all__ = [
-    "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "TAKEOVER_AFTER", "Fallen", "Frame", "Lateness",
+    "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "Admit", "ControllerPairing", "Fallen", "Frame", "Lateness",
     "LatenessMonitor", "Lockstep", "Log", "Markers", "Pacer", "Placed", "PushApplied", "RealtimeClock",
-    "RecorderGate", "Reply", "SimDriver", "State", "StreamPairing", "TickStatistics", "Watchdog", "WatchdogEvent",
+    "RecorderGate", "Reply", "SimDriver", "State", "TickStatistics", "Watchdog", "WatchdogEvent",
 ]

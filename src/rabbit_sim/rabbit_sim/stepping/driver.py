@@ -29,14 +29,14 @@ from .rules import (
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
-    TAKEOVER_AFTER,
+    Admit,
+    ControllerPairing,
     LatenessMonitor,
     Lockstep,
     Pacer,
     RealtimeClock,
     RecorderGate,
     Reply,
-    StreamPairing,
     TickStatistics,
     Watchdog,
     WatchdogEvent,
@@ -128,12 +128,12 @@ class SimDriver:
         self.achieved_rtf: float | None = None  # paced: over the last 5 s
         sim.schedule_pushes(settings.pushes)  # the Simulator applies them, as on the fast path
         self.stats = TickStatistics()
-        self.lockstep = Lockstep(settings.resend_timeout, TAKEOVER_AFTER, clock)
+        self.lockstep = Lockstep(settings.resend_timeout, clock)
         self.pacer = Pacer(settings.rtf, clock=clock) if mode == "paced" else None
         self.pace_pending = False  # paced: the newest state waits for its wall time
         self.recorder = RecorderGate(settings.wait_for_recorder and self.by_replies, RECORDER_LAG,
                                      seconds_to_ns(sim.timestep))
-        self.pairing = StreamPairing(TAKEOVER_AFTER)  # realtime: torques from one controller
+        self.pairing = ControllerPairing(settings.pairing)  # every mode: torques from one controller
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
         self.realtime = RealtimeClock(sim.timestep, clock=clock)
@@ -162,21 +162,31 @@ class SimDriver:
                               + ("paused" if self.paused else "running"))
         return self._out
 
-    def on_torques(self, stamp: int, source: str, torques: list[float], now: float) -> list[Action]:
-        """A torque reply (``now``: when it arrived, wall s)."""
+    def on_torques(self, stamp: int, frame_id: str, torques: list[float], now: float) -> list[Action]:
+        """A torque reply to the state stamped ``stamp`` (ns) from ``frame_id`` (the
+        controller instance, signed with the stack's key where there is one; ``now``: when
+        it arrived, wall s)."""
         self._out = []
         self.stats.torque_received(now, stamp)
         if not self.by_replies:
-            if not self.pairing.accepts(source, now):
-                self._refuse(source)
+            if not self._admitted(frame_id, stamp, torques):
                 return self._out
             self._latest_torques = torques
             self._latest_torque_wall = now
             if self.started and not (self.paused or self.halted) and self.realtime.overdue() >= 0.0:
                 self._run_due_ticks()  # the tick waited for this reply
             return self._out
-        self._act(self.lockstep.on_reply(stamp, source, torques, self._must_hold()), torques, source)
+        if self.lockstep.answers_due(stamp) and self._admitted(frame_id, stamp, torques):
+            self._act(self.lockstep.on_reply(torques, self._must_hold()), torques)
         return self._out
+
+    def on_release_controller(self) -> tuple[bool, str, list[Action]]:
+        """``/sim/release_controller``: (done, message, actions); see :class:`ControllerPairing`."""
+        self._out = []
+        done, message = self.pairing.release()
+        if done:
+            self._log("warning", f"{message} (t = {self.sim.time:.3f} s)")
+        return done, message, self._out
 
     def sent(self, state: State) -> None:
         """The node published ``state`` (now: where its reply's latency starts)."""
@@ -241,13 +251,6 @@ class SimDriver:
         self._out = []
         if not self.started or self.pace_pending:
             return self._out
-        takeover = self.lockstep.takeover(self._must_hold())
-        if takeover is not None:
-            old, new, reply, torques = takeover
-            self._log("warning", f"controller {new} takes over from {old}, which left the state at "
-                                 f"t = {self.sim.time:.3f} s unanswered for {TAKEOVER_AFTER:.0f} s")
-            self._act(reply, torques, new)
-            return self._out
         now = self.clock()
         if not self.paused and self.recorder.holds(self.published_stamp):
             if now - self._recorder_resent >= RECORDER_RESEND:
@@ -261,7 +264,7 @@ class SimDriver:
             return self._out
         why = (f"no node publishes {self._topic(topics.JOINT_TORQUES)}: is hzd_controller_node running?"
                if torque_publishers() == 0
-               else f"controller {self.lockstep.controller or '(none answered yet)'} has not answered: it waits "
+               else f"controller {self.pairing.controller or '(none answered yet)'} has not answered: it waits "
                     f"for a gait on {self._topic(topics.ALPHA)} and {self._topic(topics.KD)}, is busy, or died "
                     "(a killed node stays listed for up to 20 s)")
         self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
@@ -299,7 +302,7 @@ class SimDriver:
     @property
     def controller(self) -> str | None:
         """Id of the controller whose torques are applied (None before the first reply)."""
-        return self.lockstep.controller if self.by_replies else self.pairing.controller
+        return self.pairing.controller
 
     def statistics(self) -> dict:
         """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
@@ -316,22 +319,31 @@ class SimDriver:
     def _log(self, level: str, text: str, throttle: float = 0.0, key: str = "") -> None:
         self._out.append(Log(level, text, throttle, key))
 
-    def _act(self, reply: Reply, torques: list[float], source: str) -> None:
-        """Carry out what :class:`Lockstep` made of a reply."""
+    def _act(self, reply: Reply, torques: list[float]) -> None:
+        """Carry out what :class:`Lockstep` made of the paired controller's reply."""
         if reply is Reply.STEP:
             self._advance(torques)
         elif reply is Reply.RESET:
             self._place()
             self._log("info", "robot back in the initial state at t = 0 s")
-        elif reply is Reply.FOREIGN:
-            self._refuse(source)
-        # IGNORE: answers no state now due (a duplicate or stale stamp); HOLD: kept until the step may run
+        # HOLD: kept until the step may run
 
-    def _refuse(self, source: str) -> None:
-        self.stats.torques_rejected += 1
-        self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on "
-                           f"{self._topic(topics.JOINT_TORQUES)}: this simulator takes them from {self.controller} only "
-                           f"(another takes over after {TAKEOVER_AFTER:.0f} s without an answer from it)", 5.0, "refused")
+    def _admitted(self, frame_id: str, stamp: int, torques: list[float]) -> bool:
+        """Is the reply from the paired controller? A newly paired one is logged, any other
+        refused and logged (:class:`ControllerPairing`)."""
+        verdict, source = self.pairing.admit(frame_id, stamp, torques)
+        if verdict is Admit.REFUSE:
+            self.stats.torques_rejected += 1
+            why = ("it is not signed with this stack's pairing key" if self.pairing.key is not None
+                   else f"this simulator takes them from {self.pairing.controller} only (/sim/release_controller "
+                        "pairs it with the next to answer)")
+            self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on "
+                               f"{self._topic(topics.JOINT_TORQUES)}: {why}", 5.0, "refused")
+            return False
+        if verdict is Admit.PAIR:
+            self._log("info", f"paired with controller {source} at t = {self.sim.time:.3f} s"
+                              + (" (signed with this stack's pairing key)" if self.pairing.key is not None else ""))
+        return True
 
     def _must_hold(self) -> bool:
         """Lockstep/paced: the physics may not step now (paused, or a recorder lags)."""

@@ -4,7 +4,7 @@ realtime pacing, the torque watchdog, recorder flow control and the run statisti
 topics, services and timers. Every rule here is unit-tested without rclpy.
 
 * :class:`Lockstep`: one torque reply per published state, taken only if it carries the
-  stamp of the state due and comes from the paired controller. A reset or pause requested
+  stamp of the state due (and :class:`ControllerPairing` admits its controller). A reset or pause requested
   while a reply is due takes effect when that reply arrives; an overdue reply makes the
   state go out again (:meth:`Lockstep.resend_due`).
 * :class:`Pacer`: paced mode, lockstep held back to the wall clock times a real-time
@@ -16,7 +16,8 @@ topics, services and timers. Every rule here is unit-tested without rclpy.
 * :class:`Watchdog`: in realtime, torques older than ``timeout`` s are replaced by damping
   ``-damping * joint rate``; it says when it trips. :class:`LatenessMonitor` says once a
   second when the loop fell behind, and when it fell too far behind to go on.
-* :class:`StreamPairing`: realtime applies torques from one controller only.
+* :class:`ControllerPairing`: torques from the paired controller only, in every mode; the
+  controller changes by an explicit act (the stack's key, a service call), never by silence.
 * :class:`TickStatistics`: counters, late ticks and state->torque latencies; JSON-ready
   (no NaN) for ``stats_file`` and the benchmarks.
 
@@ -32,6 +33,8 @@ from dataclasses import dataclass, field
 from enum import Enum
 from typing import Callable, Sequence
 
+from rabbit_msgs_py.pairing import PairingKey, source_of
+
 
 RECORDER_LAG = 4
 """Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
@@ -39,8 +42,6 @@ keep 10: with at most 4 outstanding none is ever overwritten)."""
 RECORDER_RESEND = 0.05
 """s (wall): while the recorder lacks the state it waits for, the state goes out again this
 often (a recorder that connected late, or a report lost)."""
-TAKEOVER_AFTER = 1.0
-"""s (wall): another controller replaces the paired one after it left a state unanswered this long."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
@@ -48,10 +49,8 @@ callback then runs the tick) before stepping on the previous torque."""
 
 
 class Reply(Enum):
-    """What to do with a torque reply in lockstep."""
+    """What to do with the paired controller's reply to the due state, in lockstep."""
 
-    IGNORE = "ignore"  # it answers no state now due: a late duplicate, a stale or made-up stamp
-    FOREIGN = "foreign"  # it answers the due state, from a controller the simulator is not paired with
     RESET = "reset"  # a reset was requested while the reply was due: reset now
     HOLD = "hold"  # paused, or a recorder lags: keep the torques until the simulation may step
     STEP = "step"  # apply them, step, publish the next state
@@ -59,18 +58,12 @@ class Reply(Enum):
 
 class Lockstep:
     """Lockstep bookkeeping (see the module docstring): one reply applied per published
-    state, and only a reply that (a) carries the stamp of the state now due and (b) comes
-    from the controller the simulator is paired with. The first controller to answer is
-    paired; another that answers the due state is refused (:attr:`Reply.FOREIGN`) unless the
-    paired one has left it unanswered for ``takeover_after`` s (a restarted controller is a
-    new instance: :meth:`takeover`). ``clock``: wall time (s); stamps: ns of sim time."""
+    state, and only a reply that carries the stamp of the state now due (whose controller
+    :class:`ControllerPairing` then checks). ``clock``: wall time (s); stamps: ns of sim time."""
 
-    def __init__(self, resend_timeout: float, takeover_after: float = 1.0,
-                 clock: Callable[[], float] = time.perf_counter) -> None:
-        self.resend_timeout, self.takeover_after, self.clock = resend_timeout, takeover_after, clock
+    def __init__(self, resend_timeout: float, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.resend_timeout, self.clock = resend_timeout, clock
         self.due: int | None = None  # stamp of the state whose reply is due
-        self.controller: str | None = None  # id of the paired controller
-        self.offers: dict[str, list[float]] = {}  # replies to the due state from other controllers
         self.reset_requested = False
         self.held_torques: list[float] | None = None
         self.last_publish = 0.0
@@ -83,42 +76,23 @@ class Lockstep:
     def published(self, stamp: int) -> None:
         """The state stamped ``stamp`` (ns) went out: its reply is due."""
         self.due = stamp
-        self.offers = {}
         self.last_publish = self.clock()
 
     def restart(self) -> None:
         """The simulation was (re)placed: nothing is due, nothing is held."""
         self.due = None
-        self.offers = {}
         self.reset_requested = False
         self.held_torques = None
 
-    def on_reply(self, stamp: int, source: str, torques: list[float], hold: bool) -> Reply:
-        """Classify a torque reply; the caller then resets, holds or steps. ``hold``: the
-        simulation may not step now (paused, a recorder lags)."""
-        if self.due is None or stamp != self.due:
-            return Reply.IGNORE
-        if self.controller is None:
-            self.controller = source
-        if source != self.controller:
-            self.offers[source] = torques
-            return Reply.FOREIGN
-        return self._take(torques, hold)
+    def answers_due(self, stamp: int) -> bool:
+        """Does a reply stamped ``stamp`` answer the state now due? (Else it is a late
+        duplicate, a stale or a made-up stamp: ignored.)"""
+        return self.due is not None and stamp == self.due
 
-    def takeover(self, hold: bool) -> tuple[str | None, str, Reply, list[float]] | None:
-        """If the paired controller has left the due state unanswered for
-        ``takeover_after`` s and exactly one other controller answered it, pair with that
-        one and take its reply: (old id, new id, what to do, its torques). Otherwise None
-        (two or more others: none is trusted)."""
-        if self.due is None or len(self.offers) != 1 or self.clock() - self.last_publish < self.takeover_after:
-            return None
-        (source, torques), = self.offers.items()
-        old, self.controller = self.controller, source
-        return old, source, self._take(torques, hold), torques
-
-    def _take(self, torques: list[float], hold: bool) -> Reply:
+    def on_reply(self, torques: list[float], hold: bool) -> Reply:
+        """Take the paired controller's reply to the due state; the caller then resets, holds
+        or steps. ``hold``: the simulation may not step now (paused, a recorder lags)."""
         self.due = None
-        self.offers = {}
         if self.reset_requested:
             self.reset_requested = False
             return Reply.RESET
@@ -139,6 +113,10 @@ class Lockstep:
         torques, self.held_torques = self.held_torques, None
         return torques
 
+    def waited(self) -> float:
+        """Wall s since the due state went out (0 if nothing is due)."""
+        return self.clock() - self.last_publish if self.due is not None else 0.0
+
     def resend_due(self, paused: bool) -> float | None:
         """Seconds waited if the due reply is overdue (the state should go out again, and
         this counts a resend), else None."""
@@ -151,23 +129,57 @@ class Lockstep:
         return waited
 
 
-class StreamPairing:
-    """Realtime: the newest torque is applied only if it comes from the paired controller
-    (the first heard); another takes over only after the paired one was silent for
-    ``takeover_after`` s (wall)."""
+class Admit(Enum):
+    """What :class:`ControllerPairing` makes of a reply's source."""
 
-    def __init__(self, takeover_after: float = 1.0) -> None:
-        self.takeover_after = takeover_after
-        self.controller: str | None = None
-        self.last_heard = float("-inf")
+    ACCEPT = "accept"  # the paired controller
+    PAIR = "pair"  # a controller now paired: the first, or (with a key) a new instance the stack started
+    REFUSE = "refuse"  # any other node
 
-    def accepts(self, source: str, now: float) -> bool:
-        if self.controller != source and now - self.last_heard >= self.takeover_after:
-            self.controller = source
-        if source != self.controller:
-            return False
-        self.last_heard = now
-        return True
+
+class ControllerPairing:
+    """Which controller's torques the simulator applies, in every mode. A change of controller
+    is an explicit act, never a consequence of silence:
+
+    * with the stack's :class:`~rabbit_msgs_py.pairing.PairingKey`: only replies signed with
+      it; a new instance signing with it (a controller the stack restarted) is paired at once
+      (:attr:`Admit.PAIR`, which the simulator logs);
+    * without a key: the first controller to answer, until :meth:`release` (the
+      ``/sim/release_controller`` service); then the next to answer.
+
+    A silent, stopped or dead controller is never replaced by another node: lockstep holds,
+    realtime damps."""
+
+    def __init__(self, key: PairingKey | None = None) -> None:
+        self.key = key
+        self.controller: str | None = None  # instance id of the paired controller
+
+    def admit(self, frame_id: str, stamp: int, torques: Sequence[float]) -> tuple[Admit, str]:
+        """(verdict, the instance id the reply names) for a reply from ``frame_id``."""
+        if self.key is not None:
+            source = self.key.verify(frame_id, stamp, torques)
+            if source is None:
+                return Admit.REFUSE, source_of(frame_id)
+        else:
+            source = frame_id
+            if self.controller is None:
+                self.controller = source
+                return Admit.PAIR, source
+        if source == self.controller:
+            return Admit.ACCEPT, source
+        if self.key is None:
+            return Admit.REFUSE, source
+        self.controller = source
+        return Admit.PAIR, source
+
+    def release(self) -> tuple[bool, str]:
+        """Forget the paired controller (no key only): (done, what to say)."""
+        if self.key is not None:
+            return False, ("this simulator applies torques signed with its stack's pairing key only; a controller "
+                           "started with that key is paired when it answers")
+        old, self.controller = self.controller, None
+        return True, (f"released controller {old}: the next controller to answer is paired" if old
+                      else "no controller was paired: the next to answer is")
 
 
 class Pacer:

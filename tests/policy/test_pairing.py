@@ -1,0 +1,148 @@
+"""Explicit pairing (docs/faults.md): with the stack's pairing key no other node's torques are
+ever applied, whatever happens to the real controller or the policy, and silence never hands
+the robot to another node; a controller the stack restarts with the key resumes at once.
+
+Each node lives in a ROS context of its own, standing in for its process: "killed" is its
+context shut down, "stopped" is its executor not spun (SIGSTOP). The rogue answers every
+state with its exact stamp, 37 N m on each joint, under a name of its own or copying the
+real controller's last ``frame_id`` (signature included); it runs from before the stack
+starts or from mid-run. Every applied effort is watched on ``/joint_states``."""
+
+from __future__ import annotations
+
+import pytest
+from sensor_msgs.msg import JointState
+
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import torques_to_msg
+from rabbit_msgs_py.pairing import new_key
+from rabbit_policy.policy_node import PolicyNode
+from rabbit_sim.sim_node import SimNode
+
+from ros_helpers import ros_context, spin_for, spin_until
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+ROGUE_TORQUE = 37.0
+
+
+class Rogue:
+    """A node on ``/joint_torques`` that answers each state at once with 37 N m: under its
+    own id (``echo``) or under the real controller's last frame_id (``copy``)."""
+
+    def __init__(self, context, kind: str) -> None:
+        import rclpy
+
+        self.node = rclpy.create_node("rogue", context=context)
+        self.kind, self.frame_id, self.sent = kind, "rogue/0000", 0
+        self._pub = self.node.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
+        self.node.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
+        if kind == "copy":
+            self.node.create_subscription(JointState, topics.JOINT_TORQUES, self._on_reply, qos.STREAM_QOS)
+
+    def _on_reply(self, msg: JointState) -> None:
+        if "rogue" not in msg.header.frame_id:
+            self.frame_id = msg.header.frame_id
+
+    def _on_state(self, msg: JointState) -> None:
+        self._pub.publish(torques_to_msg([ROGUE_TORQUE] * 4, msg.header.stamp, self.frame_id))
+        self.sent += 1
+
+
+def _watch(context, executor) -> list:
+    import rclpy
+
+    efforts: list = []
+    watcher = rclpy.create_node("effort_watcher", context=context)
+    watcher.create_subscription(JointState, topics.JOINT_STATES, lambda m: efforts.append(list(m.effort[3:])),
+                                qos.STREAM_QOS)
+    executor.add_node(watcher)
+    return efforts
+
+
+@pytest.mark.parametrize("rogue_from, rogue_kind", [("start", "echo"), ("mid-run", "copy")])
+@pytest.mark.parametrize("fault", ["policy killed", "controller stopped", "controller killed"])
+def test_no_other_node_ever_gets_the_robot_with_the_stacks_key(fault, rogue_from, rogue_kind):
+    key = new_key()
+    with ros_context() as (ctx_s, ex_s), ros_context() as (ctx_p, ex_p), ros_context() as (ctx_c, ex_c), \
+            ros_context() as (ctx_r, ex_r):
+        rogue = Rogue(ctx_r, rogue_kind)
+        if rogue_from == "start":
+            ex_r.add_node(rogue.node)
+        efforts = _watch(ctx_s, ex_s)
+        sim = SimNode(context=ctx_s, pairing_key=key, resend_timeout=0.05)
+        ex_s.add_node(sim)
+        ex_p.add_node(PolicyNode(context=ctx_p))
+        controller = HZDControllerNode(context=ctx_c, pairing_key=key, decision_sync=True, decision_timeout=0.5)
+        ex_c.add_node(controller)
+        everyone = [ex_s, ex_p, ex_c, ex_r]
+        assert spin_until(everyone, lambda: sim.time >= 0.3, timeout=60.0), f"stuck at {sim.time}"
+        if rogue_from == "mid-run":
+            ex_r.add_node(rogue.node)
+            spin_until(everyone, lambda: rogue.sent > 20, timeout=10.0)
+        t_fault = sim.time
+        if fault == "policy killed":  # the controller holds its due reply for decision_timeout, then answers
+            ctx_p.try_shutdown()
+            assert spin_until([ex_s, ex_c, ex_r], lambda: sim.time >= t_fault + 0.3, timeout=60.0)
+        elif fault == "controller stopped":  # SIGSTOP for 1.5 s (longer than the old 1 s takeover)
+            spin_for([ex_s, ex_p, ex_r], 1.5)
+            assert sim.time <= t_fault + 0.002  # held (a reply in flight may land)
+            assert spin_until(everyone, lambda: sim.time >= t_fault + 0.3, timeout=60.0)  # then resumed
+        else:  # killed: the robot waits for a controller the stack starts with its key
+            ctx_c.try_shutdown()
+            spin_for([ex_s, ex_p, ex_r], 1.5)
+            assert sim.time <= t_fault + 0.002
+        assert rogue.sent > 20  # the rogue answered many states...
+        assert sim.torques_rejected > 0  # ...and was refused
+        assert not sim.fallen
+        assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
+
+
+def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_once():
+    """The controller is killed mid-walk, a rogue answering every state meanwhile; the stack
+    starts a new instance with the key: the simulator pairs with it (logged), and it answers
+    the state waiting for it at once instead of waiting out decision_timeout for a decision
+    the policy gave the old instance."""
+    key = new_key()
+    with ros_context() as (context, executor), ros_context() as (ctx_r, ex_r):
+        efforts = _watch(context, executor)
+        sim = SimNode(context=context, pairing_key=key, resend_timeout=0.05)
+        executor.add_node(sim)
+        executor.add_node(PolicyNode(context=context))
+        rogue = Rogue(ctx_r, "echo")
+        ex_r.add_node(rogue.node)
+        with ros_context() as (ctx_a, ex_a):
+            old = HZDControllerNode(context=ctx_a, pairing_key=key, decision_sync=True)
+            ex_a.add_node(old)
+            assert spin_until((executor, ex_a, ex_r), lambda: sim.time >= 0.3, timeout=60.0)
+        spin_for((executor, ex_r), 0.3)
+        t_stopped = sim.time
+        assert sim.controller == old.source
+        with ros_context() as (ctx_b, ex_b):
+            new = HZDControllerNode(context=ctx_b, pairing_key=key, decision_sync=True, decision_timeout=30.0)
+            ex_b.add_node(new)
+            assert spin_until((executor, ex_b, ex_r), lambda: sim.time >= t_stopped + 0.1, timeout=60.0)
+            assert sim.controller == new.source
+            assert new.decisions_timed_out == 0  # (with a 30 s timeout, a wait would have stalled the test)
+            assert new.decisions_waited > 0  # it follows the policy's decisions again
+        assert not sim.fallen
+        assert all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
+
+
+def test_the_pairing_key_cannot_be_read_back_from_the_nodes():
+    key = new_key()
+    with ros_context() as (context, executor):
+        for node in (SimNode(context=context, pairing_key=key), HZDControllerNode(context=context, pairing_key=key)):
+            executor.add_node(node)
+            assert not node.has_parameter("pairing_key")
+            assert key not in repr(getattr(node, "settings", "")) and key not in repr(getattr(node, "config", ""))
+
+
+def test_a_bad_pairing_key_stops_the_node_with_one_line():
+    from rabbit_msgs_py.runtime import NodeStartError
+
+    with ros_context() as (context, _executor):
+        for cls in (SimNode, HZDControllerNode):
+            with pytest.raises(NodeStartError, match="pairing_key must be 16 to 64 characters"):
+                cls(context=context, pairing_key="tooshort")
