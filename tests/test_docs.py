@@ -190,8 +190,8 @@ def test_architecture_names_the_services_and_every_node_parameter():
     from rabbit_sim.sim_node import SIM_PARAMS
 
     services = _architecture_section("Services (sim_node)", "\n\n")
-    assert sorted(re.findall(r"`(/[\w/]+)`", services)) == sorted([topics.resolve(topics.RESET_SERVICE),
-                                                                      topics.resolve(topics.PAUSE_SERVICE)])
+    assert sorted(re.findall(r"`(/[\w/]+)`", services)) == sorted(
+        [topics.resolve(name) for name in (topics.RESET_SERVICE, topics.PAUSE_SERVICE, topics.RELEASE_CONTROLLER_SERVICE)])
     declared = {"sim_node": SIM_PARAMS, "hzd_controller_node": {**CONTROLLER_PARAMS, **NODE_PARAMS},
                 "policy_node": POLICY_PARAMS, "recorder_node": RECORDER_PARAMS}
     table = _architecture_section("| node (", "\n\n")

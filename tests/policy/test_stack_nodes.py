@@ -16,6 +16,7 @@ from std_srvs.srv import Trigger
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import alpha_to_msg
+from rabbit_msgs_py.pairing import new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
@@ -571,13 +572,23 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
 
 @pytest.mark.slow
 def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
+    """Without a pairing key (nodes started by hand): the robot waits for its controller; a
+    new controller is paired only after ``/sim/release_controller`` (an explicit act, never
+    silence). With the stack's key see test_pairing.py."""
     # the controller lives in a context of its own, standing in for its own process
     with ros_context() as (context, executor):
+        import rclpy
+
         nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1)
         sim = nodes["sim"]
+        user = rclpy.create_node("user", context=context)
+        executor.add_node(user)
+        release = user.create_client(Trigger, topics.RELEASE_CONTROLLER_SERVICE)
         with ros_context() as (ctx_a, ex_a):
-            ex_a.add_node(HZDControllerNode(context=ctx_a))
+            old = HZDControllerNode(context=ctx_a)
+            ex_a.add_node(old)
             assert spin_until((executor, ex_a), lambda: sim.time >= 1.0)
+            old_source = old.source
         # controller "process" gone: its context is shut down (a reply in flight may land)
         spin_for(executor, 0.05)
         t_stopped = sim.time
@@ -587,17 +598,24 @@ def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
         with ros_context() as (ctx_b, ex_b):
             new = HZDControllerNode(context=ctx_b)
             ex_b.add_node(new)
-            assert spin_until((executor, ex_b), lambda: sim.time >= t_stopped + 2.0)
+            assert spin_until((executor, ex_b), lambda: new.torques_published > 0)
+            spin_for((executor, ex_b), 0.5)
+            assert sim.time == t_stopped and sim.controller == old_source  # answered, refused: still paired
+            assert spin_until((executor, ex_b), release.service_is_ready)
+            future = release.call_async(Trigger.Request())
+            assert spin_until((executor, ex_b), future.done) and future.result().success
+            assert spin_until((executor, ex_b), lambda: sim.time >= t_stopped + 0.5)
             assert not sim.fallen
-            assert new.controller.steps >= 3
-            assert sim.controller == new.source  # the new instance took over from the silent one
+            assert sim.controller == new.source  # the new instance, after the explicit release
 
 
 @pytest.mark.slow
-def test_a_killed_controller_is_named_as_possibly_dead_at_once(capfd):
-    """The controller process is SIGKILLed mid-walk: DDS keeps it listed for its lease (up to
-    20 s), so the first re-send warning cannot say nobody publishes; it names the paired
-    controller and says it may have died, instead of blaming only a missing gait."""
+def test_a_stopped_or_killed_controller_is_named_as_such(capfd):
+    """The controller process is SIGSTOPped mid-walk, then SIGCONTed, then SIGKILLed. DDS
+    keeps a killed node listed for its lease (up to 20 s), so "no node publishes" cannot
+    tell; the controller's torque publisher declares a 1 s liveliness lease, and the
+    simulator's warning says the controller stopped or died (not that it is busy). After
+    SIGCONT the walk goes on with the same controller."""
     import os
     import signal
     import subprocess
@@ -606,27 +624,44 @@ def test_a_killed_controller_is_named_as_possibly_dead_at_once(capfd):
     # a domain of its own: the killed process stays in the graph for its lease (20 s), and a
     # later test's run_stack would take it for another stack
     domain = (int(os.environ.get("ROS_DOMAIN_ID", "0")) + 50) % 101 + 110
+    key = new_key()
+
+    def warnings_within(seconds: float) -> list[str]:
+        found: list[str] = []
+        deadline = time.monotonic() + seconds  # the warning is throttled to one per 5 s
+        while not found and time.monotonic() < deadline:
+            spin_for(executor, 0.5)
+            found = [line for line in capfd.readouterr().err.splitlines() if "re-sending it" in line]
+        return found
+
     with ros_context(domain_id=domain) as (context, executor):
-        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1)
+        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1, pairing_key=key)
         sim = nodes["sim"]
-        proc = subprocess.Popen([sys.executable, "-m", "rabbit_hzd_controller.hzd_controller_node"],
+        proc = subprocess.Popen([sys.executable, "-m", "rabbit_hzd_controller.hzd_controller_node", "--ros-args",
+                                 "-p", f"pairing_key:={key}"],
                                 env={**os.environ, "ROS_DOMAIN_ID": str(domain)},
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             assert spin_until(executor, lambda: sim.time >= 0.3, timeout=60.0)
-            capfd.readouterr()  # what was logged before the kill
+            controller = sim.controller
+            capfd.readouterr()  # what was logged before the stop
+            os.kill(proc.pid, signal.SIGSTOP)
+            stopped = warnings_within(30.0)
+            os.kill(proc.pid, signal.SIGCONT)
+            t_resumed = sim.time
+            assert spin_until(executor, lambda: sim.time >= t_resumed + 0.2, timeout=60.0)
+            assert sim.controller == controller
+            capfd.readouterr()
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait(timeout=10)
-            warnings: list[str] = []
-            deadline = time.monotonic() + 30.0  # the warning is throttled to one per 5 s
-            while not warnings and time.monotonic() < deadline:
-                spin_for(executor, 0.5)
-                warnings = [line for line in capfd.readouterr().err.splitlines() if "re-sending it" in line]
+            killed = warnings_within(30.0)
         finally:
             if proc.poll() is None:
+                os.kill(proc.pid, signal.SIGCONT)
                 proc.kill()
-        assert warnings, "no re-send warning"
-        assert (sim.controller in warnings[0] and "died" in warnings[0]) or "no node publishes" in warnings[0]
+    for found in (stopped, killed):
+        assert found, "no re-send warning"
+        assert f"controller {controller} stopped or died" in found[0], found[0]
 
 
 @pytest.mark.slow
@@ -636,15 +671,16 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
         import rclpy
 
         # max_late_fraction 1: never halt for lateness here, this test is about the watchdog
+        key = new_key()  # the stack's: the controller it starts again is paired (test_pairing.py)
         nodes = _start_sim_and_policy(context, executor, mode="realtime", watchdog_timeout=0.05,
-                                      max_late_fraction=1.0)
+                                      max_late_fraction=1.0, pairing_key=key)
         sim = nodes["sim"]
         helper = rclpy.create_node("resetter", context=context)
         executor.add_node(helper)
         reset = helper.create_client(Trigger, topics.RESET_SERVICE)
         with spinning(executor):
             with ros_context() as (ctx_a, ex_a), spinning(ex_a):
-                ex_a.add_node(HZDControllerNode(context=ctx_a))
+                ex_a.add_node(HZDControllerNode(context=ctx_a, pairing_key=key))
                 assert wait_until(lambda: sim.time >= 1.0)
                 assert not sim.fallen
             # controller gone: damping takes over within the watchdog timeout; without a
@@ -655,7 +691,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
             assert sim.damped_ticks > 0 and (sim.damped_ticks - damped_before > 20 or sim.fallen)
             assert sim.watchdog.active or sim.fallen
             with ros_context() as (ctx_b, ex_b), spinning(ex_b):
-                ex_b.add_node(HZDControllerNode(context=ctx_b))
+                ex_b.add_node(HZDControllerNode(context=ctx_b, pairing_key=key))
                 # start again from the gait (the robot is falling or down by now)
                 future = reset.call_async(Trigger.Request())
                 assert wait_until(future.done) and future.result().success

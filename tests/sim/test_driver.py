@@ -11,7 +11,9 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_sim.model import load_model
 from rabbit_sim.settings import SimSettings
 from rabbit_sim.simulation import Simulator
-from rabbit_sim.stepping import RECORDER_LAG, Fallen, Log, Placed, PushApplied, SimDriver, State
+from rabbit_sim.stepping import (
+    RECORDER_LAG, SILENCE_WARNING_AFTER, Fallen, Log, Placed, PushApplied, SimDriver, State, TorquePublishers,
+    silence_cause)
 
 pytestmark = pytest.mark.unit
 
@@ -99,11 +101,26 @@ def test_release_controller_pairs_the_next_to_answer_and_says_so(initial_state):
 def test_an_overdue_reply_makes_the_supervisor_send_the_state_again(initial_state):
     clock = FakeClock()
     driver = _driver(initial_state, clock, resend_timeout=0.2)
-    assert driver.supervise(lambda: 1) == []
+    asked = []
+
+    def publishers(count: int, alive=None, lapsed: int = 0):
+        return lambda: asked.append(1) or TorquePublishers(count, alive, lapsed)
+
+    assert driver.supervise(publishers(1)) == []
     clock.now += 0.3
-    actions = driver.supervise(lambda: 0)
-    assert _states(actions) == [0]
-    assert any(isinstance(a, Log) and "no node publishes /joint_torques" in a.text for a in actions)
+    actions = driver.supervise(publishers(0))
+    assert _states(actions) == [0] and not any(isinstance(a, Log) for a in actions) and not asked  # re-sent, quietly
+    clock.now += SILENCE_WARNING_AFTER  # then it says why, naming the cause
+    (line,) = [a.text for a in driver.supervise(publishers(0)) if isinstance(a, Log)]
+    assert "no node publishes /joint_torques" in line and "re-sending it every 0.2 s" in line
+
+
+def test_the_silence_warning_names_the_cause():
+    topic, gait = "/joint_torques", "/hzd/alpha and /hzd/kd"
+    assert "no node publishes" in silence_cause(TorquePublishers(0), C, topic, gait)
+    assert f"controller {C} stopped or died" in silence_cause(TorquePublishers(1, 0, 1), C, topic, gait)
+    assert "is alive but has not answered" in silence_cause(TorquePublishers(2, 1, 0), C, topic, gait)
+    assert "is busy, or died" in silence_cause(TorquePublishers(1), None, topic, gait)  # no liveliness declared
 
 
 def test_paced_states_wait_for_their_wall_time(initial_state):

@@ -176,7 +176,7 @@ class HZDControllerNode(Node):
 
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
-        self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.STREAM_QOS)
+        self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.TORQUE_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
         self._phase_pub = self.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
         if self._reference_every:

@@ -14,11 +14,17 @@
   1 — the newest state always arrives (the run's last one too: a best-effort subscriber
   that missed it under load never saw the run end), and a slow monitor never holds the
   1 kHz loop back (keep-last writers overwrite what it has not taken).
+* Torque replies: the stream profile, and hzd_controller_node's publisher declares a
+  liveliness lease of 1 s (``TORQUE_QOS``: its DDS participant asserts it, whatever the
+  Python thread does), so sim_node can tell a stopped or killed controller from a busy one
+  (``LIVELINESS_MONITOR_QOS``, a second subscription that asks for that lease). Subscribers
+  with the default profile stay compatible.
 * Clock: reliable, keep last 10 (a recorder in lockstep must get every one; the newest
   is the one that matters to anyone else).
 """
 
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.duration import Duration
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile, ReliabilityPolicy
 
 
 def _reliable(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATILE) -> QoSProfile:
@@ -40,3 +46,15 @@ EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(10)
 MARKERS_QOS = _reliable(10)
 MONITOR_QOS = _reliable(1)
+
+LIVELINESS_LEASE_S = 1
+"""s: a controller's torque publisher asserts its liveliness at least this often."""
+TORQUE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                        liveliness=LivelinessPolicy.AUTOMATIC,
+                        liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
+LIVELINESS_MONITOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                    reliability=ReliabilityPolicy.BEST_EFFORT,
+                                    liveliness=LivelinessPolicy.AUTOMATIC,
+                                    liveliness_lease_duration=Duration(seconds=2 * LIVELINESS_LEASE_S))
+"""Requests a lease: matches only publishers that declare one (TORQUE_QOS), best effort and
+depth 1, read raw (its messages are not needed, only its liveliness events)."""

@@ -54,6 +54,7 @@ from pathlib import Path
 
 from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -73,7 +74,7 @@ from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
 from .settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
 from .simulation import Simulator
-from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State
+from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State, TorquePublishers
 from .urdf import urdf_from_model
 from .viewer import PassiveViewer, ViewerUnavailable
 
@@ -125,6 +126,12 @@ class SimNode(Node):
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
+        # who of the torque publishers is alive (a stopped or killed controller vs a busy one): liveliness
+        # events of a second, raw subscription that matches only publishers declaring a lease
+        self._liveliness: tuple[int, int] | None = None  # (alive, lapsed); None: no such publisher seen
+        self.create_subscription(JointState, topics.JOINT_TORQUES, lambda _raw: None, qos.LIVELINESS_MONITOR_QOS,
+                                 raw=True, event_callbacks=SubscriptionEventCallbacks(
+                                     liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
         if self.driver.recorder.enabled:
@@ -142,8 +149,7 @@ class SimNode(Node):
         mode = self.settings.mode
         self.spin_timeout = 0.1 if mode == "lockstep" else 0.001
         if self.driver.by_replies:
-            self.create_timer(0.05, lambda: self._run(self.driver.supervise,
-                                                      lambda: self.count_publishers(topics.JOINT_TORQUES)))
+            self.create_timer(0.05, lambda: self._run(self.driver.supervise, self._torque_publishers))
         if mode == "paced":
             self.create_timer(self.sim.timestep, lambda: self._run(self.driver.paced_wake))
         if mode == "realtime":
@@ -244,6 +250,13 @@ class SimNode(Node):
             self._do(actions)
         response.success = True
         return response
+
+    def _on_liveliness(self, info) -> None:
+        self._liveliness = (info.alive_count, info.not_alive_count)
+
+    def _torque_publishers(self) -> TorquePublishers:
+        alive, lapsed = self._liveliness if self._liveliness is not None else (None, 0)
+        return TorquePublishers(self.count_publishers(topics.JOINT_TORQUES), alive, lapsed)
 
     def _on_release_controller(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         with self._lock:

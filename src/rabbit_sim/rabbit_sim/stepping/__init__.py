@@ -10,6 +10,7 @@ from .rules import (
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
+    SILENCE_WARNING_AFTER,
     Lateness,
     LatenessMonitor,
     Lockstep,
@@ -18,12 +19,15 @@ from .rules import (
     RecorderGate,
     Reply,
     TickStatistics,
+    TorquePublishers,
     Watchdog,
     WatchdogEvent,
+    silence_cause,
 )
 
 __all__ = [
-    "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "Admit", "ControllerPairing", "Fallen", "Frame", "Lateness",
+    "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "SILENCE_WARNING_AFTER", "Admit", "ControllerPairing", "Fallen", "Frame", "Lateness",
     "LatenessMonitor", "Lockstep", "Log", "Markers", "Pacer", "Placed", "PushApplied", "RealtimeClock",
-    "RecorderGate", "Reply", "SimDriver", "State", "TickStatistics", "Watchdog", "WatchdogEvent",
+    "RecorderGate", "Reply", "SimDriver", "State", "TickStatistics", "TorquePublishers", "Watchdog", "WatchdogEvent",
+    "silence_cause",
 ]

@@ -29,6 +29,7 @@ from .rules import (
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
+    SILENCE_WARNING_AFTER,
     Admit,
     ControllerPairing,
     LatenessMonitor,
@@ -38,8 +39,10 @@ from .rules import (
     RecorderGate,
     Reply,
     TickStatistics,
+    TorquePublishers,
     Watchdog,
     WatchdogEvent,
+    silence_cause,
 )
 
 
@@ -244,10 +247,10 @@ class SimDriver:
             self._resume()
         return self._out
 
-    def supervise(self, torque_publishers: Callable[[], int]) -> list[Action]:
-        """Lockstep/paced, a 20 Hz wall-clock timer: a controller taking over, the recorder's
-        first state, and the state sent again when its reply is overdue
-        (``torque_publishers()``: how many nodes publish torques, for the log line)."""
+    def supervise(self, torque_publishers: Callable[[], TorquePublishers]) -> list[Action]:
+        """Lockstep/paced, a 20 Hz wall-clock timer: the recorder's first state, and the state
+        sent again when its reply is overdue (``torque_publishers()``: who publishes torques,
+        asked only then, for the log line that names the cause)."""
         self._out = []
         if not self.started or self.pace_pending:
             return self._out
@@ -262,13 +265,11 @@ class SimDriver:
         waited = self.lockstep.resend_due(self.paused)
         if waited is None:
             return self._out
-        why = (f"no node publishes {self._topic(topics.JOINT_TORQUES)}: is hzd_controller_node running?"
-               if torque_publishers() == 0
-               else f"controller {self.pairing.controller or '(none answered yet)'} has not answered: it waits "
-                    f"for a gait on {self._topic(topics.ALPHA)} and {self._topic(topics.KD)}, is busy, or died "
-                    "(a killed node stays listed for up to 20 s)")
-        self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} s; "
-                             f"re-sending it ({why})", 5.0, "resend")
+        if waited >= SILENCE_WARNING_AFTER:  # (by then a stopped or killed controller's liveliness has lapsed)
+            why = silence_cause(torque_publishers(), self.pairing.controller, self._topic(topics.JOINT_TORQUES),
+                                f"{self._topic(topics.ALPHA)} and {self._topic(topics.KD)}")
+            self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} "
+                                 f"s; re-sending it every {self.settings.resend_timeout:g} s ({why})", 5.0, "resend")
         self._send_state()
         return self._out
 

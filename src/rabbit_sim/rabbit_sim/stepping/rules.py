@@ -42,6 +42,10 @@ keep 10: with at most 4 outstanding none is ever overwritten)."""
 RECORDER_RESEND = 0.05
 """s (wall): while the recorder lacks the state it waits for, the state goes out again this
 often (a recorder that connected late, or a report lost)."""
+SILENCE_WARNING_AFTER = 2.0
+"""s (wall): lockstep says why no torque comes once the due state has waited this long (twice
+the controller's liveliness lease, so a stopped or killed one is named as such); the state
+goes out again every ``resend_timeout`` meanwhile."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
@@ -180,6 +184,33 @@ class ControllerPairing:
         old, self.controller = self.controller, None
         return True, (f"released controller {old}: the next controller to answer is paired" if old
                       else "no controller was paired: the next to answer is")
+
+
+@dataclass(frozen=True)
+class TorquePublishers:
+    """Who publishes ``/joint_torques``, for the log line when no reply comes: ``count`` in
+    the ROS graph (a killed node stays listed for its DDS lease, up to 20 s); of those that
+    declare a liveliness lease (hzd_controller_node: 1 s, ``rabbit_msgs_py.qos.TORQUE_QOS``)
+    ``alive`` assert it and ``lapsed`` stopped (their process was stopped or killed);
+    ``alive`` None: no such publisher seen (another kind of controller)."""
+
+    count: int
+    alive: int | None = None
+    lapsed: int = 0
+
+
+def silence_cause(publishers: TorquePublishers, controller: str | None, topic: str, gait: str) -> str:
+    """Why no torque reply comes, as far as the simulator can tell (``topic``: the torque
+    topic's full name; ``gait``: the gait topics the controller waits for)."""
+    if publishers.count == 0:
+        return f"no node publishes {topic}: is hzd_controller_node running?"
+    name = f"controller {controller}" if controller else "no controller has answered yet; a controller"
+    if publishers.alive == 0 and publishers.lapsed:
+        return (f"{name} stopped or died: no publisher of {topic} has asserted its liveliness for 1 s (a killed "
+                "node stays listed for up to 20 s)")
+    if publishers.alive:
+        return f"{name} is alive but has not answered: it waits for a gait on {gait}, or is busy"
+    return f"{name} has not answered: it waits for a gait on {gait}, is busy, or died"
 
 
 class Pacer:
