@@ -574,7 +574,7 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
 def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
     """Without a pairing key (nodes started by hand): the robot waits for its controller; a
     new controller is paired only after ``/sim/release_controller`` (an explicit act, never
-    silence). With the stack's key see test_pairing.py."""
+    silence). With the stack's key see test_intruders.py."""
     # the controller lives in a context of its own, standing in for its own process
     with ros_context() as (context, executor):
         import rclpy
@@ -671,7 +671,7 @@ def test_realtime_watchdog_damps_while_the_controller_is_gone():
         import rclpy
 
         # max_late_fraction 1: never halt for lateness here, this test is about the watchdog
-        key = new_key()  # the stack's: the controller it starts again is paired (test_pairing.py)
+        key = new_key()  # the stack's: the controller it starts again is paired (test_intruders.py)
         nodes = _start_sim_and_policy(context, executor, mode="realtime", watchdog_timeout=0.05,
                                       max_late_fraction=1.0, pairing_key=key)
         sim = nodes["sim"]

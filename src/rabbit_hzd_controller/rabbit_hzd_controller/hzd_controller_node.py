@@ -72,6 +72,7 @@ from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_sec
 from rabbit_msgs_py.pairing import PairingKey
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
 
@@ -116,6 +117,7 @@ NODE_PARAMS = {
                              "this controller's torques and no other node's (16-64 characters; run_stack makes one "
                              "per stack; read once at start, then removed so ros2 param get cannot read it). '' = "
                              "unsigned replies", dynamic=True),
+    "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="controller"), range=(0.0, 60.0)),
 }
 SECRET_PARAMS = ("pairing_key",)
 """Read once at start and then removed (``rabbit_msgs_py.parameters.forget_secrets``)."""
@@ -137,6 +139,7 @@ class HZDControllerNode(Node):
         try:
             self.decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
             self.pairing = PairingKey.parse(values.pop("pairing_key"))
+            solo_check = finite("solo_check", values.pop("solo_check"), 0.0)
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
             if self.gait_timing not in GAIT_TIMINGS:
@@ -176,6 +179,11 @@ class HZDControllerNode(Node):
 
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
+        self.solo = SoloStart(self, "controller", topics.JOINT_TORQUES, solo_check, self._wire)
+
+    def _wire(self) -> None:
+        """Publishers, subscriptions and timers: once no other controller runs in this
+        namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.TORQUE_QOS)
         self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
         self._phase_pub = self.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
@@ -456,7 +464,7 @@ class HZDControllerNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console script / ``ros2 run rabbit_hzd_controller hzd_controller_node``."""
-    return run_node(HZDControllerNode, args)
+    return run_node(lambda context: HZDControllerNode(context=context, solo_check=PROCESS_SOLO_CHECK), args)
 
 
 if __name__ == "__main__":

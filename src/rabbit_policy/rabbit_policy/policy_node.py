@@ -66,6 +66,7 @@ from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_v
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 
 from rabbit_policy.runtime.policies import (
     CONTROLLER_CHOICES,
@@ -113,6 +114,7 @@ POLICY_PARAMS = {
                                  "at once", range=(-1, 100000)),
     "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1",
                              range=(1, 100000)),
+    "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="policy"), range=(0.0, 60.0)),
 }
 
 
@@ -177,6 +179,17 @@ class PolicyNode(Node):
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
         self.last_observation: Observation | None = None
+        # a body-state policy: the state and the controller's phase, its decisions held until both are in
+        self.body: BodyStateBuffer | None = BodyStateBuffer(TICK_NS) if self.needs_body else None
+        self._awaiting: deque[tuple[int, Observation]] = deque()
+        self.decisions_given_up = 0
+        self._warned_planar = False
+        self._placements = 0
+        self.solo = SoloStart(self, "policy", topics.ALPHA, values["solo_check"], self._wire)
+
+    def _wire(self) -> None:
+        """Publishers and subscriptions, and the first gait: once no other policy runs in
+        this namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         self._alpha_pub = self.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
@@ -184,17 +197,10 @@ class PolicyNode(Node):
         self._timing_pub.publish(String(data=gait_timing(self.decision_period)))
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
-        self._warned_planar = False
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, self._on_step, qos.EVENT_QOS)
-        self._placements = 0
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        # a body-state policy: the state and the controller's phase, its decisions held until both are in
-        self.body: BodyStateBuffer | None = None
-        self._awaiting: deque[tuple[int, Observation]] = deque()
-        self.decisions_given_up = 0
-        if self.needs_body:
-            self.body = BodyStateBuffer(TICK_NS)
+        if self.body is not None:
             self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
             self.create_subscription(JointState, topics.PHASE, self._on_phase, qos.STREAM_QOS)
         self._publish(first_command(self.policy, self.desired_speed))  # the start: on the command
@@ -351,7 +357,7 @@ class PolicyNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console script / ``ros2 run rabbit_policy policy_node``."""
-    return run_node(PolicyNode, args)
+    return run_node(lambda context: PolicyNode(context=context, solo_check=PROCESS_SOLO_CHECK), args)
 
 
 if __name__ == "__main__":

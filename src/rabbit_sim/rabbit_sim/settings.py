@@ -9,6 +9,7 @@ from pathlib import Path
 
 from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.pairing import PairingKey
+from rabbit_msgs_py.solo import SOLO_CHECK_HELP
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
 from .model import MODEL_VARIANTS, ModelOptions
@@ -62,6 +63,7 @@ class SimSettings:
                                   "characters; run_stack makes one per stack and gives it to the controller too; read "
                                   "once at start, then removed so ros2 param get cannot read it). '' = the first "
                                   "controller to answer, until /sim/release_controller", secret=True)
+    solo_check: float = option(0.0, SOLO_CHECK_HELP.format(kind="simulator"), range=(0.0, 60.0))
     stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
     markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
                                        "one also goes out whenever RABBIT is placed", range=(0.0, 1000.0))
@@ -82,7 +84,7 @@ class SimSettings:
         ticks = self.torque_delay / TIMESTEP if math.isfinite(self.torque_delay) else -1.0
         if not (ticks >= 0.0 and abs(ticks - round(ticks)) < 1e-6):
             raise ValueError(f"torque_delay must be a whole number of ms >= 0 s, got {self.torque_delay}")
-        for name in ("stop_time", "damping", "markers_rate"):
+        for name in ("stop_time", "damping", "markers_rate", "solo_check"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value}")

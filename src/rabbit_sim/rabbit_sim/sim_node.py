@@ -69,6 +69,7 @@ from rabbit_msgs_py.conversions import (
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
 
 from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
@@ -116,6 +117,14 @@ class SimNode(Node):
                 self.viewer = PassiveViewer(self.sim.model, self.sim.data)
             except ViewerUnavailable as exc:
                 raise NodeStartError(f"sim_node: {exc}") from None
+        self._liveliness: tuple[int, int] | None = None  # torque publishers (alive, lapsed); None: none declares it
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001  # (see the timers in _wire)
+        self.solo = SoloStart(self, "simulator", topics.JOINT_STATES, self.settings.solo_check, self._wire)
+
+    def _wire(self) -> None:
+        """Publishers, subscriptions, services and timers: once no other simulator runs in
+        this namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         pub = self.create_publisher
         self._state_pub = pub(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
         self._hip_pub = pub(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
@@ -128,7 +137,6 @@ class SimNode(Node):
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         # who of the torque publishers is alive (a stopped or killed controller vs a busy one): liveliness
         # events of a second, raw subscription that matches only publishers declaring a lease
-        self._liveliness: tuple[int, int] | None = None  # (alive, lapsed); None: no such publisher seen
         self.create_subscription(JointState, topics.JOINT_TORQUES, lambda _raw: None, qos.LIVELINESS_MONITOR_QOS,
                                  raw=True, event_callbacks=SubscriptionEventCallbacks(
                                      liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
@@ -141,13 +149,11 @@ class SimNode(Node):
         self.create_service(Trigger, topics.RELEASE_CONTROLLER_SERVICE, self._on_release_controller,
                             qos_profile=SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
-        self.add_on_set_parameters_callback(self._on_set_parameters)
         # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also
         # a 1 ms wake-up for states that wait for their wall time; realtime: the physics steps
         # in the thread that spins this node, woken by a 1 ms timer and paced by the wall
         # clock: no second thread, so a tick never waits for the GIL
         mode = self.settings.mode
-        self.spin_timeout = 0.1 if mode == "lockstep" else 0.001
         if self.driver.by_replies:
             self.create_timer(0.05, lambda: self._run(self.driver.supervise, self._torque_publishers))
         if mode == "paced":
@@ -325,7 +331,7 @@ class SimNode(Node):
 
 def main(args: list[str] | None = None) -> int:
     """Console script / ``ros2 run rabbit_sim sim_node``."""
-    return run_node(SimNode, args)
+    return run_node(lambda context: SimNode(context=context, solo_check=PROCESS_SOLO_CHECK), args)
 
 
 if __name__ == "__main__":

@@ -85,7 +85,8 @@ class StackConfig:
                         torque_delay=self.torque_delay, rules=self.rules)
 
     def node_parameters(self) -> dict[str, dict[str, object]]:
-        """The ROS parameters of each node for this run (the recorder only if recording)."""
+        """The ROS parameters of each node for this run (the recorder only if recording).
+        ``solo_check`` 0: run_stack looked for another stack before it starts any node."""
         params: dict[str, dict[str, object]] = {
             "policy_node": {
                 "policy": self.controller,
@@ -95,10 +96,11 @@ class StackConfig:
                 "initial_speed": self.schedule[0][1],
                 "decision_period": self.decision_period,
                 "speed_integral": self.speed_integral,
+                "solo_check": 0.0,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
-                                    "pairing_key": self.pairing_key,
+                                    "pairing_key": self.pairing_key, "solo_check": 0.0,
                                     **required_controller_settings(self.controller, self.policy_file or None)},
             "sim_node": {
                 "model": self.model,
@@ -116,6 +118,7 @@ class StackConfig:
                 "markers_rate": self.markers_rate,
                 "viewer": self.viewer,
                 "pairing_key": self.pairing_key,
+                "solo_check": 0.0,
             },
         }
         if self.record:

@@ -1,6 +1,9 @@
-"""Explicit pairing (docs/faults.md): with the stack's pairing key no other node's torques are
-ever applied, whatever happens to the real controller or the policy, and silence never hands
-the robot to another node; a controller the stack restarts with the key resumes at once.
+"""Nobody takes or disturbs the robot (docs/faults.md). Explicit pairing: with the stack's
+pairing key no other node's torques are ever applied, whatever happens to the real
+controller or the policy, and silence never hands the robot to another node; a controller
+the stack restarts with the key resumes at once. One stack per namespace: a second
+simulator, controller or policy refuses to start and the running robot walks on exactly as
+the ROS-free loop does.
 
 Each node lives in a ROS context of its own, standing in for its process: "killed" is its
 context shut down, "stopped" is its executor not spun (SIGSTOP). The rogue answers every
@@ -17,10 +20,11 @@ from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import torques_to_msg
 from rabbit_msgs_py.pairing import new_key
+from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_sim.sim_node import SimNode
 
-from ros_helpers import ros_context, spin_for, spin_until
+from ros_helpers import ros_context, spin_for, spin_until, wait_until as wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -146,3 +150,81 @@ def test_a_bad_pairing_key_stops_the_node_with_one_line():
         for cls in (SimNode, HZDControllerNode):
             with pytest.raises(NodeStartError, match="pairing_key must be 16 to 64 characters"):
                 cls(context=context, pairing_key="tooshort")
+
+
+@pytest.mark.parametrize("kind", ["simulator", "controller", "policy"])
+def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_disturbed(kind):
+    """While a stack walks (run_in_process, lockstep, its states recorded), a second node of
+    one kind comes and goes three times in the same namespace, each in a context of its own,
+    looking as a process started by hand does (``solo_check``): each refuses, having
+    published nothing, and the stack's states are the ROS-free loop's bit for bit."""
+    import threading
+
+    import numpy as np
+
+    from rabbit_policy.bringup.stack import StackConfig, run_in_process
+    from rabbit_policy.experiment.loop import ClosedLoop
+    from rabbit_policy.experiment.scenario import Scenario
+    from rabbit_policy.runtime.policies import make_policy
+
+    node_class = {"simulator": SimNode, "controller": HZDControllerNode, "policy": PolicyNode}[kind]
+    states: list = []
+
+    def recorder(context):
+        import rclpy
+
+        node = rclpy.create_node("trajectory_recorder", context=context)
+        node.create_subscription(JointState, topics.JOINT_STATES,
+                                 lambda m: states.append(list(m.position) + list(m.velocity)), qos.STREAM_QOS)
+        return node
+
+    duration = 6.0
+    result: dict = {}
+    run = threading.Thread(target=lambda: result.update(run=run_in_process(
+        StackConfig(duration=duration, schedule=((0.0, 1.0),)), observers=[recorder])))
+    run.start()
+    try:
+        refusals = []
+        assert wait_for(lambda: len(states) > 100 or not run.is_alive(), 60.0), "the stack did not start"
+        while len(refusals) < 3 and run.is_alive():
+            with ros_context() as (context, executor):
+                intruder = node_class(context=context, solo_check=PROCESS_SOLO_CHECK)
+                executor.add_node(intruder)
+                spin_until(executor, lambda: getattr(intruder, "done", False) or intruder.solo.started,
+                           timeout=PROCESS_SOLO_CHECK + 5.0)
+                if run.is_alive():  # (the stack was there the whole time)
+                    refusals.append((intruder.solo.refused, intruder.solo.started))
+    finally:
+        run.join(timeout=300)
+    report, _nodes = result["run"]
+    assert len(refusals) >= 2 and all(found and not started for found, started in refusals), refusals
+    assert report.completed and not report.fell
+    assert len(refusals) >= 2 and all(found and not started for found, started in refusals), refusals
+    loop = ClosedLoop(Scenario.constant(1.0), make_policy("classic"))
+    reference = [loop.data.qpos.tolist() + loop.data.qvel.tolist()]
+    for _ in range(int(round(duration / 0.001))):
+        loop.tick()
+        reference.append(loop.data.qpos.tolist() + loop.data.qvel.tolist())
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert unique.shape == np.array(reference).shape and np.array_equal(unique, np.array(reference))
+
+
+def test_a_node_started_by_hand_beside_a_stack_exits_with_one_line():
+    """``python -m rabbit_sim.sim_node`` (as ``ros2 run`` starts it, with solo_check) in the
+    namespace of a running simulator: exit 1, one error line naming what it found."""
+    import subprocess
+    import sys
+
+    with ros_context() as (context, executor):
+        running = SimNode(context=context)
+        executor.add_node(running)
+        spin_for(executor, 0.2)
+        proc = subprocess.Popen([sys.executable, "-m", "rabbit_sim.sim_node"], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True)
+        while proc.poll() is None:
+            spin_for(executor, 0.1)
+        out = proc.stdout.read()
+    assert proc.returncode == 1, out
+    errors = [line for line in out.splitlines() if "ERROR" in line or line.startswith("error:")]
+    assert len(errors) == 1 and "another simulator runs in namespace /" in errors[0], out
+    assert "Traceback" not in out
