@@ -19,6 +19,12 @@
   Python thread does), so sim_node can tell a stopped or killed controller from a busy one
   (``LIVELINESS_MONITOR_QOS``, a second subscription that asks for that lease). Subscribers
   with the default profile stay compatible.
+* Services (``/sim/reset``, ``/sim/pause``, ``/sim/release_controller``): depth 1000 on both
+  sides (``SERVICE_QOS``). The server keeps every request; but a caller's responses land in
+  its own client's history, and rclpy's default client keeps 10: a client that makes more
+  than 10 calls before it takes their answers loses the rest, and no server can make up
+  for that (measured: 300 calls at once from one default client, all 300 served, 160 answers
+  reached the caller; with ``SERVICE_QOS`` 300 of 300). Make such clients with it.
 * Clock: reliable, keep last 10 (a recorder in lockstep must get every one; the newest
   is the one that matters to anyone else).
 """
@@ -58,3 +64,5 @@ LIVELINESS_MONITOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                                     liveliness_lease_duration=Duration(seconds=2 * LIVELINESS_LEASE_S))
 """Requests a lease: matches only publishers that declare one (TORQUE_QOS), best effort and
 depth 1, read raw (its messages are not needed, only its liveliness events)."""
+SERVICE_QOS = QoSProfile(depth=1000)
+"""Services and their clients: see the module docstring."""

@@ -56,7 +56,6 @@ from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header, String, UInt32
@@ -79,9 +78,6 @@ from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDrive
 from .urdf import urdf_from_model
 from .viewer import PassiveViewer, ViewerUnavailable
 
-SERVICE_QOS = QoSProfile(depth=1000)
-"""Reset and pause requests: deep, so that many callers at once are each served (at rclpy's
-default depth 10 requests beyond 10 at once were dropped; docs/faults.md)."""
 
 
 SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS + SECRET_PARAMS,
@@ -144,10 +140,10 @@ class SimNode(Node):
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
         if self.driver.recorder.enabled:
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
-        self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=SERVICE_QOS)
-        self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause, qos_profile=SERVICE_QOS)
+        self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS)
+        self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause, qos_profile=qos.SERVICE_QOS)
         self.create_service(Trigger, topics.RELEASE_CONTROLLER_SERVICE, self._on_release_controller,
-                            qos_profile=SERVICE_QOS)
+                            qos_profile=qos.SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
         # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also
         # a 1 ms wake-up for states that wait for their wall time; realtime: the physics steps

@@ -107,7 +107,7 @@ class Supervisor(Node):
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
-        self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE)
+        self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
         self.recorded_until = -1.0  # s, sim time of the newest state the recorder has written
         if config.record:
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
