@@ -334,3 +334,30 @@ def test_decision_clock_once_per_step_and_every_n_ticks():
         due = periodic.sample(stamp, float(stamp), 1.0)
     assert due == [] and periodic.sample(45, 45.0, 1.0)[0].mean_speed == pytest.approx(sum(range(36, 46)) / 10)
     assert periodic.sample(3, 1.0, 1.0) == [] and periodic.window.newest_stamp == 3  # a reset: afresh
+
+
+def test_a_speed_schedule_applies_each_change_at_the_first_state_at_or_after_its_time():
+    """One rule for ClosedLoop and policy_node (stamps in ns, 1 ns of slack for decimal
+    seconds; several changes due at once: the last), started over after a reset."""
+    from rabbit_policy.runtime.speed_schedule import SpeedSchedule
+
+    schedule = SpeedSchedule(((1.0, 1.2), (6.132268422788288, 1.416), (6.2, 0.8)))
+    assert schedule.due(999_000_000) is None
+    assert schedule.due(999_999_999) == 1.2  # 1 ns short of 1 s: the float sum of 1000 ms steps
+    assert schedule.due(1_000_000_000) is None  # applied once
+    assert schedule.next_stamp == 6_132_268_423
+    assert schedule.due(6_132_000_000) is None and schedule.due(6_133_000_000) == 1.416  # the first state after
+    assert schedule.due(7_000_000_000) == 0.8 and schedule.next_stamp is None
+    schedule.restart()
+    assert schedule.due(10_000_000_000) == 0.8  # all at once: the last
+
+
+def test_policy_node_takes_a_speed_schedule_checked_as_walk_pys():
+    from rabbit_policy.policy_node import speed_schedule
+
+    assert speed_schedule("", 1.0) is None
+    assert speed_schedule("2:1.2,4.5:0.9", 1.0).changes == ((2_000_000_000, 1.2), (4_500_000_000, 0.9))
+    for text, message in (("0:1.2", "times must increase"), ("2:1.2,2.05:1.0", "at least 0.1 s apart"),
+                          ("2-1.2", "time:speed")):
+        with pytest.raises(ValueError, match=message):
+            speed_schedule(text, 1.0)

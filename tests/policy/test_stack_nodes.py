@@ -850,18 +850,17 @@ def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller, period)
 @pytest.mark.slow
 def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_path):
     """The nodes as processes (run_stack.py's way), the learned policy deciding every 20
-    ticks, pushed: the lockstep trajectory recorded (the recorder is flow-controlled, so
-    every state is in the bag) is the fast path's bit for bit, each due state held by the
-    controller for its decision. One command: across processes a speed change reaches
-    policy_node when the supervisor's message does, not at a given state (the simulator
-    does not wait for the supervisor), and the supervisor's own report is computed from the
-    states it received, which it may miss (docs/architecture.md)."""
+    ticks, pushed, with a speed change: the lockstep trajectory recorded (the recorder is
+    flow-controlled, so every state is in the bag) is the fast path's bit for bit, each due
+    state held by the controller for its decision, the change commanded at its state by
+    policy_node (``speed_schedule``: the same rule as the loop, not the arrival of a
+    message), and the report's segment figures are walk.py's."""
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
 
     from rabbit_policy.experiment.scenario import Push
 
-    schedule, pushes = ((0.0, 0.9),), (Push(1.2, -40.0, 0.1),)
+    schedule, pushes = ((0.0, 0.9), (0.9, 1.2)), (Push(1.2, -40.0, 0.1),)
     report = run_multi_process(StackConfig(duration=2.0, schedule=schedule, pushes=pushes, controller="learned",
                                            record=str(tmp_path / "bag")))
     assert report.completed and not report.fell
@@ -880,6 +879,9 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
             states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
     assert sorted(states) == list(range(2001))
     assert np.array_equal(np.array([states[i] for i in range(2001)]), np.array(reference))
+    walked = loop.result().segments()
+    # (to 1e-12: the report's times are the stamps' seconds, the loop's a float sum of ticks)
+    assert [s["mean_speed"] for s in report.segments] == pytest.approx([s["mean_speed"] for s in walked], abs=1e-12)
 
 
 def _state(t: float, x: float) -> JointState:

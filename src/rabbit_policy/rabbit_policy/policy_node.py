@@ -82,7 +82,9 @@ from rabbit_policy.runtime.policies import (
 )
 from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.speed_schedule import SpeedSchedule
 from rabbit_policy.runtime.speed_window import Observation
+from rabbit_policy.experiment.scenario import parse_schedule, validate_schedule
 
 
 def clamp_speed(value: float, low: float, high: float) -> float:
@@ -114,8 +116,25 @@ POLICY_PARAMS = {
                                  "at once", range=(-1, 100000)),
     "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1",
                              range=(1, 100000)),
+    "speed_schedule": Param("", "speed changes at exact sim times after the start, 'T:V,...' (s, m/s; T > 0, at "
+                                "least 0.1 s apart), applied at the first state at or after T as walk.py --schedule "
+                                "applies them (a /cmd_speed in between holds until the next change); again after a "
+                                "reset. run_stack sets it: '' = none"),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="policy"), range=(0.0, 60.0)),
 }
+
+
+def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
+    """The ``speed_schedule`` parameter: None for ''; else its changes, checked as walk.py's
+    schedule is (``ValueError`` with one line)."""
+    if not text:
+        return None
+    try:
+        changes = parse_schedule(text)
+        validate_schedule(((0.0, initial_speed), *changes))
+    except ValueError as exc:
+        raise ValueError(f"speed_schedule: {exc}") from None
+    return SpeedSchedule(changes)
 
 
 def gait_timing(period: int) -> str:
@@ -170,6 +189,7 @@ class PolicyNode(Node):
                                        tick=TICK_NS)
             self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
+            self.schedule = speed_schedule(values["speed_schedule"], self.initial_speed)
         except (PolicyUnavailable, ValueError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -185,6 +205,7 @@ class PolicyNode(Node):
         self.decisions_given_up = 0
         self._warned_planar = False
         self._placements = 0
+        self._echoes: list[float] = []  # scheduled commands published on /cmd_speed, not yet heard back
         self.solo = SoloStart(self, "policy", topics.ALPHA, values["solo_check"], self._wire)
 
     def _wire(self) -> None:
@@ -195,6 +216,7 @@ class PolicyNode(Node):
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
         self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
         self._timing_pub.publish(String(data=gait_timing(self.decision_period)))
+        self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)  # scheduled commands
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
         self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
@@ -248,10 +270,28 @@ class PolicyNode(Node):
         if msg.data > 1 and msg.data != self._placements:
             reset_policy(self.policy)
             self._awaiting.clear()  # decisions of the walk before the placement
+            if self.schedule is not None:  # the schedule starts over, from the start's command
+                self.schedule.restart()
+                self.desired_speed = self.initial_speed
         self._placements = msg.data
 
     def _on_cmd_speed(self, msg: Float64) -> None:
+        if self._echoes and msg.data == self._echoes[0]:
+            self._echoes.pop(0)  # a scheduled command this node published for the record, heard back
+            return
         self._command(msg.data, self.resolve_topic_name(topics.CMD_SPEED))
+
+    def _follow_schedule(self, stamp: int) -> None:
+        """Command the scheduled speed that falls due at the state stamped ``stamp`` (ns),
+        if any (:class:`~rabbit_policy.runtime.speed_schedule.SpeedSchedule`), and publish it
+        on /cmd_speed for recordings and plots."""
+        speed = self.schedule.due(stamp) if self.schedule is not None else None
+        if speed is None:
+            return
+        self.get_logger().info(f"t = {stamp / 1e9:.3f} s: scheduled command {speed:.2f} m/s")
+        self._command(speed, "speed_schedule")
+        self._echoes.append(speed)
+        self._speed_pub.publish(Float64(data=speed))
 
     def _command(self, value: float, topic: str) -> None:
         """A commanded speed (m/s) from ``topic``: clamped into range, rejected if not finite
@@ -278,6 +318,7 @@ class PolicyNode(Node):
 
     def _on_hip_velocity(self, msg: TwistStamped) -> None:
         stamp = stamp_to_ns(msg.header.stamp)
+        self._follow_schedule(stamp)
         try:
             due = self.clock.sample(stamp, msg.twist.linear.x, self.desired_speed)
         except ValueError as exc:
@@ -335,7 +376,9 @@ class PolicyNode(Node):
             self._decide(replace(observation, body=body))
 
     def _on_step(self, msg: Header) -> None:
-        for observation in self.clock.switch(stamp_to_ns(msg.stamp), self.desired_speed):
+        stamp = stamp_to_ns(msg.stamp)  # the state before the switch; the loop decides on the one after
+        self._follow_schedule(stamp + TICK_NS)
+        for observation in self.clock.switch(stamp, self.desired_speed):
             self._decide(observation)
 
     def _decide(self, observation: Observation) -> None:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 from rabbit_msgs_py.pairing import new_key
 
-from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, validate_schedule
+from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, format_schedule, validate_schedule
 from rabbit_policy.runtime.policies import controller_name, required_controller_settings
 from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
@@ -96,6 +96,7 @@ class StackConfig:
                 "initial_speed": self.schedule[0][1],
                 "decision_period": self.decision_period,
                 "speed_integral": self.speed_integral,
+                "speed_schedule": format_schedule(self.schedule[1:]),
                 "solo_check": 0.0,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision

@@ -86,7 +86,6 @@ class Supervisor(Node):
     def __init__(self, config: StackConfig, context=None) -> None:
         super().__init__("run_stack_supervisor", context=context, namespace=config.namespace or None)
         self.config = config
-        self._changes = list(config.schedule[1:])  # (t, v) still to command
         self._times: list[float] = []  # every distinct state's sim time (s) and hip x (m)
         self._xs: list[float] = []
         self._start: tuple[float, float] | None = None  # the placed state (t, x)
@@ -138,8 +137,9 @@ class Supervisor(Node):
         return len(self._touchdown_times)
 
     def request_start(self):
-        """Send the first commanded speed (so a recording holds the whole command history)
-        and ask the (paused) simulator to run; returns the service future."""
+        """Send the first commanded speed (so a recording holds the whole command history:
+        policy_node publishes the schedule's changes as it applies them, at their states) and
+        ask the (paused) simulator to run; returns the service future."""
         self._speed_pub.publish(Float64(data=self.config.schedule[0][1]))
         return self._pause_client.call_async(SetBool.Request(data=False))
 
@@ -202,14 +202,6 @@ class Supervisor(Node):
         if not self.stalled and self._suspected is None and self.config.rules.stalled(t, self._last_step_time):
             self._suspected = (t, now)  # a stall, unless a late touchdown event says otherwise (EVENT_GRACE)
         self._settle(now)
-        # the schedule, as ClosedLoop steps it: there the state after the step that reaches a
-        # change is the first sample under the new command, so the command goes out one state
-        # ahead (then, in one process, it is in before that state's hip speed)
-        tick = self._times[-1] - self._times[-2] if len(self._times) >= 2 else 0.0
-        while self._changes and t + tick >= self._changes[0][0] - 1e-9:
-            _, speed = self._changes.pop(0)
-            self._speed_pub.publish(Float64(data=speed))
-            self.get_logger().info(f"t = {t:.2f} s: commanding {speed:.2f} m/s")
 
     def result(self) -> WalkResult:
         """The walk so far, as the fast path reports one. A touchdown is dated as

@@ -42,6 +42,7 @@ from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.policies import (GaitCommand, Policy, controller_settings, decision_period, first_command,
                                             reset_policy)
 from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.speed_schedule import SpeedSchedule, stamp_of
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import Simulator, TorqueDelay
@@ -103,8 +104,8 @@ class ClosedLoop:
         self._rolling = 0  # ticks the hip has been behind its stance foot, moving backward
         fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
         self._min_height, self._max_height, self._max_pitch = fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch
-        self._changes = list(scenario.schedule[1:])
-        self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
+        self.schedule = SpeedSchedule(scenario.schedule[1:])  # policy_node's rule (speed_schedule)
+        self._next_change = self._change_check()
         self.desired_speed = scenario.initial_speed
         dt = self.model.opt.timestep
         delay = int(round(scenario.torque_delay / dt))
@@ -196,9 +197,10 @@ class ClosedLoop:
                 peak = -tq
         self.peak_torque = peak
         if t >= self._next_change:
-            while self._changes and t >= self._changes[0][0] - 1e-9:
-                self.desired_speed = self._changes.pop(0)[1]
-            self._next_change = self._changes[0][0] - 1e-9 if self._changes else float("inf")
+            speed = self.schedule.due(stamp_of(t))
+            if speed is not None:
+                self.desired_speed = speed
+            self._next_change = self._change_check()
         x, height, pitch = qpos.tolist()[:3]
         self._append_time(t)
         self._append_x(x)
@@ -224,6 +226,12 @@ class ClosedLoop:
         if controller.touchdown:
             self._touchdown(i, t)
         return stop
+
+    def _change_check(self) -> float:
+        """Sim time (s) from which the hot path asks the schedule (a little before its next
+        change: the schedule's own rule, in ns stamps, decides)."""
+        stamp = self.schedule.next_stamp
+        return (stamp - 2) * 1e-9 if stamp is not None else float("inf")
 
     def _rolled_back(self, x: float) -> bool:
         """The early stall rule (``StopRules.roll_back_after``): True once the hip (``x``, m)

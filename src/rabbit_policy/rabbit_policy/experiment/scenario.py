@@ -55,6 +55,11 @@ def parse_schedule(text: str) -> Schedule:
     return tuple(pairs)
 
 
+def format_schedule(schedule: Sequence[tuple[float, float]]) -> str:
+    """The inverse of :func:`parse_schedule` (exact: floats in ``repr`` form)."""
+    return ",".join(f"{t!r}:{v!r}" for t, v in schedule)
+
+
 @dataclass(frozen=True)
 class PhasePush:
     """A push placed by the walk's own steps (the fast path only: training and evaluations):
