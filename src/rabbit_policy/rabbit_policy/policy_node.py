@@ -124,6 +124,10 @@ POLICY_PARAMS = {
 }
 
 
+SCHEDULE_SOURCE = "speed_schedule"
+"""Where a scheduled command comes from, in log lines."""
+
+
 def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
     """The ``speed_schedule`` parameter: None for ''; else its changes, checked as walk.py's
     schedule is (``ValueError`` with one line)."""
@@ -289,7 +293,7 @@ class PolicyNode(Node):
         if speed is None:
             return
         self.get_logger().info(f"t = {stamp / 1e9:.3f} s: scheduled command {speed:.2f} m/s")
-        self._command(speed, "speed_schedule")
+        self._command(speed, SCHEDULE_SOURCE)
         self._echoes.append(speed)
         self._speed_pub.publish(Float64(data=speed))
 
@@ -310,7 +314,7 @@ class PolicyNode(Node):
                                                                          topic))
             if line is not None:
                 self.get_logger().warning(line)
-        if speed != self.desired_speed:
+        if speed != self.desired_speed and topic != SCHEDULE_SOURCE:  # (a scheduled one is logged with its time)
             line = self._rejections.line("command", f"commanded speed {speed:.2f} m/s")
             if line is not None:
                 self.get_logger().info(line)
