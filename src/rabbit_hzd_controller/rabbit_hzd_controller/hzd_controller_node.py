@@ -12,42 +12,17 @@ state answered, before the reply: what a body-state policy reads); with ``refere
 also ``/hzd/reference`` and ``/hzd/tracking_error`` (the desired outputs and the tracking
 error, for tuning Kp and Kd).
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
-the ROS-free loop runs.
-
-* Time is the simulation's: the stamp of each ``/joint_states`` message. A reset is an
-  event: a new count on ``/sim/resets`` restarts the controller on the gait in force (stance
-  leg read from the state) and makes it answer the next state even if it equals the last
-  one answered; the placed state, if it arrived first and was taken for a re-send, is
-  answered then. (A stamp older than the last one also restarts it, for simulators that do
-  not publish ``/sim/resets``.)
-* The first gait received becomes active at once; later ones (alpha and Kd alike) are
-  queued to the next touchdown, so the constraints stay continuous within a step. For a
-  policy deciding every N ticks (``policy_node`` ``decision_period``, or a learned policy
-  trained so) they apply when they arrive instead, alpha blended in from the outputs in
-  force (``HZDController.apply_now``: continuous outputs). Which of the two follows
-  ``/hzd/gait_timing`` (from the policy node) unless the ``gait_timing`` parameter forces it.
-* ``decision_sync`` (lockstep and paced runs; run_stack sets it): when the policy decides
-  every N ticks (``/hzd/gait_timing`` = ``at_once:N``), the reply to a state the policy
-  decides on (:class:`rabbit_msgs_py.decision_ticks.PeriodicDecisions`) waits until that
-  decision's alpha and Kd are in, and they apply to that very state, as in the ROS-free
-  loop: the stack then runs the fast path bit for bit. Gaits are taken in the order they
-  come, one alpha and one Kd per due state (a rejected one counts). No decision within
-  ``decision_timeout`` s (wall): the state is answered with the gait in force, logged, and
-  gaits apply on arrival until the policy's next alpha and Kd are in.
-* Malformed alpha/Kd (wrong size or layout, NaN/inf, out of bounds, impact equalities
-  violated) are rejected with a logged error; the last good gait stays in force.
-* A state identical to the last one answered (a lockstep re-send) is not computed twice:
-  the reply already sent goes out again, unchanged (the simulator takes one reply per
-  state and ignores the rest, so a reply lost on the way cannot stall lockstep). A freshly
-  (re)started controller answers it as new, which is how lockstep resumes after a
-  controller restart.
+the ROS-free loop runs; which gait answers which state (the first gait, gaits queued to the
+touchdown or applied at once as ``/hzd/gait_timing`` says, ``decision_sync``, resets,
+re-sent states, a controller joining mid-run) is :class:`~.gait_sync.GaitSync`, ROS-free and
+unit-tested. This node parses and validates what arrives (malformed alpha/Kd, states and
+timings are rejected with a logged error; the last good gait stays in force), hands it over
+and publishes what comes back.
 """
 
 from __future__ import annotations
 
 import sys
-import time
-from collections import deque
 from dataclasses import replace
 
 from rcl_interfaces.msg import SetParametersResult
@@ -63,10 +38,11 @@ from rabbit_msgs_py.conversions import (
     joint_state_vectors,
     phase_to_msg,
     short,
+    stamp_from_ns,
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
+from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.pairing import PairingKey
@@ -74,7 +50,8 @@ from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 
-from .controller import ControllerConfig, HZDController, Leg, infer_stance, validate_alpha, validate_kd
+from .controller import ControllerConfig, Leg, validate_alpha, validate_kd
+from .gait_sync import GAIT_TIMINGS, Answer, GaitSync, Repeat, parse_gait_timing
 
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
@@ -100,7 +77,6 @@ CONTROLLER_PARAMS = {
                                dynamic=True, range=(0.001, 1.0)),
 }
 
-GAIT_TIMINGS = ("next_step", "at_once")
 NODE_PARAMS = {
     "gait_timing": Param("policy", "when a new gait applies: policy (as /hzd/gait_timing says; next_step until "
                                    "it does), next_step (queued to the next touchdown) or at_once (blended in "
@@ -126,57 +102,31 @@ SECRET_PARAMS = ("pairing_key",)
 class HZDControllerNode(Node):
     """Parameters: :data:`CONTROLLER_PARAMS` (``kp``, ``max_kd``, ``blend_phase`` and
     ``within_step_blend`` may change at run time; the rest are read-only) and
-    :data:`NODE_PARAMS`."""
+    :data:`NODE_PARAMS`. The rules are :class:`~.gait_sync.GaitSync` (ROS-free); this node
+    parses and validates what arrives, hands it over and publishes what comes back."""
 
     @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
         super().__init__("hzd_controller_node", context=context, namespace=namespace)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
         forget_secrets(self, SECRET_PARAMS)
-        self.follow_policy_timing = values.pop("gait_timing") == "policy"
-        self.gait_timing = "next_step" if self.follow_policy_timing else self.get_parameter("gait_timing").value
-        self.decision_sync = bool(values.pop("decision_sync"))
         try:
-            self.decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
+            gait_timing = values.pop("gait_timing")
+            decision_sync = bool(values.pop("decision_sync"))
+            decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
             self.pairing = PairingKey.parse(values.pop("pairing_key"))
             solo_check = finite("solo_check", values.pop("solo_check"), 0.0)
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
-            if self.gait_timing not in GAIT_TIMINGS:
-                raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {self.gait_timing!r}")
-            self.config = ControllerConfig(**values)
+            self.sync = GaitSync(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
-
-        self.controller: HZDController | None = None
-        self._alpha: list[float] | None = None  # last good gait received
-        self._kd: float | None = None
-        self._last_stamp = -1
-        self._last_state: tuple[list[float], list[float]] | None = None
-        self._waiting_state: JointState | None = None  # arrived before the gait was complete
-        self._resets: int | None = None  # the last count seen on /sim/resets
-        self._restart = False  # a reset was announced: restart on the next state
-        self._dropped: JointState | None = None  # the last state dropped as a re-send
-        self.states_received = 0
         self.torques_published = 0
-        self.replies_repeated = 0  # replies sent again for a state sent again
         self.rejected_gaits = 0
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
-        # decision_sync: the due states (None: not holding for decisions), the gaits not yet
-        # taken (None for a rejected one), the state waiting for its decision
-        self._due: PeriodicDecisions | None = None
-        self._gaits: dict[str, deque] = {"alpha": deque(), "kd": deque()}
-        self._held: tuple[JointState, list[float], list[float], int, float] | None = None
-        # decision_sync, following the policy's timing: the first state waits for /hzd/gait_timing
-        # as for the gait (a decision due on it would be missed)
-        self._timing_unknown = self.decision_sync and self.follow_policy_timing
-        self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
-        self.decisions_waited = 0  # due states answered with their decision
-        self.decisions_timed_out = 0
-
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
         self.solo = SoloStart(self, "controller", topics.JOINT_TORQUES, solo_check, self._wire)
@@ -195,9 +145,27 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        self.create_timer(0.05, self._check_held)  # wall clock: decision_timeout
+        self.create_timer(0.05, lambda: self._do(self.sync.check_held()))  # wall clock: decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
+    # ----------------------------------------------------------------- status
+    controller = property(lambda self: self.sync.controller, doc="The HZDController (None before the first state).")
+    gait_timing = property(lambda self: self.sync.gait_timing)
+    states_received = property(lambda self: self.sync.states_received)
+    replies_repeated = property(lambda self: self.sync.replies_repeated, doc="Replies sent again for a re-sent state.")
+    decisions_waited = property(lambda self: self.sync.decisions_waited, doc="Due states answered with their decision.")
+    decisions_timed_out = property(lambda self: self.sync.decisions_timed_out)
+
+    @property
+    def config(self) -> ControllerConfig:
+        return self.sync.config
+
+    @property
+    def gait(self) -> tuple[list[float], float] | None:
+        """The last good gait received: (alpha, 24 rad; Kd, N m s/rad), or None before both."""
+        if self.sync.alpha is None or self.sync.kd is None:
+            return None
+        return list(self.sync.alpha), self.sync.kd
 
     def _flush_rejections(self) -> None:
         for line in self._rejections.flush():
@@ -220,133 +188,52 @@ class HZDControllerNode(Node):
             config = replace(self.config, **changes)
         except ValueError as exc:
             return SetParametersResult(successful=False, reason=str(exc))
-        self.config = config
+        self.sync.config = config
         if self.controller is not None:
             self.controller.config = config
         return SetParametersResult(successful=True)
 
-    # --------------------------------------------------------------- gait
-    @property
-    def gait(self) -> tuple[list[float], float] | None:
-        """The last good gait received: (alpha, 24 rad; Kd, N m s/rad), or None before both."""
-        if self._alpha is None or self._kd is None:
-            return None
-        return list(self._alpha), self._kd
+    # ------------------------------------------------------------- callbacks
+    def _reject(self, kind: str, topic: str, exc: Exception, keeping: str) -> None:
+        self.rejected_gaits += 1
+        line = self._rejections.line(kind, f"rejected {self.resolve_topic_name(topic)}: {short(str(exc), 200)}; "
+                                           f"keeping {keeping}")
+        if line is not None:
+            self.get_logger().error(line)
 
     def _on_alpha(self, msg: Float64MultiArray) -> None:
         try:
             alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
         except (MessageError, ValueError) as exc:
-            self.rejected_gaits += 1
-            line = self._rejections.line("alpha", f"rejected {self.resolve_topic_name(topics.ALPHA)}: "
-                                                  f"{short(str(exc), 200)}; keeping the last good gait")
-            if line is not None:
-                self.get_logger().error(line)
-            self._take("alpha", None)
-            return
-        self._alpha = alpha
-        self._take("alpha", alpha)
-        self._answer_waiting_state()
+            self._reject("alpha", topics.ALPHA, exc, "the last good gait")
+            alpha = None
+        self._do(self.sync.on_gait_part("alpha", alpha))
 
     def _on_kd(self, msg: Float64) -> None:
         try:
             kd = validate_kd(msg.data, self.config)
         except ValueError as exc:
-            self.rejected_gaits += 1
-            line = self._rejections.line("kd", f"rejected {self.resolve_topic_name(topics.KD)}: "
-                                               f"{short(str(exc), 200)}; keeping the last good value")
-            if line is not None:
-                self.get_logger().error(line)
-            self._take("kd", None)
-            return
-        self._kd = kd
-        self._take("kd", kd)
-        self._answer_waiting_state()
-
-    def _take(self, part: str, value) -> None:
-        """A gait part (``alpha`` or ``kd``; None: rejected) that arrived: kept for the next
-        due state while holding for decisions, else applied as ``gait_timing`` says (the
-        first gait, before any state, becomes the controller's start gait instead)."""
-        if self.controller is None:
-            return
-        if self._syncing:
-            self._gaits[part].append(value)
-            self._answer_held()
-            return
-        if self._sync_paused:
-            self._gaits[part].append(value)  # counted: sync resumes once alpha and Kd came again
-            if self._gaits["alpha"] and self._gaits["kd"]:
-                self._sync_paused = False
-                self._forget_gaits()
-        if value is not None:
-            self._apply(part, value, self.gait_timing == "at_once")
-
-    def _apply(self, part: str, value, at_once: bool) -> None:
-        if part == "alpha":
-            self.controller.apply_now(tuple(value)) if at_once else self.controller.set_alpha(value)
-        else:
-            self.controller.set_kd(value) if at_once else self.controller.queue_kd(value)
-
-    def _forget_gaits(self) -> None:
-        for parts in self._gaits.values():
-            parts.clear()
-
-    @property
-    def _syncing(self) -> bool:
-        """Holding due states for their decision now."""
-        return self._due is not None and not self._sync_paused and self.gait_timing == "at_once"
+            self._reject("kd", topics.KD, exc, "the last good value")
+            kd = None
+        self._do(self.sync.on_gait_part("kd", kd))
 
     def _on_gait_timing(self, msg: String) -> None:
-        if not self.follow_policy_timing:
+        if not self.sync.follow_policy_timing:
             return
-        timing, _, period = msg.data.partition(":")
-        if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
+        try:
+            timing, period = parse_gait_timing(msg.data)
+        except ValueError as exc:
             line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
-                                                        f"{short(repr(msg.data), 60)}: not one of {GAIT_TIMINGS}, or "
-                                                        f"at_once:N with N >= 1 ticks; keeping {self.gait_timing}")
+                                                        f"{short(repr(msg.data), 60)}: {exc}; keeping "
+                                                        f"{self.sync.gait_timing}")
             if line is not None:
                 self.get_logger().error(line)
             return
-        if timing != self.gait_timing:
-            self.get_logger().info(f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
-        self.gait_timing = timing
-        self._timing_unknown = False
-        due = PeriodicDecisions(int(period), TICK_NS) if period and self.decision_sync else None
-        if due is not None and self._last_stamp >= 0:
-            due.join(self._last_stamp)  # mid-run: the policy's clock has followed since the placement
-        if (due is None) != (self._due is None) or (due is not None and due.period != self._due.period):
-            self._due = due
-            self._release_held("the policy's timing changed")
-        self._answer_waiting_state()
+        self._do(self.sync.on_gait_timing(timing, period))
 
     def _on_resets(self, msg: UInt32) -> None:
-        first = self._resets is None
-        if msg.data == self._resets:
-            return
-        self._resets = msg.data
-        if first:
-            return  # the count in force when this node started: nothing to restart
-        self._restart = True
-        self._forget_gaits()
-        self._held = None  # the placed state comes next; its answer is due, not this one's
-        self._forget_last_state()
+        self._do(self.sync.on_resets(msg.data))
 
-    def _forget_last_state(self) -> None:
-        """Answer the next state even if it repeats the last one answered; a state dropped
-        as a re-send before the event that asked for this is answered now."""
-        self._last_stamp, self._last_state = -1, None
-        if self._dropped is not None:
-            msg_state, self._dropped = self._dropped, None
-            self._on_state(msg_state)
-
-    def _answer_waiting_state(self) -> None:
-        """Answer the state that arrived before the first complete gait, if any."""
-        if self._waiting_state is not None and self._alpha is not None and self._kd is not None \
-                and not self._timing_unknown:
-            msg, self._waiting_state = self._waiting_state, None
-            self._on_state(msg)
-
-    # -------------------------------------------------------------- state
     def _on_state(self, msg: JointState) -> None:
         try:
             q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
@@ -355,110 +242,59 @@ class HZDControllerNode(Node):
             self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
                                     throttle_duration_sec=1.0)
             return
-        self.states_received += 1
-        stamp = stamp_to_ns(msg.header.stamp)
-        if self._held is not None and stamp == self._held[3]:
-            return  # re-sent while it waits for its decision: answered once it is in
-        if stamp == self._last_stamp and (q, dq) == self._last_state:
-            self._dropped = msg
-            self._torque_pub.publish(self._torque_msg)  # a re-send: the same reply again
-            self.replies_repeated += 1
-            return
-        if self._alpha is None or self._kd is None or self._timing_unknown:
-            self._waiting_state = msg
-            missing = [topics.ALPHA, topics.KD] + ([topics.GAIT_TIMING] if self._timing_unknown else [])
-            self.get_logger().warning(
-                f"no gait yet (waiting for {' and '.join(self.resolve_topic_name(t) for t in missing)}); the state will "
-                "be answered once it is complete",
-                throttle_duration_sec=2.0,
-            )
-            return
-        controller = self.controller
-        if controller is None or self._restart or stamp < self._last_stamp:
-            stance = infer_stance(q, self.config.geometry)
-            if controller is None:
-                controller = self.controller = HZDController(self._alpha, self._kd, self.config, stance)
-                if self._due is not None and stamp > 0:
-                    # joined mid-run (the stack restarted this controller): the gait in force is the
-                    # policy's newest decision (transient local); a decision on this state went to the
-                    # old instance, so it is answered at once instead of waiting out decision_timeout
-                    self._due.join(stamp)
+        self._do(self.sync.on_state(stamp_to_ns(msg.header.stamp), q, dq))
+        missing = self.sync.missing
+        if missing:
+            names = {"alpha": topics.ALPHA, "kd": topics.KD, "gait_timing": topics.GAIT_TIMING}
+            waiting = " and ".join(self.resolve_topic_name(names[m]) for m in ("alpha", "kd") if m in missing)
+            if "gait_timing" in missing:
+                waiting = " and ".join(filter(None, (waiting, self.resolve_topic_name(topics.GAIT_TIMING))))
+            self.get_logger().warning(f"no gait yet (waiting for {waiting}); the state will be answered once it is "
+                                      "complete", throttle_duration_sec=2.0)
+
+    # -------------------------------------------------------------- actions
+    def _do(self, actions: list) -> None:
+        """Carry out what :class:`GaitSync` returned, in order."""
+        for action in actions:
+            if isinstance(action, Answer):
+                self._answer(action)
+            elif isinstance(action, Repeat):
+                self._torque_pub.publish(self._torque_msg)  # a re-send: the same reply again
+            elif action.level == "warning":  # (rclpy wants one severity per call site)
+                self.get_logger().warning(action.text)
             else:
-                controller.reset(self._alpha, self._kd, stance)
-                self.get_logger().info("simulation reset: controller restarted on the gait")
-            self._restart = False
-        self._dropped = None
-        if self._due is not None and self._due.due(stamp) and self._syncing:
-            # (a newer state while one waits: its reply was given up, the older one is dropped)
-            self._held = (msg, q, dq, stamp, time.monotonic())
-            self._answer_held()
-            return
-        self._answer(msg, q, dq, stamp)
+                self.get_logger().info(action.text)
 
-    def _answer_held(self) -> None:
-        """Answer the state waiting for its decision once that decision's alpha and Kd are in."""
-        if self._held is None or not (self._gaits["alpha"] and self._gaits["kd"]):
-            return
-        msg, q, dq, stamp, _since = self._held
-        self._held = None
-        alpha, kd = self._gaits["alpha"].popleft(), self._gaits["kd"].popleft()
-        if alpha is not None:
-            self.controller.apply_now(tuple(alpha), kd)  # as the ROS-free loop applies a decision
-        elif kd is not None:
-            self._apply("kd", kd, at_once=True)
-        self.decisions_waited += 1
-        self._answer(msg, q, dq, stamp)
-
-    def _check_held(self) -> None:
-        """Timer: a due decision that did not come within ``decision_timeout`` s."""
-        if self._held is not None and time.monotonic() - self._held[4] > self.decision_timeout:
-            self.decisions_timed_out += 1
-            self._sync_paused = True
-            self._release_held(f"no decision from the policy within {self.decision_timeout:g} s")
-
-    def _release_held(self, why: str) -> None:
-        """Answer a held state with the gait in force (sync paused until the policy's next gait)."""
-        if self._held is None:
-            return
-        msg, q, dq, stamp, _since = self._held
-        self._held = None
-        self._forget_gaits()
-        self.get_logger().warning(f"{why}: answering t = {stamp / 1e9:.3f} s with the gait in force; gaits apply "
-                                  "on arrival until the policy's next one")
-        self._answer(msg, q, dq, stamp)
-
-    def _answer(self, msg: JointState, q: list[float], dq: list[float], stamp: int) -> None:
-        """Compute and publish the torques for the state (and ``/hzd/step`` at a touchdown)."""
-        controller = self.controller
-        torques = controller.compute(q, dq)
-        self._last_stamp = stamp
-        self._last_state = (q, dq)
-        if controller.touchdown:  # before the reply: the policy has it before the states that follow
-            self._step_pub.publish(Header(stamp=msg.header.stamp, frame_id=FOOT_FRAMES[controller.stance]))
+    def _answer(self, answer: Answer) -> None:
+        """Publish the torques for the state (and ``/hzd/step`` at a touchdown)."""
+        stamp = stamp_from_ns(answer.stamp)
+        frame = FOOT_FRAMES[answer.stance]
+        if answer.touchdown:  # before the reply: the policy has it before the states that follow
+            self._step_pub.publish(Header(stamp=stamp, frame_id=frame))
         if self._phase_pub.get_subscription_count():  # only for someone reading it (a body-state policy)
-            self._phase_pub.publish(phase_to_msg(controller.tau, controller.tau_rate, msg.header.stamp,
-                                                 FOOT_FRAMES[controller.stance]))
+            self._phase_pub.publish(phase_to_msg(answer.tau, answer.tau_rate, stamp, frame))
         torque_msg = self._torque_msg
-        torque_msg.header.stamp = msg.header.stamp
-        torque_msg.effort = torques
+        torque_msg.header.stamp = stamp
+        torque_msg.effort = answer.torques
         if self.pairing is not None:
-            torque_msg.header.frame_id = self.pairing.sign(self.source, stamp, torque_msg.effort)
+            torque_msg.header.frame_id = self.pairing.sign(self.source, answer.stamp, torque_msg.effort)
         self._torque_pub.publish(torque_msg)
         self.torques_published += 1
-        if self._reference_every and (stamp + TICK_NS // 2) % self._reference_every < TICK_NS:
-            self._publish_reference(msg, q, dq)
+        if self._reference_every and (answer.stamp + TICK_NS // 2) % self._reference_every < TICK_NS:
+            self._publish_reference(stamp, frame)
 
-    def _publish_reference(self, msg: JointState, q: list[float], dq: list[float]) -> None:
+    def _publish_reference(self, stamp, frame: str) -> None:
         """``/hzd/reference`` and ``/hzd/tracking_error`` of the state just answered (for a
         user tuning Kp and Kd: plot them in Foxglove or PlotJuggler)."""
         yd, dyd = self.controller.reference()
+        q, dq = self.sync.last_state
         y, dy = q[3:7], dq[3:7]  # the actuated joints, ACTUATED_JOINTS order
         for publisher, position, velocity in (
                 (self._reference_pub, yd, dyd),
                 (self._error_pub, [a - b for a, b in zip(y, yd)], [a - b for a, b in zip(dy, dyd)])):
             out = JointState(name=list(ACTUATED_JOINTS), position=position, velocity=velocity)
-            out.header.stamp = msg.header.stamp
-            out.header.frame_id = FOOT_FRAMES[self.controller.stance]
+            out.header.stamp = stamp
+            out.header.frame_id = frame
             publisher.publish(out)
 
 

@@ -1,0 +1,308 @@
+"""The controller node's rules, without ROS: which gait answers which state. :class:`GaitSync`
+takes ``hzd_controller_node``'s events (a gait part, the policy's gait timing, a reset count,
+a state, the decision timer) and returns what to do, in order (:class:`Answer` a state,
+:class:`Repeat` the last reply, :class:`Log` a line). The node parses and validates the
+messages, then publishes what comes back; the tests drive it with no rclpy, as
+``rabbit_sim.stepping.SimDriver`` is driven for the simulator.
+
+* The first complete gait (alpha and Kd) becomes the controller's start gait; a state that
+  comes before it (or, with ``decision_sync`` following the policy, before its timing) waits
+  and is answered once it is in.
+* Later gaits: queued to the next touchdown (``next_step``), or applied on arrival, blended in
+  (``at_once``); which, the policy's ``/hzd/gait_timing`` says unless fixed.
+* ``decision_sync`` with the policy deciding every N ticks: the reply to a state the policy
+  decides on (:class:`~rabbit_msgs_py.decision_ticks.PeriodicDecisions`) waits until that
+  decision's alpha and Kd are in (one of each per due state, in order; a rejected part
+  counts) and they apply to that state, as in the ROS-free loop. None within
+  ``decision_timeout`` s (wall): the state is answered with the gait in force, and gaits
+  apply on arrival until the policy's next alpha and Kd are in.
+* A reset (a new count on ``/sim/resets``, or a stamp older than the last) restarts the
+  controller on the gait in force and answers the next state even if it repeats the last
+  one; a state identical to the last one answered (a lockstep re-send) gets the same reply
+  again (:class:`Repeat`).
+* A controller that joins mid-run (restarted by the stack) answers its first state with the
+  gait in force: a decision on that state went to the old instance.
+
+Stamps are ns of sim time; ``clock`` is wall time (s, ``time.monotonic``).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from dataclasses import dataclass
+from typing import Callable, Sequence, Union
+
+from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
+
+from .controller import ControllerConfig, HZDController, Leg, infer_stance
+
+GAIT_TIMINGS = ("next_step", "at_once")
+
+
+def parse_gait_timing(text: str) -> tuple[str, int]:
+    """``/hzd/gait_timing``: ``next_step`` -> ("next_step", 0), ``at_once:N`` -> ("at_once", N)
+    (``at_once`` alone: 0, no period); ``ValueError`` for anything else."""
+    timing, _, period = text.partition(":")
+    if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
+        raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
+    return timing, int(period) if period else 0
+
+
+@dataclass(frozen=True)
+class Answer:
+    """Publish the torques (N m, the four actuated joints) answering the state at ``stamp``;
+    ``touchdown``: the stance switched on it (``/hzd/step`` first), ``stance`` the new stance
+    leg, ``tau``/``tau_rate`` the phase and its rate (1/s) on it."""
+
+    stamp: int
+    torques: list[float]
+    touchdown: bool
+    stance: Leg
+    tau: float
+    tau_rate: float
+
+
+@dataclass(frozen=True)
+class Repeat:
+    """The state at ``stamp`` was sent again: publish the last reply again, unchanged."""
+
+    stamp: int
+
+
+@dataclass(frozen=True)
+class Log:
+    level: str  # "info" | "warning"
+    text: str
+
+
+Action = Union[Answer, Repeat, Log]
+State = tuple[int, list[float], list[float]]  # stamp (ns), q (7: m, rad), dq (7: m/s, rad/s)
+
+
+class GaitSync:
+    """See the module docstring. ``gait_timing``: ``"policy"`` (follow ``/hzd/gait_timing``;
+    ``next_step`` until it says) or one of :data:`GAIT_TIMINGS`."""
+
+    def __init__(self, config: ControllerConfig, gait_timing: str = "policy", decision_sync: bool = False,
+                 decision_timeout: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
+        if gait_timing != "policy" and gait_timing not in GAIT_TIMINGS:
+            raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {gait_timing!r}")
+        self.config = config
+        self.follow_policy_timing = gait_timing == "policy"
+        self.gait_timing = "next_step" if self.follow_policy_timing else gait_timing
+        self.decision_sync, self.decision_timeout, self.clock = decision_sync, decision_timeout, clock
+        self.controller: HZDController | None = None
+        self.alpha: list[float] | None = None  # the last good gait received
+        self.kd: float | None = None
+        self._last: tuple[int, list[float], list[float]] | None = None  # the state last answered
+        self._waiting: State | None = None  # arrived before the gait was complete
+        self._dropped: State | None = None  # the last state taken for a re-send
+        self._resets: int | None = None  # the last count seen on /sim/resets
+        self._restart = False  # a reset was announced: restart on the next state
+        # decision_sync: the due states (None: not holding), the gait parts not yet taken
+        # (None for a rejected one), the state waiting for its decision (and since when)
+        self._due: PeriodicDecisions | None = None
+        self._gaits: dict[str, deque] = {"alpha": deque(), "kd": deque()}
+        self._held: tuple[State, float] | None = None
+        self._timing_unknown = decision_sync and self.follow_policy_timing  # the first state waits for it
+        self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
+        self.states_received = 0
+        self.replies_repeated = 0
+        self.decisions_waited = 0  # due states answered with their decision
+        self.decisions_timed_out = 0
+        self._out: list[Action] = []
+
+    @property
+    def last_stamp(self) -> int:
+        """The stamp (ns) of the state last answered, -1 before any (or after a reset)."""
+        return self._last[0] if self._last is not None else -1
+
+    @property
+    def last_state(self) -> tuple[list[float], list[float]] | None:
+        """(q, dq) of the state last answered."""
+        return (self._last[1], self._last[2]) if self._last is not None else None
+
+    @property
+    def missing(self) -> list[str]:
+        """What a state waits for before it can be answered: ``alpha``, ``kd``, ``gait_timing``."""
+        return ([name for name, part in (("alpha", self.alpha), ("kd", self.kd)) if part is None]
+                + (["gait_timing"] if self._timing_unknown else []))
+
+    # ---------------------------------------------------------------- events
+    def on_gait_part(self, part: str, value) -> list[Action]:
+        """A gait part that arrived, ``part`` ``alpha`` (24 rad, validated) or ``kd``
+        (N m s/rad); ``value`` None: it was rejected (it still counts as a decision's part)."""
+        self._out = []
+        if value is not None:
+            setattr(self, part, list(value) if part == "alpha" else value)
+        self._take(part, value)
+        if value is not None:
+            self._answer_waiting()
+        return self._out
+
+    def on_gait_timing(self, timing: str, period: int) -> list[Action]:
+        """The policy's ``/hzd/gait_timing``, parsed (:func:`parse_gait_timing`); ignored
+        unless following the policy."""
+        self._out = []
+        if not self.follow_policy_timing:
+            return self._out
+        if timing != self.gait_timing:
+            self._log("info", f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
+        self.gait_timing = timing
+        self._timing_unknown = False
+        due = PeriodicDecisions(period, TICK_NS) if period and self.decision_sync else None
+        if due is not None and self.last_stamp >= 0:
+            due.join(self.last_stamp)  # mid-run: the policy's clock has followed since the placement
+        if (due is None) != (self._due is None) or (due is not None and due.period != self._due.period):
+            self._due = due
+            self._release_held("the policy's timing changed")
+        self._answer_waiting()
+        return self._out
+
+    def on_resets(self, count: int) -> list[Action]:
+        """A count on ``/sim/resets`` (placements of the robot)."""
+        self._out = []
+        first = self._resets is None
+        if count == self._resets:
+            return self._out
+        self._resets = count
+        if first:
+            return self._out  # the count in force when this node started: nothing to restart
+        self._restart = True
+        self._forget_gaits()
+        self._held = None  # the placed state comes next; its answer is due, not this one's
+        self._forget_last_state()
+        return self._out
+
+    def on_state(self, stamp: int, q: list[float], dq: list[float]) -> list[Action]:
+        """A state (stamp ns; q, dq: the 7 joints)."""
+        self._out = []
+        self._state(stamp, q, dq)
+        return self._out
+
+    def check_held(self) -> list[Action]:
+        """Timer: a due decision that did not come within ``decision_timeout`` s."""
+        self._out = []
+        if self._held is not None and self.clock() - self._held[1] > self.decision_timeout:
+            self.decisions_timed_out += 1
+            self._sync_paused = True
+            self._release_held(f"no decision from the policy within {self.decision_timeout:g} s")
+        return self._out
+
+    # ------------------------------------------------------------- internals
+    def _log(self, level: str, text: str) -> None:
+        self._out.append(Log(level, text))
+
+    def _state(self, stamp: int, q: list[float], dq: list[float]) -> None:
+        self.states_received += 1
+        if self._held is not None and stamp == self._held[0][0]:
+            return  # re-sent while it waits for its decision: answered once it is in
+        if self._last is not None and stamp == self._last[0] and (q, dq) == (self._last[1], self._last[2]):
+            self._dropped = (stamp, q, dq)
+            self._out.append(Repeat(stamp))  # a re-send: the same reply again
+            self.replies_repeated += 1
+            return
+        if self.missing:
+            self._waiting = (stamp, q, dq)
+            return
+        controller = self.controller
+        if controller is None or self._restart or stamp < self.last_stamp:
+            stance = infer_stance(q, self.config.geometry)
+            if controller is None:
+                controller = self.controller = HZDController(self.alpha, self.kd, self.config, stance)
+                if self._due is not None and stamp > 0:
+                    # joined mid-run (the stack restarted this controller): the gait in force is the
+                    # policy's newest decision (transient local); a decision on this state went to the
+                    # old instance, so it is answered at once instead of waiting out decision_timeout
+                    self._due.join(stamp)
+            else:
+                controller.reset(self.alpha, self.kd, stance)
+                self._log("info", "simulation reset: controller restarted on the gait")
+            self._restart = False
+        self._dropped = None
+        if self._due is not None and self._due.due(stamp) and self._syncing:
+            # (a newer state while one waits: its reply was given up, the older one is dropped)
+            self._held = ((stamp, q, dq), self.clock())
+            self._answer_held()
+            return
+        self._answer(stamp, q, dq)
+
+    @property
+    def _syncing(self) -> bool:
+        """Holding due states for their decision now."""
+        return self._due is not None and not self._sync_paused and self.gait_timing == "at_once"
+
+    def _take(self, part: str, value) -> None:
+        """A gait part (None: rejected) that arrived: kept for the next due state while
+        holding for decisions, else applied as ``gait_timing`` says (the first gait, before
+        any state, becomes the controller's start gait instead)."""
+        if self.controller is None:
+            return
+        if self._syncing:
+            self._gaits[part].append(value)
+            self._answer_held()
+            return
+        if self._sync_paused:
+            self._gaits[part].append(value)  # counted: sync resumes once alpha and Kd came again
+            if self._gaits["alpha"] and self._gaits["kd"]:
+                self._sync_paused = False
+                self._forget_gaits()
+        if value is not None:
+            self._apply(part, value, self.gait_timing == "at_once")
+
+    def _apply(self, part: str, value, at_once: bool) -> None:
+        if part == "alpha":
+            self.controller.apply_now(tuple(value)) if at_once else self.controller.set_alpha(value)
+        else:
+            self.controller.set_kd(value) if at_once else self.controller.queue_kd(value)
+
+    def _forget_gaits(self) -> None:
+        for parts in self._gaits.values():
+            parts.clear()
+
+    def _forget_last_state(self) -> None:
+        """Answer the next state even if it repeats the last one answered; a state dropped
+        as a re-send before the event that asked for this is answered now."""
+        self._last = None
+        if self._dropped is not None:
+            state, self._dropped = self._dropped, None
+            self._state(*state)
+
+    def _answer_waiting(self) -> None:
+        """Answer the state that arrived before the first complete gait, if any."""
+        if self._waiting is not None and not self.missing:
+            state, self._waiting = self._waiting, None
+            self._state(*state)
+
+    def _answer_held(self) -> None:
+        """Answer the state waiting for its decision once that decision's alpha and Kd are in."""
+        if self._held is None or not (self._gaits["alpha"] and self._gaits["kd"]):
+            return
+        (stamp, q, dq), _since = self._held
+        self._held = None
+        alpha, kd = self._gaits["alpha"].popleft(), self._gaits["kd"].popleft()
+        if alpha is not None:
+            self.controller.apply_now(tuple(alpha), kd)  # as the ROS-free loop applies a decision
+        elif kd is not None:
+            self._apply("kd", kd, at_once=True)
+        self.decisions_waited += 1
+        self._answer(stamp, q, dq)
+
+    def _release_held(self, why: str) -> None:
+        """Answer a held state with the gait in force (sync paused until the policy's next gait)."""
+        if self._held is None:
+            return
+        (stamp, q, dq), _since = self._held
+        self._held = None
+        self._forget_gaits()
+        self._log("warning", f"{why}: answering t = {stamp / 1e9:.3f} s with the gait in force; gaits apply "
+                             "on arrival until the policy's next one")
+        self._answer(stamp, q, dq)
+
+    def _answer(self, stamp: int, q: Sequence[float], dq: Sequence[float]) -> None:
+        controller = self.controller
+        torques = controller.compute(q, dq)
+        self._last = (stamp, q, dq)
+        self._out.append(Answer(stamp, torques, controller.touchdown, controller.stance, controller.tau,
+                                controller.tau_rate))

@@ -1,0 +1,140 @@
+"""The controller node's rules without ROS (rabbit_hzd_controller.gait_sync.GaitSync): events
+in, actions out, on real gaits and states with a fake wall clock."""
+
+from __future__ import annotations
+
+import pytest
+
+from rabbit_hzd_controller.controller import ControllerConfig, HZDController, infer_stance
+from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_hzd_controller.gait_sync import Answer, GaitSync, Log, Repeat, parse_gait_timing
+from rabbit_policy.runtime.gait_library import GaitLibrary
+
+pytestmark = pytest.mark.unit
+
+MS = 1_000_000  # ns
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+@pytest.fixture(scope="module")
+def gaits():
+    library = GaitLibrary.load()
+    slow, fast = (list(library.nearest(v).alpha) for v in (0.8, 1.2))
+    q, dq = state_on_gait(library.nearest(1.0).alpha, 1.0)
+    return slow, fast, (list(q), list(dq))
+
+
+def _answers(actions) -> list[int]:
+    return [a.stamp for a in actions if isinstance(a, Answer)]
+
+
+def test_a_state_before_the_gait_waits_and_is_answered_once_it_is_complete(gaits):
+    slow, _fast, (q, dq) = gaits
+    sync = GaitSync(ControllerConfig())
+    assert sync.on_state(0, q, dq) == [] and sync.missing == ["alpha", "kd"]
+    assert sync.on_gait_part("alpha", slow) == []
+    (answer,) = sync.on_gait_part("kd", 50.0)
+    assert answer.stamp == 0 and len(answer.torques) == 4 and not answer.touchdown
+    expected = HZDController(slow, 50.0, ControllerConfig(), infer_stance(q, ControllerConfig().geometry))
+    assert answer.torques == expected.compute(q, dq)  # the ROS-free loop's law, the start gait
+
+
+def test_decision_sync_holds_a_due_state_until_its_decision_and_applies_it_to_that_state(gaits):
+    slow, fast, (q, dq) = gaits
+    sync = GaitSync(ControllerConfig(), decision_sync=True, clock=FakeClock())
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    assert sync.on_state(0, q, dq) == [] and sync.missing == ["gait_timing"]  # a due decision would be missed
+    actions = sync.on_gait_timing("at_once", 20)
+    assert [type(a) for a in actions] == [Log, Answer] and "blended in" in actions[0].text
+    for tick in range(1, 20):
+        assert _answers(sync.on_state(tick * MS, q, dq)) == [tick * MS]
+    assert sync.on_state(20 * MS, q, dq) == []  # due: held
+    assert sync.on_state(20 * MS, q, dq) == []  # sent again while it waits: still held, answered once
+    assert sync.on_gait_part("alpha", fast) == []
+    (answer,) = sync.on_gait_part("kd", 60.0)
+    assert answer.stamp == 20 * MS and sync.decisions_waited == 1
+    reference = HZDController(slow, 50.0, ControllerConfig(), sync.controller.stance)
+    reference.apply_now(tuple(fast), 60.0)
+    assert answer.torques == reference.compute(q, dq)  # the decision applied to that very state
+
+
+def test_a_decision_that_never_comes_is_given_up_and_gaits_then_apply_on_arrival(gaits):
+    slow, fast, (q, dq) = gaits
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    for tick in range(0, 21):
+        sync.on_state(tick * MS, q, dq)
+    clock.now += 1.0
+    assert sync.check_held() == []
+    clock.now += 1.5
+    warning, answer = sync.check_held()
+    assert warning.level == "warning" and "no decision from the policy within 2 s" in warning.text
+    assert answer.stamp == 20 * MS and sync.decisions_timed_out == 1
+    assert sync.on_state(40 * MS, q, dq)[0].stamp == 40 * MS  # not held while paused
+    sync.on_gait_part("alpha", fast)
+    sync.on_gait_part("kd", 60.0)  # the policy is back: sync resumes
+    assert sync.on_state(60 * MS, q, dq) == []
+
+
+def test_a_rejected_part_counts_as_its_decisions_part(gaits):
+    slow, _fast, (q, dq) = gaits
+    sync = GaitSync(ControllerConfig(), decision_sync=True)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    for tick in range(0, 21):
+        sync.on_state(tick * MS, q, dq)
+    assert sync.on_gait_part("alpha", None) == []  # rejected
+    (answer,) = sync.on_gait_part("kd", 70.0)
+    assert answer.stamp == 20 * MS and sync.controller.kd == 70.0 and sync.alpha == slow
+
+
+def test_a_resent_state_gets_the_same_reply_and_a_reset_answers_it_anew(gaits):
+    slow, _fast, (q, dq) = gaits
+    sync = GaitSync(ControllerConfig())
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_resets(1)  # the count in force at start: nothing to restart
+    assert _answers(sync.on_state(0, q, dq)) == [0]
+    assert sync.on_state(0, q, dq) == [Repeat(0)] and sync.replies_repeated == 1
+    actions = sync.on_resets(2)  # the placed state was taken for a re-send: answered now, restarted
+    assert [type(a) for a in actions] == [Log, Answer] and "controller restarted" in actions[0].text
+    assert _answers(sync.on_state(5 * MS, q, dq)) == [5 * MS]
+    assert _answers(sync.on_state(0, q, dq)) == [0]  # an older stamp: restarted too (no /sim/resets)
+
+
+def test_a_controller_joining_mid_run_answers_its_first_state_at_once(gaits):
+    """The stack restarted the controller: its first state is due for a decision that went
+    to the old instance; it is answered at once, the next due one waits as usual."""
+    slow, _fast, (q, dq) = gaits
+    sync = GaitSync(ControllerConfig(), decision_sync=True)
+    sync.on_resets(1)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    assert _answers(sync.on_state(1_500 * MS, q, dq)) == [1_500 * MS]  # a due stamp
+    for tick in range(1_501, 1_520):
+        assert _answers(sync.on_state(tick * MS, q, dq)) == [tick * MS]
+    assert sync.on_state(1_520 * MS, q, dq) == [] and sync.decisions_timed_out == 0
+
+
+def test_gait_timing_is_parsed_where_it_enters():
+    assert parse_gait_timing("next_step") == ("next_step", 0)
+    assert parse_gait_timing("at_once:20") == ("at_once", 20)
+    assert parse_gait_timing("at_once") == ("at_once", 0)
+    for bad in ("sometimes", "at_once:0", "at_once:x", "next_step:20", ""):
+        with pytest.raises(ValueError, match="at_once:N"):
+            parse_gait_timing(bad)
+    with pytest.raises(ValueError, match="gait_timing must be"):
+        GaitSync(ControllerConfig(), "whenever")
