@@ -18,8 +18,9 @@ import time
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, non_negative
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.experiment.options import add_policy_options
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
@@ -30,12 +31,9 @@ def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--controller", nargs="+", choices=CONTROLLER_CHOICES, default=["classic"])
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate")
-    parser.add_argument("--policy-file", default=None, help="learned policy checkpoint (default: packaged)")
-    parser.add_argument("--max-command-step", type=float, default=0.0, help="command rate limit (m/s per step)")
-    parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
-                        help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
-                             "once (default: the policy's own; classic 20, learned as trained)")
+    add_policy_options(parser)
+    parser.add_argument("--max-command-step", type=non_negative, default=0.0,
+                        help="command rate limit (m/s per step)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
     parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser, progress=True)
@@ -50,9 +48,9 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         names = [controller_name(c) for c in args.controller]
-        policies = {name: make_policy(name, mode=args.library_mode,
-                                      policy_file=args.policy_file if name == "learned" else None,
-                                      max_command_step=args.max_command_step, decision_period=args.decision_period)
+        policies = {name: make_policy(name, args.gait_dir if name != "learned" else None, args.library_mode,
+                                      args.policy_file if name == "learned" else None, args.max_command_step,
+                                      args.decision_period, args.speed_integral if name == "classic" else 0.0)
                     for name in names}
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -7,7 +7,8 @@ import pytest
 
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, infer_stance
 from rabbit_hzd_controller.gait_state import state_on_gait
-from rabbit_hzd_controller.gait_sync import Answer, GaitSync, Log, Repeat, parse_gait_timing
+from rabbit_hzd_controller.gait_sync import Answer, GaitSync, Log, Repeat
+from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 pytestmark = pytest.mark.unit

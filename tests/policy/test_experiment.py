@@ -9,6 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from rabbit_msgs_py.decision_ticks import PER_STEP
+
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.result import json_number
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
@@ -196,7 +198,7 @@ def test_a_periodic_policy_decides_every_n_ticks_on_a_one_step_moving_average():
         name = "spy"
 
         def __init__(self) -> None:
-            self.inner = make_policy("classic", decision_period=0)
+            self.inner = make_policy("classic", decision=PER_STEP)
 
         def act(self, observation):
             seen.append(observation)

@@ -8,6 +8,8 @@ import math
 import numpy as np
 import pytest
 
+from rabbit_msgs_py.decision_ticks import PER_STEP
+
 from rabbit_hzd_controller.controller import HZDController, Leg, infer_stance
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -114,14 +116,15 @@ def test_policies():
     from rabbit_policy.runtime.policies import CLASSIC_DECISION_PERIOD, PeriodicPolicy, decision_period
     from rabbit_policy.runtime.speed_window import Observation
 
-    policy = make_policy("classic", mode="interpolate", decision_period=0)
+    policy = make_policy("classic", mode="interpolate", decision=PER_STEP)
     assert isinstance(policy, LibraryPolicy) and decision_period(policy) == 0
     periodic = make_policy("classic")  # the default: calibrated interpolation, every 20 ticks
     assert isinstance(periodic, PeriodicPolicy) and decision_period(periodic) == CLASSIC_DECISION_PERIOD
     assert periodic.policy.mode == "interpolate"
-    for bad in (-1, 2.5, True):
-        with pytest.raises(ValueError):
-            make_policy("classic", decision_period=bad)
+    for bad in (-1, 2.5, True, None):
+        with pytest.raises(ValueError, match="DecisionTiming"):
+            make_policy("classic", decision=bad)
+
 
     command = policy.act(Observation(1.05, 0.9, 0.15))
     expected = library.interpolate(1.05)
@@ -130,6 +133,23 @@ def test_policies():
         make_policy("learned", policy_file="/nonexistent/policy.pt")
     with pytest.raises(ValueError):
         make_policy("classic", mode="best")
+
+
+def test_a_decision_timing_is_parsed_formatted_and_checked_in_one_place():
+    from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
+
+    assert [DecisionTiming.parse(t) for t in ("own", "-1", "step", "0", "20", " 20 ")] == \
+        [OWN, OWN, PER_STEP, PER_STEP, DecisionTiming(20), DecisionTiming(20)]
+    assert [str(t) for t in (OWN, PER_STEP, DecisionTiming(20))] == ["own", "step", "20"]
+    assert [t.param for t in (OWN, PER_STEP, DecisionTiming(20))] == [-1, 0, 20]  # the node parameter
+    assert DecisionTiming.parse(-1) == OWN and DecisionTiming.parse(DecisionTiming(7).param) == DecisionTiming(7)
+    assert OWN.resolve(20) == 20 and PER_STEP.resolve(20) == 0
+    for bad in ("-2", "2.5", "sometimes", ""):
+        with pytest.raises(ValueError, match="own, step or a whole number of ticks"):
+            DecisionTiming.parse(bad)
+    for bad in (-1, 2.5, True):
+        with pytest.raises(ValueError):
+            DecisionTiming(bad)
 
 
 def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_afresh():
@@ -165,7 +185,7 @@ def test_the_speed_integral_accumulates_the_error_within_its_bound_and_starts_af
     assert policy.integral.value == pytest.approx(0.2)  # 1.4 + 0.5 x 0.2 = 1.5, the library's fastest gait
     policy.reset()
     assert policy.act(Observation(1.0, 1.0, 0.0)).alpha == library.interpolate(1.0).alpha
-    assert make_policy("classic", decision_period=0, speed_integral=0.5).integral.config.dt == 0.6
+    assert make_policy("classic", decision=PER_STEP, speed_integral=0.5).integral.config.dt == 0.6
     assert make_policy("classic").policy.integral is None  # off by default: the paper's baseline
     for bad in (-0.1, math.inf, math.nan):
         with pytest.raises(ValueError, match="speed integral gain"):
@@ -248,7 +268,7 @@ def test_rate_limited_policy_moves_the_command_by_at_most_its_step():
     assert limited.name == "recorder+limit0.1"
     with pytest.raises(ValueError):
         RateLimitedPolicy(Recorder(), 0.0)
-    assert make_policy("classic", "", "nearest", max_command_step=0.2, decision_period=0).name == \
+    assert make_policy("classic", "", "nearest", max_command_step=0.2, decision=PER_STEP).name == \
         "classic/nearest+limit0.2"
 
 

@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from rabbit_msgs_py.decision_ticks import PER_STEP
+
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.policies import controller_settings, make_policy, required_controller_settings
@@ -47,7 +49,7 @@ def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs():
     assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("recovery")
     assert required_controller_settings("classic") == {} and controller_settings(make_policy("classic")) == {}
     with pytest.raises(ValueError, match="decision period"):
-        make_policy("recovery", decision_period=0)
+        make_policy("recovery", decision=PER_STEP)
     with pytest.raises(ValueError, match="speed integral"):
         make_policy("recovery", speed_integral=0.2)
 

@@ -16,6 +16,7 @@ from std_srvs.srv import Trigger
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import alpha_to_msg
+from rabbit_msgs_py.decision_ticks import DecisionTiming
 from rabbit_msgs_py.pairing import new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
@@ -233,7 +234,7 @@ def test_stack_walks_and_cmd_speed_changes_the_speed():
 
 @pytest.mark.slow
 def test_decisions_every_n_ticks_walk_through_the_stack_with_gaits_applied_at_once():
-    config = StackConfig(duration=6.0, schedule=((0.0, 1.0), (3.0, 1.2)), decision_period=50)
+    config = StackConfig(duration=6.0, schedule=((0.0, 1.0), (3.0, 1.2)), decision=DecisionTiming(50))
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell and not report.stalled
     assert nodes["hzd_controller_node"].gait_timing == "at_once"  # told by policy_node on /hzd/gait_timing
@@ -825,9 +826,10 @@ def test_run_stack_and_walk_report_the_same_keys_and_numbers(controller, period)
     from rabbit_policy.experiment.scenario import Push, Scenario
 
     schedule, pushes = ((0.0, 0.9), (1.5, 1.2)), (Push(2.2, -40.0, 0.1),)
-    config = StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision_period=period, controller=controller)
+    config = StackConfig(duration=3.5, schedule=schedule, pushes=pushes, decision=DecisionTiming.parse(period),
+                         controller=controller)
     report = run_in_process(config)[0]
-    policy = make_policy(controller, decision_period=None if period == -1 else period)
+    policy = make_policy(controller, decision=DecisionTiming.parse(period))
     result = walk(policy, Scenario(schedule=schedule, pushes=pushes), 3.5)
     stack, fast = report.summary(), run_summary(controller, policy.name, result, 1.0)
     assert list(stack) == list(fast)

@@ -1,5 +1,6 @@
 """The controller node's rules, without ROS: which gait answers which state. :class:`GaitSync`
-takes ``hzd_controller_node``'s events (a gait part, the policy's gait timing, a reset count,
+takes ``hzd_controller_node``'s events (a gait part, the policy's gait timing parsed by
+``rabbit_msgs_py.decision_ticks.parse_gait_timing``, a reset count,
 a state, the decision timer) and returns what to do, in order (:class:`Answer` a state,
 :class:`Repeat` the last reply, :class:`Log` a line). The node parses and validates the
 messages, then publishes what comes back; the tests drive it with no rclpy, as
@@ -33,21 +34,9 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Sequence, Union
 
-from rabbit_msgs_py.decision_ticks import TICK_NS, PeriodicDecisions
+from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, PeriodicDecisions
 
 from .controller import ControllerConfig, HZDController, Leg, infer_stance
-
-GAIT_TIMINGS = ("next_step", "at_once")
-
-
-def parse_gait_timing(text: str) -> tuple[str, int]:
-    """``/hzd/gait_timing``: ``next_step`` -> ("next_step", 0), ``at_once:N`` -> ("at_once", N)
-    (``at_once`` alone: 0, no period); ``ValueError`` for anything else."""
-    timing, _, period = text.partition(":")
-    if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
-        raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
-    return timing, int(period) if period else 0
-
 
 @dataclass(frozen=True)
 class Answer:

@@ -42,7 +42,7 @@ from rabbit_msgs_py.conversions import (
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.pairing import PairingKey
@@ -51,7 +51,7 @@ from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 
 from .controller import ControllerConfig, Leg, validate_alpha, validate_kd
-from .gait_sync import GAIT_TIMINGS, Answer, GaitSync, Repeat, parse_gait_timing
+from .gait_sync import Answer, GaitSync, Repeat
 
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 

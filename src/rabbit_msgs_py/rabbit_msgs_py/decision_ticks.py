@@ -1,6 +1,14 @@
-"""Which states a policy deciding every N ticks decides on: the one rule that the policy's
-decision clock (``rabbit_policy.runtime.decision_clock``) and a controller holding its reply
-for a due decision (``hzd_controller_node`` with ``decision_sync``) both follow.
+"""When a policy decides, one type and one rule for everyone.
+
+:class:`DecisionTiming` says when (the policy's own timing, once per step, or every N ticks),
+parsed, formatted and checked here only: from the command line (``own``, ``step`` or N; the
+older ``-1`` and ``0`` too), from a node parameter (``-1``, ``0``, N), and on the wire
+(``/hzd/gait_timing``: ``next_step`` or ``at_once:N``).
+
+:class:`PeriodicDecisions` says which states a policy deciding every N ticks decides on: the
+one rule that the policy's decision clock (``rabbit_policy.runtime.decision_clock``) and a
+controller holding its reply for a due decision (``hzd_controller_node`` with
+``decision_sync``) both follow.
 
 Stamps are integers in any unit (the ROS-free loop: ticks; the nodes: ns of sim time),
 ``tick`` the physics step in that unit. The placed state (stamp 0) is never due; a state is
@@ -12,8 +20,72 @@ seen again (a state re-sent) is not due a second time.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 TICK_NS = 1_000_000
 """The simulation's step in ns of sim time (the model's 1 ms timestep: one control tick)."""
+
+GAIT_TIMINGS = ("next_step", "at_once")
+"""How a gait applies, as ``/hzd/gait_timing`` says: at the next touchdown, or at once."""
+
+
+@dataclass(frozen=True)
+class DecisionTiming:
+    """When a policy decides: ``ticks`` None = as the policy was made (classic every 20 ticks;
+    a learned policy as trained), 0 = once per step (at the touchdown, the gait queued to the
+    next one), N = every N ticks of 1 ms (the gait applied at once, blended in)."""
+
+    ticks: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.ticks is not None and (isinstance(self.ticks, bool) or not isinstance(self.ticks, int)
+                                       or self.ticks < 0):
+            raise ValueError(f"a decision timing is own, step or a whole number of ticks >= 1, got {self.ticks!r}")
+
+    @classmethod
+    def parse(cls, text: str | int) -> "DecisionTiming":
+        """The command line's ``own``, ``step`` or N (ticks); ``-1`` and ``0`` are the older
+        spellings of own and step (and a node parameter's). ``ValueError`` otherwise."""
+        value = str(text).strip().lower()
+        if value in ("own", "-1"):
+            return cls(None)
+        if value in ("step", "0"):
+            return cls(0)
+        if value.isdigit():
+            return cls(int(value))
+        raise ValueError(f"a decision timing is own, step or a whole number of ticks >= 1, got {text!r}")
+
+    @property
+    def param(self) -> int:
+        """As a node parameter: -1 own, 0 once per step, N."""
+        return -1 if self.ticks is None else self.ticks
+
+    def resolve(self, own: int) -> int:
+        """Ticks between decisions (0: once per step), ``own`` being the policy's own."""
+        return own if self.ticks is None else self.ticks
+
+    def __str__(self) -> str:
+        return "own" if self.ticks is None else "step" if self.ticks == 0 else str(self.ticks)
+
+
+OWN = DecisionTiming(None)
+PER_STEP = DecisionTiming(0)
+
+
+def gait_timing(period: int) -> str:
+    """``/hzd/gait_timing`` for a policy deciding every ``period`` ticks (0: once per step):
+    ``next_step``, or ``at_once:N``, which also tells a controller holding its reply for a
+    due decision (``decision_sync``) which states are due."""
+    return f"at_once:{period}" if period else "next_step"
+
+
+def parse_gait_timing(text: str) -> tuple[str, int]:
+    """``/hzd/gait_timing``: ``next_step`` -> ("next_step", 0), ``at_once:N`` -> ("at_once", N)
+    (``at_once`` alone: 0, no period); ``ValueError`` for anything else."""
+    timing, _, period = text.partition(":")
+    if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
+        raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
+    return timing, int(period) if period else 0
 
 
 class PeriodicDecisions:

@@ -63,7 +63,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_vectors, phase_from_msg, stamp_to_ns
-from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.decision_ticks import TICK_NS, DecisionTiming, gait_timing
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -141,13 +141,6 @@ def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
     return SpeedSchedule(changes)
 
 
-def gait_timing(period: int) -> str:
-    """``/hzd/gait_timing`` for a policy deciding every ``period`` ticks (0: once per step):
-    ``next_step``, or ``at_once:N``, which also tells a controller holding its reply for a
-    due decision (``decision_sync``) which states are due."""
-    return f"at_once:{period}" if period else "next_step"
-
-
 def clamp_message(value: float, low: float, high: float, clamped: float, topic: str = topics.CMD_SPEED) -> str:
     """The log line for a clamped command; any value prints short (``1e+308``, not 309 digits)."""
     return f"{topic} {value:.4g} m/s is outside [{low:g}, {high:g}]; clamped to {clamped:.2f} m/s"
@@ -168,11 +161,8 @@ class PolicyNode(Node):
             self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
                                       values["policy_file"] or None,
                                       finite("max_command_step", values["max_command_step"], 0.0),
-                                      None if values["decision_period"] == -1 else max(values["decision_period"], 0),
+                                      DecisionTiming.parse(values["decision_period"]),
                                       finite("speed_integral", values["speed_integral"], 0.0))
-            if values["decision_period"] < -1:
-                raise ValueError(f"decision_period must be -1 (the policy's own), 0 or N > 0 ticks, "
-                                 f"got {values['decision_period']}")
             if values["window"] < 1:
                 raise ValueError(f"window must be >= 1 tick, got {values['window']}")
             if values["decision_window"] < 1:

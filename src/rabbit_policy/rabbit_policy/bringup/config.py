@@ -7,6 +7,7 @@ import math
 import re
 from dataclasses import dataclass, field
 
+from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_msgs_py.pairing import new_key
 
 from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, format_schedule, validate_schedule
@@ -26,9 +27,9 @@ NODE_MODULES = {
 @dataclass(frozen=True)
 class StackConfig:
     """One run of the stack. ``schedule``: (start time s, speed m/s) pairs, first at 0.
-    ``decision_period``: -1 = the policy's own (classic: every 20 ticks; learned: as
-    trained), 0 = once per step, N > 0 = every N ticks, the controller applying each gait at
-    once (told so on ``/hzd/gait_timing``). ``markers_rate``: ``/rabbit/markers`` per s of
+    ``decision``: when the policy decides (:class:`~rabbit_msgs_py.decision_ticks.DecisionTiming`:
+    its own timing, once per step, or every N ticks, the controller applying each gait at
+    once, told so on ``/hzd/gait_timing``). ``markers_rate``: ``/rabbit/markers`` per s of
     sim time (0 = off); ``viewer``: sim_node opens MuJoCo's viewer."""
 
     duration: float
@@ -43,7 +44,7 @@ class StackConfig:
     library_mode: str = "interpolate"
     gait_dir: str = ""
     policy_file: str = ""
-    decision_period: int = -1
+    decision: DecisionTiming = OWN
     speed_integral: float = 0.0  # 1/s, classic only: Westervelt's event-based speed integral (0 = off)
     pushes: tuple[Push, ...] = ()
     push_duration: float = 0.1
@@ -74,9 +75,8 @@ class StackConfig:
             raise ValueError(f"recorder_timeout must be a finite number > 0 s, got {self.recorder_timeout}")
         if not (math.isfinite(self.rtf) and self.rtf > 0.0):
             raise ValueError(f"rtf must be a finite number > 0, got {self.rtf}")
-        if not (isinstance(self.decision_period, int) and self.decision_period >= -1):
-            raise ValueError(f"decision_period must be -1 (the policy's own), 0 or a whole number of ticks, "
-                             f"got {self.decision_period!r}")
+        if not isinstance(self.decision, DecisionTiming):
+            raise ValueError(f"decision must be a DecisionTiming, got {self.decision!r}")
 
     def scenario(self) -> Scenario:
         """The run as a fast-path scenario (the report's; walk.py runs the same one)."""
@@ -94,7 +94,7 @@ class StackConfig:
                 "gait_dir": self.gait_dir,
                 "policy_file": self.policy_file,
                 "initial_speed": self.schedule[0][1],
-                "decision_period": self.decision_period,
+                "decision_period": self.decision.param,
                 "speed_integral": self.speed_integral,
                 "speed_schedule": format_schedule(self.schedule[1:]),
                 "solo_check": 0.0,
@@ -167,7 +167,7 @@ def policy_name(config: StackConfig) -> str | None:
 
     try:
         return make_policy(config.controller, config.gait_dir or None, config.library_mode, config.policy_file or None,
-                           decision_period=None if config.decision_period == -1 else config.decision_period,
+                           decision=config.decision,
                            speed_integral=config.speed_integral).name
     except (PolicyUnavailable, ValueError, OSError):
         return None

@@ -36,11 +36,10 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.experiment.options import add_model_options, add_policy_options  # here: after main() took Ctrl-C over
     from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -62,15 +61,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "
                              "stacks in different namespaces run side by side in one domain (default: the root)")
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
-                        help="classic policy: nearest gait or blend of the two around the speed")
-    parser.add_argument("--gait-dir", default="", help="gait library directory (default: packaged)")
-    parser.add_argument("--policy-file", default="", help="--controller learned: policy checkpoint (default: packaged)")
-    parser.add_argument("--decision-period", type=int, default=-1, metavar="TICKS",
-                        help="-1: the policy's own (classic: every 20 ticks; learned: as trained; the default), 0: "
-                             "once per step, N > 0: every N ticks (1 ms), each gait applied at once, blended in")
-    parser.add_argument("--speed-integral", type=float, default=0.0, metavar="KI",
-                        help=SPEED_INTEGRAL_HELP)
+    add_policy_options(parser)
     parser.add_argument("--record", default="", metavar="DIR",
                         help="record every stack topic to a rosbag2 bag (MCAP) in DIR (must not exist)")
     parser.add_argument("--compression", "--record-compression", choices=("none", "zstd"), default="none",
@@ -134,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
             model=args.model, friction=args.friction or 0.0, torso_mass_scale=args.torso_mass_scale,
             torque_delay=args.torque_delay, library_mode=args.library_mode, gait_dir=args.gait_dir,
             policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
-            decision_period=args.decision_period, speed_integral=args.speed_integral,
+            decision=args.decision_period, speed_integral=args.speed_integral,
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, reference_rate=args.reference_rate, viewer=args.viewer, rtf=args.rtf,

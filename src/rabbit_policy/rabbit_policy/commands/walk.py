@@ -43,11 +43,10 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser, non_negative, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
-from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.experiment.options import add_model_options  # here: after main() took Ctrl-C over
+    from rabbit_policy.experiment.options import add_model_options, add_policy_options  # here: after main() took Ctrl-C over
     from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -61,17 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
     parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
     add_model_options(parser)
-    parser.add_argument("--gait-dir", default=None, help="gait library directory (default: packaged)")
-    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
-                        help="classic: nearest gait or blend of the two around the command")
-    parser.add_argument("--policy-file", default=None, help="learned: policy checkpoint (default: packaged)")
+    add_policy_options(parser)
     parser.add_argument("--max-command-step", type=non_negative, default=0.0,
                         help="command rate limit (m/s per step; 0: none, the default)")
-    parser.add_argument("--decision-period", type=int, default=None, metavar="TICKS",
-                        help="ticks between decisions: 0 = once per step, N = every N ticks with the gait blended in at "
-                             "once (default: the policy's own; classic 20, learned as trained)")
-    parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI",
-                        help=SPEED_INTEGRAL_HELP)
     parser.add_argument("--video", default=None, metavar="FILE.gif",
                         help="also write the walk as an animated GIF, rendered offscreen from the recorded motion "
                              "(25 frames per s of sim time, 320 x 240; MUJOCO_GL=egl or osmesa, chosen by itself "
@@ -147,8 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     controller = controller_name(args.controller)
     try:
-        policy = make_policy(controller, args.gait_dir, args.library_mode, args.policy_file, args.max_command_step,
-                             args.decision_period, args.speed_integral)
+        policy = make_policy(controller, args.gait_dir or None, args.library_mode, args.policy_file or None,
+                             args.max_command_step, args.decision_period, args.speed_integral)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

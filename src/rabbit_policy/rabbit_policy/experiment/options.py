@@ -1,12 +1,16 @@
-"""The model-error options of a walk, one definition for ``scripts/walk.py`` (the fast path)
-and ``scripts/run_stack.py`` (the node stack, as ``sim_node`` parameters): the model variant,
-the foot friction, the torso mass and the torque delay."""
+"""Options shared by ``scripts/walk.py`` (the fast path) and ``scripts/run_stack.py`` (the
+node stack), one definition each: the model errors (the model variant, the foot friction,
+the torso mass and the torque delay; sim_node parameters in the stack) and the policy
+(library mode, gait directory, policy file, decision timing, speed integral; policy_node
+parameters in the stack)."""
 
 from __future__ import annotations
 
 import argparse
 
 from rabbit_msgs_py.cli import non_negative, positive
+from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
+from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
 
 
@@ -22,3 +26,25 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
 def model_options(args: argparse.Namespace) -> ModelOptions:
     """The model of :func:`add_model_options`' arguments."""
     return ModelOptions(args.model, args.friction, args.torso_mass_scale)
+
+
+def decision_timing(text: str) -> DecisionTiming:
+    """An argparse type: ``own``, ``step`` or N ticks (:meth:`DecisionTiming.parse`)."""
+    try:
+        return DecisionTiming.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_policy_options(parser: argparse.ArgumentParser) -> None:
+    """``--library-mode``, ``--gait-dir``, ``--policy-file``, ``--decision-period``,
+    ``--speed-integral`` (``make_policy``'s arguments; run_stack hands them to policy_node)."""
+    parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
+                        help="classic: the nearest gait or the blend of the two around the command")
+    parser.add_argument("--gait-dir", default="", help="classic: gait library directory (default: packaged)")
+    parser.add_argument("--policy-file", default="", help="learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--decision-period", type=decision_timing, default=OWN, metavar="own|step|TICKS",
+                        help="when the policy decides: own = as it was made (classic every 20 ticks, learned as "
+                             "trained; the default), step = once per step, N = every N ticks (1 ms), each gait "
+                             "applied at once, blended in (-1 and 0 are accepted for own and step)")
+    parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI", help=SPEED_INTEGRAL_HELP)

@@ -29,6 +29,7 @@ from typing import Protocol
 
 import numpy as np
 
+from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, check_gain,
                                                   decision_dt, integral_limit)
@@ -354,18 +355,17 @@ def controller_name(name: str) -> str:
 
 def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "interpolate",
                 policy_file: str | Path | None = None, max_command_step: float = 0.0,
-                decision_period: int | None = None, speed_integral: float = 0.0,
+                decision: DecisionTiming = OWN, speed_integral: float = 0.0,
                 integral_offset_limit: float = DEFAULT_OFFSET_LIMIT) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on. ``max_command_step`` > 0 wraps it in a
-    :class:`RateLimitedPolicy` (m/s per step; 0: no limit). ``decision_period``: None = the
-    policy's own (classic: :data:`CLASSIC_DECISION_PERIOD`; learned: as trained), 0 = once
-    per step, N > 0 = every N ticks (a :class:`PeriodicPolicy`). ``speed_integral`` > 0
+    :class:`RateLimitedPolicy` (m/s per step; 0: no limit). ``decision``: the policy's own
+    timing (classic: :data:`CLASSIC_DECISION_PERIOD`; learned: as trained), once per step,
+    or every N ticks (a :class:`PeriodicPolicy`). ``speed_integral`` > 0
     (1/s, classic only): Westervelt's event-based speed integral with that gain, its offset
     within +-``integral_offset_limit`` m/s (see :class:`LibraryPolicy`)."""
-    if decision_period is not None and (isinstance(decision_period, bool) or not isinstance(decision_period, int)
-                                        or decision_period < 0):
-        raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {decision_period!r}")
+    if not isinstance(decision, DecisionTiming):
+        raise ValueError(f"decision must be a DecisionTiming (own, step or N ticks), got {decision!r}")
     check_gain(speed_integral, "the speed integral gain")
     kind = controller_name(kind)
     if kind != "classic" and speed_integral:
@@ -383,13 +383,13 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
             library = GaitLibrary.load(gait_dir or None)
         except (FileNotFoundError, ValueError) as exc:
             raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
-        period = CLASSIC_DECISION_PERIOD if decision_period is None else decision_period
+        period = decision.resolve(CLASSIC_DECISION_PERIOD)
         policy: Policy = LibraryPolicy(library, mode, speed_integral, decision_dt(period), integral_offset_limit)
         if kind == "recovery":
             policy = _recovery(policy, period)
             period = None  # it decides every CLASSIC_DECISION_PERIOD ticks itself
     else:
-        policy = _learned(policy_file, decision_period)  # it carries its decision period
+        policy = _learned(policy_file, decision.ticks)  # it carries its decision period
     if max_command_step:
         policy = RateLimitedPolicy(policy, max_command_step)
     return PeriodicPolicy(policy, period) if period else policy
