@@ -47,7 +47,6 @@ NaN/inf commands are rejected with an error; the last good command stays in forc
 
 from __future__ import annotations
 
-import math
 import sys
 from collections import deque
 from dataclasses import replace
@@ -82,16 +81,10 @@ from rabbit_policy.runtime.policies import (
 )
 from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.commands import COMMAND_RANGE, clamp_message, clamp_speed
 from rabbit_policy.runtime.speed_schedule import SpeedSchedule
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_policy.experiment.scenario import parse_schedule, validate_schedule
-
-
-def clamp_speed(value: float, low: float, high: float) -> float:
-    """``value`` limited to [low, high]; raises ``ValueError`` if it is NaN or infinite."""
-    if not math.isfinite(value):
-        raise ValueError(f"speed command must be finite, got {value}")
-    return min(max(value, low), high)
 
 
 POLICY_PARAMS = {
@@ -105,9 +98,9 @@ POLICY_PARAMS = {
                                 "within [min_speed, max_speed]", range=(0.1, 3.0)),
     "speed_integral": Param(0.0, "classic: event-based speed integral gain, 1/s (0 = off): the gait for the command "
                                  "plus the bounded integral of the speed error", range=(0.0, 100.0)),
-    "min_speed": Param(0.7, "lowest command, m/s, not above max_speed; /cmd_speed below is clamped", dynamic=True,
+    "min_speed": Param(COMMAND_RANGE[0], "lowest command, m/s, not above max_speed; /cmd_speed below is clamped", dynamic=True,
                        range=(0.1, 3.0)),
-    "max_speed": Param(1.5, "highest command, m/s, not below min_speed; /cmd_speed above is clamped", dynamic=True,
+    "max_speed": Param(COMMAND_RANGE[1], "highest command, m/s, not below min_speed; /cmd_speed above is clamped", dynamic=True,
                        range=(0.1, 3.0)),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
@@ -139,11 +132,6 @@ def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
     except ValueError as exc:
         raise ValueError(f"speed_schedule: {exc}") from None
     return SpeedSchedule(changes)
-
-
-def clamp_message(value: float, low: float, high: float, clamped: float, topic: str = topics.CMD_SPEED) -> str:
-    """The log line for a clamped command; any value prints short (``1e+308``, not 309 digits)."""
-    return f"{topic} {value:.4g} m/s is outside [{low:g}, {high:g}]; clamped to {clamped:.2f} m/s"
 
 
 class PolicyNode(Node):

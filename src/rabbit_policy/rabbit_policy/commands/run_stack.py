@@ -113,12 +113,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
-    from rabbit_policy.experiment.scenario import parse_pushes, parse_schedule
+    from rabbit_policy.experiment.options import schedule_from_args
+    from rabbit_policy.experiment.scenario import parse_pushes
     from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
 
     try:
-        schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
+        schedule = schedule_from_args(args)
         pushes = parse_pushes(args.push) if args.push else ()
         config = StackConfig(
             duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,

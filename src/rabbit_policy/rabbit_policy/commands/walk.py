@@ -126,12 +126,12 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
-    from rabbit_policy.experiment.scenario import Scenario, parse_pushes, parse_schedule
-    from rabbit_policy.experiment.options import model_options
+    from rabbit_policy.experiment.scenario import Scenario, parse_pushes
+    from rabbit_policy.experiment.options import model_options, schedule_from_args
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
 
     try:
-        schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
+        schedule = schedule_from_args(args)
         scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
                             model=model_options(args))
     except ValueError as exc:

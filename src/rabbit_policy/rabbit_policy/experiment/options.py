@@ -48,3 +48,20 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
                              "trained; the default), step = once per step, N = every N ticks (1 ms), each gait "
                              "applied at once, blended in (-1 and 0 are accepted for own and step)")
     parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI", help=SPEED_INTEGRAL_HELP)
+
+
+def schedule_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
+    """The speed schedule of ``--speed`` / ``--speed-schedule``: parsed, each speed outside
+    the controllers' range clamped into it with one ``warning:`` line on stderr (the rule
+    policy_node applies to ``/cmd_speed``: ``rabbit_policy.runtime.commands``);
+    ``ValueError`` for a schedule that is not one."""
+    import sys
+
+    from rabbit_policy.experiment.scenario import parse_schedule
+    from rabbit_policy.runtime.commands import clamp_schedule
+
+    schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
+    schedule, lines = clamp_schedule(schedule)
+    for line in lines:
+        print(f"warning: {line}", file=sys.stderr)
+    return schedule
