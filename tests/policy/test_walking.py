@@ -208,3 +208,22 @@ def test_walk_writes_an_offscreen_video_of_the_walk(tmp_path):
     for bad in (str(tmp_path / "walk.mp4"), str(tmp_path / "missing" / "walk.gif")):
         refused = _walk_script("--duration", "1", "--video", bad, check=False)
         assert refused.returncode == 2 and refused.stderr.count("\n") == 1 and "--video" in refused.stderr
+
+
+def test_times_are_on_the_tick_grid_whatever_decimals_a_schedule_and_duration_have():
+    """Issue 40's case: a change and a duration off the ms grid. The walk runs the duration's
+    whole ticks and ends on the grid (4.132 s, not 4.131999...), the last segment ends there
+    too, so its mean speed is reported; touchdowns and reach times are on the ns grid."""
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.runtime.policies import make_policy
+
+    duration = 4.132268422788288
+    result = walk(make_policy("classic"), Scenario(schedule=((0.0, 0.9), (2.132268422788288, 1.1))), duration)
+    summary = result.summary()
+    assert summary["duration"] == 4.132 and result.end_time == 4.132
+    last = summary["segments"][-1]
+    assert last["end"] == 4.132 and last["mean_speed"] is not None
+    assert all(round(t, 9) == t for t in result.times[:50]) and all(round(td.time, 9) == td.time
+                                                                       for td in result.touchdowns)
+    assert all(row["reach_time"] is None or round(row["reach_time"], 9) == row["reach_time"]
+               for row in summary["segments"][:1])

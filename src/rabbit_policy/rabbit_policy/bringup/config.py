@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_msgs_py.pairing import new_key
 
-from rabbit_policy.experiment.scenario import Push, Scenario, format_pushes, format_schedule, validate_schedule
+from rabbit_policy.experiment.scenario import (Push, Scenario, format_pushes, format_schedule, on_tick_grid,
+                                               validate_schedule)
 from rabbit_policy.runtime.policies import controller_name, required_controller_settings
 from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
@@ -110,7 +111,7 @@ class StackConfig:
                 "torque_delay": self.torque_delay,
                 "mode": self.mode,
                 "rtf": self.rtf,
-                "stop_time": self.duration,
+                "stop_time": on_tick_grid(self.duration),
                 "push_duration": self.push_duration,
                 "push_schedule": format_pushes(self.pushes),
                 "start_paused": True,

@@ -19,6 +19,7 @@ from rabbit_msgs_py.conversions import stamp_to_seconds
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
+from rabbit_policy.experiment.scenario import on_tick_grid
 
 from .config import StackConfig
 
@@ -63,7 +64,7 @@ class RunReport:
         scenario = config.scenario()
         empty = WalkResult(scenario=scenario, fell=False, fall_time=None, stalled=False, stall_time=None,
                            start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]), touchdowns=[],
-                           peak_torque=0.0, planned_duration=config.duration)
+                           peak_torque=0.0, planned_duration=on_tick_grid(config.duration))
         return cls(controller=config.controller, policy=None, result=empty, wall_time=0.0, completed=False,
                    error=error)
 
@@ -225,7 +226,7 @@ class Supervisor(Node):
         return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
                           stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,
-                          planned_duration=config.duration - t0)  # t0: the first state seen (0 unless missed)
+                          planned_duration=round(on_tick_grid(config.duration) - t0, 9))  # t0: the first state seen
 
     def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
         wall = (

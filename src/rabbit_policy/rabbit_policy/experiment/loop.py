@@ -37,7 +37,7 @@ from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Le
 from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
-from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.experiment.scenario import Scenario, on_tick_grid, whole_ticks
 from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.policies import (GaitCommand, Policy, controller_settings, decision_period, first_command,
                                             reset_policy)
@@ -112,7 +112,7 @@ class ClosedLoop:
         self._delay = TorqueDelay(delay) if delay else None
         # what happened
         self.ticks = 0
-        self.start_time = float(self.data.time)
+        self.start_time = round(float(self.data.time), 9)  # times on the ns grid of the stack's stamps
         self.start_x = float(self.data.qpos[0])
         self._times: list[float] = []
         self._xs: list[float] = []
@@ -186,7 +186,7 @@ class ClosedLoop:
         torques = controller.compute(qpos.tolist(), qvel.tolist())
         if self._delay is not None:
             torques = self._delay(torques)
-        t = self.sim.step(torques)
+        t = round(self.sim.step(torques), 9)  # MuJoCo's float sum of steps, on the ns grid (16.132, not 16.131999...)
         i = self.ticks
         self.ticks = i + 1
         peak = self.peak_torque
@@ -283,7 +283,7 @@ class ClosedLoop:
         if duration is not None:
             if not duration > 0:
                 raise ValueError(f"duration must be > 0 s, got {duration}")
-            n = int(round(duration / self.model.opt.timestep))
+            n = whole_ticks(duration, self.model.opt.timestep)
         elif max_ticks is not None:
             n = max_ticks
         else:
@@ -320,7 +320,7 @@ def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: G
     loop = ClosedLoop(scenario, policy, start, start_speed=start_speed, kp=kp, controller=controller, model=model,
                       observer=observer, record_state=record_state)
     loop.run(duration, stop_on_fall=stop_on_fall)
-    return replace(loop.result(), planned_duration=duration)
+    return replace(loop.result(), planned_duration=on_tick_grid(duration, loop.model.opt.timestep))
 
 
 def walk_gait(gait: Gait, duration: float, model: ModelOptions = ModelOptions()) -> WalkResult:

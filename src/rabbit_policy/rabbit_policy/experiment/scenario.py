@@ -25,6 +25,18 @@ a policy decides every 20 ms; commands closer than this only flood the logs and 
 (8,000 entries 0.2 ms apart once gave 14,250 log lines)."""
 
 
+def whole_ticks(seconds: float, tick: float = 0.001) -> int:
+    """A duration (s) as the whole number of ticks (``tick`` s each) a walk of it runs."""
+    return int(round(seconds / tick))
+
+
+def on_tick_grid(seconds: float, tick: float = 0.001) -> float:
+    """The sim time (s) a walk of ``seconds`` ends at: its whole ticks, on the ns grid of
+    the stack's stamps (16.132268 -> 16.132), so that a duration, a segment's end and the
+    time the walk ended are the same number."""
+    return round(whole_ticks(seconds, tick) * tick, 9)
+
+
 def validate_schedule(schedule: Sequence[tuple[float, float]]) -> None:
     """Raise ``ValueError`` unless the schedule starts at t = 0, every entry is finite and
     its times increase by at least :data:`MIN_SCHEDULE_SPACING`."""
