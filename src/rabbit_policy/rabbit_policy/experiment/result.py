@@ -13,6 +13,11 @@ mean over the last step) and a step's mean speed here are the same number.
 * reach time of a segment: from its start to the touchdown ending the first whole step
   that began at or after the change and whose mean speed is within ``tolerance`` of the
   command (None: never within the segment).
+
+Times are sim seconds on the ns grid of the stack's stamps (the ROS-free loop rounds
+MuJoCo's float sum of 1 ms steps to it), and a walk of a duration runs its whole ticks and
+is planned to end at that grid time (``scenario.on_tick_grid``): the fast path and the
+stack report the same numbers, and a segment ends where the walk does.
 """
 
 from __future__ import annotations
