@@ -85,6 +85,15 @@ class StackConfig:
                         model=ModelOptions(self.model, self.friction or None, self.torso_mass_scale),
                         torque_delay=self.torque_delay, rules=self.rules)
 
+    def build_policy(self):
+        """The policy policy_node builds for this run (run_stack builds it once, to refuse a
+        bad one with one line before any node starts and to name it in the report); raises
+        ``PolicyUnavailable`` or ``ValueError``."""
+        from rabbit_policy.runtime.policies import make_policy
+
+        return make_policy(self.controller, self.gait_dir or None, self.library_mode, self.policy_file or None,
+                           decision=self.decision, speed_integral=self.speed_integral)
+
     def node_parameters(self) -> dict[str, dict[str, object]]:
         """The ROS parameters of each node for this run (the recorder only if recording).
         ``solo_check`` 0: run_stack looked for another stack before it starts any node."""
@@ -164,11 +173,9 @@ def ros_arguments(parameters: dict[str, object], namespace: str = "") -> list[st
 def policy_name(config: StackConfig) -> str | None:
     """The name of the policy policy_node runs for ``config`` (as the fast path names it);
     None if it cannot be built here (policy_node then said why)."""
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable
 
     try:
-        return make_policy(config.controller, config.gait_dir or None, config.library_mode, config.policy_file or None,
-                           decision=config.decision,
-                           speed_integral=config.speed_integral).name
+        return config.build_policy().name
     except (PolicyUnavailable, ValueError, OSError):
         return None

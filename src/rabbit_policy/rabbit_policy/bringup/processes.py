@@ -71,9 +71,10 @@ class NodeProcesses:
 
 
 def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr,
-                      stop=lambda: False) -> RunReport:
+                      stop=lambda: False, policy: str | None = None) -> RunReport:
     """Start the nodes as processes, supervise the run here, stop them; returns the report.
-    ``stop()``: polled, true ends the run early."""
+    ``stop()``: polled, true ends the run early; ``policy``: its name for the report (built
+    from ``config`` here if not given)."""
     import rclpy
 
     from rabbit_msgs_py.runtime import make_executor
@@ -97,7 +98,7 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
                 rclpy.shutdown(context=context)
         if config.record:  # a failed recording is the cause whatever else it led to
             error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
-        return supervisor.report(error, policy_name(config))
+        return supervisor.report(error, policy or policy_name(config))
 
 
 def recording_error(exit_status: int, stats_file: str) -> str | None:

@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
 
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable
     from rabbit_policy.experiment.options import schedule_from_args
     from rabbit_policy.experiment.scenario import parse_pushes
     from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
@@ -149,8 +149,7 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
             if not is_bag_directory(Path(args.record)):
                 raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
-        make_policy(args.controller, args.gait_dir or None, args.library_mode,
-                    args.policy_file or None, speed_integral=args.speed_integral)
+        policy = config.build_policy().name  # once: a bad one is refused before any node starts
     except ValueError as exc:
         parser.error(str(exc))
     except PolicyUnavailable as exc:
@@ -174,7 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.in_process:
         report, _nodes = run_in_process(config, stop=stop)
     else:
-        report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop)
+        report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop, policy=policy)
     return _report_and_exit(report, config, args.json)
 
 
