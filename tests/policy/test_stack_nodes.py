@@ -936,7 +936,16 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
         assert stalled.done and stalled.stalled and stalled.stall_time == pytest.approx(3.001)
         result = stalled.result()
         assert result.stalled and result.times[-1] == pytest.approx(3.001)  # ends at the stall
-        for node in (late, stalled):
+
+        gappy = module.Supervisor(config, context=context)  # it missed the states around the stall (load)
+        for t in ticks:
+            if not 2.95 < t < 3.033:
+                gappy._on_state(_state(t, t))
+            if t == 1.0:
+                gappy._count_step(_step(t - 0.001))
+        time.sleep(0.3)
+        assert gappy.done and gappy.stall_time == 3.001  # dated at the tick the rule fired, not at 3.033
+        for node in (late, stalled, gappy):
             node.destroy_node()
 
 

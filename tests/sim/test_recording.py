@@ -18,6 +18,7 @@ from mcap_ros2.decoder import DecoderFactory
 
 from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS
+from rabbit_msgs_py.decision_ticks import PER_STEP
 from rabbit_msgs_py.runtime import NodeStartError
 from rabbit_policy.bringup.stack import StackConfig, run_in_process
 from rabbit_policy.experiment.scenario import Push
@@ -39,7 +40,7 @@ def recorded(request, tmp_path_factory):
     # for; with decisions every N ticks one can fall on the very last state, after the
     # recording stopped (docs/recording.md)
     config = StackConfig(duration=duration, schedule=((0.0, 0.9), (duration / 2, 1.1)), record=str(bag),
-                         record_compression=request.param, pushes=pushes, decision_period=0)
+                         record_compression=request.param, pushes=pushes, decision=PER_STEP)
     report, nodes = run_in_process(config)
     assert report.completed and not report.fell
     return bag, nodes, request.param

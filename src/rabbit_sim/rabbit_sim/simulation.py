@@ -64,6 +64,15 @@ class StopRules:
         """True when no touchdown came for more than ``stall_after`` s (times in s)."""
         return time - last_touchdown > self.stall_after
 
+    def stall_time(self, last_touchdown: float, tick: float = 0.001) -> float:
+        """The sim time (s, on the ns grid) of the first tick at which :meth:`stalled` holds
+        after a touchdown at ``last_touchdown``: where a walk that saw every state declares
+        the stall (the stack's supervisor, which may miss states, dates it so too)."""
+        n = math.floor((last_touchdown + self.stall_after) / tick)
+        while not self.stalled(round(n * tick, 9), last_touchdown):
+            n += 1
+        return round(n * tick, 9)
+
 
 class TorqueDelay:
     """Torques applied ``ticks`` ticks after they were computed, until then the first ones

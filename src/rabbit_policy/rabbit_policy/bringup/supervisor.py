@@ -201,7 +201,9 @@ class Supervisor(Node):
         if self._pending_step is not None and t > self._pending_step:
             self._last_step_time, self._pending_step = t, None
         if not self.stalled and self._suspected is None and self.config.rules.stalled(t, self._last_step_time):
-            self._suspected = (t, now)  # a stall, unless a late touchdown event says otherwise (EVENT_GRACE)
+            # a stall, unless a late touchdown event says otherwise (EVENT_GRACE), dated at the tick the rule
+            # fired, not at the state this node happened to see first (it may miss states)
+            self._suspected = (self.config.rules.stall_time(self._last_step_time), now)
         self._settle(now)
 
     def result(self) -> WalkResult:
@@ -223,7 +225,9 @@ class Supervisor(Node):
             i = int(np.searchsorted(times, stamp + 1e-9, side="right"))
             if i < len(times):  # (a switch on the last state: that tick was never simulated)
                 touchdowns.append(Touchdown(round(stamp + TICK_NS * 1e-9, 9), float("nan"), float(xs[i])))
-        return WalkResult(scenario=scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
+        # the physics halts at the fall: the last state received (the newest always arrives) is the fall's
+        fall_time = max(self.fall_time, self.sim_time) if self.fell and self.fall_time is not None else self.fall_time
+        return WalkResult(scenario=scenario, fell=self.fell, fall_time=fall_time, stalled=self.stalled,
                           stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,
                           planned_duration=round(on_tick_grid(config.duration) - t0, 9))  # t0: the first state seen
