@@ -11,17 +11,11 @@ from rabbit_hzd_controller.gait_sync import Answer, GaitSync, Log, Repeat
 from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
+from fake_clock import FakeClock
+
 pytestmark = pytest.mark.unit
 
 MS = 1_000_000  # ns
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 @pytest.fixture(scope="module")

@@ -15,19 +15,13 @@ from rabbit_sim.stepping import (
     RECORDER_LAG, SILENCE_WARNING_AFTER, Fallen, Log, Placed, PushApplied, SimDriver, State, TorquePublishers,
     silence_cause)
 
+from fake_clock import FakeClock
+
 pytestmark = pytest.mark.unit
 
 MS = 1_000_000  # ns
 C = "hzd_controller_node/cccc"
 ZERO = [0.0] * 4
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 @pytest.fixture(scope="module")

@@ -15,17 +15,9 @@ from rabbit_sim.stepping import (
     Admit, ControllerPairing, LatenessMonitor, Lockstep, Pacer, RealtimeClock, RecorderGate, Reply, TickStatistics,
     Watchdog, WatchdogEvent)
 
+from fake_clock import FakeClock
+
 pytestmark = pytest.mark.unit
-
-
-class FakeClock:
-    """A settable wall clock (s) for rules that read the time."""
-
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
 
 
 A, B = "hzd_controller_node/aaaa", "hzd_controller_node/bbbb"  # two controller instances
