@@ -117,10 +117,6 @@ class Lockstep:
         torques, self.held_torques = self.held_torques, None
         return torques
 
-    def waited(self) -> float:
-        """Wall s since the due state went out (0 if nothing is due)."""
-        return self.clock() - self.last_publish if self.due is not None else 0.0
-
     def resend_due(self, paused: bool) -> float | None:
         """Seconds waited if the due reply is overdue (the state should go out again, and
         this counts a resend), else None."""
