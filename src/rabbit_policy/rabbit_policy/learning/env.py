@@ -62,7 +62,12 @@ v_d + gain x the memory's integral (index 3, then bounded so that the offset sta
 | ``reward_alive`` | ``alive_bonus`` per env step that did not end the episode (0 by default): a survival term, so that a fall forfeits the rest of the episode's bonus and a survived push pays more than its tracking costs |
 
 The reward is their sum. ``info`` also holds ``desired_speed``, ``mean_speed`` (m/s), ``fell``,
-``stalled``, ``rejected`` and ``time`` (sim s).
+``stalled``, ``rejected``, ``time`` (sim s) and ``privileged`` (also in the reset's info): the
+state a critic may see and the policy may not (:data:`PRIVILEGED_STATE`, in that order: the body
+state, the hip height (m), the time since the last touchdown (s), the push acting now (N, world
+x), the episode's push impulse (N s, signed; 0 without one) and whether it is still to come, the
+foot friction, the torso mass scale, the ``drives`` variant (1) and the torque delay (s)). PPO's
+privileged critic reads it (:mod:`rabbit_policy.learning.ppo`).
 
 ## Starting state and episodes
 
@@ -143,6 +148,15 @@ from rabbit_sim.simulation import StopRules
 START_ATTEMPTS = 10
 """Scenarios drawn at a reset until the starting gait's first step completes (about 1 in 750
 robust draws stalls there: 0.72 m/s on friction 0.4); the episodes are those that start."""
+
+PRIVILEGED_STATE = ("torso_pitch", "torso_pitch_rate", "phase", "phase_rate", "hip_velocity", "hip_height",
+                    "since_touchdown", "push_force", "push_impulse", "push_pending", "friction",
+                    "torso_mass_scale", "drives", "torque_delay")
+"""The entries of ``info["privileged"]`` (see Rewards): rad, rad/s, 1, 1/s, m/s, m, s, N, N s,
+0/1, 1, 1, 0/1, s."""
+
+PACKAGED_FRICTION = 0.8
+"""The packaged foot friction coefficient (``ModelOptions.friction`` None)."""
 
 DEFAULT_MAX_STEPS = MAX_EPISODE_STEPS
 """Env steps per episode unless the spec (``max_episode_steps``) or ``max_steps`` says otherwise."""
@@ -476,7 +490,18 @@ class RabbitHZDEnv(gym.Env):
                               else self.bounds.to_normalised(np.append(gait.free, gait.kd)))
         if self.render_mode == "human":
             self.render()
-        return self._observation(), {"desired_speed": self.desired_speed}
+        return self._observation(), {"desired_speed": self.desired_speed, "privileged": self.privileged_state()}
+
+    def privileged_state(self) -> np.ndarray:
+        """The episode's state a critic may see (:data:`PRIVILEGED_STATE`, float32)."""
+        loop = self._loop
+        scenario, sim = loop.scenario, loop.sim
+        model = scenario.model
+        since = loop.time - (loop.touchdowns[-1].time if loop.touchdowns else loop.start_time)
+        return np.array((*loop.body_state(), float(loop.data.qpos[1]), since, sim.push_wrench[0], self._push_impulse,
+                         float(self._push_impulse != 0.0 and sim.pushes_started == 0),
+                         PACKAGED_FRICTION if model.friction is None else model.friction, model.torso_mass_scale,
+                         float(model.variant == "drives"), scenario.torque_delay), dtype=np.float32)
 
     def _draw_scenario(self) -> Scenario:
         """This episode's scenario: the commands, a push, the model and the delay (drawn
@@ -491,6 +516,7 @@ class RabbitHZDEnv(gym.Env):
                 schedule.append((t, speed))
                 t, speed = t + float(rng.uniform(*d.command_interval)), float(rng.uniform(lo, hi))
         pushes, phase_pushes = (), ()
+        self._push_impulse = 0.0
         if d.push_probability > 0.0 and rng.random() < d.push_probability and horizon > 2.0:
             time = float(rng.uniform(1.0, horizon - 1.0))
             if d.relative_impulse:
@@ -506,6 +532,7 @@ class RabbitHZDEnv(gym.Env):
                                           d.push_duration),)
             else:
                 pushes = (Push(time, impulse / d.push_duration, d.push_duration),)
+            self._push_impulse = impulse
         model = ModelOptions(d.variants[int(rng.integers(len(d.variants)))],
                              friction=d.frictions[int(rng.integers(len(d.frictions)))],
                              torso_mass_scale=d.torso_mass_scales[int(rng.integers(len(d.torso_mass_scales)))])
@@ -545,7 +572,8 @@ class RabbitHZDEnv(gym.Env):
         reward = terms["reward_tracking"] + terms["reward_fall"] + terms["reward_alive"]
         truncated = not terminated and self._steps >= self.max_steps
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
-                "stalled": stalled, "rejected": rejected, "time": self._loop.time, **terms}
+                "stalled": stalled, "rejected": rejected, "time": self._loop.time,
+                "privileged": self.privileged_state(), **terms}
         if self.distribution.command_interval is None and self._steps == self._switch_step:  # the paper's change
             self.desired_speed = self._next_speed
             self._loop.set_command(self._next_speed)
