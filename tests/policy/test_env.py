@@ -193,7 +193,7 @@ def test_determinism_for_a_seed():
 
 @pytest.mark.slow
 def test_warm_started_network_reproduces_the_library_and_walks():
-    from rabbit_policy.runtime.network import HZDPolicyNet, act
+    from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward
     from rabbit_policy.runtime.speed_window import Observation
     from dataclasses import replace
 
@@ -203,15 +203,15 @@ def test_warm_started_network_reproduces_the_library_and_walks():
     net = HZDPolicyNet(env.bounds.low, env.bounds.high)
     warm_start(net, env.library, seed=0, config=replace(WARM_STARTS["scheduled"], iterations=4000))
     for v in (0.8, 1.0, 1.4):  # away from the steps of the nearest-gait staircase (and v + 0.3 too)
-        error = np.abs(act(net, Observation(v, v, 0.0)) - library_targets(env.library, np.array([v]))[0])
+        error = np.abs(NetworkForward.of(net)(Observation(v, v, 0.0)) - library_targets(env.library, np.array([v]))[0])
         assert error[:20].max() < 0.06  # rad (a fit: its last digits vary with torch threads)
         # measured 0.5 m/s above the command: the gait 0.2 m/s below the measured speed
-        error = np.abs(act(net, Observation(v, v + 0.5, -0.5)) - library_targets(
+        error = np.abs(NetworkForward.of(net)(Observation(v, v + 0.5, -0.5)) - library_targets(
             env.library, np.array([v]), np.array([v + 0.5]))[0])
         assert error[:20].max() < 0.05  # rad
     obs, _info = env.reset(seed=2)
     for _ in range(20):
-        obs, _r, terminated, truncated, info = env.step(env.bounds.to_normalised(act(net, Observation(*obs.astype(float)))))
+        obs, _r, terminated, truncated, info = env.step(env.bounds.to_normalised(NetworkForward.of(net)(Observation(*obs.astype(float)))))
         assert not terminated and not info["rejected"]
     assert truncated
 
@@ -328,7 +328,7 @@ def test_a_memory_policy_runs_in_the_closed_loop_and_starts_every_walk_afresh():
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.scenario import Scenario
     from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
-    from rabbit_policy.runtime.network import HZDPolicyNet, act, widen_inputs
+    from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, widen_inputs
     from rabbit_policy.runtime.policies import NetworkPolicy
     from rabbit_policy.runtime.speed_window import Observation
 
@@ -337,7 +337,8 @@ def test_a_memory_policy_runs_in_the_closed_loop_and_starts_every_walk_afresh():
     wide = widen_inputs(paper, 25)
     policy = NetworkPolicy(wide, decision_period=20, memory=SpeedMemory(MemoryConfig.for_period(20)))
     observation = Observation(1.0, 0.95, 0.05)
-    assert np.allclose(act(paper, observation), act(wide, policy.memory.inputs(observation.as_tuple())), atol=1e-6)
+    assert np.allclose(NetworkForward.of(paper)(observation), NetworkForward.of(wide)(policy.memory.inputs(observation.as_tuple())),
+                       atol=1e-6)
     first = walk(policy, Scenario.constant(1.0), 2.0)
     integral = policy.memory.integral
     second = walk(policy, Scenario.constant(1.0), 2.0)

@@ -392,3 +392,31 @@ def test_policy_node_takes_a_speed_schedule_checked_as_walk_pys():
                           ("2-1.2", "time:speed")):
         with pytest.raises(ValueError, match=message):
             speed_schedule(text, 1.0)
+
+
+@pytest.mark.parametrize("output, inputs", [("sigmoid", 3), ("clip", 25), ("tanh", 30)])
+def test_the_numpy_forward_pass_is_torchs_within_float32_rounding(output, inputs):
+    """Issue 38 item 2: the network decides without torch; every output within 1e-6 of its
+    range of torch's, on random weights (large enough to reach the clip and saturations)."""
+    import torch
+
+    from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward
+
+    rng = np.random.default_rng(inputs)
+    low = rng.uniform(-1.5, 0.0, 21)
+    high = low + rng.uniform(0.1, 150.0, 21)
+    torch.manual_seed(inputs)
+    net = HZDPolicyNet(low, high, output=output, inputs=inputs)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.mul_(3.0)
+    forward = NetworkForward.of(net)
+    x = (rng.normal(size=(500, inputs)) * net.scale.numpy() * 2 + net.offset.numpy()).astype(np.float32)
+    with torch.no_grad():
+        expected = net(torch.as_tensor(x)).numpy().astype(float)
+    got = np.array([forward(row) for row in x])
+    assert np.max(np.abs(got - expected) / (high - low)) < 1e-6
+    with torch.no_grad():
+        for p in net.parameters():
+            p.zero_()
+    assert np.array_equal(forward(x[0]), got[0])  # a snapshot: the network's later weights do not reach it

@@ -27,7 +27,7 @@ import torch
 from rabbit_msgs_py.cli import option
 from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
-from rabbit_policy.runtime.network import HZDPolicyNet
+from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward
 
 
 @dataclass(frozen=True)
@@ -120,15 +120,15 @@ def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, episode: Episode) -> Ro
     seed, first, second = episode
     obs, _info = env.reset(seed=seed, options={"desired_speed": first, "next_speed": second})
     total, steps, abs_error = 0.0, 0, 0.0
-    with torch.no_grad():
-        while True:
-            action = net(torch.as_tensor(obs, dtype=torch.float32)).numpy()  # physical units
-            obs, reward, terminated, truncated, info = env.step(env.bounds.to_normalised(action))
-            total += reward
-            steps += 1
-            abs_error += abs(info["mean_speed"] - info["desired_speed"])
-            if terminated or truncated:
-                return Rollout(total, steps, abs_error, terminated)
+    forward = NetworkForward.of(net)  # numpy per step, not torch
+    while True:
+        action = forward(obs)  # physical units
+        obs, reward, terminated, truncated, info = env.step(env.bounds.to_normalised(action))
+        total += reward
+        steps += 1
+        abs_error += abs(info["mean_speed"] - info["desired_speed"])
+        if terminated or truncated:
+            return Rollout(total, steps, abs_error, terminated)
 
 
 def _evaluate(args: tuple[EnvKey, np.ndarray, list[Episode]]) -> list[Rollout]:

@@ -241,7 +241,9 @@ def packaged_policy_file() -> Path:
 
 class NetworkPolicy:
     """An HZD-RL network in memory (``HZDPolicyNet``): observation -> 20 free
-    coefficients + Kd -> (alpha, Kd). Training evaluates its current network with it.
+    coefficients + Kd -> (alpha, Kd), decided by a numpy snapshot of the weights at construction
+    (:class:`~.network.NetworkForward`: build another policy after they change; training
+    builds one per evaluation).
     ``decision_period`` > 0: the network was trained to decide every that many ticks (the
     loops that run it read it, as for a :class:`PeriodicPolicy`). ``memory``: a network with
     :mod:`.memory`'s inputs keeps its integral and last action here (:meth:`reset` at the
@@ -255,7 +257,10 @@ class NetworkPolicy:
                  base: Policy | None = None) -> None:
         if base is not None and residual is None:
             raise ValueError("a base policy is what a residual adds to: give the residual too")
+        from rabbit_policy.runtime.network import NetworkForward
+
         self.net = net
+        self.forward = NetworkForward.of(net)  # numpy per decision; a snapshot of the weights now
         self.name = name
         self.memory = memory
         self.residual = residual
@@ -289,18 +294,16 @@ class NetworkPolicy:
 
     def _remember(self, action: np.ndarray) -> None:
         """Record the network-side action (physical units) in the memory, normalised to its bounds."""
-        low, high = self.net.low.numpy().astype(float), self.net.high.numpy().astype(float)
+        low, high = self.forward.low.astype(float), self.forward.high.astype(float)
         self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
 
     def act(self, observation: Observation) -> GaitCommand:
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 
-        from rabbit_policy.runtime.network import act
-
         if self.memory is None:
-            action = act(self.net, observation.as_tuple())
+            action = self.forward(observation.as_tuple())
         else:
-            action = act(self.net, self.memory.inputs(observation.as_tuple(), observation.body))
+            action = self.forward(self.memory.inputs(observation.as_tuple(), observation.body))
             self._remember(action)
         if self.base is not None:
             from rabbit_hzd_controller.alpha import reduce_alpha
