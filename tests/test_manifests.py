@@ -19,7 +19,9 @@ ROSDEP_KEYS = {
     # Python modules from PyPI / Debian -> rosdep keys
     # (keys as ros/rosdistro's rosdep/python.yaml names them: *-pip where only pip has it;
     # mcap has no key of its own, mcap-ros2-support installs it)
-    "numpy": "python3-numpy", "mujoco": "python3-mujoco-pip", "PIL": "python3-pil",
+    "numpy": "python3-numpy", "numba": "python3-numba",
+    "llvmlite": "python3-numba",  # numba's own compiler binding: no key of its own, numba's package brings it
+    "mujoco": "python3-mujoco-pip", "PIL": "python3-pil",
     "matplotlib": "python3-matplotlib", "torch": "python3-torch", "gymnasium": "python3-gymnasium-pip",
     "rosbags": "python3-rosbags-pip", "yaml": "python3-yaml", "tqdm": "python3-tqdm", "mcap": "mcap-ros2-support",
     # ROS 2 packages: the key is the package name

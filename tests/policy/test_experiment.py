@@ -161,11 +161,21 @@ def test_stall_ends_the_walk_and_is_reported():
 
 @pytest.mark.sim
 def test_a_torque_delay_applies_each_tick_s_torques_that_much_later():
+    import copy
+
     delayed = ClosedLoop(Scenario.constant(1.0, torque_delay=0.005), CLASSIC)
-    computed, applied = [], []
-    compute = delayed.controller.compute
-    delayed.controller.compute = lambda q, dq: computed.append(compute(q, dq)) or computed[-1]
-    delayed.observer = lambda lp, t: applied.append(list(t))
+
+    def next_torques(lp: ClosedLoop) -> list[float]:
+        """What the controller computes on the next tick (a copy of it, on this state)."""
+        return copy.deepcopy(lp.controller).compute(lp.data.qpos, lp.data.qvel)
+
+    computed, applied = [next_torques(delayed)], []
+
+    def observe(lp: ClosedLoop, torques) -> None:
+        applied.append(list(torques))
+        computed.append(next_torques(lp))
+
+    delayed.observer = observe
     delayed.run(max_ticks=40)
     assert applied[:5] == [computed[0]] * 5  # the first torques, held over the 5 ms
     assert applied[5:] == computed[:35]  # then each tick's torques, 5 ticks later

@@ -1,9 +1,9 @@
 """The HZD controller: virtual constraints tracked by a PD law, with stance switching.
 
 One call of :meth:`HZDController.compute` is one 1 kHz control tick: joint state in,
-four joint torques out. It is written in plain Python floats (no numpy on the hot path,
-see ``scripts/bench_sim.py``) and is the very same code the ROS node, the Gymnasium
-environment, the gait optimizer and the benchmarks run.
+four joint torques out, computed by the compiled law (:mod:`.law`, numba) on the
+controller's state arrays: the very same code the ROS node, the Gymnasium environment, the
+gait optimizer, the benchmarks and the ROS-free loop's compiled inner loop run.
 
 Joint state order (the model's ``qpos``/``qvel`` order, also the ``/joint_states`` order):
 ``JOINT_NAMES = (x, z, torso_pitch, left_hip, left_knee, right_hip, right_knee)``; x, z
@@ -24,13 +24,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
-from math import cos, isfinite, sin
+from math import isfinite
 from typing import Sequence
 
 import numpy as np
 
 from .alpha import N_ALPHA, OUTPUTS, alpha_matrix, impact_violation
 from .bezier import bezier, bezier_derivative
+from . import law
 from .kinematics import LegGeometry, foot_from_hip
 from .phase import PhaseBounds, phase_bounds_from_alpha
 
@@ -118,19 +119,6 @@ class ControllerConfig:
             raise ValueError("ControllerConfig.tick must be finite and > 0 (s)")
 
 
-@dataclass(frozen=True)
-class _Outputs:
-    """Pre-digested alpha for the hot path: per output, the 6 coefficients and the 5
-    scaled differences ``M (a[k+1] - a[k])`` of the derivative polynomial."""
-
-    alpha: tuple[float, ...]
-    coeffs: tuple[tuple[float, ...], ...]
-    diffs: tuple[tuple[float, ...], ...]
-    bounds: PhaseBounds
-    p_plus: float  # bounds.p_plus and bounds.span as plain attributes (span is a property)
-    span: float
-
-
 def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarray:
     """Return ``alpha`` as a float 24-vector, or raise ``ValueError`` saying what is wrong:
     wrong size, non-finite entries, impact equalities violated, or no forward step."""
@@ -181,34 +169,30 @@ def infer_stance(q: Sequence[float], geometry: LegGeometry | None = None) -> Leg
     return Leg.LEFT if left[0] >= right[0] else Leg.RIGHT
 
 
-_BlendState = tuple[float, tuple[float, ...], tuple[float, ...], float]
-"""A blend in progress: (phase at its start, position offsets rad, rate offsets rad per
-unit phase, length in phase)."""
-
-
-def _blend_shape(r: float, length: float) -> tuple[float, float, float, float]:
-    """The blend's shape functions at ``r`` = (phase - start) / length, clamped to [0, 1]:
-    w = 1 - smoothstep(r) carries the position offsets (w(0) = 1, w'(0) = w(1) = w'(1) = 0),
-    h = length r (1 - r)^2 the rate offsets (h(0) = 0, dh/dphase(0) = 1, h(1) = h'(1) = 0);
-    returns (w, dw/dphase, h, dh/dphase)."""
-    r = 0.0 if r < 0.0 else 1.0 if r > 1.0 else r
-    u = 1.0 - r
-    return 1.0 - r * r * (3.0 - 2.0 * r), -6.0 * r * u / length, length * r * u * u, u * (1.0 - 3.0 * r)
-
-
-def _digest(alpha: np.ndarray, config: ControllerConfig) -> _Outputs:
+def _slot(alpha: np.ndarray, config: ControllerConfig) -> np.ndarray:
+    """A validated alpha as a gait slot of :mod:`.law`: the 4 outputs' coefficients, p_plus,
+    p_minus, span."""
     m = alpha_matrix(alpha)
-    coeffs = tuple(tuple(float(v) for v in m[:, j]) for j in range(4))
-    diffs = tuple(tuple(5.0 * (c[k + 1] - c[k]) for k in range(5)) for c in coeffs)
     bounds = phase_bounds_from_alpha(alpha, config.geometry)
-    return _Outputs(
-        alpha=tuple(float(v) for v in alpha),
-        coeffs=coeffs,
-        diffs=diffs,
-        bounds=bounds,
-        p_plus=bounds.p_plus,
-        span=bounds.span,
-    )
+    row = np.empty(law.SLOT_SIZE)
+    row[:law.COEFFS] = m.T.reshape(-1)  # output-major
+    row[law.P_PLUS], row[law.P_MINUS], row[law.SPAN] = bounds.p_plus, bounds.p_minus, bounds.span
+    return row
+
+
+def _config_array(config: ControllerConfig) -> np.ndarray:
+    cfg = np.empty(law.CONFIG_SIZE)
+    cfg[law.KP], cfg[law.TORQUE_LIMIT] = config.kp, config.torque_limit
+    cfg[law.FEMUR], cfg[law.TIBIA] = config.geometry.femur, config.geometry.tibia
+    cfg[law.TOUCHDOWN_MIN_PHASE], cfg[law.TOUCHDOWN_HEIGHT] = config.touchdown_min_phase, config.touchdown_height
+    cfg[law.BLEND_PHASE], cfg[law.WITHIN_STEP_BLEND] = config.blend_phase, config.within_step_blend
+    cfg[law.MIN_PHASE_RATE], cfg[law.TICK] = config.min_phase_rate, config.tick
+    cfg.setflags(write=False)
+    return cfg
+
+
+_ALPHA_ORDER = np.arange(law.COEFFS).reshape(4, 6).T.reshape(-1)
+"""Slot entries in alpha's order (coefficient-major): ``alpha = slot[_ALPHA_ORDER]``."""
 
 
 class HZDController:
@@ -220,6 +204,10 @@ class HZDController:
     :meth:`queue_kd` holds it to the next touchdown like alpha (a gait decided for the
     next step, as the policy node and the learning environment use it). :meth:`apply_now`
     makes a gait active within the step, its outputs blended in from the ones in force.
+
+    The state lives in :mod:`.law`'s arrays (``arrays``): :meth:`compute` runs the compiled
+    law on them, and the ROS-free loop's compiled inner loop runs the same law on the same
+    arrays between its Python events.
     """
 
     def __init__(
@@ -230,33 +218,53 @@ class HZDController:
         stance: Leg = Leg.LEFT,
     ) -> None:
         self.config = config or ControllerConfig()
+        self._state = np.zeros(law.STATE_SIZE)
+        self._gaits = np.zeros((3, law.SLOT_SIZE))
+        self._torques = np.zeros(4)
         self.reset(alpha, kd, stance)
+
+    @property
+    def config(self) -> ControllerConfig:
+        """The fixed parameters (setting them anew takes effect from the next tick)."""
+        return self._config
+
+    @config.setter
+    def config(self, config: ControllerConfig) -> None:
+        self._config = config
+        self._cfg = _config_array(config)
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(cfg, state, gaits): what :func:`.law.control` takes (the state and gaits are live)."""
+        return self._cfg, self._state, self._gaits
 
     # ------------------------------------------------------------------ state
     def reset(self, alpha: Sequence[float], kd: float, stance: Leg = Leg.LEFT) -> None:
         """Make ``alpha`` active immediately, set ``kd`` and the stance leg, zero counters."""
-        self._active = _digest(validate_alpha(alpha, self.config), self.config)
-        self._pending: _Outputs | None = None
-        self._pending_kd: float | None = None
-        self.kd = validate_kd(kd, self.config)
-        self.stance = Leg(stance)
-        self.steps = 0
-        self.tau = 0.0
-        self.tau_rate = 0.0  # d tau / dt (1/s) at the last compute
-        self.touchdown = False
-        self._replaced: _Outputs | None = None  # the gait a touchdown (or apply_now) just replaced
-        self._replaced_blend: _BlendState | None = None  # its blend then, if any
-        self._blend: _BlendState | None = None
-        self._blend_length = self.config.blend_phase  # of the next blend to start
+        self._put(law.ACTIVE, validate_alpha(alpha, self.config))
+        s = self._state
+        s[:] = 0.0
+        s[law.PENDING_KD] = np.nan
+        s[law.KD] = validate_kd(kd, self.config)
+        s[law.STANCE] = float(Leg(stance))
+        s[law.NEXT_BLEND_LENGTH] = self.config.blend_phase
+
+    def _put(self, slot: int, alpha: np.ndarray) -> None:
+        """Write a validated alpha into a gait slot."""
+        self._gaits[slot] = _slot(alpha, self.config)
+
+    def _slot_alpha(self, slot: int) -> tuple[float, ...]:
+        return tuple(self._gaits[slot, _ALPHA_ORDER].tolist())
 
     def set_alpha(self, alpha: Sequence[float]) -> None:
         """Queue ``alpha`` to take effect at the next touchdown (raises ``ValueError``).
         The gait that would be in force anyway (a policy repeating itself) is not
         validated and digested again."""
-        in_force = self._pending if self._pending is not None else self._active
-        if isinstance(alpha, tuple) and alpha == in_force.alpha:
+        in_force = law.PENDING if self._state[law.HAS_PENDING] else law.ACTIVE
+        if isinstance(alpha, tuple) and alpha == self._slot_alpha(in_force):
             return
-        self._pending = _digest(validate_alpha(alpha, self.config), self.config)
+        self._put(law.PENDING, validate_alpha(alpha, self.config))
+        self._state[law.HAS_PENDING] = 1.0
 
     def apply_now(self, alpha: Sequence[float], kd: float | None = None) -> None:
         """Make ``alpha`` (and ``kd`` if given) active from the next tick, within the step:
@@ -267,221 +275,129 @@ class HZDController:
         :meth:`set_alpha` and :meth:`queue_kd`). Raises ``ValueError`` (and changes nothing)
         for a bad alpha or Kd."""
         new_kd = None if kd is None else validate_kd(kd, self.config)
-        if self.tau >= self.config.within_step_until:
+        s = self._state
+        if s[law.TAU] >= self.config.within_step_until:
             self.set_alpha(alpha)
             if new_kd is not None:
-                self._pending_kd = new_kd
+                s[law.PENDING_KD] = new_kd
             return
-        self._pending = None
-        if not (isinstance(alpha, tuple) and alpha == self._active.alpha):
-            digested = _digest(validate_alpha(alpha, self.config), self.config)
+        s[law.HAS_PENDING] = 0.0
+        if not (isinstance(alpha, tuple) and alpha == self._slot_alpha(law.ACTIVE)):
+            valid = validate_alpha(alpha, self.config)
             if self.config.within_step_blend > 0.0:
-                self._replaced, self._replaced_blend = self._active, self._blend
-                self._blend_length = self.config.within_step_blend
+                self._gaits[law.REPLACED] = self._gaits[law.ACTIVE]
+                s[law.HAS_REPLACED] = 1.0
+                blend, replaced = slice(law.BLEND, law.BLEND + law.BLEND_SIZE), slice(
+                    law.REPLACED_BLEND, law.REPLACED_BLEND + law.BLEND_SIZE)
+                s[replaced] = s[blend]
+                s[law.HAS_REPLACED_BLEND] = s[law.HAS_BLEND]
+                s[law.NEXT_BLEND_LENGTH] = self.config.within_step_blend
             else:  # at once: the new gait's own outputs from the next tick
-                self._replaced = self._replaced_blend = self._blend = None
-            self._active = digested
+                s[law.HAS_REPLACED] = s[law.HAS_REPLACED_BLEND] = s[law.HAS_BLEND] = 0.0
+            self._put(law.ACTIVE, valid)
         if new_kd is not None:
-            self.kd = new_kd
-            self._pending_kd = None
+            s[law.KD] = new_kd
+            s[law.PENDING_KD] = np.nan
 
     def set_kd(self, kd: float) -> None:
         """Set the derivative gain, effective at the next tick (raises ``ValueError``)."""
-        self.kd = validate_kd(kd, self.config)
+        self._state[law.KD] = validate_kd(kd, self.config)
 
     def queue_kd(self, kd: float) -> None:
         """Queue the derivative gain for the next touchdown (raises ``ValueError``)."""
-        self._pending_kd = validate_kd(kd, self.config)
+        self._state[law.PENDING_KD] = validate_kd(kd, self.config)
+
+    @property
+    def kd(self) -> float:
+        """The derivative gain in force (N m s/rad); setting it is :meth:`set_kd`."""
+        return float(self._state[law.KD])
+
+    @kd.setter
+    def kd(self, kd: float) -> None:
+        self.set_kd(kd)
 
     @property
     def pending_kd(self) -> float | None:
         """Derivative gain waiting for the next touchdown, if any."""
-        return self._pending_kd
+        value = float(self._state[law.PENDING_KD])
+        return None if value != value else value
 
     @property
     def alpha(self) -> tuple[float, ...]:
         """The active 24 coefficients."""
-        return self._active.alpha
+        return self._slot_alpha(law.ACTIVE)
 
     @property
     def pending_alpha(self) -> tuple[float, ...] | None:
         """Coefficients waiting for the next touchdown, if any."""
-        return None if self._pending is None else self._pending.alpha
+        return self._slot_alpha(law.PENDING) if self._state[law.HAS_PENDING] else None
 
     @property
     def bounds(self) -> PhaseBounds:
         """Phase bounds of the active gait."""
-        return self._active.bounds
+        row = self._gaits[law.ACTIVE]
+        return PhaseBounds(float(row[law.P_PLUS]), float(row[law.P_MINUS]))
+
+    @property
+    def stance(self) -> Leg:
+        """The stance leg."""
+        return Leg(int(self._state[law.STANCE]))
+
+    @property
+    def steps(self) -> int:
+        """Touchdowns since the last :meth:`reset`."""
+        return int(self._state[law.STEPS])
+
+    @steps.setter
+    def steps(self, value: int) -> None:
+        self._state[law.STEPS] = float(value)
+
+    @property
+    def tau(self) -> float:
+        """The phase at the last :meth:`compute` (0..1)."""
+        return float(self._state[law.TAU])
+
+    @tau.setter
+    def tau(self, value: float) -> None:
+        self._state[law.TAU] = float(value)
+
+    @property
+    def tau_rate(self) -> float:
+        """d tau / dt (1/s) at the last :meth:`compute`."""
+        return float(self._state[law.TAU_RATE])
+
+    @property
+    def touchdown(self) -> bool:
+        """Whether the last :meth:`compute` switched stance."""
+        return bool(self._state[law.TOUCHDOWN])
 
     # --------------------------------------------------------------- hot path
     def compute(self, q: Sequence[float], dq: Sequence[float]) -> list[float]:
         """One control tick: joint positions ``q`` and velocities ``dq`` (7 each, in
-        ``JOINT_NAMES`` order) -> torques (N m) in ``ACTUATED_JOINTS`` order."""
-        cfg = self.config
-        geometry = cfg.geometry
-        lf = geometry.femur
-        lt = geometry.tibia
-        min_phase = cfg.touchdown_min_phase
-        pitch = q[2]
-        dpitch = dq[2]
-        self.touchdown = False
-        for _ in range(2):
-            if self.stance is _LEFT:
-                sh, sk, wh, wk = q[3], q[4], q[5], q[6]
-            else:
-                sh, sk, wh, wk = q[5], q[6], q[3], q[4]
-            out = self._active
-            span = out.span
-            phi_f = sh - pitch
-            phi_t = phi_f - sk
-            p_hip = -(lf * sin(phi_f) + lt * sin(phi_t))
-            s = (p_hip - out.p_plus) / span
-            if s < min_phase or self.touchdown:
-                break
-            sw_f = wh - pitch
-            swing_height = q[1] - lf * cos(sw_f) - lt * cos(sw_f - wk)
-            if swing_height > cfg.touchdown_height:
-                break
-            self._switch_stance()
-
-        if self.stance is _LEFT:
-            dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
-        else:
-            dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
-        if s <= 0.0:
-            t = 0.0
-            dtau = 0.0
-        elif s >= 1.0:
-            t = 1.0
-            dtau = 0.0
-        else:
-            t = s
-            dphi_f = dsh - dpitch
-            dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
-            dtau = dp_hip / span
-        if cfg.min_phase_rate:  # off by default: one attribute read on the hot path
-            t, dtau = self._phase_in_time(t, dtau)
-        self.tau = t
-        self.tau_rate = dtau
-        if self._replaced is not None:
-            self._start_blend(t, (sh, sk, wh, wk), p_hip)
-
-        # Bernstein bases of degree 5 (values) and 4 (derivative).
-        u = 1.0 - t
-        t2 = t * t
-        t3 = t2 * t
-        u2 = u * u
-        u3 = u2 * u
-        b0 = u3 * u2
-        b1 = 5.0 * t * u2 * u2
-        b2 = 10.0 * t2 * u3
-        b3 = 10.0 * t3 * u2
-        b4 = 5.0 * t3 * t * u
-        b5 = t3 * t2
-        c0 = u2 * u2
-        c1 = 4.0 * t * u3
-        c2 = 6.0 * t2 * u2
-        c3 = 4.0 * t3 * u
-        c4 = t2 * t2
-
-        kp = cfg.kp
-        kd = self.kd
-        limit = cfg.torque_limit
-        torques = []
-        blend = self._blend
-        if blend is None:
-            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy in zip(
-                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk)):
-                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
-                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
-                tq = kp * (yd - y) + kd * (dyd - dy)
-                torques.append(limit if tq > limit else -limit if tq < -limit else tq)
-        else:  # the same law on the blended outputs y_d + c(tau) (see _blend_shape)
-            r = (t - blend[0]) / blend[3]
-            if r >= 1.0:
-                self._blend = None
-            w, dw, h, dh = _blend_shape(r, blend[3])
-            for (a0, a1, a2, a3, a4, a5), (d0, d1, d2, d3, d4), y, dy, off, rate in zip(
-                    out.coeffs, out.diffs, (sh, sk, wh, wk), (dsh, dsk, dwh, dwk), blend[1], blend[2]):
-                yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w + rate * h
-                dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4 + off * dw + rate * dh) * dtau
-                tq = kp * (yd - y) + kd * (dyd - dy)
-                torques.append(limit if tq > limit else -limit if tq < -limit else tq)
-        if self.stance is _LEFT:
-            return torques
-        return [torques[2], torques[3], torques[0], torques[1]]
+        ``JOINT_NAMES`` order) -> torques (N m) in ``ACTUATED_JOINTS`` order
+        (:func:`.law.control`, compiled)."""
+        law.control(self._cfg, self._state, self._gaits, np.asarray(q, dtype=np.float64),
+                    np.asarray(dq, dtype=np.float64), self._torques)
+        return self._torques.tolist()
 
     def reference(self) -> tuple[list[float], list[float]]:
         """The desired outputs of the last :meth:`compute` (off the hot path, for plotting):
         (y_d in rad, dy_d/dt in rad/s), four each in ``ACTUATED_JOINTS`` order (left hip, left
         knee, right hip, right knee: the stance and swing outputs mapped back to the legs),
         from the phase and its rate of that tick and the gait (and blend) in force."""
+        s, g = self._state, self._gaits
         t, dtau = self.tau, self.tau_rate
-        out, blend = self._active, self._blend
         w = dw = h = dh = 0.0
         offsets = rates = (0.0,) * 4
-        if blend is not None:
-            w, dw, h, dh = _blend_shape(min((t - blend[0]) / blend[3], 1.0), blend[3])
-            offsets, rates = blend[1], blend[2]
-        yd = [bezier(c, t) + off * w + rate * h for c, off, rate in zip(out.coeffs, offsets, rates)]
+        if s[law.HAS_BLEND]:
+            start, length = s[law.BLEND], s[law.BLEND + 9]
+            w, dw, h, dh = law.blend_shape(min((t - start) / length, 1.0), length)
+            offsets, rates = s[law.BLEND + 1:law.BLEND + 5], s[law.BLEND + 5:law.BLEND + 9]
+        coeffs = g[law.ACTIVE, :law.COEFFS].reshape(4, 6)
+        yd = [bezier(c, t) + off * w + rate * h for c, off, rate in zip(coeffs, offsets, rates)]
         dyd = [(bezier_derivative(c, t) + off * dw + rate * dh) * dtau
-               for c, off, rate in zip(out.coeffs, offsets, rates)]
+               for c, off, rate in zip(coeffs, offsets, rates)]
+        yd, dyd = [float(v) for v in yd], [float(v) for v in dyd]
         if self.stance is _LEFT:
             return yd, dyd
         return yd[2:] + yd[:2], dyd[2:] + dyd[:2]
-
-    def _phase_in_time(self, t: float, dtau: float) -> tuple[float, float]:
-        """``min_phase_rate``: the phase (and its rate) no slower than that rate in time
-        since the last tick's phase (0 right after a touchdown), saturated at 1."""
-        rate = self.config.min_phase_rate
-        floor = (0.0 if self.touchdown else self.tau) + rate * self.config.tick
-        if t >= floor:
-            return t, dtau
-        return (1.0, 0.0) if floor >= 1.0 else (floor, rate)
-
-    def _start_blend(self, tau: float, outputs: tuple[float, ...], p_hip: float) -> None:
-        """Right after the gait changed (a touchdown with ``blend_phase``, or
-        :meth:`apply_now`): the offsets (rad) from the new gait's desired outputs to the
-        replaced ones at this state (a blend in progress included), blended out over the
-        blend length. Within a step (the replaced gait was not ended by a touchdown) the
-        rates are matched too (rad per unit of the new gait's phase), so y_d and dy_d/dt
-        are both continuous; after a touchdown only the positions are (the impact changed
-        the velocities anyway)."""
-        old, self._replaced = self._replaced, None
-        old_blend, self._replaced_blend = self._replaced_blend, None
-        within_step = not self.touchdown
-        s_old = (p_hip - old.p_plus) / old.span
-        t_old = 0.0 if s_old < 0.0 else 1.0 if s_old > 1.0 else s_old
-        if old_blend is None:
-            w = dw = h = dh = 0.0
-            old_offsets = old_rates = (0.0,) * 4
-        else:
-            w, dw, h, dh = _blend_shape((t_old - old_blend[0]) / old_blend[3], old_blend[3])
-            old_offsets, old_rates = old_blend[1], old_blend[2]
-        new = self._active
-        offsets = tuple(bezier(old_c, t_old) + off * w + rate * h - bezier(new_c, tau)
-                        for old_c, new_c, off, rate in zip(old.coeffs, new.coeffs, old_offsets, old_rates))
-        if within_step and 0.0 < s_old < 1.0:  # d/dtau_new = d/dtau_old * span_new / span_old
-            ratio = new.span / old.span
-            rates = tuple((bezier_derivative(old_c, t_old) + off * dw + rate * dh) * ratio
-                          - bezier_derivative(new_c, tau)
-                          for old_c, new_c, off, rate in zip(old.coeffs, new.coeffs, old_offsets, old_rates))
-        else:
-            rates = (0.0,) * 4
-        self._blend = (tau, offsets, rates, self._blend_length)
-
-    def _switch_stance(self) -> None:
-        self.stance = self.stance.other()
-        self.steps += 1
-        self.touchdown = True
-        self._blend = None
-        self._replaced = self._replaced_blend = None  # an apply_now this very tick: the new gait at once
-        if self._pending is not None:
-            if self.config.blend_phase > 0.0 and self._pending.alpha != self._active.alpha:
-                self._replaced = self._active
-                self._blend_length = self.config.blend_phase
-            self._active = self._pending
-            self._pending = None
-        if self._pending_kd is not None:
-            self.kd = self._pending_kd
-            self._pending_kd = None

@@ -111,6 +111,18 @@ class PeriodicDecisions:
         self._last = stamp
         self._next = self.period * (stamp // self.period + 1) if stamp > 0 else self.period
 
+    @property
+    def next_due(self) -> int:
+        """The stamp from which the next state is due."""
+        return self._next
+
+    def skip_to(self, stamp: int) -> None:
+        """States up to ``stamp`` were seen and none was due (``stamp`` < :attr:`next_due`,
+        after the last seen): as :meth:`due` on each of them, at once."""
+        if not ((self._last is None or stamp > self._last) and 0 < stamp < self._next):
+            raise ValueError(f"stamp {stamp} cannot be skipped to (last {self._last}, next due {self._next})")
+        self._last = stamp
+
     def due(self, stamp: int) -> bool:
         """True if the policy decides on the state at ``stamp`` (see the module docstring)."""
         if self._last is not None and stamp == self._last:

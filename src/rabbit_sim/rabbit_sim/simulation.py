@@ -11,13 +11,15 @@ control tick.
 from __future__ import annotations
 
 import math
-from collections import deque
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
 import mujoco
+import numpy as np
 
 from rabbit_msgs_py.pushes import Push
+
+from . import compiled
 
 
 @dataclass(frozen=True)
@@ -32,11 +34,8 @@ class FallLimits:
     max_hip_height: float = 0.8 + 1e-3
 
     def fallen(self, hip_height: float, pitch: float) -> bool:
-        return (
-            abs(pitch) >= self.max_abs_pitch
-            or hip_height <= self.min_hip_height
-            or hip_height >= self.max_hip_height
-        )
+        """The compiled rule (:func:`.compiled.fallen`), hip height in m, pitch in rad."""
+        return compiled.fallen(hip_height, pitch, self.min_hip_height, self.max_hip_height, self.max_abs_pitch)
 
 
 @dataclass(frozen=True)
@@ -76,26 +75,27 @@ class StopRules:
 
 class TorqueDelay:
     """Torques applied ``ticks`` ticks after they were computed, until then the first ones
-    held: the one rule of a torque delay, run by the ROS-free loop and by ``sim_node``
-    (``torque_delay``), so the two walk the same."""
+    held: the one rule of a torque delay (:func:`.compiled.delay_torques`), run by the ROS-free
+    loop and by ``sim_node`` (``torque_delay``), so the two walk the same."""
 
     def __init__(self, ticks: int) -> None:
         if not (isinstance(ticks, int) and ticks >= 1):
             raise ValueError(f"a torque delay is a whole number of ticks >= 1, got {ticks!r}")
         self.ticks = ticks
-        self._queue: deque[Sequence[float]] = deque()
+        self.queue = np.zeros((ticks, 4))
+        self.count = np.zeros(1)
+        self._torques = np.zeros(4)
+        self._out = np.zeros(4)
 
     def clear(self) -> None:
         """Forget the torques in flight (the robot was placed again)."""
-        self._queue.clear()
+        self.count[0] = 0.0
 
-    def __call__(self, torques: Sequence[float]) -> Sequence[float]:
+    def __call__(self, torques: Sequence[float]) -> list[float]:
         """The torques to apply this tick, given the ones computed for it (N m)."""
-        queue = self._queue
-        if not queue:
-            queue.extend([torques] * self.ticks)
-        queue.append(torques)
-        return queue.popleft()
+        self._torques[:] = torques
+        compiled.delay_torques(self.queue, self.count, self._torques, self._out)
+        return self._out.tolist()
 
 
 class Simulator:
@@ -112,15 +112,46 @@ class Simulator:
     def __init__(self, model: mujoco.MjModel, limits: FallLimits | None = None) -> None:
         self.model = model
         self.data = mujoco.MjData(model)
-        self._ctrl = self.data.ctrl  # a view, kept: MjData builds a new one on every access
         self.limits = limits or FallLimits()
         self._torso = model.body("torso").id
-        self._push_until = -1.0
+        self.bind()
         self._schedule: tuple[Push, ...] = ()
-        self._scheduled: list[Push] = []
-        self._next_push_time = float("inf")
-        self.push_changed = False
-        self.pushes_started = 0
+        self.push_state = np.zeros(compiled.PUSH_STATE_SIZE)  # compiled.push_rule's state
+        self.push_state[compiled.PUSH_UNTIL] = -1.0
+        self.push_schedule = np.zeros((0, 3))  # time s, force N, duration s, by time
+        self._torques = np.zeros(4)
+
+    def bind(self) -> None:
+        """Keep views of the data's controls and the torso's row of ``xfrc_applied`` (MjData
+        builds a new view on every access); again after the data was copied."""
+        self._ctrl = self.data.ctrl
+        self._wrench = self.data.xfrc_applied[self._torso]
+
+    @property
+    def wrench(self):
+        """The torso's row of ``xfrc_applied`` (a live view: N, N m, world frame)."""
+        return self._wrench
+
+    @property
+    def push_changed(self) -> bool:
+        """True after a step in which a push started or ended."""
+        return bool(self.push_state[compiled.PUSH_CHANGED])
+
+    @property
+    def pushes_started(self) -> int:
+        """Pushes started so far (scheduled and :meth:`push`)."""
+        return int(self.push_state[compiled.PUSHES_STARTED])
+
+    @property
+    def next_push_event(self) -> float:
+        """Sim time (s) from which a step may end or start a push (inf: none pending); the
+        compiled loop steps no further than the step before it without the rule's check."""
+        state, schedule = self.push_state, self.push_schedule
+        until = state[compiled.PUSH_UNTIL]
+        end = until - 0.5 * self.model.opt.timestep if until >= 0.0 else math.inf
+        i = int(state[compiled.NEXT_PUSH])
+        start = schedule[i, 0] - compiled.PUSH_TIME_TOLERANCE if i < len(schedule) else math.inf
+        return min(end, start)
 
     @property
     def time(self) -> float:
@@ -138,8 +169,8 @@ class Simulator:
         mujoco.mj_resetData(self.model, self.data)
         self.data.qpos[:] = qpos
         self.data.qvel[:] = qvel
-        self._push_until = -1.0
-        self.push_changed = False
+        self.push_state[compiled.PUSH_UNTIL] = -1.0
+        self.push_state[compiled.PUSH_CHANGED] = 0.0
         mujoco.mj_forward(self.model, self.data)
         self._rearm()
 
@@ -156,8 +187,10 @@ class Simulator:
 
     def _rearm(self) -> None:
         now = self.data.time
-        self._scheduled = [p for p in self._schedule if p.time >= now - 1e-9]
-        self._next_push_time = self._scheduled[0].time - 1e-9 if self._scheduled else float("inf")
+        self.push_schedule = np.array([(p.time, p.force_x, p.duration) for p in self._schedule], dtype=float
+                                      ).reshape(-1, 3)
+        due = [i for i, p in enumerate(self._schedule) if p.time >= now - compiled.PUSH_TIME_TOLERANCE]
+        self.push_state[compiled.NEXT_PUSH] = due[0] if due else len(self._schedule)
 
     @property
     def push_wrench(self) -> tuple[float, float, float]:
@@ -169,39 +202,25 @@ class Simulator:
     def push(self, force_x: float, duration: float, force_z: float = 0.0, torque_y: float = 0.0) -> None:
         """Apply a wrench at the torso CoM, world frame (N, N, N m), for ``duration`` s
         from now (``round(duration / timestep)`` steps). Replaces a push still in progress."""
-        wrench = self.data.xfrc_applied[self._torso]
+        wrench, state = self._wrench, self.push_state
         wrench[:] = 0.0
         wrench[0] = force_x
         wrench[2] = force_z
         wrench[4] = torque_y
-        self._push_until = self.data.time + duration
-        self.push_changed = True
-        self.pushes_started += 1
+        state[compiled.PUSH_UNTIL] = self.data.time + duration
+        state[compiled.PUSH_CHANGED] = 1.0
+        state[compiled.PUSHES_STARTED] += 1.0
 
     def step(self, torques: Sequence[float]) -> float:
         """Apply ``torques`` (N m, four) for one timestep and advance the physics; then end
-        a push whose time is up and start scheduled pushes now due. Returns the new sim
-        time (s)."""
+        a push whose time is up and start scheduled pushes now due
+        (:func:`.compiled.push_rule`). Returns the new sim time (s)."""
         data, ctrl = self.data, self._ctrl
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = torques
         mujoco.mj_step(self.model, data)
         now = data.time
-        self.push_changed = False
-        # half a step of tolerance: sim time sums 1 ms steps and drifts below exact values
-        if self._push_until >= 0.0 and now >= self._push_until - 0.5 * self.model.opt.timestep:
-            data.xfrc_applied[self._torso, :] = 0.0
-            self._push_until = -1.0
-            self.push_changed = True
-        if now >= self._next_push_time:
-            self._start_due_pushes()
+        compiled.push_rule(now, 0.5 * self.model.opt.timestep, self.push_state, self.push_schedule, self._wrench)
         return now
-
-    def _start_due_pushes(self) -> None:
-        now = self.data.time
-        while self._scheduled and now >= self._scheduled[0].time - 1e-9:
-            push = self._scheduled.pop(0)
-            self.push(push.force_x, push.duration)
-        self._next_push_time = self._scheduled[0].time - 1e-9 if self._scheduled else float("inf")
 
     def fallen(self) -> bool:
         """True when the paper's limits (torso pitch, hip height) are left."""

@@ -152,8 +152,7 @@ def clone_loop(loop: ClosedLoop) -> ClosedLoop:
     if library is not None and hasattr(library, "library"):
         memo[id(library.library)] = library.library  # read-only: share it
     new = copy.deepcopy(loop, memo)
-    new._qpos, new._qvel = new.data.qpos, new.data.qvel  # views of the copy's MjData
-    new.sim._ctrl = new.sim.data.ctrl
+    new._bind()  # views of the copy's MjData
     return new
 
 

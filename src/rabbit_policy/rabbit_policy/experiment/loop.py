@@ -36,6 +36,7 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
 from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_policy.experiment import ticks
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario, on_tick_grid, whole_ticks
 from rabbit_policy.runtime.body import body_state
@@ -46,6 +47,9 @@ from rabbit_policy.runtime.speed_schedule import SpeedSchedule, stamp_of
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import Simulator, TorqueDelay
+
+CHUNK = 4096
+"""Most ticks one compiled call runs (the size of its buffers)."""
 
 Observer = Callable[["ClosedLoop", Sequence[float]], None]
 """Called after every tick with the loop and the torques applied (N m)."""
@@ -80,7 +84,6 @@ class ClosedLoop:
         self.model = model if model is not None else load_model(scenario.model)
         self.sim = Simulator(self.model, scenario.rules.fall)
         self.data = self.sim.data
-        self._qpos, self._qvel = self.data.qpos, self.data.qvel  # views, kept (MjData makes one per access)
         config = replace(controller or ControllerConfig(), **controller_settings(policy))
         if kp is not None:
             config = replace(config, kp=kp)
@@ -98,35 +101,48 @@ class ClosedLoop:
         # time in ticks, a sample being the state after a step)
         self.clock = DecisionClock(self._period, window) if (policy is not None or observe_speed) else None
         self.window = None if self.clock is None else self.clock.window
-        self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._stall_after = scenario.rules.stall_after
-        self._roll_back_ticks = int(round(scenario.rules.roll_back_after / self.model.opt.timestep))
-        self._rolling = 0  # ticks the hip has been behind its stance foot, moving backward
-        fall = scenario.rules.fall  # FallLimits.fallen, inlined on the hot path (tested to agree)
-        self._min_height, self._max_height, self._max_pitch = fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch
         self.schedule = SpeedSchedule(scenario.schedule[1:])  # policy_node's rule (speed_schedule)
         self._next_change = self._change_check()
         self.desired_speed = scenario.initial_speed
         dt = self.model.opt.timestep
         delay = int(round(scenario.torque_delay / dt))
         self._delay = TorqueDelay(delay) if delay else None
+        # the compiled ticks' state (ticks.run_ticks): time, the fall limits, the early stall rule
+        fall = scenario.rules.fall
+        self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
+        self._state = np.zeros(ticks.LOOP_STATE_SIZE)
+        self._state[[ticks.TIMESTEP, ticks.MIN_HEIGHT, ticks.MAX_HEIGHT, ticks.MAX_PITCH, ticks.ROLL_BACK_TICKS,
+                     ticks.LEFT_FOOT, ticks.RIGHT_FOOT]] = (
+            dt, fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch,
+            int(round(scenario.rules.roll_back_after / dt)), *self._feet)
+        self._no_delay = (np.zeros((0, 4)), np.zeros(1))
+        self._buffers = (np.zeros(CHUNK), np.zeros(CHUNK), np.zeros(CHUNK))  # times, hip x, hip speed
+        self._applied = np.zeros(4)
+        self._bind()
         # what happened
         self.ticks = 0
         self.start_time = round(float(self.data.time), 9)  # times on the ns grid of the stack's stamps
         self.start_x = float(self.data.qpos[0])
         self._times: list[float] = []
         self._xs: list[float] = []
-        self._append_time, self._append_x = self._times.append, self._xs.append  # bound once: the hot path
         self._qpos_rows: list[np.ndarray] = []
         self._qvel_rows: list[np.ndarray] = []
         self._stance: list[int] = []
         self.touchdowns: list[Touchdown] = []
         self.decisions: list[Decision] = []
-        self.peak_torque = 0.0
         self.fell = self.stalled = False
         self.fall_time: float | None = None
         self.stall_time: float | None = None
         self._last_touchdown_time = self.start_time
+
+    def _bind(self) -> None:
+        """Keep views of the MuJoCo data's fields (MjData makes a new one on every access);
+        again after the data is copied (:func:`~rabbit_policy.evaluation.ceiling.clone_loop`)."""
+        self.data = self.sim.data
+        self._qpos, self._qvel = self.data.qpos, self.data.qvel
+        self._ctrl, self._site_xpos = self.data.ctrl, self.data.site_xpos
+        self.sim.bind()
 
     # ------------------------------------------------------------------ state
     @property
@@ -177,70 +193,91 @@ class ClosedLoop:
         c = self.controller
         return body_state(self._qpos, self._qvel, c.tau, c.tau_rate)
 
+    @property
+    def peak_torque(self) -> float:
+        """The largest |torque| applied so far (N m)."""
+        return float(self._state[ticks.PEAK])
+
     # ------------------------------------------------------------------- tick
     def tick(self) -> bool:
         """One control tick and physics step (see the module docstring); returns True when
         a stop rule fired this tick (fell or stalled)."""
-        controller = self.controller
-        qpos, qvel = self._qpos, self._qvel
-        torques = controller.compute(qpos.tolist(), qvel.tolist())
-        if self._delay is not None:
-            torques = self._delay(torques)
-        t = round(self.sim.step(torques), 9)  # MuJoCo's float sum of steps, on the ns grid (16.132, not 16.131999...)
+        return self._advance(1)[1]
+
+    def _quiet_ticks(self, limit: int) -> int:
+        """How many ticks (1 to ``limit``) may run compiled at once: nothing Python decides
+        falls strictly inside them (a decision, a command change, a stall by time, a
+        recorded state or an observer), only possibly on the last."""
+        if self.observer is not None or self.record_state:
+            return 1
+        n = min(limit, CHUNK)
+        if self.clock is not None:
+            due = self.clock.next_due
+            if due is not None:
+                n = min(n, max(1, due - self.ticks))
+        now, dt = self._state[ticks.TIME], self._state[ticks.TIMESTEP]
+        for event in (self._next_change, self._last_touchdown_time + self._stall_after):
+            if event != float("inf"):  # the first tick that may reach it can be the last
+                n = min(n, max(1, int((event - now) / dt - 1e-6) + 1))
+        return n
+
+    def _advance(self, limit: int) -> tuple[int, bool]:
+        """Run up to ``limit`` ticks compiled (:func:`.ticks.run_ticks`), then what Python
+        decides on the last of them; returns (ticks run, a stop rule fired)."""
+        controller, data, sim, state = self.controller, self.data, self.sim, self._state
+        times, xs, speeds = self._buffers
+        cfg, controller_state, gaits = controller.arrays
+        queue, count = (self._delay.queue, self._delay.count) if self._delay is not None else self._no_delay
+        state[ticks.TIME] = data.time
+        k = ticks.run_ticks(self.model._address, data._address, self._qpos, self._qvel, self._ctrl, self._site_xpos,
+                            cfg, controller_state, gaits, queue, count, sim.push_state, sim.push_schedule,
+                            sim.wrench, state, times, xs, speeds, self._applied, self._quiet_ticks(limit))
+        if state[ticks.TIME] != data.time:
+            raise RuntimeError("the compiled loop's clock left MuJoCo's: the model's integrator must advance the "
+                               "time by one timestep per step (Euler or implicit)")
+        stamps = [round(t, 9) for t in times[:k].tolist()]  # on the ns grid of the stack's stamps (16.132)
+        self._times.extend(stamps)
+        self._xs.extend(xs[:k].tolist())
         i = self.ticks
-        self.ticks = i + 1
-        peak = self.peak_torque
-        for tq in torques:
-            if tq > peak:
-                peak = tq
-            elif -tq > peak:
-                peak = -tq
-        self.peak_torque = peak
+        self.ticks = i + k
+        t = stamps[-1]
+        speed_list = speeds[:k].tolist()
+        if self.clock is not None and k > 1:  # the samples before the last decide nothing (_quiet_ticks)
+            self.clock.add_quiet(range(i + 1, i + k), speed_list[:-1], self.desired_speed)
         if t >= self._next_change:
             speed = self.schedule.due(stamp_of(t))
             if speed is not None:
                 self.desired_speed = speed
             self._next_change = self._change_check()
-        x, height, pitch = qpos.tolist()[:3]
-        self._append_time(t)
-        self._append_x(x)
         if self.record_state:
-            self._qpos_rows.append(qpos.copy())
-            self._qvel_rows.append(qvel.copy())
+            self._qpos_rows.append(self._qpos.copy())
+            self._qvel_rows.append(self._qvel.copy())
             self._stance.append(int(controller.stance))
         if self.observer is not None:
-            self.observer(self, torques)
+            self.observer(self, self._applied.tolist())
         if self.clock is not None:
-            for observation in self.clock.sample(i + 1, qvel[0], self.desired_speed,
+            for observation in self.clock.sample(i + k, speed_list[-1], self.desired_speed,
                                                  self.policy is not None):  # every N ticks
                 self._decide(observation, t)
         stop = False
-        if not (self._min_height < height < self._max_height and -self._max_pitch < pitch < self._max_pitch):
+        flags = int(state[ticks.STOP])
+        if flags & ticks.FELL:
             if not self.fell:
                 self.fell, self.fall_time = True, t
             stop = True
-        if t - self._last_touchdown_time > self._stall_after or (self._roll_back_ticks and self._rolled_back(x)):
+        if t - self._last_touchdown_time > self._stall_after or flags & ticks.ROLLED_BACK:
             if not self.stalled:
                 self.stalled, self.stall_time = True, t
             stop = True
         if controller.touchdown:
-            self._touchdown(i, t)
-        return stop
+            self._touchdown(i + k - 1, t)
+        return k, stop
 
     def _change_check(self) -> float:
         """Sim time (s) from which the hot path asks the schedule (a little before its next
         change: the schedule's own rule, in ns stamps, decides)."""
         stamp = self.schedule.next_stamp
         return (stamp - 2) * 1e-9 if stamp is not None else float("inf")
-
-    def _rolled_back(self, x: float) -> bool:
-        """The early stall rule (``StopRules.roll_back_after``): True once the hip (``x``, m)
-        has been behind the stance foot and moving backward for that many ticks running."""
-        if self._qvel[0] < 0.0 and x < self.data.site_xpos[self._feet[int(self.controller.stance)]][0]:
-            self._rolling += 1
-            return self._rolling >= self._roll_back_ticks
-        self._rolling = 0
-        return False
 
     def _touchdown(self, i: int, t: float) -> None:
         data = self.data
@@ -288,9 +325,12 @@ class ClosedLoop:
             n = max_ticks
         else:
             raise ValueError("give a duration or max_ticks")
-        tick, controller = self.tick, self.controller
-        for _ in range(n):
-            if tick() and stop_on_fall:
+        advance, controller = self._advance, self.controller
+        done = 0
+        while done < n:
+            ticks_run, stop = advance(n - done)
+            done += ticks_run
+            if stop and stop_on_fall:
                 return True
             if until_touchdown and controller.touchdown:
                 return False

@@ -75,6 +75,24 @@ class DecisionClock:
             return [self.window.observation(desired_speed, stamp, None if step is None else stamp - step)]
         return self._due(desired_speed)
 
+    @property
+    def next_due(self) -> int | None:
+        """The stamp of the next sample that may bring a decision (every N ticks: the next
+        multiple; once per step: the next sample while a switch waits), None while none can."""
+        if self._ticks is not None:
+            return self._ticks.next_due
+        return None if not self._pending else (self.window.newest_stamp or 0) + self.tick
+
+    def add_quiet(self, stamps: range, speeds: list[float], desired_speed: float) -> None:
+        """Add samples (stamps rising, after the newest) that bring no decision (before
+        :attr:`next_due`): as :meth:`sample` on each, at once (the compiled loop's ticks)."""
+        newest, due = self.window.newest_stamp, self.next_due
+        if (newest is not None and stamps[0] <= newest) or stamps[0] <= 0 or (due is not None and stamps[-1] >= due):
+            raise ValueError(f"samples {stamps[0]}..{stamps[-1]} are not quiet (newest {newest}, next due {due})")
+        self.window.extend(stamps, speeds, desired_speed)
+        if self._ticks is not None:
+            self._ticks.skip_to(stamps[-1])
+
     def switch(self, stamp: int, desired_speed: float) -> list[Observation]:
         """A stance switch on the state at ``stamp``; returns the decision now due once per
         step (if the sample after it is in already), else nothing."""

@@ -78,6 +78,18 @@ class SpeedWindow:
         self._speeds.append(speed)
         self._errors.append(desired_speed - speed)
 
+    def extend(self, stamps: range, speeds: list[float], desired_speed: float) -> None:
+        """Append samples whose stamps rise after the newest, all under one command (m/s):
+        as :meth:`add` on each (non-finite speeds raise ``ValueError``, adding none)."""
+        if not all(isfinite(v) for v in speeds):
+            raise ValueError("hip speeds must be finite")
+        self._stamps.extend(stamps)
+        self._speeds.extend(speeds)
+        self._errors.extend([desired_speed - v for v in speeds])
+        if len(self._stamps) >= 2 * self._keep:  # drop the oldest beyond the newest 2 * size
+            drop = len(self._stamps) - self._keep
+            del self._stamps[:drop], self._speeds[:drop], self._errors[:drop]
+
     def observation(self, desired_speed: float, stamp_ns: int | None = None,
                     since_ns: int | None = None) -> Observation:
         """Averages over the newest ``size`` samples with ``since_ns`` < stamp <= ``stamp_ns``

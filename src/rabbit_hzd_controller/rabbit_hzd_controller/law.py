@@ -1,0 +1,303 @@
+"""The HZD law, compiled: one control tick on plain arrays (numba ``@njit``).
+
+The one implementation of the per-tick law (phase, Bezier outputs, blending, the impact switch,
+the PD law and its saturation). :class:`~.controller.HZDController` keeps its state in the
+arrays below and calls :func:`control` every tick (the controller node does, through it), and
+the ROS-free loop calls the same function inside its compiled inner loop
+(:mod:`rabbit_policy.experiment.ticks`), between ``mj_step`` calls. Compiled once per machine and
+cached (``cache=True``: next to this file, or in numba's user-wide cache when the install is
+read-only).
+
+Arrays (float64):
+
+* ``cfg`` (:data:`CONFIG_SIZE`): the constant settings, indices ``KP`` ... ``TICK`` (N m/rad, N m,
+  m, m, 1, m, 1, 1, 1/s, s).
+* ``state`` (:data:`STATE_SIZE`): the stance leg (0 left, 1 right), steps, phase tau and its
+  rate (1/s), the touchdown flag of the last tick, Kd (N m s/rad), the queued Kd (NaN: none),
+  flags for a queued gait, a replaced gait, a blend and the replaced gait's blend, the next
+  blend's length, then the blend in force and the replaced gait's blend (each: start phase, 4
+  position offsets rad, 4 rate offsets rad per unit phase, length).
+* ``gaits`` (3 x :data:`SLOT_SIZE`): the active, queued and replaced gaits, each the 4 outputs'
+  6 coefficients (rad; output-major: stance hip, stance knee, swing hip, swing knee), then
+  p_plus, p_minus and the span (m).
+
+Every expression is written in the order of the Python law it replaced, so the torques are the
+same floats (tested against a pure-Python reference in ``tests/hzd_controller``).
+"""
+
+from __future__ import annotations
+
+from math import cos, sin
+
+import numpy as np
+from numba import njit
+
+# cfg
+KP, TORQUE_LIMIT, FEMUR, TIBIA, TOUCHDOWN_MIN_PHASE, TOUCHDOWN_HEIGHT, BLEND_PHASE, WITHIN_STEP_BLEND, \
+    MIN_PHASE_RATE, TICK = range(10)
+CONFIG_SIZE = 10
+
+# state
+STANCE, STEPS, TAU, TAU_RATE, TOUCHDOWN, KD, PENDING_KD, HAS_PENDING, HAS_REPLACED, HAS_BLEND, \
+    HAS_REPLACED_BLEND, NEXT_BLEND_LENGTH = range(12)
+BLEND = 12
+"""The blend in force: start phase, 4 offsets, 4 rates, length (10 entries)."""
+REPLACED_BLEND = 22
+"""The replaced gait's blend, in the same layout."""
+BLEND_SIZE = 10
+STATE_SIZE = 32
+
+# gait slots
+ACTIVE, PENDING, REPLACED = range(3)
+COEFFS = 24
+P_PLUS, P_MINUS, SPAN = 24, 25, 26
+SLOT_SIZE = 27
+
+_COMB5 = (1.0, 5.0, 10.0, 10.0, 5.0, 1.0)
+_COMB4 = (1.0, 4.0, 6.0, 4.0, 1.0)
+
+
+@njit(cache=True)
+def bezier5(g: np.ndarray, slot: int, j: int, t: float) -> float:
+    """Output ``j``'s degree-5 Bezier of gait ``slot`` at ``t`` (``bezier.bezier``'s arithmetic)."""
+    s = 1.0 - t
+    tp0, tp1 = 1.0, t
+    tp2 = tp1 * t
+    tp3 = tp2 * t
+    tp4 = tp3 * t
+    tp5 = tp4 * t
+    sp1 = s
+    sp2 = sp1 * s
+    sp3 = sp2 * s
+    sp4 = sp3 * s
+    sp5 = sp4 * s
+    base = 6 * j
+    acc = 0.0
+    acc += g[slot, base] * (_COMB5[0] * tp0 * sp5)
+    acc += g[slot, base + 1] * (_COMB5[1] * tp1 * sp4)
+    acc += g[slot, base + 2] * (_COMB5[2] * tp2 * sp3)
+    acc += g[slot, base + 3] * (_COMB5[3] * tp3 * sp2)
+    acc += g[slot, base + 4] * (_COMB5[4] * tp4 * sp1)
+    acc += g[slot, base + 5] * (_COMB5[5] * tp5 * 1.0)
+    return acc
+
+
+@njit(cache=True)
+def bezier5_derivative(g: np.ndarray, slot: int, j: int, t: float) -> float:
+    """d/dtau of :func:`bezier5` (``bezier.bezier_derivative``'s arithmetic)."""
+    s = 1.0 - t
+    tp0, tp1 = 1.0, t
+    tp2 = tp1 * t
+    tp3 = tp2 * t
+    tp4 = tp3 * t
+    sp1 = s
+    sp2 = sp1 * s
+    sp3 = sp2 * s
+    sp4 = sp3 * s
+    base = 6 * j
+    acc = 0.0
+    acc += 5 * (g[slot, base + 1] - g[slot, base]) * (_COMB4[0] * tp0 * sp4)
+    acc += 5 * (g[slot, base + 2] - g[slot, base + 1]) * (_COMB4[1] * tp1 * sp3)
+    acc += 5 * (g[slot, base + 3] - g[slot, base + 2]) * (_COMB4[2] * tp2 * sp2)
+    acc += 5 * (g[slot, base + 4] - g[slot, base + 3]) * (_COMB4[3] * tp3 * sp1)
+    acc += 5 * (g[slot, base + 5] - g[slot, base + 4]) * (_COMB4[4] * tp4 * 1.0)
+    return acc
+
+
+@njit(cache=True)
+def blend_shape(r: float, length: float) -> tuple[float, float, float, float]:
+    """The blend's shape functions at ``r`` = (phase - start) / length, clamped to [0, 1]:
+    w = 1 - smoothstep(r) carries the position offsets (w(0) = 1, w'(0) = w(1) = w'(1) = 0),
+    h = length r (1 - r)^2 the rate offsets (h(0) = 0, dh/dphase(0) = 1, h(1) = h'(1) = 0);
+    returns (w, dw/dphase, h, dh/dphase)."""
+    r = 0.0 if r < 0.0 else 1.0 if r > 1.0 else r
+    u = 1.0 - r
+    return 1.0 - r * r * (3.0 - 2.0 * r), -6.0 * r * u / length, length * r * u * u, u * (1.0 - 3.0 * r)
+
+
+@njit(cache=True)
+def _copy_slot(g: np.ndarray, src: int, dst: int) -> None:
+    for k in range(SLOT_SIZE):
+        g[dst, k] = g[src, k]
+
+
+@njit(cache=True)
+def _same_gait(g: np.ndarray, a: int, b: int) -> bool:
+    for k in range(COEFFS):
+        if g[a, k] != g[b, k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def switch_stance(cfg: np.ndarray, s: np.ndarray, g: np.ndarray) -> None:
+    """A touchdown: the other leg stands, the queued gait (and Kd) become active; with
+    ``blend_phase`` a changed gait blends in from the one it replaced."""
+    s[STANCE] = 1.0 - s[STANCE]
+    s[STEPS] += 1.0
+    s[TOUCHDOWN] = 1.0
+    s[HAS_BLEND] = 0.0
+    s[HAS_REPLACED] = 0.0
+    s[HAS_REPLACED_BLEND] = 0.0  # an apply_now this very tick: the new gait at once
+    if s[HAS_PENDING] != 0.0:
+        if cfg[BLEND_PHASE] > 0.0 and not _same_gait(g, PENDING, ACTIVE):
+            _copy_slot(g, ACTIVE, REPLACED)
+            s[HAS_REPLACED] = 1.0
+            s[NEXT_BLEND_LENGTH] = cfg[BLEND_PHASE]
+        _copy_slot(g, PENDING, ACTIVE)
+        s[HAS_PENDING] = 0.0
+    if not np.isnan(s[PENDING_KD]):
+        s[KD] = s[PENDING_KD]
+        s[PENDING_KD] = np.nan
+
+
+@njit(cache=True)
+def _start_blend(s: np.ndarray, g: np.ndarray, tau: float, p_hip: float) -> None:
+    """Right after the gait changed (a touchdown with ``blend_phase``, or ``apply_now``): the
+    offsets (rad) from the new gait's desired outputs to the replaced ones at this state (a
+    blend in progress included), blended out over the blend length. Within a step the rates
+    are matched too (rad per unit of the new gait's phase), so y_d and dy_d/dt are both
+    continuous; after a touchdown only the positions are."""
+    s[HAS_REPLACED] = 0.0
+    had_old_blend = s[HAS_REPLACED_BLEND] != 0.0
+    s[HAS_REPLACED_BLEND] = 0.0
+    within_step = s[TOUCHDOWN] == 0.0
+    s_old = (p_hip - g[REPLACED, P_PLUS]) / g[REPLACED, SPAN]
+    t_old = 0.0 if s_old < 0.0 else 1.0 if s_old > 1.0 else s_old
+    w = dw = h = dh = 0.0
+    if had_old_blend:
+        w, dw, h, dh = blend_shape((t_old - s[REPLACED_BLEND]) / s[REPLACED_BLEND + 9], s[REPLACED_BLEND + 9])
+    rates_matched = within_step and 0.0 < s_old < 1.0
+    ratio = g[ACTIVE, SPAN] / g[REPLACED, SPAN]
+    for j in range(4):
+        off = s[REPLACED_BLEND + 1 + j] if had_old_blend else 0.0
+        rate = s[REPLACED_BLEND + 5 + j] if had_old_blend else 0.0
+        offset = bezier5(g, REPLACED, j, t_old) + off * w + rate * h - bezier5(g, ACTIVE, j, tau)
+        if rates_matched:  # d/dtau_new = d/dtau_old * span_new / span_old
+            new_rate = ((bezier5_derivative(g, REPLACED, j, t_old) + off * dw + rate * dh) * ratio
+                        - bezier5_derivative(g, ACTIVE, j, tau))
+        else:
+            new_rate = 0.0
+        s[BLEND + 1 + j] = offset
+        s[BLEND + 5 + j] = new_rate
+    s[BLEND] = tau
+    s[BLEND + 9] = s[NEXT_BLEND_LENGTH]
+    s[HAS_BLEND] = 1.0
+
+
+@njit(cache=True)
+def control(cfg: np.ndarray, s: np.ndarray, g: np.ndarray, q: np.ndarray, dq: np.ndarray, out: np.ndarray) -> None:
+    """One control tick: joint positions ``q`` and velocities ``dq`` (7 each, ``JOINT_NAMES``
+    order) -> ``out``, the four torques (N m) in ``ACTUATED_JOINTS`` order; updates ``s`` (and
+    ``g`` at a touchdown). See :mod:`.controller` for the steps."""
+    lf = cfg[FEMUR]
+    lt = cfg[TIBIA]
+    min_phase = cfg[TOUCHDOWN_MIN_PHASE]
+    pitch = q[2]
+    dpitch = dq[2]
+    s[TOUCHDOWN] = 0.0
+    sh = sk = wh = wk = phi_f = phi_t = p_hip = x = 0.0
+    for _ in range(2):
+        if s[STANCE] == 0.0:
+            sh, sk, wh, wk = q[3], q[4], q[5], q[6]
+        else:
+            sh, sk, wh, wk = q[5], q[6], q[3], q[4]
+        span = g[ACTIVE, SPAN]
+        phi_f = sh - pitch
+        phi_t = phi_f - sk
+        p_hip = -(lf * sin(phi_f) + lt * sin(phi_t))
+        x = (p_hip - g[ACTIVE, P_PLUS]) / span
+        if x < min_phase or s[TOUCHDOWN] != 0.0:
+            break
+        sw_f = wh - pitch
+        swing_height = q[1] - lf * cos(sw_f) - lt * cos(sw_f - wk)
+        if swing_height > cfg[TOUCHDOWN_HEIGHT]:
+            break
+        switch_stance(cfg, s, g)
+    span = g[ACTIVE, SPAN]
+
+    if s[STANCE] == 0.0:
+        dsh, dsk, dwh, dwk = dq[3], dq[4], dq[5], dq[6]
+    else:
+        dsh, dsk, dwh, dwk = dq[5], dq[6], dq[3], dq[4]
+    if x <= 0.0:
+        t = 0.0
+        dtau = 0.0
+    elif x >= 1.0:
+        t = 1.0
+        dtau = 0.0
+    else:
+        t = x
+        dphi_f = dsh - dpitch
+        dp_hip = -(lf * cos(phi_f) * dphi_f + lt * cos(phi_t) * (dphi_f - dsk))
+        dtau = dp_hip / span
+    rate = cfg[MIN_PHASE_RATE]
+    if rate != 0.0:  # the phase (and its rate) no slower than that rate in time since the last tick's
+        floor = (0.0 if s[TOUCHDOWN] != 0.0 else s[TAU]) + rate * cfg[TICK]
+        if t < floor:
+            if floor >= 1.0:
+                t, dtau = 1.0, 0.0
+            else:
+                t, dtau = floor, rate
+    s[TAU] = t
+    s[TAU_RATE] = dtau
+    if s[HAS_REPLACED] != 0.0:
+        _start_blend(s, g, t, p_hip)
+
+    # Bernstein bases of degree 5 (values) and 4 (derivative).
+    u = 1.0 - t
+    t2 = t * t
+    t3 = t2 * t
+    u2 = u * u
+    u3 = u2 * u
+    b0 = u3 * u2
+    b1 = 5.0 * t * u2 * u2
+    b2 = 10.0 * t2 * u3
+    b3 = 10.0 * t3 * u2
+    b4 = 5.0 * t3 * t * u
+    b5 = t3 * t2
+    c0 = u2 * u2
+    c1 = 4.0 * t * u3
+    c2 = 6.0 * t2 * u2
+    c3 = 4.0 * t3 * u
+    c4 = t2 * t2
+
+    kp = cfg[KP]
+    kd = s[KD]
+    limit = cfg[TORQUE_LIMIT]
+    blending = s[HAS_BLEND] != 0.0
+    w = dw = h = dh = 0.0
+    if blending:
+        length = s[BLEND + 9]
+        r = (t - s[BLEND]) / length
+        if r >= 1.0:
+            s[HAS_BLEND] = 0.0
+        w, dw, h, dh = blend_shape(r, length)
+    first = 0 if s[STANCE] == 0.0 else 2  # torques in leg order: stance outputs first when left stands
+    for j in range(4):
+        base = 6 * j
+        a0, a1, a2, a3, a4, a5 = (g[ACTIVE, base], g[ACTIVE, base + 1], g[ACTIVE, base + 2], g[ACTIVE, base + 3],
+                                  g[ACTIVE, base + 4], g[ACTIVE, base + 5])
+        d0 = 5.0 * (a1 - a0)
+        d1 = 5.0 * (a2 - a1)
+        d2 = 5.0 * (a3 - a2)
+        d3 = 5.0 * (a4 - a3)
+        d4 = 5.0 * (a5 - a4)
+        if j == 0:
+            y, dy = sh, dsh
+        elif j == 1:
+            y, dy = sk, dsk
+        elif j == 2:
+            y, dy = wh, dwh
+        else:
+            y, dy = wk, dwk
+        if blending:
+            off = s[BLEND + 1 + j]
+            rt = s[BLEND + 5 + j]
+            yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w + rt * h
+            dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4 + off * dw + rt * dh) * dtau
+        else:
+            yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5
+            dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
+        tq = kp * (yd - y) + kd * (dyd - dy)
+        out[(first + j) % 4] = limit if tq > limit else -limit if tq < -limit else tq
