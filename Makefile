@@ -28,6 +28,7 @@ $(STAMP): requirements.txt requirements-extras.txt $(foreach p,$(PACKAGES),$(p)/
 	$(if $(TORCH_INDEX),$(PY) -m pip install --quiet torch==2.13.0 --index-url $(TORCH_INDEX))
 	$(PY) -m pip install --quiet -r requirements.txt -r requirements-extras.txt
 	$(PY) -m pip install --quiet $(foreach p,$(PACKAGES),-e $(p))
+	$(PY) -c "from rabbit_policy.experiment.loop import compile_kernels; compile_kernels()"  # numba's cache
 	touch $@
 
 demo: $(STAMP)

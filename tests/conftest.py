@@ -43,6 +43,15 @@ os.environ["ROS_DOMAIN_ID"] = str(_domain)  # worker k takes k, k + N, k + 2N, .
 KINDS = ("unit", "sim", "ros")
 
 
+def pytest_configure(config):
+    """The compiled kernels built (or loaded from their cache) once, before any worker or node
+    process starts: a cold cache would otherwise compile in each of them at once."""
+    if not hasattr(config, "workerinput"):  # the controlling process (or a run without workers)
+        from rabbit_policy.experiment.loop import compile_kernels
+
+        compile_kernels()
+
+
 def pytest_collection_modifyitems(config, items):
     """Each test has exactly one kind, set where it is defined (its module or itself)."""
     for item in items:

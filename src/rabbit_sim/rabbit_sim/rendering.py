@@ -13,6 +13,7 @@ display; Debian packages ``libegl1 libegl-mesa0 libgl1-mesa-dri``) or ``osmesa``
 
 from __future__ import annotations
 
+import atexit
 import os
 import weakref
 from pathlib import Path
@@ -69,8 +70,12 @@ class FrameRenderer:
         self.model = model
         self.camera = camera or side_camera()
         # closed at the latest when the interpreter exits, while EGL can still free the context
-        # (a renderer left to its __del__ then prints two EGLError tracebacks)
+        # (a renderer left to its __del__ then prints two EGLError tracebacks). weakref.finalize's
+        # own exit hook is not enough: it runs after MuJoCo's eglTerminate whenever a library
+        # imported before mujoco made a finalizer first (numba does); this hook, registered after
+        # mujoco's, runs before it.
         self._closer = weakref.finalize(self, self.renderer.close)
+        atexit.register(self._closer)
 
     def render(self, data: mujoco.MjData) -> np.ndarray:
         """The frame of ``data``'s state (its kinematics must be current: after a step or
@@ -80,6 +85,7 @@ class FrameRenderer:
         return self.renderer.render().copy()
 
     def close(self) -> None:
+        atexit.unregister(self._closer)
         self._closer()  # once: an explicit close, or at exit
 
 

@@ -363,6 +363,29 @@ def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: G
     return replace(loop.result(), planned_duration=on_tick_grid(duration, loop.model.opt.timestep))
 
 
+def compile_kernels() -> float:
+    """Compile (or load from numba's cache) every compiled kernel the loop and the nodes run, by
+    walking 30 ms with a torque delay, a push and the early stall rule; returns the wall time
+    (s). ``make setup`` and the test session call it, so no process compiles on its own."""
+    from time import perf_counter
+
+    from rabbit_msgs_py.pushes import Push
+    from rabbit_sim.simulation import StopRules
+
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+
+    start = perf_counter()
+    gait = GaitLibrary.load().nearest(1.0)
+    scenario = Scenario(schedule=((0.0, gait.speed),), pushes=(Push(0.01, 1.0, 0.005),), torque_delay=0.002,
+                        rules=StopRules(roll_back_after=0.5))
+    loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd))
+    loop.run(max_ticks=30)
+    loop.controller.compute(loop.data.qpos, loop.data.qvel)  # the node's path: one tick through the class
+    loop.sim.step([0.0] * 4)
+    loop.sim.fallen()
+    return perf_counter() - start
+
+
 def walk_gait(gait: Gait, duration: float, model: ModelOptions = ModelOptions()) -> WalkResult:
     """Walk one fixed gait (its own Kp) at its design speed for ``duration`` s (the gait
     tools' check of a designed gait)."""
