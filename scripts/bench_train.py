@@ -7,7 +7,7 @@
 Prints one JSON object:
 * ``env_steps_per_s_per_core``: ``RabbitHZD-v0`` steps per second in one process with the
   decision rate of every policy shipped (one step = 20 ticks = 20 ms of simulation; the paper's episodes),
-  the warm-started policy acting (network forward included), resets included;
+  the warm-started policy acting (its numpy forward pass included, as training decides), resets included;
   ``per_walking_step`` the same with one env step per walking step (0.4-0.7 s).
 * ``sim_seconds_per_s_per_core``: the same in simulated seconds per wall second.
 * ``pool_env_steps_per_s``: the same with ``--workers`` processes in parallel (all cores).
@@ -62,7 +62,7 @@ def env_throughput(steps: int, seed: int = 0, decision_period: int = 20) -> tupl
     import torch
 
     from rabbit_policy.learning.env import RabbitHZDEnv
-    from rabbit_policy.runtime.network import HZDPolicyNet
+    from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward
     from rabbit_policy.learning.warm_start import WARM_STARTS, warm_start
 
     torch.set_num_threads(1)
@@ -70,12 +70,12 @@ def env_throughput(steps: int, seed: int = 0, decision_period: int = 20) -> tupl
     env = RabbitHZDEnv(max_steps=500 if decision_period else 30, decision_period=decision_period)
     net = HZDPolicyNet(env.bounds.low, env.bounds.high)
     warm_start(net, env.library, seed=seed, config=WARM_STARTS["interpolate"])
+    forward = NetworkForward.of(net)  # what training and the loops decide with (numpy, not torch)
     obs, _ = env.reset(seed=seed)
     sim_time, episode_start = 0.0, 0.0
     start = time.perf_counter()
     for _ in range(steps):
-        with torch.no_grad():
-            action = net(torch.as_tensor(obs)).numpy()
+        action = forward(obs)
         obs, _r, terminated, truncated, info = env.step(env.bounds.to_normalised(action))
         if terminated or truncated:
             sim_time += info["time"]

@@ -29,11 +29,11 @@ from typing import Sequence
 
 import numpy as np
 
-from .alpha import N_ALPHA, OUTPUTS, alpha_matrix, impact_violation
+from .alpha import N_ALPHA, N_COEFFS, OUTPUTS
 from .bezier import bezier, bezier_derivative
 from . import law
 from .kinematics import LegGeometry, foot_from_hip
-from .phase import PhaseBounds, phase_bounds_from_alpha
+from .phase import NO_STEP, PhaseBounds
 
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES  # noqa: F401  (re-exported)
 
@@ -122,29 +122,36 @@ class ControllerConfig:
 def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarray:
     """Return ``alpha`` as a float 24-vector, or raise ``ValueError`` saying what is wrong:
     wrong size, non-finite entries, impact equalities violated, or no forward step."""
-    arr = np.asarray(alpha, dtype=float).reshape(-1)
+    return _validated(alpha, config)[0]
+
+
+def _validated(alpha: Sequence[float], config: ControllerConfig) -> tuple[np.ndarray, PhaseBounds]:
+    """:func:`validate_alpha`, and the gait's phase bounds (computed on the way by the
+    compiled checks, :func:`.law.gait_check`)."""
+    arr = np.ascontiguousarray(alpha, dtype=float).reshape(-1)
     if arr.size != N_ALPHA:
         raise ValueError(f"alpha must have {N_ALPHA} coefficients, got {arr.size}")
-    if not np.all(np.isfinite(arr)):
+    out = np.empty(2)
+    geometry = config.geometry
+    code = law.gait_check(arr, *config.hip_coefficient_range, *config.knee_coefficient_range, geometry.femur,
+                          geometry.tibia, out)
+    if code == law.GAIT_NOT_FINITE:
         raise ValueError("alpha contains NaN or infinite coefficients")
-    matrix = alpha_matrix(arr)
-    for j, output in enumerate(OUTPUTS):
+    if code >= law.GAIT_RANGE:
+        j = code - law.GAIT_RANGE
         lo, hi = config.knee_coefficient_range if j % 2 else config.hip_coefficient_range
-        column = matrix[:, j]
-        if column.min() < lo or column.max() > hi:
-            raise ValueError(
-                f"alpha {output} coefficients span [{column.min():.4g}, {column.max():.4g}] rad,"
-                f" outside the bounds [{lo}, {hi}] rad"
-            )
-    violation = impact_violation(arr)
-    if violation > 1e-6:
-        raise ValueError(f"alpha violates the impact equalities by {violation:.3g} rad")
-    bounds = phase_bounds_from_alpha(arr, config.geometry)
+        raise ValueError(f"alpha {OUTPUTS[j]} coefficients span [{out[0]:.4g}, {out[1]:.4g}] rad,"
+                         f" outside the bounds [{lo}, {hi}] rad")
+    if code == law.GAIT_IMPACT:
+        raise ValueError(f"alpha violates the impact equalities by {out[0]:.3g} rad")
+    if code == law.GAIT_NO_STEP:
+        raise ValueError(NO_STEP)
+    bounds = PhaseBounds(p_plus=float(out[0]), p_minus=float(out[1]))
     if bounds.span < config.min_step_length:
         raise ValueError(
             f"alpha implies a {bounds.span:.3f} m step, shorter than {config.min_step_length} m"
         )
-    return arr
+    return arr, bounds
 
 
 def validate_kd(kd: float, config: ControllerConfig | None = None) -> float:
@@ -169,13 +176,11 @@ def infer_stance(q: Sequence[float], geometry: LegGeometry | None = None) -> Leg
     return Leg.LEFT if left[0] >= right[0] else Leg.RIGHT
 
 
-def _slot(alpha: np.ndarray, config: ControllerConfig) -> np.ndarray:
-    """A validated alpha as a gait slot of :mod:`.law`: the 4 outputs' coefficients, p_plus,
-    p_minus, span."""
-    m = alpha_matrix(alpha)
-    bounds = phase_bounds_from_alpha(alpha, config.geometry)
+def _slot(alpha: np.ndarray, bounds: PhaseBounds) -> np.ndarray:
+    """A validated alpha and its phase bounds as a gait slot of :mod:`.law`: the 4 outputs'
+    coefficients, p_plus, p_minus, span."""
     row = np.empty(law.SLOT_SIZE)
-    row[:law.COEFFS] = m.T.reshape(-1)  # output-major
+    row[:law.COEFFS] = alpha.reshape(N_COEFFS, 4).T.reshape(-1)  # output-major
     row[law.P_PLUS], row[law.P_MINUS], row[law.SPAN] = bounds.p_plus, bounds.p_minus, bounds.span
     return row
 
@@ -241,7 +246,7 @@ class HZDController:
     # ------------------------------------------------------------------ state
     def reset(self, alpha: Sequence[float], kd: float, stance: Leg = Leg.LEFT) -> None:
         """Make ``alpha`` active immediately, set ``kd`` and the stance leg, zero counters."""
-        self._put(law.ACTIVE, validate_alpha(alpha, self.config))
+        self._put(law.ACTIVE, *_validated(alpha, self.config))
         s = self._state
         s[:] = 0.0
         s[law.PENDING_KD] = np.nan
@@ -249,9 +254,9 @@ class HZDController:
         s[law.STANCE] = float(Leg(stance))
         s[law.NEXT_BLEND_LENGTH] = self.config.blend_phase
 
-    def _put(self, slot: int, alpha: np.ndarray) -> None:
-        """Write a validated alpha into a gait slot."""
-        self._gaits[slot] = _slot(alpha, self.config)
+    def _put(self, slot: int, alpha: np.ndarray, bounds: PhaseBounds) -> None:
+        """Write a validated alpha (and its phase bounds) into a gait slot."""
+        self._gaits[slot] = _slot(alpha, bounds)
 
     def _slot_alpha(self, slot: int) -> tuple[float, ...]:
         return tuple(self._gaits[slot, _ALPHA_ORDER].tolist())
@@ -263,7 +268,7 @@ class HZDController:
         in_force = law.PENDING if self._state[law.HAS_PENDING] else law.ACTIVE
         if isinstance(alpha, tuple) and alpha == self._slot_alpha(in_force):
             return
-        self._put(law.PENDING, validate_alpha(alpha, self.config))
+        self._put(law.PENDING, *_validated(alpha, self.config))
         self._state[law.HAS_PENDING] = 1.0
 
     def apply_now(self, alpha: Sequence[float], kd: float | None = None) -> None:
@@ -283,7 +288,7 @@ class HZDController:
             return
         s[law.HAS_PENDING] = 0.0
         if not (isinstance(alpha, tuple) and alpha == self._slot_alpha(law.ACTIVE)):
-            valid = validate_alpha(alpha, self.config)
+            valid = _validated(alpha, self.config)
             if self.config.within_step_blend > 0.0:
                 self._gaits[law.REPLACED] = self._gaits[law.ACTIVE]
                 s[law.HAS_REPLACED] = 1.0
@@ -294,7 +299,7 @@ class HZDController:
                 s[law.NEXT_BLEND_LENGTH] = self.config.within_step_blend
             else:  # at once: the new gait's own outputs from the next tick
                 s[law.HAS_REPLACED] = s[law.HAS_REPLACED_BLEND] = s[law.HAS_BLEND] = 0.0
-            self._put(law.ACTIVE, valid)
+            self._put(law.ACTIVE, *valid)
         if new_kd is not None:
             s[law.KD] = new_kd
             s[law.PENDING_KD] = np.nan

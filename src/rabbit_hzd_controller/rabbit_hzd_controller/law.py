@@ -27,7 +27,7 @@ same floats (tested against a pure-Python reference in ``tests/hzd_controller``)
 
 from __future__ import annotations
 
-from math import cos, sin
+from math import atan2, cos, hypot, pi, sin
 
 import numpy as np
 from numba import njit
@@ -301,3 +301,79 @@ def control(cfg: np.ndarray, s: np.ndarray, g: np.ndarray, q: np.ndarray, dq: np
             dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4) * dtau
         tq = kp * (yd - y) + kd * (dyd - dy)
         out[(first + j) % 4] = limit if tq > limit else -limit if tq < -limit else tq
+
+
+# ------------------------------------------------------------------ a gait's entry checks
+GAIT_OK, GAIT_NOT_FINITE, GAIT_IMPACT, GAIT_NO_STEP, GAIT_RANGE = range(5)
+""":func:`gait_check`'s answers (GAIT_RANGE + j: output j's coefficients out of range)."""
+
+_SWAP = (2, 3, 0, 1)
+
+
+@njit(cache=True)
+def _foot(femur: float, tibia: float, pitch: float, hip: float, knee: float) -> tuple[float, float]:
+    """Foot position relative to the hip (m, world axes): ``kinematics.foot_from_hip``."""
+    phi_f = hip - pitch
+    phi_t = phi_f - knee
+    return femur * sin(phi_f) + tibia * sin(phi_t), -(femur * cos(phi_f) + tibia * cos(phi_t))
+
+
+@njit(cache=True)
+def end_of_step_pitch(alpha: np.ndarray, femur: float, tibia: float) -> float:
+    """Torso pitch (rad) at which the end-of-step posture (alpha's last row) has both feet at
+    the same height, the swing foot ahead; NaN when both feet are at one point (no step)."""
+    sx, sz = _foot(femur, tibia, 0.0, alpha[20], alpha[21])
+    wx, wz = _foot(femur, tibia, 0.0, alpha[22], alpha[23])
+    dx, dz = wx - sx, wz - sz
+    if hypot(dx, dz) < 1e-6:
+        return np.nan
+    # Pitching the torso by q rotates every foot vector by -q (angles from the downward
+    # vertical); the stance->swing vector is horizontal and forward when its angle is pi/2.
+    beta = atan2(dx, -dz)
+    q = beta - pi / 2.0
+    return (q + pi) % (2.0 * pi) - pi
+
+
+@njit(cache=True)
+def phase_bounds(alpha: np.ndarray, femur: float, tibia: float) -> tuple[float, float]:
+    """(p_plus, p_minus), m: the hip relative to the stance foot at the start and end of a
+    step of the gait ``alpha`` (24, coefficient-major); NaNs when it has no step."""
+    pitch = end_of_step_pitch(alpha, femur, tibia)
+    if np.isnan(pitch):
+        return np.nan, np.nan
+    sx, sz = _foot(femur, tibia, pitch, alpha[20], alpha[21])
+    wx, wz = _foot(femur, tibia, pitch, alpha[22], alpha[23])
+    p_minus = -sx
+    return p_minus - hypot(wx - sx, wz - sz), p_minus
+
+
+@njit(cache=True)
+def gait_check(alpha: np.ndarray, hip_lo: float, hip_hi: float, knee_lo: float, knee_hi: float, femur: float,
+               tibia: float, out: np.ndarray) -> int:
+    """A gait's entry checks (``controller.validate_alpha``, which words the answer): finite
+    coefficients, each output's within its range (out: that output's min and max), the
+    impact equalities within 1e-6 rad (out[0]: the violation), a step (out: p_plus, p_minus)."""
+    for k in range(24):
+        if not np.isfinite(alpha[k]):
+            return GAIT_NOT_FINITE
+    for j in range(4):
+        lo, hi = (knee_lo, knee_hi) if j % 2 else (hip_lo, hip_hi)
+        low = high = alpha[j]
+        for k in range(1, 6):
+            v = alpha[4 * k + j]
+            low = min(low, v)
+            high = max(high, v)
+        if low < lo or high > hi:
+            out[0], out[1] = low, high
+            return GAIT_RANGE + j
+    violation = 0.0
+    for j in range(4):
+        violation = max(violation, abs(alpha[20 + j] - alpha[_SWAP[j]]))
+    if violation > 1e-6:
+        out[0] = violation
+        return GAIT_IMPACT
+    p_plus, p_minus = phase_bounds(alpha, femur, tibia)
+    if np.isnan(p_plus):
+        return GAIT_NO_STEP
+    out[0], out[1] = p_plus, p_minus
+    return GAIT_OK

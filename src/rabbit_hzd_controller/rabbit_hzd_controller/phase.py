@@ -13,9 +13,11 @@ against the law written out from the paper.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from math import atan2, hypot, pi
 from typing import Sequence
 
+import numpy as np
+
+from . import law
 from .alpha import alpha_matrix
 from .kinematics import LegGeometry, foot_from_hip
 
@@ -45,20 +47,17 @@ def stance_hip_position(geom: LegGeometry, pitch: float, hip: float, knee: float
     return -foot_from_hip(geom, pitch, hip, knee)[0]
 
 
+NO_STEP = "end-of-step posture has both feet at the same point: no step"
+
+
 def end_of_step_pitch(alpha: Sequence[float], geom: LegGeometry) -> float:
     """Torso pitch (rad) at which the end-of-step posture ``alpha[5]`` has both feet at the
-    same height with the swing foot ahead: the touchdown posture of the gait."""
-    end = alpha_matrix(alpha)[-1]
-    sx, sz = foot_from_hip(geom, 0.0, end[0], end[1])
-    wx, wz = foot_from_hip(geom, 0.0, end[2], end[3])
-    dx, dz = wx - sx, wz - sz
-    if hypot(dx, dz) < 1e-6:
-        raise ValueError("end-of-step posture has both feet at the same point: no step")
-    # Pitching the torso by q rotates every foot vector by -q (angles from the downward
-    # vertical); the stance->swing vector is horizontal and forward when its angle is pi/2.
-    beta = atan2(dx, -dz)
-    q = beta - pi / 2.0
-    return (q + pi) % (2.0 * pi) - pi
+    same height with the swing foot ahead: the touchdown posture of the gait (compiled:
+    :func:`.law.end_of_step_pitch`, the controller's entry check runs the same)."""
+    pitch = law.end_of_step_pitch(_flat(alpha), geom.femur, geom.tibia)
+    if pitch != pitch:
+        raise ValueError(NO_STEP)
+    return float(pitch)
 
 
 def phase_bounds_from_alpha(alpha: Sequence[float], geom: LegGeometry) -> PhaseBounds:
@@ -68,14 +67,14 @@ def phase_bounds_from_alpha(alpha: Sequence[float], geom: LegGeometry) -> PhaseB
     ground; that fixes the torso pitch (:func:`end_of_step_pitch`), hence ``p_minus`` (hip
     relative to the stance foot) and the step length ``L`` (foot to foot). Positions are
     continuous through impact and the legs swap roles, so the next step starts at
-    ``p_plus = p_minus - L``.
+    ``p_plus = p_minus - L`` (compiled: :func:`.law.phase_bounds`).
     """
-    end = alpha_matrix(alpha)[-1]
-    pitch = end_of_step_pitch(alpha, geom)
-    sx, sz = foot_from_hip(geom, pitch, end[0], end[1])
-    wx, wz = foot_from_hip(geom, pitch, end[2], end[3])
-    p_minus = -sx
-    step_length = hypot(wx - sx, wz - sz)
-    return PhaseBounds(p_plus=p_minus - step_length, p_minus=p_minus)
+    p_plus, p_minus = law.phase_bounds(_flat(alpha), geom.femur, geom.tibia)
+    if p_plus != p_plus:
+        raise ValueError(NO_STEP)
+    return PhaseBounds(p_plus=float(p_plus), p_minus=float(p_minus))
 
 
+def _flat(alpha: Sequence[float]) -> np.ndarray:
+    """A gait's 24 coefficients as a contiguous float vector (raises for another size)."""
+    return np.ascontiguousarray(alpha_matrix(alpha)).reshape(-1)

@@ -211,7 +211,7 @@ class ClosedLoop:
         if self.observer is not None or self.record_state:
             return 1
         n = min(limit, CHUNK)
-        if self.clock is not None:
+        if self.clock is not None and self.policy is not None:  # nobody decides: the samples only
             due = self.clock.next_due
             if due is not None:
                 n = min(n, max(1, due - self.ticks))
@@ -243,7 +243,7 @@ class ClosedLoop:
         t = stamps[-1]
         speed_list = speeds[:k].tolist()
         if self.clock is not None and k > 1:  # the samples before the last decide nothing (_quiet_ticks)
-            self.clock.add_quiet(range(i + 1, i + k), speed_list[:-1], self.desired_speed)
+            self.clock.add_quiet(range(i + 1, i + k), speed_list[:-1], self.desired_speed, self.policy is not None)
         if t >= self._next_change:
             speed = self.schedule.due(stamp_of(t))
             if speed is not None:

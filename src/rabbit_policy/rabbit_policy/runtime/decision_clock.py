@@ -83,15 +83,21 @@ class DecisionClock:
             return self._ticks.next_due
         return None if not self._pending else (self.window.newest_stamp or 0) + self.tick
 
-    def add_quiet(self, stamps: range, speeds: list[float], desired_speed: float) -> None:
-        """Add samples (stamps rising, after the newest) that bring no decision (before
-        :attr:`next_due`): as :meth:`sample` on each, at once (the compiled loop's ticks)."""
+    def add_quiet(self, stamps: range, speeds: list[float], desired_speed: float, observe: bool = True) -> None:
+        """Add samples (stamps rising, after the newest) that bring no decision: as
+        :meth:`sample` on each, at once (the compiled loop's ticks). With ``observe`` (someone
+        decides) they must come before :attr:`next_due`; without, the decision schedule moves
+        on past them as :meth:`sample` would move it."""
         newest, due = self.window.newest_stamp, self.next_due
-        if (newest is not None and stamps[0] <= newest) or stamps[0] <= 0 or (due is not None and stamps[-1] >= due):
+        if (newest is not None and stamps[0] <= newest) or stamps[0] <= 0 or (
+                observe and due is not None and stamps[-1] >= due):
             raise ValueError(f"samples {stamps[0]}..{stamps[-1]} are not quiet (newest {newest}, next due {due})")
         self.window.extend(stamps, speeds, desired_speed)
         if self._ticks is not None:
-            self._ticks.skip_to(stamps[-1])
+            if stamps[-1] < self._ticks.next_due:
+                self._ticks.skip_to(stamps[-1])
+            else:
+                self._ticks.due(stamps[-1])  # past a due stamp nobody observes: the schedule moves on
 
     def switch(self, stamp: int, desired_speed: float) -> list[Observation]:
         """A stance switch on the state at ``stamp``; returns the decision now due once per
