@@ -36,6 +36,7 @@ from typing import Callable, Sequence, Union
 
 from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, PeriodicDecisions
 
+from . import law
 from .controller import ControllerConfig, HZDController, Leg, infer_stance
 
 @dataclass(frozen=True)
@@ -77,6 +78,7 @@ class GaitSync:
                  decision_timeout: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
         if gait_timing != "policy" and gait_timing not in GAIT_TIMINGS:
             raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {gait_timing!r}")
+        law.warm()  # the compiled law loaded now, not on the first state (a real-time tick's worth and more)
         self.config = config
         self.follow_policy_timing = gait_timing == "policy"
         self.gait_timing = "next_step" if self.follow_policy_timing else gait_timing

@@ -377,3 +377,14 @@ def gait_check(alpha: np.ndarray, hip_lo: float, hip_hi: float, knee_lo: float, 
         return GAIT_NO_STEP
     out[0], out[1] = p_plus, p_minus
     return GAIT_OK
+
+
+def warm() -> None:
+    """Load (or compile) every function here now, not on a node's first tick: a node calls it
+    while it starts (loading from numba's cache takes about half a second, which a first
+    tick in real time would spend late)."""
+    cfg, state, gaits = np.zeros(CONFIG_SIZE), np.zeros(STATE_SIZE), np.zeros((3, SLOT_SIZE))
+    cfg[[FEMUR, TIBIA, KP, TORQUE_LIMIT, TOUCHDOWN_MIN_PHASE]] = (0.4, 0.4, 1.0, 1.0, 0.5)
+    gaits[:, SPAN] = 1.0
+    control(cfg, state, gaits, np.zeros(7), np.zeros(7), np.zeros(4))
+    gait_check(np.zeros(24), -1.0, 1.0, -1.0, 1.0, 0.4, 0.4, np.zeros(2))

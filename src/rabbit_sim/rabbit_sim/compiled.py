@@ -98,3 +98,14 @@ def delay_torques(queue: np.ndarray, count: np.ndarray, torques: np.ndarray, out
         out[k] = queue[slot, k]
         queue[slot, k] = torques[k]
     count[0] = n + 1
+
+
+def warm() -> None:
+    """Load (or compile) every function here now, not on ``sim_node``'s first step (loading
+    from numba's cache takes about half a second, which a first tick in real time would
+    spend late)."""
+    state = np.zeros(PUSH_STATE_SIZE)
+    state[PUSH_UNTIL] = -1.0
+    push_rule(0.0, 0.0005, state, np.zeros((0, 3)), np.zeros(6))
+    delay_torques(np.zeros((1, 4)), np.zeros(1), np.zeros(4), np.zeros(4))
+    fallen(0.7, 0.0, 0.6, 0.8, 0.5)

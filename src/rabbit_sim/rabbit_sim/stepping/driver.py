@@ -22,6 +22,7 @@ from typing import Callable
 from rabbit_msgs_py import topics
 from rabbit_msgs_py.joints import N_ACTUATED
 
+from .. import compiled
 from ..markers import RobotShapes, marker_period_ticks
 from ..settings import REPLY_MODES, SimSettings
 from ..simulation import Simulator, TorqueDelay
@@ -116,6 +117,7 @@ class SimDriver:
 
     def __init__(self, settings: SimSettings, sim: Simulator, clock: Callable[[], float] = time.perf_counter,
                  shapes: bool = True, namespace: str = "/") -> None:
+        compiled.warm()  # the compiled rules loaded now, not on the first step (half a second in real time)
         self.settings, self.sim, self.clock = settings, sim, clock
         self.namespace = namespace  # the node's: log lines name topics in full (_topic)
         mode = settings.mode
