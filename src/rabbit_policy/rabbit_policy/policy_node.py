@@ -72,6 +72,7 @@ from rabbit_policy.runtime.policies import (
     DEFAULT_DECISION_WINDOW,
     LIBRARY_MODES,
     GaitCommand,
+    Policy,
     PolicyUnavailable,
     controller_settings,
     decision_period,
@@ -138,7 +139,10 @@ class PolicyNode(Node):
     """The gait policy node."""
 
     @destroyed_if_start_fails
-    def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
+    def __init__(self, context=None, namespace: str | None = None, built_policy: Policy | None = None,
+                 **overrides) -> None:
+        """``built_policy``: the policy the parameters describe, already built (an in-process
+        stack builds it once, to refuse a bad one before any node starts); None: built here."""
         super().__init__("policy_node", context=context, namespace=namespace)
         values = declare(self, POLICY_PARAMS, overrides)
         try:
@@ -146,11 +150,10 @@ class PolicyNode(Node):
             self.max_speed = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
             if not self.min_speed <= self.max_speed:
                 raise ValueError(f"min_speed ({self.min_speed}) must not be above max_speed ({self.max_speed})")
-            self.policy = make_policy(values["policy"], values["gait_dir"] or None, values["library_mode"],
-                                      values["policy_file"] or None,
-                                      finite("max_command_step", values["max_command_step"], 0.0),
-                                      DecisionTiming.parse(values["decision_period"]),
-                                      finite("speed_integral", values["speed_integral"], 0.0))
+            self.policy = built_policy if built_policy is not None else make_policy(
+                values["policy"], values["gait_dir"] or None, values["library_mode"], values["policy_file"] or None,
+                finite("max_command_step", values["max_command_step"], 0.0),
+                DecisionTiming.parse(values["decision_period"]), finite("speed_integral", values["speed_integral"], 0.0))
             if values["window"] < 1:
                 raise ValueError(f"window must be >= 1 tick, got {values['window']}")
             if values["decision_window"] < 1:

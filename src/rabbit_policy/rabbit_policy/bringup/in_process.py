@@ -12,10 +12,13 @@ from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recordi
 
 
 def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_kind: str | None = None,
-                   observers: Sequence[object] = (), stop=lambda: False) -> tuple[RunReport, dict[str, object]]:
+                   observers: Sequence[object] = (), stop=lambda: False,
+                   policy: object | None = None) -> tuple[RunReport, dict[str, object]]:
     """Run the stack in this process on one executor; returns the report and the nodes
     (for tests and benchmarks). ``observers``: extra node factories ``f(context)``;
-    ``stop()``: polled, true ends the run early (the caller's signal handling)."""
+    ``stop()``: polled, true ends the run early (the caller's signal handling); ``policy``:
+    ``config.build_policy()`` if the caller built it already (policy_node takes it, not
+    building it again)."""
     import rclpy
 
     from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
@@ -30,7 +33,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     try:
         params = config.node_parameters()
         ns = config.namespace or None
-        nodes["policy_node"] = PolicyNode(context=context, namespace=ns, **params["policy_node"])
+        nodes["policy_node"] = PolicyNode(context=context, namespace=ns, built_policy=policy, **params["policy_node"])
         nodes["hzd_controller_node"] = HZDControllerNode(context=context, namespace=ns, **params["hzd_controller_node"])
         nodes["sim_node"] = SimNode(context=context, namespace=ns, **params["sim_node"])
         if "recorder_node" in params:

@@ -149,7 +149,8 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
             if not is_bag_directory(Path(args.record)):
                 raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
-        policy = config.build_policy().name  # once: a bad one is refused before any node starts
+        built = config.build_policy()  # once: a bad one is refused before any node starts
+        policy = built.name
     except ValueError as exc:
         parser.error(str(exc))
     except PolicyUnavailable as exc:
@@ -171,7 +172,7 @@ def main(argv: list[str] | None = None) -> int:
 
     stop = lambda: bool(interrupted)  # noqa: E731
     if args.in_process:
-        report, _nodes = run_in_process(config, stop=stop)
+        report, _nodes = run_in_process(config, stop=stop, policy=built)
     else:
         report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop, policy=policy)
     return _report_and_exit(report, config, args.json)
