@@ -247,3 +247,44 @@ def test_queued_kd_and_alpha_take_effect_at_touchdown():
     assert not loop.run(duration=2.0, until_touchdown=True) and loop.touchdowns
     assert controller.kd == fast.kd and controller.alpha == tuple(fast.alpha)
     assert controller.pending_kd is None and controller.pending_alpha is None
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("controller", ["classic", "learned", "recovery"])
+def test_the_compiled_runs_of_ticks_are_the_loop_ticked_one_at_a_time(controller):
+    """ClosedLoop.run hands runs of ticks to the compiled inner loop and decides between them
+    (rabbit_policy.experiment.ticks); ticked one at a time (the observer's path) it must walk
+    the same to the last bit: decisions, touchdowns, a phase push, a command change between
+    two decisions, a torque delay, a stall by time included."""
+    from rabbit_policy.runtime.policies import make_policy
+
+    scenario = Scenario(schedule=((0.0, 0.8), (1.2345, 1.3)), pushes=(Push(2.0, -90.0, 0.1),),
+                        phase_pushes=(PhasePush(3.0, 0.4, 120.0, 0.1),), torque_delay=0.001)
+    runs = []
+    for chunked in (True, False):
+        loop = ClosedLoop(scenario, make_policy(controller))
+        if chunked:
+            loop.run(5.0, stop_on_fall=False)
+        else:
+            for _ in range(5000):
+                loop.tick()
+        runs.append(loop)
+    a, b = runs
+    assert a.ticks == b.ticks == 5000
+    assert np.array_equal(a.data.qpos, b.data.qpos) and np.array_equal(a.data.qvel, b.data.qvel)
+    assert a.touchdowns == b.touchdowns and a.decisions == b.decisions and a.placed_pushes == b.placed_pushes
+    assert a.result().times.tolist() == b.result().times.tolist() and a.peak_torque == b.peak_torque
+    assert (a.fell, a.stalled, a.fall_time, a.stall_time) == (b.fell, b.stalled, b.fall_time, b.stall_time)
+    assert len(a.decisions) > 10 and len(a.touchdowns) >= 2
+
+
+@pytest.mark.sim
+def test_a_stall_by_time_is_dated_at_the_same_tick_whether_the_ticks_run_compiled_or_one_by_one():
+    scenario = Scenario.constant(0.7, pushes=(Push(2.0, -150.0, 0.1),))
+    chunked = ClosedLoop(scenario, CLASSIC)
+    chunked.run(8.0)
+    single = ClosedLoop(scenario, CLASSIC)
+    while not single.tick():
+        pass
+    assert chunked.failed and (chunked.stall_time, chunked.fall_time) == (single.stall_time, single.fall_time)
+    assert chunked.ticks == single.ticks

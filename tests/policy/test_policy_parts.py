@@ -420,3 +420,28 @@ def test_the_numpy_forward_pass_is_torchs_within_float32_rounding(output, inputs
         for p in net.parameters():
             p.zero_()
     assert np.array_equal(forward(x[0]), got[0])  # a snapshot: the network's later weights do not reach it
+
+
+def test_quiet_samples_added_at_once_are_the_samples_added_one_by_one():
+    """DecisionClock.add_quiet (the compiled loop's samples between two decisions) against
+    sample() on each: the same observations after, and a run that would hold a decision is
+    refused."""
+    from rabbit_policy.runtime.decision_clock import DecisionClock
+
+    rng = np.random.default_rng(3)
+    speeds = (1.0 + 0.1 * rng.standard_normal(300)).tolist()
+    for period in (0, 20):
+        one, many = DecisionClock(period, 100), DecisionClock(period, 100)
+        decided = []
+        for i, v in enumerate(speeds[:45], start=1):
+            decided += one.sample(i, v, 1.1)
+        many.add_quiet(range(1, 20), speeds[:19], 1.1)
+        decided_many = many.sample(20, speeds[19], 1.1)
+        many.add_quiet(range(21, 40), speeds[20:39], 1.1)
+        decided_many += many.sample(40, speeds[39], 1.1)
+        many.add_quiet(range(41, 46), speeds[40:45], 1.1)
+        assert decided == decided_many
+        assert one.observe(1.1) == many.observe(1.1)
+        if period:
+            with pytest.raises(ValueError, match="not quiet"):
+                many.add_quiet(range(46, 70), speeds[45:69], 1.1)  # 60 is due
