@@ -43,3 +43,12 @@ def test_joining_mid_run_follows_the_clock_that_started_at_the_placement():
 def test_bad_periods_are_refused(period, tick):
     with pytest.raises(ValueError):
         PeriodicDecisions(period, tick)
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5, True, None, "20"])
+def test_a_training_env_and_its_episodes_take_a_timing_in_ticks_through_the_one_check(bad):
+    from rabbit_msgs_py.decision_ticks import decision_ticks
+
+    assert decision_ticks(0) == 0 and decision_ticks(20) == 20
+    with pytest.raises(ValueError, match="decision timing"):
+        decision_ticks(bad)

@@ -68,6 +68,16 @@ class DecisionTiming:
         return "own" if self.ticks is None else "step" if self.ticks == 0 else str(self.ticks)
 
 
+def decision_ticks(value: int) -> int:
+    """A concrete timing in ticks, as a training environment and its episodes take it (0: one
+    env step per walking step, N: every N ticks; not "own": an environment has no policy of
+    its own to ask): ``value`` back, or ``ValueError`` with :class:`DecisionTiming`'s words."""
+    timing = DecisionTiming(value)
+    if timing.ticks is None:
+        raise ValueError("a decision timing in ticks is step (0) or a whole number of ticks >= 1, got own")
+    return timing.ticks
+
+
 OWN = DecisionTiming(None)
 PER_STEP = DecisionTiming(0)
 

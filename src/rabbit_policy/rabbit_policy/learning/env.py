@@ -131,6 +131,7 @@ import numpy as np
 from rabbit_hzd_controller.alpha import N_FREE, expand_alpha, reduce_alpha
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import option
+from rabbit_msgs_py.decision_ticks import decision_ticks
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
@@ -293,8 +294,7 @@ class EpisodeConfig:
     def __post_init__(self) -> None:
         if not (isinstance(self.max_steps, int) and self.max_steps >= 1):
             raise ValueError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
-        if not (isinstance(self.decision_period, int) and self.decision_period >= 0):
-            raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {self.decision_period!r}")
+        decision_ticks(self.decision_period)  # raises for anything but 0 or N ticks
         if self.distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
@@ -368,8 +368,7 @@ class RabbitHZDEnv(gym.Env):
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
-        if not (isinstance(decision_period, int) and decision_period >= 0):
-            raise ValueError(f"decision_period must be a whole number of ticks >= 0, got {decision_period!r}")
+        decision_period = decision_ticks(decision_period)  # the one check: 0 or N ticks
         if not (isinstance(max_steps, int) and max_steps >= 1):
             raise ValueError(f"max_steps must be a whole number >= 1, got {max_steps!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
