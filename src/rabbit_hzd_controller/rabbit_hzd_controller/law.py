@@ -22,7 +22,8 @@ Arrays (float64):
   p_plus, p_minus and the span (m).
 
 Every expression is written in the order of the Python law it replaced, so the torques are the
-same floats (tested against a pure-Python reference in ``tests/hzd_controller``).
+same floats (walks compared bit for bit with that law through a worktree, docs/benchmarks.md;
+``tests/hzd_controller`` checks it against the law written out from the paper).
 """
 
 from __future__ import annotations
