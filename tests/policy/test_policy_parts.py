@@ -59,6 +59,29 @@ def test_speed_window_keeps_the_newest_two_windows_and_its_means_are_correctly_r
     assert window.observation(1.0, 880 * MS).as_tuple() == (1.0, 1.0, 0.0)  # older than the newest 100: dropped
 
 
+def test_exact_sum_is_math_fsum_bit_for_bit():
+    """The compiled correctly rounded sum equals math.fsum (one correctly rounded value, whatever
+    the algorithm) on badly scaled, cancelling and tie-making data; non-finite input falls back
+    to fsum's own rules."""
+    from rabbit_policy.runtime.exact_sum import exact_sum
+
+    rng = np.random.default_rng(11)
+    cases = [np.zeros(0), np.array([1.0]), np.array([1e100, 1.0, -1e100]), np.array([1.0, 1e-16, 1e-16]),
+             np.array([2.0 ** 53, 1.0, 2.0 ** -60]), np.array([2.0 ** 53, 1.0, -(2.0 ** -60)]),  # ties and near-ties
+             np.array([0.1] * 10)]
+    for _ in range(300):
+        n = int(rng.integers(1, 800))
+        values = rng.uniform(-1.0, 1.0, n) * 10.0 ** rng.integers(-20, 20, n)
+        values = np.concatenate([values, -values[: n // 2] * (1 + 1e-15)])  # heavy cancellation
+        cases.append(rng.permutation(values))
+    for values in cases:
+        got, want = exact_sum(values), math.fsum(values.tolist())
+        assert got == want or (math.isnan(got) and math.isnan(want)), values
+    assert exact_sum(np.array([math.inf, 1.0])) == math.inf
+    with pytest.raises(OverflowError):  # as fsum: an intermediate overflow
+        exact_sum(np.array([1e308, 1e308, -1e308]))
+
+
 def test_clamp_speed():
     assert clamp_speed(1.2, 0.7, 1.5) == 1.2
     assert clamp_speed(9.0, 0.7, 1.5) == 1.5 and clamp_speed(-1.0, 0.7, 1.5) == 0.7

@@ -26,6 +26,7 @@ N_FREE = N_ALPHA - N_OUTPUTS  # 20
 
 SWAP_LEGS = (2, 3, 0, 1)
 """Output permutation that relabels stance <-> swing."""
+_SWAP_INDEX = np.array(SWAP_LEGS)
 
 
 def expand_alpha(free: Sequence[float]) -> np.ndarray:
@@ -33,8 +34,7 @@ def expand_alpha(free: Sequence[float]) -> np.ndarray:
     free = np.asarray(free, dtype=float).reshape(-1)
     if free.shape != (N_FREE,):
         raise ValueError(f"expected {N_FREE} free Bezier coefficients, got {free.size}")
-    last = free[list(SWAP_LEGS)]
-    return np.concatenate([free, last])
+    return np.concatenate([free, free[_SWAP_INDEX]])
 
 
 def reduce_alpha(alpha: Sequence[float], atol: float = 1e-9) -> np.ndarray:

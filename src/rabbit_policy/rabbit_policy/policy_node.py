@@ -80,6 +80,7 @@ from rabbit_policy.runtime.policies import (
     make_policy,
     reset_policy,
 )
+from rabbit_policy.runtime import exact_sum
 from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.commands import COMMAND_RANGE, clamp_message, clamp_speed
@@ -172,6 +173,7 @@ class PolicyNode(Node):
             self.clock = DecisionClock(self.decision_period,
                                        values["decision_window"] if self.decision_period else values["window"],
                                        tick=TICK_NS)
+            exact_sum.warm()  # the window's compiled sum loaded now, not on the first decision
             self.desired_speed = finite("initial_speed", values["initial_speed"], self.min_speed, self.max_speed)
             self.initial_speed = self.desired_speed
             self.schedule = speed_schedule(values["speed_schedule"], self.initial_speed)

@@ -124,8 +124,8 @@ class ClosedLoop:
         self.ticks = 0
         self.start_time = round(float(self.data.time), 9)  # times on the ns grid of the stack's stamps
         self.start_x = float(self.data.qpos[0])
-        self._times: list[float] = []
-        self._xs: list[float] = []
+        self._time_chunks: list[np.ndarray] = []  # sim time (s) and hip x (m) after each tick, per compiled run
+        self._x_chunks: list[np.ndarray] = []
         self._qpos_rows: list[np.ndarray] = []
         self._qvel_rows: list[np.ndarray] = []
         self._stance: list[int] = []
@@ -235,15 +235,13 @@ class ClosedLoop:
         if state[ticks.TIME] != data.time:
             raise RuntimeError("the compiled loop's clock left MuJoCo's: the model's integrator must advance the "
                                "time by one timestep per step (Euler or implicit)")
-        stamps = [round(t, 9) for t in times[:k].tolist()]  # on the ns grid of the stack's stamps (16.132)
-        self._times.extend(stamps)
-        self._xs.extend(xs[:k].tolist())
+        self._time_chunks.append(times[:k].copy())  # rounded to the ns grid when a result is built
+        self._x_chunks.append(xs[:k].copy())
         i = self.ticks
         self.ticks = i + k
-        t = stamps[-1]
-        speed_list = speeds[:k].tolist()
+        t = round(float(times[k - 1]), 9)  # on the ns grid of the stack's stamps (16.132)
         if self.clock is not None and k > 1:  # the samples before the last decide nothing (_quiet_ticks)
-            self.clock.add_quiet(range(i + 1, i + k), speed_list[:-1], self.desired_speed, self.policy is not None)
+            self.clock.add_quiet(range(i + 1, i + k), speeds[:k - 1], self.desired_speed, self.policy is not None)
         if t >= self._next_change:
             speed = self.schedule.due(stamp_of(t))
             if speed is not None:
@@ -256,7 +254,7 @@ class ClosedLoop:
         if self.observer is not None:
             self.observer(self, self._applied.tolist())
         if self.clock is not None:
-            for observation in self.clock.sample(i + k, speed_list[-1], self.desired_speed,
+            for observation in self.clock.sample(i + k, float(speeds[k - 1]), self.desired_speed,
                                                  self.policy is not None):  # every N ticks
                 self._decide(observation, t)
         stop = False
@@ -342,12 +340,17 @@ class ClosedLoop:
         return WalkResult(
             scenario=self.scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
             stall_time=self.stall_time, start_time=self.start_time, start_x=self.start_x,
-            times=np.array(self._times), hip_x=np.array(self._xs), touchdowns=list(self.touchdowns),
+            times=np.array([round(t, 9) for t in _joined(self._time_chunks).tolist()]),  # the ns grid, as t above
+            hip_x=_joined(self._x_chunks), touchdowns=list(self.touchdowns),
             decisions=list(self.decisions), peak_torque=self.peak_torque,
             qpos=np.array(self._qpos_rows).reshape(-1, self.model.nq) if record else None,
             qvel=np.array(self._qvel_rows).reshape(-1, self.model.nv) if record else None,
             stance=np.array(self._stance, dtype=np.int8) if record else None,
         )
+
+
+def _joined(chunks: list[np.ndarray]) -> np.ndarray:
+    return np.concatenate(chunks) if chunks else np.zeros(0)
 
 
 def walk(policy: Policy | None, scenario: Scenario, duration: float, *, start: GaitCommand | None = None,
@@ -372,6 +375,7 @@ def compile_kernels() -> float:
     from rabbit_msgs_py.pushes import Push
     from rabbit_sim.simulation import StopRules
 
+    from rabbit_policy.runtime import exact_sum
     from rabbit_policy.runtime.gait_library import GaitLibrary
 
     start = perf_counter()
@@ -383,6 +387,7 @@ def compile_kernels() -> float:
     loop.controller.compute(loop.data.qpos, loop.data.qvel)  # the node's path: one tick through the class
     loop.sim.step([0.0] * 4)
     loop.sim.fallen()
+    exact_sum.warm()
     return perf_counter() - start
 
 

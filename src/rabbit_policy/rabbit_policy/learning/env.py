@@ -137,7 +137,7 @@ from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds,  # noqa: F401  (ActionBounds re-exported)
-                                           ResidualAction, residual_sum_bounds)
+                                           ResidualAction, clip, residual_sum_bounds)
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
 from rabbit_policy.runtime.speed_integral import check_gain
@@ -431,10 +431,10 @@ class RabbitHZDEnv(gym.Env):
         noise = self.distribution.observation_noise
         if noise > 0.0:
             obs[1:] += self.np_random.normal(0.0, noise, 2)
-        obs = np.clip(obs, self.observation_space.low[:3], self.observation_space.high[:3])
+        obs = clip(obs, self.observation_space.low[:3], self.observation_space.high[:3])
         if self.memory is not None:
             obs = self.memory.inputs(obs, self._loop.body_state() if self.memory.config.body else None)
-        return np.clip(obs, self.observation_space.low, self.observation_space.high).astype(np.float32)
+        return clip(obs, self.observation_space.low, self.observation_space.high).astype(np.float32)
 
     def _run_to_touchdown(self) -> tuple[bool, bool]:
         """Simulate until the next touchdown (or a stop rule); returns (fell, stalled)."""
@@ -545,7 +545,7 @@ class RabbitHZDEnv(gym.Env):
         if self._loop is None:
             raise RuntimeError("call reset() before step()")
         if self.memory is not None:
-            self.memory.record(np.clip(np.asarray(action, dtype=float), -1.0, 1.0))
+            self.memory.record(clip(np.asarray(action, dtype=float), -1.0, 1.0))
         action = self.bounds.to_physical(action)
         if self.base is not None:  # on the base controller's decision now (it reads the body state)
             base = self.base.act(replace(self._loop.observation(moving=True), body=self._loop.body_state()))

@@ -20,6 +20,8 @@ which the controller switched stance (``/hzd/step``'s stamp).
 
 from __future__ import annotations
 
+import numpy as np
+
 from rabbit_msgs_py.decision_ticks import PeriodicDecisions
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
 
@@ -83,7 +85,7 @@ class DecisionClock:
             return self._ticks.next_due
         return None if not self._pending else (self.window.newest_stamp or 0) + self.tick
 
-    def add_quiet(self, stamps: range, speeds: list[float], desired_speed: float, observe: bool = True) -> None:
+    def add_quiet(self, stamps: range, speeds: np.ndarray, desired_speed: float, observe: bool = True) -> None:
         """Add samples (stamps rising, after the newest) that bring no decision: as
         :meth:`sample` on each, at once (the compiled loop's ticks). With ``observe`` (someone
         decides) they must come before :attr:`next_due`; without, the decision schedule moves
