@@ -43,6 +43,27 @@ def test_the_rule_acts_only_inside_the_step_and_only_when_the_hip_falls_behind()
 
 
 @pytest.mark.unit
+def test_last_weight_is_the_rules_weight_at_the_last_decision():
+    """``last_weight`` (what a gated residual and the diagnostics read): 0 on a steady walk,
+    > 0 once the hip falls behind the previous steps at the same phase, 0 again after a reset."""
+    from rabbit_policy.runtime.speed_window import Observation
+
+    policy = make_policy("recovery")
+    assert policy.last_weight == 0.0
+
+    def decide(tau: float, hip_velocity: float) -> float:
+        policy.act(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, hip_velocity)))
+        return policy.last_weight
+
+    taus = [i / 25 for i in range(1, 25)]
+    steady = [decide(tau, 1.0) for _ in range(5) for tau in taus]  # five steps at the command's pace (the memory holds four)
+    assert steady == [0.0] * len(steady)
+    assert decide(0.5, 0.3) > 0.0  # far behind the previous steps at this phase
+    policy.reset()
+    assert policy.last_weight == 0.0
+
+
+@pytest.mark.unit
 def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs():
     policy = make_policy("recovery")
     assert policy.needs_body and policy.decision_period == 20
@@ -115,8 +136,12 @@ def test_the_tuning_counts_the_pushes_and_the_offsets_are_what_saves_them():
     assert survivals(idle, cases, config) == 0
 
 
-def _zero_residual_on_recovery_file(path) -> None:
-    """A checkpoint of the zero residual on the recovery controller, as train.py writes one."""
+def _zero_residual_on_recovery_file(path, base: str = "recovery", scale_weights: float = 0.0) -> None:
+    """A checkpoint of the zero residual on the recovery controller, as train.py writes one
+    (``scale_weights`` > 0: the last layer's weights set to that x a fixed random draw: a
+    residual that is not zero)."""
+    import torch
+
     from rabbit_policy.learning.warm_start import zero_residual_network
     from rabbit_policy.runtime.actions import RESIDUAL_SCALE, policy_bounds
     from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -126,8 +151,13 @@ def _zero_residual_on_recovery_file(path) -> None:
     library = GaitLibrary.load()
     bounds = policy_bounds("residual", library)
     net = zero_residual_network(bounds.low, bounds.high, INPUTS["body"], seed=1)
+    if scale_weights:
+        last = [m for m in net.body if isinstance(m, torch.nn.Linear)][-1]
+        with torch.no_grad():
+            last.weight.copy_(scale_weights * torch.as_tensor(np.random.default_rng(3).standard_normal(
+                tuple(last.weight.shape))))
     info = {"features": "body", "action": "residual", "output": "tanh", "residual_scale": list(RESIDUAL_SCALE),
-            "integral_gain": 0.0, "residual_base": "recovery", "config": {"decision_period": 20},
+            "integral_gain": 0.0, "residual_base": base, "config": {"decision_period": 20},
             "memory": MemoryConfig.for_features("body", 20, 0.0, library.speed_range).to_dict()}
     PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info).save(path)
 
@@ -152,6 +182,35 @@ def test_a_zero_residual_on_the_recovery_base_is_the_recovery_controller_bit_for
         assert not loop.failed
         final.append(loop.data.qpos.copy())
     assert np.array_equal(final[0], final[1])
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_a_gated_residual_walks_the_recovery_controller_until_the_hip_falls_behind(tmp_path):
+    """The ``recovery_gated`` base: a residual that is not zero walks the recovery controller's
+    trajectory to the last bit while the rule's weight is 0 (an undisturbed walk at a constant
+    command; after an acceleration the hip lags the new command and the rule's weight opens
+    for a few decisions, docs/learning.md), and acts once a push slows the hip (the
+    trajectories part). The same residual on the ungated base parts from the start."""
+    scenario = Scenario(schedule=((0.0, 1.0),))
+    pushed = Scenario(schedule=((0.0, 1.0),), pushes=(Push(3.0, -110.0, 0.1),))
+    ends = {}
+    for base in ("recovery_gated", "recovery"):
+        path = tmp_path / f"{base}.pt"
+        _zero_residual_on_recovery_file(path, base, scale_weights=0.3)
+        policy = make_policy("learned", policy_file=path)
+        assert controller_settings(policy) == CONTROLLER_SETTINGS
+        for name, sc in (("walk", scenario), ("pushed", pushed)):
+            loop = ClosedLoop(sc, policy)
+            loop.run(5.0, stop_on_fall=False)
+            ends[base, name] = loop.data.qpos.copy()
+    for name, sc in (("walk", scenario), ("pushed", pushed)):
+        loop = ClosedLoop(sc, make_policy("recovery"))
+        loop.run(5.0, stop_on_fall=False)
+        ends["none", name] = loop.data.qpos.copy()
+    assert np.array_equal(ends["recovery_gated", "walk"], ends["none", "walk"])
+    assert not np.array_equal(ends["recovery_gated", "pushed"], ends["none", "pushed"])
+    assert not np.array_equal(ends["recovery", "walk"], ends["none", "walk"])
 
 
 @pytest.mark.unit

@@ -112,7 +112,7 @@ TimeLimit wrapper only, so every id carries :class:`EpisodeLength`, which makes 
 | ``features`` | ``"paper"`` | the observation: the paper's three, ``"memory"`` or ``"body"`` (see Observation space) |
 | ``action`` | ``"direct"`` | the action: the gait, or ``"residual"`` on the library (see Observation space) |
 | ``integral_gain`` | 0.0 | residual only: the base gait at v_d + gain x the speed integral (1/s; see Observation space) |
-| ``residual_base`` | ``"classic"`` | residual only: what it adds to, the library's gait (``classic``) or the recovery controller's decision (``recovery``; needs a decision period; the controller then applies gaits at once) |
+| ``residual_base`` | ``"classic"`` | residual only: what it adds to, the library's gait (``classic``) or the recovery controller's decision (``recovery``; needs a decision period; the controller then applies gaits at once), or that scaled by the recovery rule's weight at the decision (``recovery_gated``: zero until something slows the hip) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
 ## Version history
@@ -137,7 +137,7 @@ from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds,  # noqa: F401  (ActionBounds re-exported)
-                                           ResidualAction, clip, residual_sum_bounds)
+                                           ResidualAction, clip, residual_gate, residual_sum_bounds)
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
 from rabbit_policy.runtime.speed_integral import check_gain
@@ -284,7 +284,8 @@ class EpisodeConfig:
                                    "rabbit_policy.runtime.actions)", choices=ACTIONS)
     residual_base: str = option("classic", "action residual: what it adds to, the library's gait at the command "
                                            "(classic) or the recovery controller's decision every decision period "
-                                           "(recovery: classic plus the push-recovery rule, gaits applied at once)",
+                                           "(recovery: classic plus the push-recovery rule, gaits applied at once; "
+                                           "recovery_gated: the same, the residual scaled by the rule's weight w)",
                                 choices=RESIDUAL_BASES)
     integral_gain: float = option(0.0, "action residual with memory or body features: the base gait is the "
                                        "library's at v_d + this (1/s) x the memory's speed integral (zero residual = "
@@ -549,7 +550,8 @@ class RabbitHZDEnv(gym.Env):
         action = self.bounds.to_physical(action)
         if self.base is not None:  # on the base controller's decision now (it reads the body state)
             base = self.base.act(replace(self._loop.observation(moving=True), body=self._loop.body_state()))
-            action = self.residual.compose_on(action, np.append(reduce_alpha(base.alpha), base.kd))
+            action = self.residual.compose_on(action * residual_gate(self.base), np.append(reduce_alpha(base.alpha),
+                                                                                         base.kd))
         elif self.residual is not None:
             action = self.residual.compose(action, self.desired_speed,
                                            self.memory.integral if self.memory is not None else 0.0)

@@ -11,7 +11,11 @@
   speed error (:mod:`.speed_integral`: Westervelt's event-based integral), so a zero
   residual is the classic controller with that speed integral. With the ``recovery`` base
   (:data:`RESIDUAL_BASES`) the residual adds to the recovery controller's decision instead
-  (:meth:`ResidualAction.compose_on`), so a zero residual is that controller.
+  (:meth:`ResidualAction.compose_on`), so a zero residual is that controller; with
+  ``recovery_gated`` the residual is first scaled by the recovery rule's weight w at the
+  decision (0 while the hip keeps its pace, up to 1 at the rule's full deficit:
+  :func:`residual_gate`), so a policy acts only once something slowed the hip and every
+  perturbation of it walks the recovery controller's trajectory until then.
 
 :class:`ResidualAction` is the one implementation, run by the learning environment and by
 :class:`~rabbit_policy.runtime.policies.NetworkPolicy` (walk.py, the evaluations, policy_node).
@@ -29,7 +33,7 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_integral import check_gain
 
 ACTIONS = ("direct", "residual")
-RESIDUAL_BASES = ("classic", "recovery")
+RESIDUAL_BASES = ("classic", "recovery", "recovery_gated")
 """What a residual adds to: the calibrated library's gait at the command (``classic``), or the
 recovery controller's decision (``recovery``: classic plus the push-recovery rule,
 :mod:`.recovery`, applied at once; the push-recovery issue's residual on the model-based
@@ -118,11 +122,17 @@ class ResidualAction:
 def residual_sum_bounds(library: GaitLibrary, base: str = "classic", margin: float = 0.15) -> ActionBounds:
     """What a residual's sum is clipped to (:attr:`ResidualAction.direct`): on the ``classic``
     base the direct action's bounds (the library's range widened by ``margin`` rad); on the
-    ``recovery`` base the controller's own coefficient limits, since the recovery rule's
+    ``recovery`` bases the controller's own coefficient limits, since the recovery rule's
     offsets reach beyond the library's range (a zero residual must be that controller)."""
     if base not in RESIDUAL_BASES:
         raise ValueError(f"residual base must be one of {RESIDUAL_BASES}, got {base!r}")
     return ActionBounds.from_library(library, margin if base == "classic" else float("inf"))
+
+
+def residual_gate(base) -> float:
+    """What a residual on ``base`` (a residual base's policy, after its decision) is scaled by:
+    the recovery rule's weight at that decision for the ``recovery_gated`` base, else 1."""
+    return float(base.last_weight) if getattr(base, "gates_residual", False) else 1.0
 
 
 def policy_bounds(action: str, library: GaitLibrary, margin: float = 0.15) -> ActionBounds:

@@ -210,7 +210,7 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
         if path.is_file():
             from rabbit_policy.runtime.network import PolicyCheckpoint
 
-            if PolicyCheckpoint.load(path).info.get("residual_base", "classic") == "recovery":
+            if PolicyCheckpoint.load(path).info.get("residual_base", "classic") != "classic":
                 return dict(CONTROLLER_SETTINGS)
     return {}
 
@@ -225,7 +225,9 @@ def residual_base_policy(base: str, library: GaitLibrary, decision_period: int) 
         raise ValueError(f"residual base must be one of {RESIDUAL_BASES}, got {base!r}")
     if base == "classic":
         return None
-    return _recovery(LibraryPolicy(library, "interpolate"), decision_period)
+    recovery = _recovery(LibraryPolicy(library, "interpolate"), decision_period)
+    recovery.gates_residual = base == "recovery_gated"
+    return recovery
 
 
 def decision_period(policy: Policy | None) -> int:
@@ -308,8 +310,11 @@ class NetworkPolicy:
         if self.base is not None:
             from rabbit_hzd_controller.alpha import reduce_alpha
 
+            from rabbit_policy.runtime.actions import residual_gate
+
             base = self.base.act(observation)
-            action = self.residual.compose_on(action, np.append(reduce_alpha(base.alpha), base.kd))
+            action = self.residual.compose_on(action * residual_gate(self.base), np.append(reduce_alpha(base.alpha),
+                                                                                         base.kd))
         elif self.residual is not None:
             action = self.residual.compose(action, observation.desired_speed,
                                            self.memory.integral if self.memory is not None else 0.0)

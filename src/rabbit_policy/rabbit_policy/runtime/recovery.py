@@ -134,6 +134,7 @@ class RecoveryPolicy:
 
     needs_body = True
     controller_settings = CONTROLLER_SETTINGS
+    gates_residual = False  # True: a residual on it is scaled by last_weight (the recovery_gated base)
 
     def __init__(self, classic, config: RecoveryConfig = RecoveryConfig(), decision_period: int = 20,
                  decision_window: int = 1000) -> None:
@@ -149,6 +150,7 @@ class RecoveryPolicy:
         self._offsets = np.zeros((5, N_OUTPUTS))
         self._offsets[1:, :] = np.asarray(config.offsets)
         self._held = None  # the base gait held late in the step
+        self.last_weight = 0.0
 
     def with_config(self, config: RecoveryConfig) -> "RecoveryPolicy":
         """The same controller with other constants (tuning)."""
@@ -158,6 +160,7 @@ class RecoveryPolicy:
         self._base.reset()
         self.memory.reset()
         self._held = None
+        self.last_weight = 0.0
 
     def start_command(self, speed: float):
         """Classic's gait at ``speed`` (no body state exists before the walk)."""
@@ -185,6 +188,7 @@ class RecoveryPolicy:
         reference = self.memory.observe(tau, hip_velocity / max(ramped, 0.1))
         ramping = abs(ramped - observation.desired_speed) > 1e-9
         w = 0.0 if ramping else self.weight(tau, hip_velocity / max(ramped, 0.1), reference)
+        self.last_weight = w  # the rule's weight at this decision (read by diagnostics and gated residuals)
         if w <= 0.0:
             return command
         free = reduce_alpha(command.alpha).reshape(5, N_OUTPUTS) + w * self._offsets
