@@ -208,7 +208,7 @@ class ClosedLoop:
         """How many ticks (1 to ``limit``) may run compiled at once: nothing Python decides
         falls strictly inside them (a decision, a command change, a stall by time, a
         recorded state or an observer), only possibly on the last."""
-        if self.observer is not None or self.record_state:
+        if limit == 1 or self.observer is not None or self.record_state:
             return 1
         n = min(limit, CHUNK)
         if self.clock is not None and self.policy is not None:  # nobody decides: the samples only
