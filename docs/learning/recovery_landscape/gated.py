@@ -11,7 +11,7 @@ import sys
 
 import numpy as np
 
-from landscape import training_config
+from landscape import setup
 
 
 def gated_rollout(env, forward, episode) -> bool:
@@ -27,20 +27,11 @@ def gated_rollout(env, forward, episode) -> bool:
 
 def main() -> None:
     from rabbit_policy.learning.env import RabbitHZDEnv
-    from rabbit_policy.learning.es import get_flat, set_flat, stratified_episodes
-    from rabbit_policy.learning.warm_start import zero_residual_network
-    from rabbit_policy.runtime.actions import policy_bounds
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.memory import INPUTS
+    from rabbit_policy.learning.es import set_flat
     from rabbit_policy.runtime.network import NetworkForward
 
-    config = training_config().trainer
-    bounds = policy_bounds("residual", GaitLibrary.load())
-    net = zero_residual_network(bounds.low, bounds.high, INPUTS[config.features], 0)
-    theta = get_flat(net)
+    config, net, theta, episodes, rng = setup()
     env = RabbitHZDEnv(**config.env_kwargs())
-    rng = np.random.default_rng(0)
-    episodes = stratified_episodes(rng, config.episodes, (0.7, 1.5))
 
     def run(params: np.ndarray) -> np.ndarray:
         set_flat(net, params)

@@ -27,8 +27,10 @@ def training_config():
                                 "--out", "/tmp/unused", "--episodes", "24"])
 
 
-def main() -> None:
-    from rabbit_policy.learning.es import _evaluate, get_flat, stratified_episodes
+def setup():
+    """(the preset's ES config, the zero-residual network, its flat parameters, the 24 episodes,
+    the generator after drawing them): what every script here starts from."""
+    from rabbit_policy.learning.es import get_flat, stratified_episodes
     from rabbit_policy.learning.warm_start import zero_residual_network
     from rabbit_policy.runtime.actions import policy_bounds
     from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -37,10 +39,16 @@ def main() -> None:
     config = training_config().trainer
     bounds = policy_bounds("residual", GaitLibrary.load())
     net = zero_residual_network(bounds.low, bounds.high, INPUTS[config.features], 0)
-    theta = get_flat(net)
-    key = tuple(sorted(config.env_kwargs().items()))
     rng = np.random.default_rng(0)
     episodes = stratified_episodes(rng, config.episodes, (0.7, 1.5))
+    return config, net, get_flat(net), episodes, rng
+
+
+def main() -> None:
+    from rabbit_policy.learning.es import _evaluate
+
+    config, _net, theta, episodes, rng = setup()
+    key = tuple(sorted(config.env_kwargs().items()))
     centre = _evaluate((key, theta, episodes))
     fell0 = np.array([r.fell for r in centre])
     rows = {"episodes": len(episodes), "centre": {"mean_return": float(np.mean([r.total for r in centre])),
