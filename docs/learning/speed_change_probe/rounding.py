@@ -1,6 +1,6 @@
 # How much of make demo's outcome is rounding? (docs/learning.md, 2026-11-27 (later))
 #   .venv/bin/python docs/learning/speed_change_probe/rounding.py 0 60 > rounding.txt
-# The shipped learned policy walks make demo's schedule (0.8, 1.4 from 6 s, 0.9 from 12 s, 1.2 from 18 s;
+# The shipped learned policy walks make demo's kind of schedule (0.8, 1.4 from 6 s, 0.9 from 12 s, 1.2 from 18 s; make demo's own changes at 13 s;
 # 24 s) on the fast path with every action multiplied by (1 + u), u uniform in +-1e-7 (float32 rounding's
 # size), one seed per line: (seed, fell, stalled, stall time, touchdowns).
 import sys
