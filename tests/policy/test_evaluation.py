@@ -103,6 +103,64 @@ def test_the_map_of_a_policy_with_memory_is_a_function_of_its_coordinates(contro
     assert pickle.dumps(memory) == before
 
 
+def test_the_map_does_not_depend_on_what_it_evaluated_before():
+    """Each evaluation restores the solver's warm start with the state (mjSTATE_WARMSTART is
+    not part of mjSTATE_FULLPHYSICS). Without it the next step started from the last
+    evaluation's warm start, and P(x) moved by 6e-14 after another evaluation."""
+    step = WalkReturnMap(CLASSIC, 1.0, feedback=False, settle_steps=10)
+    x = step.natural_states(2)[-1]
+    first = step(x)
+    far = x.copy()
+    far[6] += 0.3  # stance hip rate (rad/s)
+    step(far)
+    assert np.array_equal(step(x), first)
+
+
+def _section_by_single_ticks(step: WalkReturnMap, x: np.ndarray) -> np.ndarray:
+    """The map's section rule, one tick at a time from the closed loop's public ``tick``
+    (the reference the compiled path must equal): after a touchdown, the first tick whose
+    phase crosses the section, the state interpolated between its two sides."""
+    import mujoco
+
+    from rabbit_policy.evaluation.poincare import section_crossing
+
+    step._apply(x)
+    model, data, controller, spec = step.model, step.data, step.controller, step._spec
+    before, after = np.zeros(step._size), np.zeros(step._size)
+    touched = False
+    for _ in range(step.max_ticks):
+        g_before = controller.tau - step.section_phase
+        mujoco.mj_getState(model, data, before, spec)
+        stance = controller.stance
+        assert not step.loop.tick()
+        if controller.touchdown:  # classic decides from the command alone
+            touched = True
+            command = step._act(step.desired_speed)
+            controller.set_alpha(command.alpha)
+            controller.queue_kd(command.kd)
+        g_after = controller.tau - step.section_phase
+        if touched and controller.stance == stance and g_before < 0.0 <= g_after:
+            mujoco.mj_getState(model, data, after, spec)
+            mujoco.mj_setState(model, data, section_crossing(g_before, g_after, before, after), spec)
+            mujoco.mj_forward(model, data)
+            return step.coordinates()
+    raise AssertionError("no crossing")
+
+
+@pytest.mark.parametrize("margin", [0.01, 0.0])
+def test_the_compiled_map_equals_ticking_one_tick_at_a_time(margin):
+    """The map runs its ticks compiled to just short of the section (the kernel's section
+    stop), then alone; with no margin every step's compiled run passes the crossing and is
+    replayed one tick short of it. Either way: the same next state, bit for bit, as the loop
+    ticked one tick at a time, on the cycle and off it."""
+    step = WalkReturnMap(CLASSIC, 1.0, feedback=False, settle_steps=10, section_margin=margin)
+    x = step.natural_states(2)[-1]
+    for delta in (0.0, 0.05, -0.05):
+        start = x.copy()
+        start[5] += delta  # torso pitch rate (rad/s)
+        assert np.array_equal(step(start), _section_by_single_ticks(step, start))
+
+
 def test_the_learned_policy_map_has_memory_coordinates():
     step = WalkReturnMap(make_policy("learned"), 1.0, feedback=True)
     x = step.natural_states(3)[-1]

@@ -468,3 +468,25 @@ def test_quiet_samples_added_at_once_are_the_samples_added_one_by_one():
         if period:
             with pytest.raises(ValueError, match="not quiet"):
                 many.add_quiet(range(46, 70), speeds[45:69], 1.1)  # 60 is due
+
+
+def test_a_policy_copy_shares_what_no_decision_changes_and_copies_its_memory():
+    """``copy_policy`` (the return map's and the ceiling's copies, a few per map evaluation)
+    shares the network, its forward pass and the gait libraries, and copies the memory: the
+    copy decides as the original would, and its decisions leave the original's memory as
+    it was."""
+    from rabbit_policy.runtime.policies import copy_policy
+    from rabbit_policy.runtime.speed_window import Observation
+
+    policy = make_policy("learned")
+    copied = copy_policy(policy)
+    assert copied.net is policy.net and copied.forward is policy.forward
+    assert copied.residual.library is policy.residual.library
+    assert copied.memory is not policy.memory
+    observation = Observation(1.0, 0.9, 0.1)
+    assert copied.act(observation) == policy.act(observation)  # the same decision from the same memory
+    before = copy_policy(policy)
+    copied.act(Observation(1.0, 0.5, 0.5))
+    assert before.act(observation) == policy.act(observation)  # the copy's decisions left the original alone
+    recovery = make_policy("recovery")
+    assert copy_policy(recovery).classic.library is recovery.classic.library

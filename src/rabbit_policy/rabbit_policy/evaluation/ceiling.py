@@ -38,7 +38,7 @@ from rabbit_hzd_controller.alpha import N_FREE, expand_alpha, reduce_alpha
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.runtime.policies import GaitCommand, Policy, make_policy
+from rabbit_policy.runtime.policies import GaitCommand, Policy, make_policy, read_only_memo
 from rabbit_policy.runtime.speed_window import Observation
 
 AT_ONCE = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
@@ -147,10 +147,7 @@ class OracleGaits:
 def clone_loop(loop: ClosedLoop) -> ClosedLoop:
     """An independent copy of a running loop (simulator, controller, policy, records) that
     goes on exactly as the original would; the compiled model is shared."""
-    memo = {id(loop.model): loop.model}
-    library = getattr(getattr(loop.policy, "classic", None), "policy", None)
-    if library is not None and hasattr(library, "library"):
-        memo[id(library.library)] = library.library  # read-only: share it
+    memo = {id(loop.model): loop.model, **read_only_memo(loop.policy)}  # read-only: shared
     new = copy.deepcopy(loop, memo)
     new._bind()  # views of the copy's MjData
     return new

@@ -22,28 +22,33 @@ state, restored with it), so the map is a function of its coordinates; the memor
 slow mode (the integral's) is not one of them.
 
 Every evaluation of the map restores the *full* MuJoCo state captured on the cycle
-(``mj_setState`` with ``mjSTATE_FULLPHYSICS``: time, positions, velocities, warm
-start), a copy of the captured controller, applies the coordinates and simulates to the
-next crossing, one step later, swapping the legs back into stance-relative order.
+(``mj_setState`` with ``mjSTATE_FULLPHYSICS | mjSTATE_WARMSTART``: time, positions,
+velocities and the constraint solver's warm start, without which the next step depends on
+what ran before at the 1e-15 level), a copy of the captured controller, applies the
+coordinates and simulates to the next crossing, one step later, swapping the legs back
+into stance-relative order. The ticks run compiled (to the touchdown, then up to the tick
+that crosses the section, which runs alone: :meth:`WalkReturnMap.run_to_section`).
 """
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
-from rabbit_hzd_controller.controller import HZDController, Leg
+from rabbit_hzd_controller.controller import Leg
 from rabbit_sim.model import ModelOptions
 
 from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
-from rabbit_policy.runtime.policies import Policy, first_command, reset_policy
+from rabbit_policy.runtime.policies import Policy, copy_policy, first_command, reset_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
 
+SECTION_MARGIN = 0.01
+"""Phase short of the section where the compiled ticks hand over to single ones (2-4 ticks of
+walking; a tick that jumps past the section is replayed, :meth:`WalkReturnMap._short_of_section`)."""
 STANCE_JOINTS = {Leg.LEFT: (3, 4, 5, 6), Leg.RIGHT: (5, 6, 3, 4)}  # stance hip, knee, swing hip, knee
 ROBOT_DIMENSION = 10
 MEMORY_DIMENSION = 3
@@ -56,7 +61,7 @@ class StepFailed(RuntimeError):
 @dataclass
 class _Capture:
     state: np.ndarray
-    controller: HZDController
+    controller: tuple[np.ndarray, ...]  # the controller's state and gait arrays (HZDController.arrays)
     foot: np.ndarray  # stance foot site position (world, m)
     foot_velocity: np.ndarray  # its linear velocity (world, m/s)
     step_count: int  # ticks of the current step up to the section
@@ -82,11 +87,14 @@ class StabilityResult:
 class WalkReturnMap:
     """P: section state -> section state one step later, for ``policy`` commanded
     ``desired_speed`` (m/s). Starts on the policy's first gait and walks ``settle_steps``
-    steps onto the cycle before capturing it."""
+    steps onto the cycle before capturing it. ``section_margin``: the phase short of the
+    section where the compiled ticks hand over to single ones (0: every step's crossing tick
+    is replayed; the result is the same, bit for bit)."""
 
     def __init__(self, policy: Policy, desired_speed: float, feedback: bool, model: ModelOptions = ModelOptions(),
-                 section_phase: float = 0.5, settle_steps: int = 40, max_step_time: float = 2.0) -> None:
-        self.policy = copy.deepcopy(policy)  # its memory is the map's: the caller's policy is not touched
+                 section_phase: float = 0.5, settle_steps: int = 40, max_step_time: float = 2.0,
+                 section_margin: float = SECTION_MARGIN) -> None:
+        self.policy = copy_policy(policy)  # its memory is the map's: the caller's policy is not touched
         reset_policy(self.policy)  # and starts afresh, whatever walked with it before
         self.desired_speed = float(desired_speed)
         self.feedback = feedback
@@ -97,11 +105,15 @@ class WalkReturnMap:
         self.controller = self.loop.controller
         self.data = self.loop.data
         self.section_phase = section_phase
+        self.section_margin = section_margin
         self.max_ticks = int(round(max_step_time / self.model.opt.timestep))
         self._feet = {Leg.LEFT: self.model.site("left_foot").id, Leg.RIGHT: self.model.site("right_foot").id}
-        self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        # the whole physics state *and* the solver's warm start (not part of FULLPHYSICS): restored, a
+        # state steps to the same next state whatever ran before
+        self._spec = mujoco.mjtState.mjSTATE_FULLPHYSICS | mujoco.mjtState.mjSTATE_WARMSTART
         self._size = mujoco.mj_stateSize(self.model, self._spec)
         self._jac = np.zeros((3, self.model.nv))
+        self._before, self._after = np.zeros(self._size), np.zeros(self._size)  # full states around a tick
         # policy memory: mean speeds (m/s) behind the active and the queued gait, and the
         # running sum / tick count of the current step
         self.active_speed = self.pending_speed = self.desired_speed
@@ -131,8 +143,16 @@ class WalkReturnMap:
         mujoco.mj_getState(self.model, self.data, state, self._spec)
         site = self._feet[self.controller.stance]
         mujoco.mj_jacSite(self.model, self.data, self._jac, None, site)
-        self._capture = _Capture(state, copy.deepcopy(self.controller), self.data.site_xpos[site].copy(),
-                                 self._jac @ self.data.qvel, self.step_count, copy.deepcopy(self.policy))
+        self._capture = _Capture(state, self._controller_state(), self.data.site_xpos[site].copy(),
+                                 self._jac @ self.data.qvel, self.step_count, copy_policy(self.policy))
+
+    def _controller_state(self) -> tuple[np.ndarray, ...]:
+        """A copy of what the controller's ticks change: its state and gait arrays."""
+        return tuple(a.copy() for a in self.controller.arrays[1:])
+
+    def _restore_controller(self, saved: tuple[np.ndarray, ...]) -> None:
+        for live, copied in zip(self.controller.arrays[1:], saved):
+            live[...] = copied
 
     def _act(self, mean_speed: float):
         """The policy's gait for a step whose mean speed was ``mean_speed`` (m/s); a policy that
@@ -146,9 +166,9 @@ class WalkReturnMap:
         """Restore the captured state and controller, then set the coordinates ``x``."""
         model, data, cap = self.model, self.data, self._capture
         mujoco.mj_setState(model, data, cap.state, self._spec)
-        self.controller.__dict__.update(copy.deepcopy(cap.controller).__dict__)
-        self.policy = copy.deepcopy(cap.policy)  # a policy with memory decides from the cycle's memory
-        stance = cap.controller.stance
+        self._restore_controller(cap.controller)
+        self.policy = copy_policy(cap.policy)  # a policy with memory decides from the cycle's memory
+        stance = self.controller.stance
         if self.feedback:
             self.active_speed, self.pending_speed, running = (float(v) for v in x[ROBOT_DIMENSION:])
             active, pending = self._act(self.active_speed), self._act(self.pending_speed)
@@ -175,12 +195,20 @@ class WalkReturnMap:
         data.qvel[1] = cap.foot_velocity[2] - relative[2]
         mujoco.mj_forward(model, data)
 
-    def _tick(self) -> bool:
-        """One closed-loop tick; at a touchdown the policy decides the gait after next.
-        Returns True when the robot fell."""
-        fell = self.loop.tick() and self.loop.sim.fallen()
-        self.step_sum += float(self.data.qvel[0])
-        self.step_count += 1
+    def _ticks(self, limit: int) -> int:
+        """Up to ``limit`` closed-loop ticks at once (:meth:`ClosedLoop.advance`: compiled, ending
+        at a touchdown); returns the ticks run (:meth:`_commit`)."""
+        return self._commit(*self.loop.advance(limit))
+
+    def _commit(self, speeds: np.ndarray, stop: bool) -> int:
+        """Account for ticks run: their hip speeds (m/s) join the step's running sum tick by
+        tick; at a touchdown the policy decides the gait after next. Returns how many ran;
+        raises :class:`StepFailed` when the robot fell."""
+        total = self.step_sum
+        for v in speeds.tolist():  # one by one, in order: the sum a tick-by-tick walk forms
+            total += v
+        self.step_sum = total
+        self.step_count += len(speeds)
         if self.controller.touchdown:
             mean = self.step_sum / self.step_count
             command = self._act(mean)
@@ -188,24 +216,55 @@ class WalkReturnMap:
             self.controller.queue_kd(command.kd)
             self.active_speed, self.pending_speed = self.pending_speed, mean
             self.step_sum, self.step_count = 0.0, 0
-        return fell
+        if stop and self.loop.sim.fallen():
+            raise StepFailed("the robot fell before the next section")
+        return len(speeds)
+
+    def _short_of_section(self, limit: int) -> tuple[int, bool]:
+        """Run compiled to the first tick whose phase is within ``section_margin`` of the
+        section, or to whatever ends the run first (a touchdown, a fall, ``limit`` ticks).
+        Returns the ticks run and whether the next tick crosses the section: a run whose last
+        tick jumped past the section is undone (the MuJoCo state and the controller restored)
+        and replayed one tick shorter, the same ticks again, bit for bit."""
+        model, data = self.model, self.data
+        mujoco.mj_getState(model, data, self._before, self._spec)
+        controller = self._controller_state()
+        speeds, stop = self.loop.advance(limit, self.section_phase - self.section_margin)
+        if self.controller.touchdown or self.controller.tau < self.section_phase:
+            return self._commit(speeds, stop), False
+        mujoco.mj_setState(model, data, self._before, self._spec)
+        self._restore_controller(controller)
+        return (self._ticks(len(speeds) - 1) if len(speeds) > 1 else 0), True
 
     def run_to_section(self) -> None:
         """Simulate to the next mid-stance crossing after a touchdown and leave the
-        simulator (and the running step sum) at the interpolated crossing."""
+        simulator (and the running step sum) at the interpolated crossing. The ticks run
+        compiled to the touchdown, then to just short of the section; the last few, the one
+        on which the phase crosses among them, run alone, the crossing interpolated between
+        the two states around it."""
         model, data, controller = self.model, self.data, self.controller
-        before, after = np.zeros(self._size), np.zeros(self._size)
-        touched = False
-        for _ in range(self.max_ticks):
+        before, after = self._before, self._after
+        touched = crossing_next = False
+        left = self.max_ticks
+        while left > 0:
+            if not touched:  # no crossing counts before the touchdown: compiled to it
+                left -= self._ticks(left)
+                touched = controller.touchdown
+                continue
+            if not crossing_next and controller.tau < self.section_phase - self.section_margin:
+                ran, crossing_next = self._short_of_section(left)
+                left -= ran
+                if ran and (controller.touchdown or left == 0):
+                    crossing_next = False
+                    continue
             g_before = controller.tau - self.section_phase
             mujoco.mj_getState(model, data, before, self._spec)
             stance_before, sum_before = controller.stance, self.step_sum
-            fell = self._tick()
-            touched = touched or controller.touchdown
-            if fell:
-                raise StepFailed("the robot fell before the next section")
+            self._ticks(1)
+            left -= 1
+            crossing_next = False
             g_after = controller.tau - self.section_phase
-            if touched and controller.stance == stance_before and g_before < 0.0 <= g_after:
+            if controller.stance == stance_before and g_before < 0.0 <= g_after:
                 mujoco.mj_getState(model, data, after, self._spec)
                 w = -g_before / (g_after - g_before)
                 mujoco.mj_setState(model, data, section_crossing(g_before, g_after, before, after), self._spec)

@@ -116,6 +116,7 @@ class ClosedLoop:
                      ticks.LEFT_FOOT, ticks.RIGHT_FOOT]] = (
             dt, fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch,
             int(round(scenario.rules.roll_back_after / dt)), *self._feet)
+        self._state[ticks.SECTION] = np.inf  # no section stop (advance's section_phase)
         self._no_delay = (np.zeros((0, 4)), np.zeros(1))
         self._buffers = (np.zeros(CHUNK), np.zeros(CHUNK), np.zeros(CHUNK))  # times, hip x, hip speed
         self._applied = np.zeros(4)
@@ -203,6 +204,24 @@ class ClosedLoop:
         """One control tick and physics step (see the module docstring); returns True when
         a stop rule fired this tick (fell or stalled)."""
         return self._advance(1)[1]
+
+    def advance(self, limit: int, section_phase: float = np.inf) -> tuple[np.ndarray, bool]:
+        """Up to ``limit`` ticks at once, compiled: to the first thing Python decides (see
+        :meth:`_quiet_ticks`), a touchdown, a stop rule, or (``section_phase``) the first tick
+        whose phase tau is at or past that phase (:attr:`reached_section`). Returns the hip
+        velocity (m/s, world x) after each tick run and whether a stop rule fired (fell or
+        stalled)."""
+        self._state[ticks.SECTION] = section_phase
+        try:
+            k, stop = self._advance(limit)
+        finally:
+            self._state[ticks.SECTION] = np.inf
+        return self._buffers[2][:k].copy(), stop
+
+    @property
+    def reached_section(self) -> bool:
+        """Whether the last tick's phase reached :meth:`advance`'s ``section_phase``."""
+        return bool(int(self._state[ticks.STOP]) & ticks.SECTION_REACHED)
 
     def _quiet_ticks(self, limit: int) -> int:
         """How many ticks (1 to ``limit``) may run compiled at once: nothing Python decides

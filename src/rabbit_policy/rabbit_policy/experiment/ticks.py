@@ -4,7 +4,7 @@
 tick the HZD law (:func:`rabbit_hzd_controller.law.control`), the torque delay, ``mj_step``
 (MuJoCo's C function, called directly), the push rule (:mod:`rabbit_sim.compiled`), the record
 of time, hip position and speed, and the stop rules below; it returns after ``n`` ticks, or
-after a tick that touched down, fell or rolled back. The loop chooses ``n`` so that nothing
+after a tick that touched down, fell, rolled back or reached the section phase. The loop chooses ``n`` so that nothing
 Python decides (a decision, a command change, a stall by time, an observer) falls strictly
 inside: those happen between calls, on the same state as before. Every rule here is the one
 implementation the node stack runs too (the controller node and ``sim_node`` call the same
@@ -13,7 +13,8 @@ compiled functions tick by tick).
 The loop state ``state`` (float64, :data:`LOOP_STATE_SIZE`): sim time (s, MuJoCo's sum of
 timesteps, mirrored: ``mj_step`` adds one timestep), the timestep (s), the fall limits (m, m,
 rad), the early stall rule's length (ticks, 0: off) and its count, the peak |torque| (N m), the
-two foot sites, and the stop flags of the last tick (:data:`FELL`, :data:`ROLLED_BACK`).
+two foot sites, the stop flags of the last tick (:data:`FELL`, :data:`ROLLED_BACK`,
+:data:`SECTION_REACHED`) and the section phase (+inf: none; the Poincaré return map stops at it).
 """
 
 from __future__ import annotations
@@ -24,20 +25,23 @@ from numba import njit
 from rabbit_hzd_controller import law
 from rabbit_sim import compiled as sim_rules
 
-TIME, TIMESTEP, MIN_HEIGHT, MAX_HEIGHT, MAX_PITCH, ROLL_BACK_TICKS, ROLLING, PEAK, LEFT_FOOT, RIGHT_FOOT, STOP = \
-    range(11)
-LOOP_STATE_SIZE = 11
-FELL, ROLLED_BACK = 1, 2
+TIME, TIMESTEP, MIN_HEIGHT, MAX_HEIGHT, MAX_PITCH, ROLL_BACK_TICKS, ROLLING, PEAK, LEFT_FOOT, RIGHT_FOOT, STOP, \
+    SECTION = range(12)
+LOOP_STATE_SIZE = 12
+FELL, ROLLED_BACK, SECTION_REACHED = 1, 2, 4
 """Bits of ``state[STOP]``."""
 
 
-
 @njit(cache=True)
-def stop_rules(state: np.ndarray, qpos: np.ndarray, qvel: np.ndarray, site_xpos: np.ndarray, stance: float) -> None:
-    """After a step: ``state[STOP]`` gets :data:`FELL` when the fall limits are left, and
+def stop_rules(state: np.ndarray, qpos: np.ndarray, qvel: np.ndarray, site_xpos: np.ndarray, stance: float,
+               tau: float) -> None:
+    """After a step: ``state[STOP]`` gets :data:`FELL` when the fall limits are left,
     :data:`ROLLED_BACK` once the hip has been behind its stance foot (``stance`` 0 left, 1
-    right) and moving backward for the early stall rule's number of ticks running."""
+    right) and moving backward for the early stall rule's number of ticks running, and
+    :data:`SECTION_REACHED` when the tick's phase ``tau`` is at or past ``state[SECTION]``."""
     flags = 0.0
+    if tau >= state[SECTION]:
+        flags += SECTION_REACHED
     if sim_rules.fallen(qpos[1], qpos[2], state[MIN_HEIGHT], state[MAX_HEIGHT], state[MAX_PITCH]):
         flags += FELL
     if state[ROLL_BACK_TICKS] > 0.0:
@@ -88,7 +92,7 @@ def run_ticks(model: int, data: int, qpos: np.ndarray, qvel: np.ndarray, ctrl: n
         xs[k] = qpos[0]
         speeds[k] = qvel[0]
         k += 1
-        stop_rules(state, qpos, qvel, site_xpos, controller[law.STANCE])
+        stop_rules(state, qpos, qvel, site_xpos, controller[law.STANCE], controller[law.TAU])
         if state[STOP] != 0.0 or controller[law.TOUCHDOWN] != 0.0:
             break
     state[PEAK] = peak

@@ -21,7 +21,9 @@ for classic, ``rl`` for learned.
 
 from __future__ import annotations
 
+import copy
 import math
+import sys
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
@@ -186,6 +188,40 @@ def reset_policy(policy: Policy | None) -> None:
     reset = getattr(policy, "reset", None)
     if reset is not None:
         reset()
+
+
+def read_only_memo(policy: Policy | None) -> dict[int, object]:
+    """A ``copy.deepcopy`` memo that shares the parts of ``policy`` no decision changes: gait
+    libraries, and a network's numpy forward pass, weights and checkpoint. Deep copies of
+    those cost about a hundred decisions each; the state decisions do change (a memory, a
+    rate limit's command, the recovery rule's) is copied."""
+    network = sys.modules.get("rabbit_policy.runtime.network")  # not imported: no network to share
+    shared: tuple[type, ...] = (GaitLibrary,)
+    if network is not None:
+        shared += (network.NetworkForward, network.PolicyCheckpoint, network.HZDPolicyNet)
+    memo: dict[int, object] = {}
+    seen: set[int] = set()
+    stack: list[object] = [policy]
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, shared):
+            memo[id(obj)] = obj
+        elif isinstance(obj, (list, tuple)):
+            stack.extend(obj)
+        elif isinstance(obj, dict):
+            stack.extend(obj.values())
+        elif type(obj).__module__.startswith("rabbit_") and hasattr(obj, "__dict__"):
+            stack.extend(vars(obj).values())
+    return memo
+
+
+def copy_policy(policy: Policy) -> Policy:
+    """An independent copy of ``policy`` and its decision state, sharing what no decision
+    changes (:func:`read_only_memo`)."""
+    return copy.deepcopy(policy, read_only_memo(policy))
 
 
 def controller_settings(policy: Policy | None) -> dict[str, float]:
