@@ -99,3 +99,20 @@ def test_expand_rejects_wrong_size(size):
 def test_reduce_rejects_wrong_size(size):
     with pytest.raises(ValueError):
         reduce_alpha(np.zeros(size))
+
+
+def test_the_compiled_degree_5_bezier_is_the_general_one_bit_for_bit():
+    """The law's compiled degree-5 curve (the blend's start reads it) is the general
+    ``bezier``'s arithmetic in the same order, so a reference the controller publishes and
+    the law's blend agree to the last bit."""
+    from rabbit_hzd_controller import law
+
+    gen = np.random.default_rng(7)
+    g = np.zeros((3, law.SLOT_SIZE))
+    for _ in range(200):
+        g[law.ACTIVE, :24] = gen.normal(size=24)
+        t = float(gen.uniform(0.0, 1.0))
+        for j in range(4):
+            coeffs = g[law.ACTIVE, 6 * j:6 * j + 6].tolist()
+            assert law.bezier5(g, law.ACTIVE, j, t) == bezier(coeffs, t)
+            assert law.bezier5_derivative(g, law.ACTIVE, j, t) == bezier_derivative(coeffs, t)

@@ -16,6 +16,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from math import acos, atan2, cos, hypot, sin
 
+from numba import njit
+
 
 @dataclass(frozen=True)
 class LegGeometry:
@@ -30,14 +32,19 @@ class LegGeometry:
         return self.femur + self.tibia
 
 
-def foot_from_hip(geom: LegGeometry, pitch: float, hip: float, knee: float) -> tuple[float, float]:
-    """Foot position relative to the hip joint, world axes (m)."""
+@njit(cache=True)
+def foot_position(femur: float, tibia: float, pitch: float, hip: float, knee: float) -> tuple[float, float]:
+    """Foot position relative to the hip joint, world axes (m), of a leg with links ``femur``
+    and ``tibia`` (m) at torso pitch, hip and knee angles (rad). Compiled: the law's gait
+    checks call it too (:mod:`.law`)."""
     phi_f = hip - pitch
     phi_t = phi_f - knee
-    return (
-        geom.femur * sin(phi_f) + geom.tibia * sin(phi_t),
-        -(geom.femur * cos(phi_f) + geom.tibia * cos(phi_t)),
-    )
+    return femur * sin(phi_f) + tibia * sin(phi_t), -(femur * cos(phi_f) + tibia * cos(phi_t))
+
+
+def foot_from_hip(geom: LegGeometry, pitch: float, hip: float, knee: float) -> tuple[float, float]:
+    """Foot position relative to the hip joint, world axes (m): :func:`foot_position`."""
+    return foot_position(geom.femur, geom.tibia, pitch, hip, knee)
 
 
 def foot_velocity_from_hip(

@@ -33,6 +33,8 @@ from math import atan2, cos, hypot, pi, sin
 import numpy as np
 from numba import njit
 
+from .kinematics import foot_position
+
 # cfg
 KP, TORQUE_LIMIT, FEMUR, TIBIA, TOUCHDOWN_MIN_PHASE, TOUCHDOWN_HEIGHT, BLEND_PHASE, WITHIN_STEP_BLEND, \
     MIN_PHASE_RATE, TICK = range(10)
@@ -312,19 +314,11 @@ _SWAP = (2, 3, 0, 1)
 
 
 @njit(cache=True)
-def _foot(femur: float, tibia: float, pitch: float, hip: float, knee: float) -> tuple[float, float]:
-    """Foot position relative to the hip (m, world axes): ``kinematics.foot_from_hip``."""
-    phi_f = hip - pitch
-    phi_t = phi_f - knee
-    return femur * sin(phi_f) + tibia * sin(phi_t), -(femur * cos(phi_f) + tibia * cos(phi_t))
-
-
-@njit(cache=True)
 def end_of_step_pitch(alpha: np.ndarray, femur: float, tibia: float) -> float:
     """Torso pitch (rad) at which the end-of-step posture (alpha's last row) has both feet at
     the same height, the swing foot ahead; NaN when both feet are at one point (no step)."""
-    sx, sz = _foot(femur, tibia, 0.0, alpha[20], alpha[21])
-    wx, wz = _foot(femur, tibia, 0.0, alpha[22], alpha[23])
+    sx, sz = foot_position(femur, tibia, 0.0, alpha[20], alpha[21])
+    wx, wz = foot_position(femur, tibia, 0.0, alpha[22], alpha[23])
     dx, dz = wx - sx, wz - sz
     if hypot(dx, dz) < 1e-6:
         return np.nan
@@ -342,8 +336,8 @@ def phase_bounds(alpha: np.ndarray, femur: float, tibia: float) -> tuple[float, 
     pitch = end_of_step_pitch(alpha, femur, tibia)
     if np.isnan(pitch):
         return np.nan, np.nan
-    sx, sz = _foot(femur, tibia, pitch, alpha[20], alpha[21])
-    wx, wz = _foot(femur, tibia, pitch, alpha[22], alpha[23])
+    sx, sz = foot_position(femur, tibia, pitch, alpha[20], alpha[21])
+    wx, wz = foot_position(femur, tibia, pitch, alpha[22], alpha[23])
     p_minus = -sx
     return p_minus - hypot(wx - sx, wz - sz), p_minus
 
@@ -389,3 +383,4 @@ def warm() -> None:
     gaits[:, SPAN] = 1.0
     control(cfg, state, gaits, np.zeros(7), np.zeros(7), np.zeros(4))
     gait_check(np.zeros(24), -1.0, 1.0, -1.0, 1.0, 0.4, 0.4, np.zeros(2))
+    foot_position(0.4, 0.4, 0.0, 0.0, 0.0)  # called from Python too (kinematics.foot_from_hip)
