@@ -54,7 +54,7 @@ def test_reward_terms_are_in_info_and_sum_to_the_reward():
     env.reset(seed=1)
     _obs, reward, _te, _tr, info = env.step(np.zeros(21, np.float32))
     assert reward == info["reward_tracking"] + info["reward_fall"] and info["reward_fall"] == 0.0
-    assert info["reward_alive"] == 0.0  # no survival term by default
+    assert info["reward_alive"] == info["reward_slow"] == 0.0  # no survival or slow-hip term by default
     assert info["reward_tracking"] == -((info["mean_speed"] - info["desired_speed"]) ** 2)
     falling = RabbitHZDEnv(max_steps=60, decision_period=20, fall_penalty=-7.0)
     falling.reset(seed=1)
@@ -383,9 +383,29 @@ def test_the_survival_term_pays_every_step_survived_and_is_checked():
     env.reset(seed=1)
     _obs, reward, terminated, _tr, info = env.step(np.zeros(21, np.float32))
     assert not terminated and info["reward_alive"] == 0.25
-    assert reward == info["reward_tracking"] + info["reward_fall"] + info["reward_alive"]
+    assert reward == info["reward_tracking"] + info["reward_fall"] + info["reward_alive"] + info["reward_slow"]
     with pytest.raises(ValueError, match="alive_bonus"):
         RabbitHZDEnv(alive_bonus=-1.0)
+
+
+def test_the_slow_hip_term_pays_below_its_speed_only_and_is_checked():
+    """``slow_penalty`` pays per m/s the hip velocity is below SLOW_HIP_SPEED at the end of an
+    env step: nothing while walking, a cost that grows as the hip slows (here made to roll
+    backward at once)."""
+    from rabbit_policy.learning.env import SLOW_HIP_SPEED
+
+    env = RabbitHZDEnv(max_steps=60, decision_period=20, slow_penalty=-2.0)
+    env.reset(seed=1, options={"desired_speed": 1.0})
+    _obs, reward, _te, _tr, info = env.step(np.zeros(21, np.float32))
+    assert info["reward_slow"] == 0.0
+    env.loop.data.qvel[0] = -0.6  # m/s: the hip rolling back
+    _obs, reward, _te, _tr, info = env.step(np.zeros(21, np.float32))
+    hip = float(env.loop.data.qvel[0])
+    assert hip < SLOW_HIP_SPEED
+    assert info["reward_slow"] == -2.0 * (SLOW_HIP_SPEED - hip) < 0.0
+    assert reward == info["reward_tracking"] + info["reward_fall"] + info["reward_alive"] + info["reward_slow"]
+    with pytest.raises(ValueError, match="slow_penalty"):
+        RabbitHZDEnv(slow_penalty=0.5)
 
 
 def test_one_episode_length_from_either_spelling():

@@ -19,15 +19,15 @@ SIGMAS = (0.001, 0.003, 0.01, 0.03)
 MEMBERS = 12
 
 
-def training_config():
+def training_config(preset: str = "recovery_residual_es.yaml"):
     spec = importlib.util.spec_from_file_location("train_script", ROOT / "scripts" / "train.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.parse_config(["--config", str(ROOT / "config/train/recovery_residual_es.yaml"),
+    return module.parse_config(["--config", str(ROOT / "config/train" / preset),
                                 "--out", "/tmp/unused", "--episodes", "24"])
 
 
-def setup():
+def setup(preset: str = "recovery_residual_es.yaml"):
     """(the preset's ES config, the zero-residual network, its flat parameters, the 24 episodes,
     the generator after drawing them): what every script here starts from."""
     from rabbit_policy.learning.es import get_flat, stratified_episodes
@@ -36,7 +36,7 @@ def setup():
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.memory import INPUTS
 
-    config = training_config().trainer
+    config = training_config(preset).trainer
     bounds = policy_bounds("residual", GaitLibrary.load())
     net = zero_residual_network(bounds.low, bounds.high, INPUTS[config.features], 0)
     rng = np.random.default_rng(0)

@@ -60,6 +60,7 @@ v_d + gain x the memory's integral (index 3, then bounded so that the offset sta
 | ``reward_tracking`` | ``-(mean hip speed - v_d)^2`` per env step (the paper; the true speed, without noise) |
 | ``reward_fall`` | ``fall_penalty`` once, when the episode ends by a fall or stall (0 otherwise): with only negative rewards an early end would otherwise pay |
 | ``reward_alive`` | ``alive_bonus`` per env step that did not end the episode (0 by default): a survival term, so that a fall forfeits the rest of the episode's bonus and a survived push pays more than its tracking costs |
+| ``reward_slow`` | ``slow_penalty`` x (:data:`SLOW_HIP_SPEED` - hip velocity) per env step whose hip velocity (m/s, world x, at its end) is below that speed, 0 otherwise (0 by default): a margin that grows as a pushed robot nears a stall, smooth in the policy's parameters where the fall penalty is all or nothing (docs/learning.md, 2026-11-27 (third)) |
 
 The reward is their sum. ``info`` also holds ``desired_speed``, ``mean_speed`` (m/s), ``fell``,
 ``stalled``, ``rejected``, ``time`` (sim s) and ``privileged`` (also in the reset's info): the
@@ -161,6 +162,11 @@ PACKAGED_FRICTION = 0.8
 
 DEFAULT_MAX_STEPS = MAX_EPISODE_STEPS
 """Env steps per episode unless the spec (``max_episode_steps``) or ``max_steps`` says otherwise."""
+
+SLOW_HIP_SPEED = 0.25
+"""m/s: the hip velocity below which ``slow_penalty`` pays (undisturbed walking at 0.7 m/s keeps
+the hip faster through the whole step; a push that nearly stalls the robot brings it to 0 and
+below)."""
 
 
 @dataclass(frozen=True)
@@ -272,6 +278,8 @@ class EpisodeConfig:
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     alive_bonus: float = option(0.0, "reward per env step survived, >= 0 (a survival term: a fall forfeits the "
                                      "rest of the episode's)")
+    slow_penalty: float = option(0.0, "reward per env step per m/s the hip velocity is below SLOW_HIP_SPEED "
+                                      "(0.25 m/s), <= 0 (a smooth margin near a stall; 0 = none)")
     roll_back_after: float = option(0.0, "s: end the episode as a stall once the hip has been behind its stance "
                                          "foot and moving backward this long (the early failure rule, "
                                          "StopRules.roll_back_after; 0 = only no touchdown for 2 s)")
@@ -302,6 +310,7 @@ class EpisodeConfig:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
         if not (np.isfinite(self.alive_bonus) and self.alive_bonus >= 0.0):
             raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
+        check_slow_penalty(self.slow_penalty)
         StopRules(roll_back_after=self.roll_back_after)  # raises for a bad value
         if self.action not in ACTIONS:
             raise ValueError(f"action must be one of {ACTIONS}, got {self.action!r}")
@@ -313,9 +322,16 @@ class EpisodeConfig:
         """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
         return {"max_steps": self.max_steps, "decision_period": self.decision_period,
                 "distribution": self.distribution, "fall_penalty": self.fall_penalty,
-                "alive_bonus": self.alive_bonus, "features": self.features, "action": self.action,
+                "alive_bonus": self.alive_bonus, "slow_penalty": self.slow_penalty, "features": self.features,
+                "action": self.action,
                 "residual_base": self.residual_base, "integral_gain": self.integral_gain,
                 "rules": StopRules(roll_back_after=self.roll_back_after)}
+
+
+def check_slow_penalty(penalty: float) -> None:
+    """Raise ``ValueError`` unless ``penalty`` (reward per m/s below :data:`SLOW_HIP_SPEED`) is finite and <= 0."""
+    if not (np.isfinite(penalty) and penalty <= 0.0):
+        raise ValueError(f"slow_penalty must be finite and <= 0, got {penalty}")
 
 
 def check_residual_base(base: str, action: str, decision_period: int, integral_gain: float) -> None:
@@ -361,7 +377,7 @@ class RabbitHZDEnv(gym.Env):
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
-                 alive_bonus: float = 0.0,
+                 alive_bonus: float = 0.0, slow_penalty: float = 0.0,
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
                  features: str = "paper", action: str = "direct", integral_gain: float = 0.0,
@@ -412,6 +428,8 @@ class RabbitHZDEnv(gym.Env):
         if not (np.isfinite(alive_bonus) and alive_bonus >= 0.0):
             raise ValueError(f"alive_bonus must be finite and >= 0, got {alive_bonus}")
         self.alive_bonus = alive_bonus
+        check_slow_penalty(slow_penalty)
+        self.slow_penalty = slow_penalty
         self.rules = rules
         self.model_options = ModelOptions(model) if isinstance(model, str) else model
         self._models = {self.model_options: load_model(self.model_options)}
@@ -569,8 +587,9 @@ class RabbitHZDEnv(gym.Env):
         terminated = fell or stalled
         terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
                  "reward_fall": self.fall_penalty if terminated else 0.0,
-                 "reward_alive": 0.0 if terminated else self.alive_bonus}
-        reward = terms["reward_tracking"] + terms["reward_fall"] + terms["reward_alive"]
+                 "reward_alive": 0.0 if terminated else self.alive_bonus,
+                 "reward_slow": self.slow_penalty * max(0.0, SLOW_HIP_SPEED - float(self._loop.data.qvel[0]))}
+        reward = terms["reward_tracking"] + terms["reward_fall"] + terms["reward_alive"] + terms["reward_slow"]
         truncated = not terminated and self._steps >= self.max_steps
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time,
