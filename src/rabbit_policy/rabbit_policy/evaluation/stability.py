@@ -26,8 +26,9 @@ Every evaluation of the map restores the *full* MuJoCo state captured on the cyc
 velocities and the constraint solver's warm start, without which the next step depends on
 what ran before at the 1e-15 level), a copy of the captured controller, applies the
 coordinates and simulates to the next crossing, one step later, swapping the legs back
-into stance-relative order. The ticks run compiled (to the touchdown, then up to the tick
-that crosses the section, which runs alone: :meth:`WalkReturnMap.run_to_section`).
+into stance-relative order. The ticks run compiled (to the touchdown, then to just short of
+the section; the last few, the crossing among them, run alone:
+:meth:`WalkReturnMap.run_to_section`).
 """
 
 from __future__ import annotations
