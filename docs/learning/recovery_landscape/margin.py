@@ -28,12 +28,14 @@ def margin_rollout(env, forward, episode) -> tuple[bool, float]:
             return bool(terminated), lowest
 
 
-def main() -> None:
+def study(preset: str = "recovery_residual_es.yaml", sigmas: tuple[float, ...] = (0.001, 0.003, 0.01, 0.03)) -> dict:
+    """The centre's and 8 members' outcomes and margins per sigma on ``preset``'s env (gated_margin.py
+    runs it on the gated preset)."""
     from rabbit_policy.learning.env import RabbitHZDEnv
     from rabbit_policy.learning.es import set_flat
     from rabbit_policy.runtime.network import NetworkForward
 
-    config, net, theta, episodes, rng = setup()
+    config, net, theta, episodes, rng = setup(preset)
     env = RabbitHZDEnv(**config.env_kwargs())
 
     def run(params: np.ndarray) -> list[tuple[bool, float]]:
@@ -43,7 +45,7 @@ def main() -> None:
 
     centre = run(theta)
     out = {"centre": [{"failed": f, "margin": m} for f, m in centre], "sigmas": []}
-    for sigma in (0.001, 0.003, 0.01, 0.03):
+    for sigma in sigmas:
         moves, flips = [], 0
         for _ in range(8):
             member = run(theta + sigma * rng.standard_normal(theta.size))
@@ -58,8 +60,8 @@ def main() -> None:
                "margin_move_max": float(moves.max()), "share_unmoved": float(np.mean(moves < 1e-9))}
         out["sigmas"].append(row)
         print(row, file=sys.stderr, flush=True)
-    print(json.dumps(out, indent=1))
+    return out
 
 
 if __name__ == "__main__":
-    main()
+    print(json.dumps(study(), indent=1))
