@@ -208,7 +208,7 @@ class ClosedLoop:
     def advance(self, limit: int, section_phase: float = np.inf) -> tuple[np.ndarray, bool]:
         """Up to ``limit`` ticks at once, compiled: to the first thing Python decides (see
         :meth:`_quiet_ticks`), a touchdown, a stop rule, or (``section_phase``) the first tick
-        whose phase tau is at or past that phase (:attr:`reached_section`). Returns the hip
+        whose phase tau is at or past that phase (the controller's ``tau`` then says so). Returns the hip
         velocity (m/s, world x) after each tick run and whether a stop rule fired (fell or
         stalled)."""
         self._state[ticks.SECTION] = section_phase
@@ -217,11 +217,6 @@ class ClosedLoop:
         finally:
             self._state[ticks.SECTION] = np.inf
         return self._buffers[2][:k].copy(), stop
-
-    @property
-    def reached_section(self) -> bool:
-        """Whether the last tick's phase reached :meth:`advance`'s ``section_phase``."""
-        return bool(int(self._state[ticks.STOP]) & ticks.SECTION_REACHED)
 
     def _quiet_ticks(self, limit: int) -> int:
         """How many ticks (1 to ``limit``) may run compiled at once: nothing Python decides
