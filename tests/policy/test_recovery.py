@@ -18,13 +18,16 @@ from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig, 
 @pytest.mark.unit
 def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
     memory = StepMemory(bins=4, depth=2)
-    for speeds in ([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4]):  # two whole steps
+    for speeds in ([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4]):  # two whole steps at command 1 m/s
         for b, v in enumerate(speeds):
-            assert memory.observe(0.125 + 0.25 * b, v) is None  # not two whole steps yet
-    assert memory.observe(0.1, 0.5) == 0.9  # a touchdown (the phase fell back): min(1.0, 0.9) in bin 0
-    assert memory.observe(0.6, 0.5) == 1.0  # bin 2: min(1.2, 1.0)
+            assert memory.observe(0.125 + 0.25 * b, v, 1.0) is None  # not two whole steps yet
+    assert memory.observe(0.1, 0.5, 1.0) == 0.9  # a touchdown (the phase fell back): min(1.0, 0.9) in bin 0
+    assert memory.observe(0.6, 0.5, 1.0) == 1.0  # bin 2: min(1.2, 1.0)
+    # each step's hip velocity over the larger of its command and today's
+    assert memory.observe(0.6, 0.5, 2.0) == 0.5  # accelerated: min(1.2, 1.0) / 2.0
+    assert memory.observe(0.6, 0.5, 0.5) == 1.0  # decelerated: over the steps' own 1.0
     memory.reset()
-    assert memory.observe(0.5, 1.0) is None
+    assert memory.observe(0.5, 1.0, 1.0) is None
     with pytest.raises(ValueError):
         RecoveryConfig(offsets=(0.1, 0.1))
     with pytest.raises(ValueError):
@@ -61,6 +64,45 @@ def test_last_weight_is_the_rules_weight_at_the_last_decision():
     assert decide(0.5, 0.3) > 0.0  # far behind the previous steps at this phase
     policy.reset()
     assert policy.last_weight == 0.0
+
+
+@pytest.mark.unit
+def test_the_rule_watches_an_acceleration_and_holds_off_only_while_the_command_ramps_down():
+    """Accelerating, the hip is as fast as in the steps before: no push. If it then falls
+    far behind them while the base gait still ramps up (the stall an acceleration from 0.7
+    m/s to 1.3 m/s ran into, the ramp held short of the command), the rule acts. Until
+    2026-11-27 it held off during every ramp and those walks fell. Ramping down, it holds off."""
+    from rabbit_policy.runtime.speed_window import Observation
+
+    policy = make_policy("recovery")
+    taus = [i / 25 for i in range(1, 25)]
+
+    def decide(command: float, tau: float, hip_velocity: float) -> float:
+        policy.act(Observation(command, 0.7, 0.0, body=(0.0, 0.0, tau, 2.0, hip_velocity)))
+        return policy.last_weight
+
+    assert [decide(0.7, tau, 0.7) for _ in range(5) for tau in taus] == [0.0] * 120  # steady at 0.7 m/s
+    early = [decide(1.3, tau, 0.75) for tau in taus[:8]]  # the command jumps; the hip speeds up
+    assert early == [0.0] * 8 and 0.7 < policy._base.command < 1.3  # still ramping, held from 0.2 of phase
+    assert decide(1.3, 0.4, 0.1) == 1.0  # the hip stops while the base gait ramps up: act
+    policy.reset()
+    [decide(1.3, tau, 1.3) for _ in range(5) for tau in taus]  # steady at 1.3 m/s
+    assert decide(0.7, 0.04, 1.3) == 0.0 and decide(0.7, 0.4, 0.1) == 0.0  # commanded down: not a push
+
+
+@pytest.mark.sim
+def test_an_acceleration_from_0_7_to_1_3_m_s_at_a_touchdown_walks():
+    """The ordered change that fell at every phase until the rule watched accelerations
+    (checks 1-6, docs/learning.md 2026-11-27 (fourth)): 0.7 -> 1.3 m/s at the touchdown
+    after 6 s; the hip slows to about 0.1 m/s in the first stance after it. It walks, and
+    speeds up (slowly: about 1.15 m/s 5 s later)."""
+    from rabbit_policy.evaluation.robustness import phase_times
+
+    policy = make_policy("recovery")
+    change = phase_times(policy, 0.7, 6.0, [0.0])[0]
+    result = walk(policy, Scenario(schedule=((0.0, 0.7), (change, 1.3))), change + 6.0)
+    assert not result.failed
+    assert result.step_speeds()[-1][2] > 1.0
 
 
 @pytest.mark.unit
@@ -188,10 +230,9 @@ def test_a_zero_residual_on_the_recovery_base_is_the_recovery_controller_bit_for
 @pytest.mark.slow
 def test_a_gated_residual_walks_the_recovery_controller_until_the_hip_falls_behind(tmp_path):
     """The ``recovery_gated`` base: a residual that is not zero walks the recovery controller's
-    trajectory to the last bit while the rule's weight is 0 (an undisturbed walk at a constant
-    command; after an acceleration the hip lags the new command and the rule's weight opens
-    for a few decisions, docs/learning.md), and acts once a push slows the hip (the
-    trajectories part). The same residual on the ungated base parts from the start."""
+    trajectory to the last bit while the rule's weight is 0 (an undisturbed walk), and acts
+    once a push slows the hip (the trajectories part). The same residual on the ungated base
+    parts from the start."""
     scenario = Scenario(schedule=((0.0, 1.0),))
     pushed = Scenario(schedule=((0.0, 1.0),), pushes=(Push(3.0, -110.0, 0.1),))
     ends = {}

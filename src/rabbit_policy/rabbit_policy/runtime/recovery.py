@@ -14,15 +14,30 @@ step's start and end postures, and the impact equalities, stay as they are).
 
 The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`):
 
-1. the hip's deficit d = r_prev(tau) - v_x / v_c - ``threshold``: v_x is the hip velocity
-   now (m/s, world x), v_c the ramped command (below), r_prev(tau) the slowest v_x / v_c of
-   the four previous steps at the same phase (:class:`StepMemory`, ``bins`` phase bins).
-   The reference is the robot's own recent steps, so nothing needs calibrating and a model
-   error (friction, masses, drives) moves it with the walk;
+1. the hip's deficit d = r(tau) - v_x / v_c - ``threshold``: v_x is the hip velocity now
+   (m/s, world x), v_c the ramped command (below), r(tau) the slowest of the four previous
+   steps at the same phase (:class:`StepMemory`, ``bins`` phase bins), each step's hip
+   velocity there over the larger of the ramped command then and now. The reference is
+   the robot's own recent steps, so nothing needs calibrating and a model error (friction,
+   masses, drives) moves it with the walk;
 2. w = clip(d / ``full``, 0, 1) while the phase is inside the step (0 < tau < 1: at its
    ends the hip phase is clamped and says nothing of the hip's progress), the previous
-   steps are known and the command is not ramping, else 0 (a commanded deceleration is
-   not a push: judged on checks 1-6 without this gate, 9 of 72 decelerations fell);
+   steps are known and the command is not ramping down, else 0 (a commanded deceleration
+   is not a push: judged on checks 1-6 without this gate, 9 of 72 decelerations fell).
+
+   Why the larger command: after a deceleration the steps before were fast for their
+   (higher) command, so their hip velocity over it keeps the fast steps from looking like
+   the norm; after an acceleration the hip is as fast as in the steps before or faster,
+   so their hip velocity over today's (higher) command keeps the hip's lag behind the new
+   command from looking like a push. Until 2026-11-27 the memory held v_x / v_c of its own
+   step and the gate held the rule off during every ramp, up or down: the gate kept the rule
+   off through the stall an acceleration from 0.7 m/s to 1.3-1.5 m/s runs into (the base
+   gait ramps to the new speed within the first 0.2 of a long step and the hip stops at 0.4
+   of it), and every such change fell. Measured (docs/learning.md 2026-11-27 (fourth), the
+   ordered changes and the 100 random sequences of checks 1-6): the old rule 3 pairs fell
+   or stalled and 97 sequences walked; hip velocity in m/s over today's command with the
+   gate on ramp-down only, 0 and 93 (after a deceleration the fast steps look like the
+   norm); this rule, 0 and 98 (classic 1 and 98);
 3. the gait is classic's with ``w * offsets`` (rad) added to rows 1-4 of the four outputs
    (stance hip, stance knee, swing hip, swing knee), applied at once: no blend, no queue
    (:data:`CONTROLLER_SETTINGS`, which the loops and the stack give the controller).
@@ -34,10 +49,12 @@ The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`
    commanded at mid-step fell; classic queues such a gait for the touchdown for the same
    reason, ``ControllerConfig.within_step_until``). The ramp's rate and hold were chosen on
    100 random one-minute command sequences (docs/learning.md): 0.015 m/s per decision held
-   from 0.6 of phase lost 13, 0.04 held from 0.2 lost 3 (classic 2); a gait for another
-   speed applied at once moves the phase itself (the start and end postures set it), and
-   accelerations from 0.7 m/s to 1.3-1.5 m/s still stall (a 10-20 ms blend avoids that and
-   loses pushes at 0.7 m/s).
+   from 0.6 of phase lost 13, 0.04 held from 0.2 lost 3 (classic 2). A gait for another
+   speed applied at once moves the phase itself (the start and end postures set it): after
+   a large acceleration command the phase can stay below 0.2 for most of a step, and the
+   ramp runs on (0.7 to 1.26 m/s within one step); the rule of 1-2 is what catches the
+   stall that follows. Capping the ramp per step instead (0.2 m/s) made every acceleration
+   from 0.7 m/s to 1.1 m/s and beyond stall.
 
 Undisturbed, w stays 0 and the gait is classic's (the limit cycle is classic's). The rule
 never speeds up: a forward push (the hip ahead of its last step) leaves classic alone.
@@ -91,13 +108,14 @@ class RecoveryConfig:
 
 
 class StepMemory:
-    """Per phase bin, the hip velocity as a fraction of the (ramped) command, for the step now
-    and the ``depth`` steps before; a touchdown (the phase falling back by more than half a
-    step) shifts them. The reference at a phase is the slowest of the steps before there:
-    so a walk whose legs alternate (a period-two gait, common at 0.7 m/s and on low friction)
-    is not taken for a pushed one, nor is the return to speed after a forward push (the steps
-    before the push are slower than those after it), and a commanded speed change moves the
-    fraction little."""
+    """Per phase bin, the hip velocity (m/s, world x) and the ramped command then (m/s), for
+    the step now and the ``depth`` steps before; a touchdown (the phase falling back by more
+    than half a step) shifts them. The reference at a phase is the slowest of the steps
+    before there, each as its hip velocity over the larger of its command and today's: so a
+    walk whose legs alternate (a period-two gait, common at 0.7 m/s and on low friction) is
+    not taken for a pushed one, nor is the return to speed after a forward push (the steps
+    before the push are slower than those after it), nor a commanded speed change in either
+    direction (the module docstring)."""
 
     def __init__(self, bins: int, depth: int = 4) -> None:
         self.bins = bins
@@ -105,24 +123,26 @@ class StepMemory:
         self.reset()
 
     def reset(self) -> None:
-        self.steps = [np.full(self.bins, np.nan) for _ in range(self.depth + 1)]  # now, then the steps before
+        self.steps = [np.full((self.bins, 2), np.nan) for _ in range(self.depth + 1)]  # now, then the steps before
         self._last_tau: float | None = None
 
-    def observe(self, tau: float, fraction: float) -> float | None:
-        """Record the hip velocity fraction at phase ``tau``; the slowest of the previous
-        steps' at this phase (each at its bin, or its nearest recorded one), None before
-        ``depth`` whole steps are known."""
+    def observe(self, tau: float, hip_velocity: float, command: float) -> float | None:
+        """Record the hip velocity (m/s) at phase ``tau`` under the ramped ``command`` (m/s,
+        > 0); the reference there: the slowest of the previous steps' hip velocity over the
+        larger of their command and ``command`` (each at its bin, or its nearest recorded
+        one), None before ``depth`` whole steps are known."""
         if self._last_tau is not None and tau < self._last_tau - 0.5:
-            self.steps = [np.full(self.bins, np.nan)] + self.steps[:self.depth]
+            self.steps = [np.full((self.bins, 2), np.nan)] + self.steps[:self.depth]
         self._last_tau = tau
         b = min(max(int(tau * self.bins), 0), self.bins - 1)
-        self.steps[0][b] = fraction
+        self.steps[0][b] = (hip_velocity, command)
         references = []
         for step in self.steps[1:]:
-            known = np.flatnonzero(~np.isnan(step))
+            known = np.flatnonzero(~np.isnan(step[:, 0]))
             if known.size < self.bins // 2:  # not a whole step (the walk's first ones)
                 return None
-            references.append(float(step[known[np.argmin(np.abs(known - b))]]))
+            velocity, then = step[known[np.argmin(np.abs(known - b))]]
+            references.append(float(velocity / max(then, command)))
         return min(references)
 
 
@@ -169,7 +189,7 @@ class RecoveryPolicy:
     def weight(self, tau: float, fraction: float, reference: float | None) -> float:
         """w in [0, 1]: how much of the offsets apply (the module docstring); ``fraction``:
         the hip velocity over the ramped command now, ``reference`` the previous steps'
-        slowest at this phase (None: unknown)."""
+        slowest at this phase (:meth:`StepMemory.observe`; None: unknown)."""
         if reference is None or not 0.0 < tau < 1.0:
             return 0.0
         deficit = reference - fraction - self.config.threshold
@@ -184,10 +204,10 @@ class RecoveryPolicy:
         if tau < self.config.hold_from or self._held is None:
             self._held = self._base.act(observation)  # the ramp advances early in the step only
         command = self._held
-        ramped = self._base.command  # the command the base gait is for (m/s), ramping to v_d
-        reference = self.memory.observe(tau, hip_velocity / max(ramped, 0.1))
-        ramping = abs(ramped - observation.desired_speed) > 1e-9
-        w = 0.0 if ramping else self.weight(tau, hip_velocity / max(ramped, 0.1), reference)
+        ramped = max(self._base.command, 0.1)  # the command the base gait is for (m/s), ramping to v_d
+        reference = self.memory.observe(tau, hip_velocity, ramped)
+        slowing = self._base.command > observation.desired_speed + 1e-9  # a commanded deceleration
+        w = 0.0 if slowing else self.weight(tau, hip_velocity / ramped, reference)
         self.last_weight = w  # the rule's weight at this decision (read by diagnostics and gated residuals)
         if w <= 0.0:
             return command
