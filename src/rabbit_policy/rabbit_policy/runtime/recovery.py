@@ -54,7 +54,7 @@ The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`
    a large acceleration command the phase can stay below 0.2 for most of a step, and the
    ramp runs on (0.7 to 1.26 m/s within one step); the rule of 1-2 is what catches the
    stall that follows. Capping the ramp per step instead (0.2 m/s) made every acceleration
-   from 0.7 m/s to 1.1 m/s and beyond stall.
+   from 0.7 m/s to 1.1 m/s and beyond fall or stall (with the old rule).
 
 Undisturbed, w stays 0 and the gait is classic's (the limit cycle is classic's). The rule
 never speeds up: a forward push (the hip ahead of its last step) leaves classic alone.
