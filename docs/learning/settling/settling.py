@@ -1,13 +1,14 @@
 # Issue 37 item 4, measured as its bar reads: "at least 95 % of speed changes within 0.03 m/s 5-10 s after
 # the change" (docs/learning.md, 2026-11-27 (fourth)).
 #   .venv/bin/python docs/learning/settling/settling.py > docs/learning/settling/settling.json
+#   .venv/bin/python docs/learning/settling/settling.py --changes 200 --seed 38 classic recovery > docs/learning/settling/settling_200.json
 # Per change (seeded, the same for every controller): a walk at a uniform speed a in [0.7, 1.5] m/s; at a
 # uniform time in [6, 7) s (any phase of a step) the command changes to a uniform b with |b - a| >= 0.1; the
 # walk goes on 10 s. Settled: it neither fell nor stalled and the mean speed from 5 to 10 s after the change
 # (WalkResult.mean_speed, the one mean-speed definition) is within 0.03 m/s of b. Also the signed error, and
 # the same over 3-10 s.
+import argparse
 import json
-import sys
 
 import numpy as np
 
@@ -30,10 +31,10 @@ def draws(n: int, seed: int = 37) -> list[tuple[float, float, float]]:
     return rows
 
 
-def measure(controller: str) -> dict:
+def measure(controller: str, changes: int = CHANGES, seed: int = 37) -> dict:
     policy = make_policy(controller)
     rows = []
-    for a, b, t in draws(CHANGES):
+    for a, b, t in draws(changes, seed):
         result = walk(policy, Scenario(schedule=((0.0, a), (t, b))), t + 10.0)
         late = None if result.failed else result.mean_speed(t + 5.0, t + 10.0) - b
         rows.append({"from": a, "to": b, "change_time": t, "failed": result.failed,
@@ -46,5 +47,10 @@ def measure(controller: str) -> dict:
 
 
 if __name__ == "__main__":
-    controllers = sys.argv[1:] or ["classic", "learned", "recovery"]
-    print(json.dumps({"tolerance": TOLERANCE, "results": [measure(c) for c in controllers]}, indent=1))
+    parser = argparse.ArgumentParser()
+    parser.add_argument("controllers", nargs="*", default=["classic", "learned", "recovery"])
+    parser.add_argument("--changes", type=int, default=CHANGES)
+    parser.add_argument("--seed", type=int, default=37)
+    args = parser.parse_args()
+    print(json.dumps({"tolerance": TOLERANCE, "changes": args.changes, "seed": args.seed,
+                      "results": [measure(c, args.changes, args.seed) for c in args.controllers]}, indent=1))
