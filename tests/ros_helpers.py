@@ -100,13 +100,16 @@ def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> 
         yield context, executor
     finally:
         try:
-            for node in list(executor.get_nodes()):
+            nodes = list(executor.get_nodes())
+            # first: an EventsExecutor holds on to what a callback created (a node's topics
+            # wired once its solo_check passed), and the node lives on in the domain with it
+            executor.shutdown()
+            for node in nodes:
                 try:
                     close = getattr(node, "close", None)
                     if close:
                         close()
                 finally:
-                    executor.remove_node(node)
                     node.destroy_node()
             for node in [n for n in list(_LIVE_NODES) if n.context is context]:
                 left_alive.append(node.get_fully_qualified_name())

@@ -52,3 +52,22 @@ def test_after_a_test_that_leaves_a_node_the_worker_moves_to_a_free_domain():
             leak.destroy_node()
     finally:
         rclpy.shutdown(context=context)
+
+
+def test_a_node_that_started_after_its_solo_check_leaves_the_domain_with_its_test_context():
+    """ros_context, as the tests use it: a node that wired its topics from a timer callback
+    (a policy started after its solo_check, as one started by hand is) is gone from the
+    domain when the block ends, even while the test still holds the node and the executor.
+    rclpy's EventsExecutor keeps what a callback created: destroying the node before
+    shutting the executor down left it listed, and a later test's run_stack refused to
+    start "beside another stack" (CI, 2026-11-27)."""
+    from rabbit_policy.policy_node import PolicyNode
+
+    from ros_helpers import ros_context, spin_until
+
+    domain = (int(os.environ["ROS_DOMAIN_ID"]) - 1 + 30) % 101 + 1  # neither ours nor another worker's
+    with ros_context(domain_id=domain) as (context, executor):
+        policy = PolicyNode(context=context, solo_check=0.3)
+        executor.add_node(policy)
+        assert spin_until(executor, lambda: policy.solo.started, timeout=20.0)
+    assert domain_users(domain, wait=3.0) == []

@@ -157,7 +157,11 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
     """While a stack walks (run_in_process, lockstep, its states recorded), a second node of
     one kind comes and goes three times in the same namespace, each in a context of its own,
     looking as a process started by hand does (``solo_check``): each refuses, having
-    published nothing, and the stack's states are the ROS-free loop's bit for bit."""
+    published nothing, and the stack's states are the ROS-free loop's bit for bit.
+
+    The stack walks until the third intruder is gone (then it is stopped), however fast
+    this machine runs it: a fixed 6 s walk ended before the second intruder had finished
+    looking on a fast one (CI, 2026-11-27)."""
     import threading
 
     import numpy as np
@@ -178,10 +182,10 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
                                  lambda m: states.append(list(m.position) + list(m.velocity)), qos.STREAM_QOS)
         return node
 
-    duration = 6.0
+    intruders_done = threading.Event()
     result: dict = {}
     run = threading.Thread(target=lambda: result.update(run=run_in_process(
-        StackConfig(duration=duration, schedule=((0.0, 1.0),)), observers=[recorder])))
+        StackConfig(duration=600.0, schedule=((0.0, 1.0),)), observers=[recorder], stop=intruders_done.is_set)))
     run.start()
     try:
         refusals = []
@@ -192,21 +196,21 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
                 executor.add_node(intruder)
                 spin_until(executor, lambda: getattr(intruder, "done", False) or intruder.solo.started,
                            timeout=PROCESS_SOLO_CHECK + 5.0)
-                if run.is_alive():  # (the stack was there the whole time)
-                    refusals.append((intruder.solo.refused, intruder.solo.started))
+                refusals.append((intruder.solo.refused, intruder.solo.started, run.is_alive()))
     finally:
+        intruders_done.set()
         run.join(timeout=300)
     report, _nodes = result["run"]
-    assert len(refusals) >= 2 and all(found and not started for found, started in refusals), refusals
-    assert report.completed and not report.fell
-    assert len(refusals) >= 2 and all(found and not started for found, started in refusals), refusals
+    assert report.error == "interrupted" and not report.fell, report  # walking until stopped
+    assert len(refusals) == 3 and all(found and not started and alive for found, started, alive in refusals), refusals
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert len(unique) > 1000  # (the stack walked through three intruders' checks: seconds)
     loop = ClosedLoop(Scenario.constant(1.0), make_policy("classic"))
     reference = [loop.data.qpos.tolist() + loop.data.qvel.tolist()]
-    for _ in range(int(round(duration / 0.001))):
+    for _ in range(len(unique) - 1):
         loop.tick()
         reference.append(loop.data.qpos.tolist() + loop.data.qvel.tolist())
-    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
-    assert unique.shape == np.array(reference).shape and np.array_equal(unique, np.array(reference))
+    assert np.array_equal(unique, np.array(reference))
 
 
 def test_a_node_started_by_hand_beside_a_stack_exits_with_one_line():
