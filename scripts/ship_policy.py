@@ -26,6 +26,7 @@ import argparse
 import shlex
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
@@ -132,7 +133,9 @@ def network_text(info: dict) -> list[str]:
     if features in ("memory", "body"):
         inputs.append(f"the integral of the speed error (m, clamped to ±{memory.get('limit', 0.2):g}: anti-windup"
                       + (f"; held where v_d + {memory['gain']:g} I would leave {memory['speed_range']} m/s"
-                         if memory.get("gain") and memory.get("speed_range") else "") + ")")
+                         if memory.get("gain") and memory.get("speed_range") else "")
+                      + (f"; held while |v_d − v| ≥ {memory['band']:g} m/s, a transient" if memory.get("band") else "")
+                      + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
         inputs.append("the body state at the decision: torso pitch (rad) and rate (rad/s), phase and its rate "
@@ -201,6 +204,8 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
     criteria = criteria or Criteria()
     cfg = info.get("config", {})
+    band = (info.get("memory") or {}).get("band")
+    band = None if cfg.get("integral_band") else band  # set after training (ship_policy --integral-band)
     if screened:
         selected = f"runs/X/evaluated/{int(info.get('iteration', 0)):05d}.pt"
         selection = (f" (this file is that run's `{selected.split('/', 2)[2]}`, chosen among every evaluated "
@@ -223,7 +228,9 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         + (f"{cfg['decision_period']} ticks" if cfg.get("decision_period") else "one walking step")
         + f"; reward −(v̄ − v_d)² per step, fall penalty {cfg.get('fall_penalty', -10.0):g}; episodes: "
         + distribution_text(cfg.get("distribution", "paper")) + ")",
-        f"- regenerate: `{train_command(info, bool(screened))}`, then `scripts/ship_policy.py {selected}`{selection}",
+        f"- regenerate: `{train_command(info, bool(screened))}`, then `scripts/ship_policy.py {selected}"
+        + (f" --integral-band {band:g}" if band else "") + f"`{selection}"
+        + ("; the run trained without the band, which ship_policy sets on the shipped copy" if band else ""),
         f"- shipped with: `{command}`" if command else "",
         "", "## Acceptance 1-6 (the learning issue; ROS-free fast path, "
         "`rabbit_policy.evaluation.acceptance.broad_acceptance`)", "",
@@ -235,6 +242,26 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         *evaluation_table(results, criteria), "",
     ]
     return "\n".join(lines)
+
+
+def with_integral_band(policy: Path, band: float, out: Path) -> Path:
+    """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
+    speed error is ``band`` m/s or more (``MemoryConfig.band``); ``ValueError`` for a policy
+    without the memory inputs or a band that is not a number > 0."""
+    from rabbit_policy.runtime.memory import MemoryConfig
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+
+    checkpoint = PolicyCheckpoint.load(policy)
+    if "memory" not in checkpoint.info:
+        raise ValueError(f"--integral-band: {policy} has no speed integral (features "
+                         f"{checkpoint.info.get('features', 'paper')!r}; it needs memory or body)")
+    try:
+        memory = MemoryConfig(**{**checkpoint.info["memory"], "band": band})
+    except ValueError as exc:
+        raise ValueError(f"--integral-band: {exc}") from None
+    checkpoint.info["memory"] = memory.to_dict()
+    checkpoint.save(out)
+    return out
 
 
 def warm_start_policy(checkpoint):
@@ -266,6 +293,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--classic-integral", type=float, metavar="KI",
                         help="also classic HZD with the event-based speed integral of this gain (1/s) in both "
                              "tables (the base of a residual policy trained with --integral-gain KI)")
+    parser.add_argument("--integral-band", type=float, metavar="B",
+                        help="ship the policy with its speed integral held while |v_d - v| >= B m/s (conditional "
+                             "integration, rabbit_policy.runtime.speed_integral; a memory policy only): the shipped "
+                             "copy records it, and every check runs on it")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -277,10 +308,15 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
+    scratch = tempfile.TemporaryDirectory(prefix="rabbit_ship_")
+    source = args.policy
     try:
-        policy = make_policy("learned", policy_file=args.policy)
+        if args.integral_band is not None:
+            source = with_integral_band(args.policy, args.integral_band, Path(scratch.name) / args.policy.name)
+        policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
-    except PolicyUnavailable as exc:
+    except (PolicyUnavailable, ValueError) as exc:
+        scratch.cleanup()
         print(f"error: {exc}", file=sys.stderr)
         return 2
     info = policy.checkpoint.info
@@ -327,11 +363,12 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     if not args.dry_run:
         TARGET.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(args.policy, TARGET / "hzd_rl_policy.pt")
+        shutil.copyfile(source, TARGET / "hzd_rl_policy.pt")
         (TARGET / "MODEL_CARD.md").write_text(card)
         (TARGET / "evaluation.json").write_text(strict_json.dumps({"acceptance_1_6": dict(broad),
                                                                     "tracking": dict(results)}, indent=1) + "\n")
         print(f"shipped to {TARGET / 'hzd_rl_policy.pt'}", file=sys.stderr)
+    scratch.cleanup()
     return 0
 
 

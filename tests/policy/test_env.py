@@ -449,3 +449,23 @@ def test_the_registered_presets_are_the_runs_we_ship_and_train():
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
     assert gym.make("RabbitHZD-Recovery-v0").unwrapped.rules.roll_back_after == 0.6
+
+
+def test_the_integral_band_and_clip_reach_the_env_memory_and_bad_ones_are_refused():
+    """``integral_band``/``integral_clip`` (train.py --integral-band/--integral-clip): the
+    env's memory integrates as the shipped copy with that band or clip would
+    (``MemoryConfig``), so a run trains on what ship_policy ships; a negative or non-finite
+    value, or one without the integral (the paper's features), is refused in one line."""
+    from rabbit_policy.learning.es import ESConfig
+
+    config = ESConfig(max_steps=5, decision_period=20, features="memory", action="residual", integral_gain=0.2,
+                      integral_band=0.1, integral_clip=0.05)
+    memory = RabbitHZDEnv(**config.env_kwargs()).memory.config
+    assert (memory.band, memory.clip, memory.gain) == (0.1, 0.05, 0.2)
+    assert RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0).env_kwargs()).memory.config.band is None
+    for bad, message in (({"integral_band": -0.1}, "integral_band must be a finite number >= 0"),
+                         ({"integral_clip": float("nan")}, "integral_clip must be a finite number >= 0"),
+                         ({"integral_band": 0.1, "features": "paper", "action": "direct", "integral_gain": 0.0},
+                          "integral_band acts on the speed integral")):
+        with pytest.raises(ValueError, match=message):
+            replace(config, **bad)

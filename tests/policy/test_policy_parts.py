@@ -243,6 +243,34 @@ def test_the_speed_integral_is_held_where_the_gait_would_leave_the_library_range
             IntegralConfig(**({"limit": 0.2, "dt": 0.02} | bad))
 
 
+def test_the_speed_integral_with_a_band_holds_on_large_errors_and_integrates_small_ones():
+    """Conditional integration: |v_d - v̄| >= band (a transient: a hip lagging a new command,
+    a push) leaves I where it is; smaller errors integrate as without a band. Error
+    saturation: with a clip, a large error integrates at the clip's rate."""
+    from rabbit_policy.runtime.memory import MemoryConfig
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral
+
+    banded = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0, band=0.1))
+    assert banded.update(0.05, 1.0) == pytest.approx(0.05)
+    assert banded.update(0.3, 1.0) == pytest.approx(0.05)  # held
+    assert banded.update(-0.1, 1.0) == pytest.approx(0.05)  # at the band: held
+    assert banded.update(-0.09, 1.0) == pytest.approx(-0.04)
+    assert banded.update(math.nan, 1.0) == pytest.approx(-0.04)  # no error known: held, never NaN
+    clipped = SpeedIntegral(IntegralConfig(limit=1.0, dt=1.0, clip=0.05))  # error saturation instead
+    assert clipped.update(0.3, 1.0) == pytest.approx(0.05)  # a large error: at the clip's rate
+    assert clipped.update(-0.02, 1.0) == pytest.approx(0.03)  # a small one: as it is
+    assert clipped.update(-1.0, 1.0) == pytest.approx(-0.02)
+    for name in ("band", "clip"):
+        for bad in (0.0, -0.1, math.inf, math.nan):
+            with pytest.raises(ValueError, match=name):
+                IntegralConfig(limit=1.0, dt=1.0, **{name: bad})
+    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), band=0.1, clip=0.05)
+    config = memory.integral_config()
+    assert (config.band, config.clip) == (0.1, 0.05) and MemoryConfig(**memory.to_dict()) == memory
+    older = {k: v for k, v in memory.to_dict().items() if k not in ("band", "clip")}  # a checkpoint from before
+    assert MemoryConfig(**older).integral_config() == IntegralConfig(1.0, 0.02, 0.2, (0.7, 1.5))
+
+
 def test_learned_policy_checkpoint_round_trip(tmp_path):
     import torch
 

@@ -27,7 +27,8 @@ pytestmark = pytest.mark.sim
 
 ROOT = Path(__file__).resolve().parents[2]
 NEWER_FIELDS = {"features": "paper", "action": "direct", "integral_gain": 0.0, "alive_bonus": 0.0,
-                "slow_penalty": 0.0, "roll_back_after": 0.0, "residual_base": "classic", "top": 0}
+                "slow_penalty": 0.0, "roll_back_after": 0.0, "residual_base": "classic", "top": 0,
+                "integral_band": 0.0, "integral_clip": 0.0}
 """ES options newer than a checkpoint, at the defaults that keep its run as it was."""
 LIBRARY = GaitLibrary.load()
 
@@ -263,6 +264,31 @@ def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(t
     assert target.read_bytes() == before
     missing = run_script("scripts/ship_policy.py", str(tmp_path / "none.pt"), "--quick", "--dry-run")
     assert missing.returncode == 2 and "does not exist" in missing.stderr
+
+
+def test_ship_policy_sets_the_integral_band_on_the_shipped_copy_and_the_card_says_so(tmp_path):
+    """``--integral-band B``: the copy ship_policy checks and ships holds its speed integral
+    while |v_d - v| >= B (``MemoryConfig.band``), the network untouched; the card's inputs
+    and regenerate line say so; a policy without the integral, or a band that is not a
+    number > 0, is one line and exit 2 before anything is measured."""
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        from ship_policy import network_text, with_integral_band
+    finally:
+        sys.path.remove(str(ROOT / "scripts"))
+    source = packaged_policy_file()
+    banded = LearnedPolicy(with_integral_band(source, 0.1, tmp_path / "banded.pt"))
+    original = LearnedPolicy(source)
+    assert banded.memory.config.band == 0.1
+    assert banded.memory.config == type(banded.memory.config)(**{**original.memory.config.to_dict(), "band": 0.1})
+    assert all(torch.equal(a, b) for a, b in zip(banded.checkpoint.state_dict.values(),
+                                                  original.checkpoint.state_dict.values()))
+    assert "held while |v_d − v| ≥ 0.1 m/s" in " ".join(network_text(banded.checkpoint.info))
+    for args, message in ((["--integral-band", "0"], "--integral-band: the speed integral's band must be"),
+                          (["--integral-band", "nan"], "--integral-band: the speed integral's band must be")):
+        out = run_script("scripts/ship_policy.py", str(source), *args, "--quick", "--dry-run")
+        assert out.returncode == 2 and message in out.stderr, out.stderr[-2000:]
+        assert len(out.stderr.strip().splitlines()) == 1, out.stderr
 
 
 @pytest.mark.slow

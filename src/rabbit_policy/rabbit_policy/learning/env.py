@@ -113,6 +113,8 @@ TimeLimit wrapper only, so every id carries :class:`EpisodeLength`, which makes 
 | ``features`` | ``"paper"`` | the observation: the paper's three, ``"memory"`` or ``"body"`` (see Observation space) |
 | ``action`` | ``"direct"`` | the action: the gait, or ``"residual"`` on the library (see Observation space) |
 | ``integral_gain`` | 0.0 | residual only: the base gait at v_d + gain x the speed integral (1/s; see Observation space) |
+| ``integral_band`` | 0.0 | memory or body features: the speed integral is held while the speed error is this or more (m/s; 0 = never; :mod:`rabbit_policy.runtime.speed_integral`) |
+| ``integral_clip`` | 0.0 | memory or body features: the error the speed integral adds is clipped to +-this (m/s; 0 = not clipped) |
 | ``residual_base`` | ``"classic"`` | residual only: what it adds to, the library's gait (``classic``) or the recovery controller's decision (``recovery``; needs a decision period; the controller then applies gaits at once), or that scaled by the recovery rule's weight at the decision (``recovery_gated``: zero until something slows the hip) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
@@ -298,6 +300,10 @@ class EpisodeConfig:
     integral_gain: float = option(0.0, "action residual with memory or body features: the base gait is the "
                                        "library's at v_d + this (1/s) x the memory's speed integral (zero residual = "
                                        "classic HZD with that speed integral; 0 = none)")
+    integral_band: float = option(0.0, "memory or body features: the speed integral is held while |v_d - v| >= this "
+                                       "(m/s; conditional integration against windup after a speed change; 0 = never)")
+    integral_clip: float = option(0.0, "memory or body features: the speed error the integral adds is clipped to "
+                                       "+-this (m/s; error saturation against windup; 0 = not clipped)")
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
@@ -317,6 +323,12 @@ class EpisodeConfig:
         check_integral_gain(self.integral_gain, self.action)
         check_features(self.features, self.decision_period, self.integral_gain)
         check_residual_base(self.residual_base, self.action, self.decision_period, self.integral_gain)
+        for name in ("integral_band", "integral_clip"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0 (m/s; 0 = off), got {value!r}")
+            if value and self.features == "paper":
+                raise ValueError(f"{name} acts on the speed integral: it needs features memory or body")
 
     def env_kwargs(self) -> dict:
         """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
@@ -325,6 +337,7 @@ class EpisodeConfig:
                 "alive_bonus": self.alive_bonus, "slow_penalty": self.slow_penalty, "features": self.features,
                 "action": self.action,
                 "residual_base": self.residual_base, "integral_gain": self.integral_gain,
+                "integral_band": self.integral_band, "integral_clip": self.integral_clip,
                 "rules": StopRules(roll_back_after=self.roll_back_after)}
 
 
@@ -381,7 +394,7 @@ class RabbitHZDEnv(gym.Env):
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
                  features: str = "paper", action: str = "direct", integral_gain: float = 0.0,
-                 residual_base: str = "classic") -> None:
+                 residual_base: str = "classic", integral_band: float = 0.0, integral_clip: float = 0.0) -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -411,7 +424,7 @@ class RabbitHZDEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.features = features
         memory = MemoryConfig.for_features(features, decision_period, integral_gain,  # raises for a bad combination
-                                           self.library.speed_range)
+                                           self.library.speed_range, integral_band or None, integral_clip or None)
         self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:

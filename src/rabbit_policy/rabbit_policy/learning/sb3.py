@@ -85,7 +85,8 @@ class SB3Config(EpisodeConfig):
         from rabbit_policy.runtime.memory import MemoryConfig
 
         memory = MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain,
-                                           GaitLibrary.load().speed_range)
+                                           GaitLibrary.load().speed_range, self.integral_band or None,
+                                           self.integral_clip or None)
         return {"features": self.features, "action": self.action,
                 **({"memory": memory.to_dict()} if memory is not None else {}),
                 **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": self.integral_gain,

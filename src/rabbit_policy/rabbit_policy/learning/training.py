@@ -151,7 +151,8 @@ def train(args: TrainingConfig) -> int:
     features, action = args.trainer.features, args.trainer.action
     bounds = policy_bounds(action, library)
     gain = args.trainer.integral_gain
-    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain, library.speed_range)
+    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain, library.speed_range,
+                                       args.trainer.integral_band or None, args.trainer.integral_clip or None)
     residual = (ResidualAction(library, residual_sum_bounds(library, args.trainer.residual_base), integral_gain=gain)
                 if action == "residual" else None)
     if residual is not None:  # a zero residual: the classic controller (or the residual's base)

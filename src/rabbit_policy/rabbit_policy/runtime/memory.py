@@ -50,13 +50,18 @@ class MemoryConfig:
     ``gain`` (1/s) and ``speed_range`` (m/s): the integral also offsets a residual's base gait
     by ``gain * I`` and is held where that gait stays within the library's speeds
     (:class:`~.speed_integral.IntegralConfig`; None: not held, as in the policies trained
-    before the gate, whose checkpoints record none)."""
+    before the gate, whose checkpoints record none); ``band`` (m/s): the integral is held
+    while the speed error is as large as that, ``clip`` (m/s): the error it integrates is
+    clipped to +-clip (:class:`~.speed_integral.IntegralConfig`; None, the checkpoints
+    before 2026-11-27: neither)."""
 
     dt: float
     limit: float = DEFAULT_LIMIT
     body: bool = False
     gain: float = 0.0
     speed_range: tuple[float, float] | None = None
+    band: float | None = None
+    clip: float | None = None
 
     def __post_init__(self) -> None:
         if not (self.dt > 0.0 and self.limit > 0.0):
@@ -70,31 +75,38 @@ class MemoryConfig:
 
     def integral_config(self) -> IntegralConfig:
         """The configuration of the memory's :class:`~.speed_integral.SpeedIntegral`."""
-        return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range)
+        return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range, band=self.band,
+                              clip=self.clip)
 
     @classmethod
-    def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False) -> "MemoryConfig":
+    def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False,
+                   band: float | None = None, clip: float | None = None) -> "MemoryConfig":
         """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
         per walking step, about 0.6 s)."""
-        return cls(decision_dt(decision_period), limit, body)
+        return cls(decision_dt(decision_period), limit, body, band=band, clip=clip)
 
     @classmethod
     def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0,
-                     speed_range: tuple[float, float] | None = None) -> "MemoryConfig | None":
+                     speed_range: tuple[float, float] | None = None, band: float | None = None,
+                     clip: float | None = None) -> "MemoryConfig | None":
         """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's.
         ``integral_gain`` > 0 (1/s): its integral also offsets a residual's base gait by
         ``integral_gain * I`` m/s, so I is bounded by
         :func:`~.speed_integral.integral_limit` (the offset within +-0.2 m/s) and held where
-        the base gait would leave ``speed_range`` (m/s: the library's speeds; needed with a gain)."""
+        the base gait would leave ``speed_range`` (m/s: the library's speeds; needed with a gain).
+        ``band``, ``clip`` (m/s; None: none): the integral's anti-windup on large errors
+        (:class:`~.speed_integral.IntegralConfig`)."""
         check_features(features, decision_period, integral_gain)
         if features == "paper":
+            if band is not None or clip is not None:
+                raise ValueError("an integral band or clip needs the speed integral: features memory or body")
             return None
         if not integral_gain:
-            return cls.for_period(decision_period, DEFAULT_LIMIT, body=features == "body")
+            return cls.for_period(decision_period, DEFAULT_LIMIT, features == "body", band, clip)
         if speed_range is None:
             raise ValueError("a memory whose integral offsets the base gait needs the library's speed range")
         return cls(decision_dt(decision_period), integral_limit(integral_gain), features == "body", integral_gain,
-                   speed_range)
+                   speed_range, band, clip)
 
 
 class SpeedMemory:
