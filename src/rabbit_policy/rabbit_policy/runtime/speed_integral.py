@@ -3,8 +3,9 @@
 ``I = clamp(I + (v_d - v̄) dt, -limit, +limit)`` per decision (m: m/s times s), with
 ``v_d - v̄`` the observation's mean speed error and ``dt`` the time between decisions;
 conditional integration: at the bound the sum stops growing, so it unwinds at once when the
-error turns, and with a ``band`` it integrates only errors smaller than the band. Where I offsets the library's gait (below), it is also held where that gait
-``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
+error turns (with a ``band``, it also integrates only errors smaller than the band; with a
+``clip``, the error clipped). Where I offsets the library's gait (below), it is also held
+where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
 ``speed_range``): beyond them ``interpolate`` clamps, so anything integrated there is
 windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
 + integral 0.3 from 91 to 95 of 100 random sequences and from 50 to 52 of 72 speed changes,
