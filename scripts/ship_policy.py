@@ -304,19 +304,23 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
+    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band copy
+        return ship(parser, args, argv, Path(scratch))
 
+
+def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
+    """Measure, write the card and ship (``main``'s work once its arguments are parsed);
+    ``scratch``: a directory for the policy's ``--integral-band`` copy."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
-    scratch = tempfile.TemporaryDirectory(prefix="rabbit_ship_")
     source = args.policy
     try:
         if args.integral_band is not None:
-            source = with_integral_band(args.policy, args.integral_band, Path(scratch.name) / args.policy.name)
+            source = with_integral_band(args.policy, args.integral_band, scratch / args.policy.name)
         policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
     except (PolicyUnavailable, ValueError) as exc:
-        scratch.cleanup()
         print(f"error: {exc}", file=sys.stderr)
         return 2
     info = policy.checkpoint.info
@@ -368,7 +372,6 @@ def main(argv: list[str] | None = None) -> int:
         (TARGET / "evaluation.json").write_text(strict_json.dumps({"acceptance_1_6": dict(broad),
                                                                     "tracking": dict(results)}, indent=1) + "\n")
         print(f"shipped to {TARGET / 'hzd_rl_policy.pt'}", file=sys.stderr)
-    scratch.cleanup()
     return 0
 
 

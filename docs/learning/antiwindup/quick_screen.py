@@ -11,7 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "settling"))
 from settling import TOLERANCE, draws  # noqa: E402
 
 from rabbit_policy.evaluation.acceptance import BroadCriteria  # noqa: E402
-from rabbit_policy.evaluation.robustness import RobustnessConfig, _model_job  # noqa: E402
+from rabbit_policy.evaluation.robustness import RobustnessConfig, model_errors  # noqa: E402
 from rabbit_policy.experiment.loop import walk  # noqa: E402
 from rabbit_policy.experiment.scenario import Scenario  # noqa: E402
 from rabbit_policy.runtime.policies import LearnedPolicy  # noqa: E402
@@ -19,7 +19,7 @@ from rabbit_policy.runtime.policies import LearnedPolicy  # noqa: E402
 config, judged = RobustnessConfig(), BroadCriteria().judged_models
 for path in sys.argv[1:]:
     policy = LearnedPolicy(path)
-    models = [_model_job((policy, case, v, config)) for case in config.model_errors for v in config.model_speeds]
+    models = model_errors(policy, config)["rows"]
     settled = 0
     for a, b, t in draws(60, 37):
         result = walk(policy, Scenario(schedule=((0.0, a), (t, b))), t + 10.0)

@@ -330,6 +330,12 @@ class EpisodeConfig:
             if value and self.features == "paper":
                 raise ValueError(f"{name} acts on the speed integral: it needs features memory or body")
 
+    def memory_config(self, speed_range: tuple[float, float]) -> MemoryConfig | None:
+        """The memory these options give a policy (None: the paper's features), for the
+        library's ``speed_range`` (m/s): what the env keeps and a checkpoint records."""
+        return MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain, speed_range,
+                                         self.integral_band or None, self.integral_clip or None)
+
     def env_kwargs(self) -> dict:
         """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
         return {"max_steps": self.max_steps, "decision_period": self.decision_period,

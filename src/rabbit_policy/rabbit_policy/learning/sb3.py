@@ -82,11 +82,8 @@ class SB3Config(EpisodeConfig):
         outputs (as ``train.py`` writes them)."""
         from rabbit_policy.runtime.actions import RESIDUAL_SCALE
         from rabbit_policy.runtime.gait_library import GaitLibrary
-        from rabbit_policy.runtime.memory import MemoryConfig
 
-        memory = MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain,
-                                           GaitLibrary.load().speed_range, self.integral_band or None,
-                                           self.integral_clip or None)
+        memory = self.memory_config(GaitLibrary.load().speed_range)
         return {"features": self.features, "action": self.action,
                 **({"memory": memory.to_dict()} if memory is not None else {}),
                 **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": self.integral_gain,

@@ -133,7 +133,7 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ResidualAction, policy_bounds, residual_sum_bounds
-    from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
+    from rabbit_policy.runtime.memory import INPUTS, SpeedMemory
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
     from rabbit_policy.runtime.policies import NetworkPolicy, residual_base_policy
     from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
@@ -151,8 +151,7 @@ def train(args: TrainingConfig) -> int:
     features, action = args.trainer.features, args.trainer.action
     bounds = policy_bounds(action, library)
     gain = args.trainer.integral_gain
-    memory = MemoryConfig.for_features(features, args.trainer.decision_period, gain, library.speed_range,
-                                       args.trainer.integral_band or None, args.trainer.integral_clip or None)
+    memory = args.trainer.memory_config(library.speed_range)
     residual = (ResidualAction(library, residual_sum_bounds(library, args.trainer.residual_base), integral_gain=gain)
                 if action == "residual" else None)
     if residual is not None:  # a zero residual: the classic controller (or the residual's base)
