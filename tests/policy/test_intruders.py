@@ -204,7 +204,6 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
     assert report.error == "interrupted" and not report.fell, report  # walking until stopped
     assert len(refusals) == 3 and all(found and not started and alive for found, started, alive in refusals), refusals
     unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
-    assert len(unique) > 1000  # (the stack walked through three intruders' checks: seconds)
     loop = ClosedLoop(Scenario.constant(1.0), make_policy("classic"))
     reference = [loop.data.qpos.tolist() + loop.data.qvel.tolist()]
     for _ in range(len(unique) - 1):
