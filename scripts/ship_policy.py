@@ -27,6 +27,7 @@ import shlex
 import shutil
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
@@ -135,6 +136,10 @@ def network_text(info: dict) -> list[str]:
                       + (f"; held where v_d + {memory['gain']:g} I would leave {memory['speed_range']} m/s"
                          if memory.get("gain") and memory.get("speed_range") else "")
                       + (f"; held while |v_d − v| ≥ {memory['band']:g} m/s, a transient" if memory.get("band") else "")
+                      + (f"; for {memory['steady_gate']['seconds']:g} s after each change of v_d, held unless the "
+                         f"error moved by less than {memory['steady_gate']['delta']:g} m/s over the last "
+                         f"{memory['steady_gate']['window']:g} s (the lag behind a new command is not integrated)"
+                         if memory.get("steady_gate") else "")
                       + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
@@ -195,6 +200,20 @@ def card_header(info: dict, broad: list[tuple[str, dict]] | None = None) -> list
     return lines + ["---", ""]
 
 
+def rules_set_after_training(info: dict) -> tuple[str, str]:
+    """The ship_policy options that set the speed integral's rules the run trained without
+    (``--integral-band``, ``--integral-steady-gate``), and the card's note saying so; empty
+    strings if none."""
+    memory = info.get("memory") or {}
+    band = None if info.get("config", {}).get("integral_band") else memory.get("band")  # trained with it: not set
+    gate = memory.get("steady_gate")
+    flags = (f" --integral-band {band:g}" if band else "") + (f" --integral-steady-gate {gate['seconds']:g}"
+                                                              if gate else "")
+    names = " and ".join(["band"] * bool(band) + ["steady gate"] * bool(gate))
+    return flags, (f"; the run trained without the integral's {names}, which ship_policy sets on the shipped copy"
+                   if names else "")
+
+
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,
                command: str = "", criteria=None, screened: str = "") -> str:
     """The card's markdown; ``criteria``: the tracking checks' (default: the full ones);
@@ -204,8 +223,7 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
     criteria = criteria or Criteria()
     cfg = info.get("config", {})
-    band = (info.get("memory") or {}).get("band")
-    band = None if cfg.get("integral_band") else band  # set after training (ship_policy --integral-band)
+    set_after, set_after_note = rules_set_after_training(info)
     if screened:
         selected = f"runs/X/evaluated/{int(info.get('iteration', 0)):05d}.pt"
         selection = (f" (this file is that run's `{selected.split('/', 2)[2]}`, chosen among every evaluated "
@@ -229,8 +247,7 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         + f"; reward −(v̄ − v_d)² per step, fall penalty {cfg.get('fall_penalty', -10.0):g}; episodes: "
         + distribution_text(cfg.get("distribution", "paper")) + ")",
         f"- regenerate: `{train_command(info, bool(screened))}`, then `scripts/ship_policy.py {selected}"
-        + (f" --integral-band {band:g}" if band else "") + f"`{selection}"
-        + ("; the run trained without the band, which ship_policy sets on the shipped copy" if band else ""),
+        + set_after + f"`{selection}" + set_after_note,
         f"- shipped with: `{command}`" if command else "",
         "", "## Acceptance 1-6 (the learning issue; ROS-free fast path, "
         "`rabbit_policy.evaluation.acceptance.broad_acceptance`)", "",
@@ -244,21 +261,30 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
     return "\n".join(lines)
 
 
-def with_integral_band(policy: Path, band: float, out: Path) -> Path:
+def with_integral_rules(policy: Path, out: Path, band: float | None = None,
+                        steady_gate_s: float | None = None) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
-    speed error is ``band`` m/s or more (``MemoryConfig.band``); ``ValueError`` for a policy
-    without the memory inputs or a band that is not a number > 0."""
+    speed error is ``band`` m/s or more (``MemoryConfig.band``) and, for ``steady_gate_s`` s
+    after each command change, integrates only a steady error (``MemoryConfig.steady_gate``,
+    its other fields the defaults); None: that rule as the checkpoint has it. ``ValueError``
+    naming the option for a policy without the memory inputs or a value that is not a number > 0."""
     from rabbit_policy.runtime.memory import MemoryConfig
     from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.runtime.speed_integral import SteadyGate
 
     checkpoint = PolicyCheckpoint.load(policy)
     if "memory" not in checkpoint.info:
-        raise ValueError(f"--integral-band: {policy} has no speed integral (features "
+        option = "--integral-band" if band is not None else "--integral-steady-gate"
+        raise ValueError(f"{option}: {policy} has no speed integral (features "
                          f"{checkpoint.info.get('features', 'paper')!r}; it needs memory or body)")
-    try:
-        memory = MemoryConfig(**{**checkpoint.info["memory"], "band": band})
-    except ValueError as exc:
-        raise ValueError(f"--integral-band: {exc}") from None
+    memory = MemoryConfig(**checkpoint.info["memory"])
+    for option, name, value in (("--integral-band", "band", band),
+                                ("--integral-steady-gate", "steady_gate", steady_gate_s)):
+        if value is not None:
+            try:
+                memory = replace(memory, **{name: SteadyGate(seconds=value) if name == "steady_gate" else value})
+            except ValueError as exc:
+                raise ValueError(f"{option}: {exc}") from None
     checkpoint.info["memory"] = memory.to_dict()
     checkpoint.save(out)
     return out
@@ -297,6 +323,10 @@ def main(argv: list[str] | None = None) -> int:
                         help="ship the policy with its speed integral held while |v_d - v| >= B m/s (conditional "
                              "integration, rabbit_policy.runtime.speed_integral; a memory policy only): the shipped "
                              "copy records it, and every check runs on it")
+    parser.add_argument("--integral-steady-gate", type=float, metavar="SECONDS",
+                        help="ship the policy with its speed integral integrating, for SECONDS s after each change "
+                             "of the command, only a steady error (rabbit_policy.runtime.speed_integral.SteadyGate; "
+                             "a memory policy only): the shipped copy records it, and every check runs on it")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -304,20 +334,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band copy
+    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band/-steady-gate copy
         return ship(parser, args, argv, Path(scratch))
 
 
 def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     """Measure, write the card and ship (``main``'s work once its arguments are parsed);
-    ``scratch``: a directory for the policy's ``--integral-band`` copy."""
+    ``scratch``: a directory for the policy's ``--integral-band``/``--integral-steady-gate`` copy."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     source = args.policy
     try:
-        if args.integral_band is not None:
-            source = with_integral_band(args.policy, args.integral_band, scratch / args.policy.name)
+        if args.integral_band is not None or args.integral_steady_gate is not None:
+            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band,
+                                         args.integral_steady_gate)
         policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
     except (PolicyUnavailable, ValueError) as exc:

@@ -4,7 +4,8 @@
 ``v_d - v̄`` the observation's mean speed error and ``dt`` the time between decisions;
 conditional integration: at the bound the sum stops growing, so it unwinds at once when the
 error turns (with a ``band``, it also integrates only errors smaller than the band; with a
-``clip``, the error clipped). Where I offsets the library's gait (below), it is also held
+``clip``, the error clipped; with a :class:`SteadyGate`, for a few seconds after each change of
+the command it integrates only an error that has stopped moving). Where I offsets the library's gait (below), it is also held
 where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
 ``speed_range``): beyond them ``interpolate`` clamps, so anything integrated there is
 windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
@@ -26,6 +27,7 @@ remove: it corrects only in proportion to the error it sees.
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from math import isfinite
 
@@ -67,6 +69,38 @@ def integral_limit(gain: float, offset_limit: float = DEFAULT_OFFSET_LIMIT) -> f
 
 
 @dataclass(frozen=True)
+class SteadyGate:
+    """For ``seconds`` s after each change of the command, the integral integrates only a
+    *steady* error: one that moved by less than ``delta`` m/s over the last ``window`` s
+    (about a step); elsewhere (a walk's start, pushes, model errors at a constant command) it
+    integrates as without the gate.
+
+    Why: after a change the error is the hip's lag behind the new command, a transient that
+    ends on its own. Integrated, it wound the shipped policy's offset up by as much as 0.12 m/s,
+    which then took about 10 s to unwind (34 of 60 changes settled within 0.03 m/s 5-10 s after
+    the change; classic 57). A band (hold while the error is large, ``IntegralConfig.band``)
+    removed the overshoot but also every steady error larger than itself, and lost the 3 ms
+    torque delay at 1.3 m/s; this gate leaves every walk at a constant command bit for bit as
+    it was, so the model errors and push margins cannot change, and settled 56 of the 60
+    (docs/learning.md, 2026-11-27 (sixth))."""
+
+    seconds: float = 5.0
+    delta: float = 0.03
+    window: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("seconds", "delta", "window"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and isfinite(value) and value > 0.0):
+                raise ValueError(f"the speed integral's steady gate {name} must be a finite number > 0, got {value!r}")
+
+    def decisions(self, dt: float) -> tuple[int, int]:
+        """(decisions the gate stays shut after a change, decisions back the error is compared
+        with), each at least 1, for decisions every ``dt`` s."""
+        return max(1, round(self.seconds / dt)), max(1, round(self.window / dt))
+
+
+@dataclass(frozen=True)
 class IntegralConfig:
     """``limit``: the bound on I (m, anti-windup); ``dt``: s between decisions; ``gain``
     (1/s) with ``speed_range`` (m/s, low, high): I is also held where the commanded gait
@@ -75,7 +109,8 @@ class IntegralConfig:
     policies trained before it); ``band`` (m/s): I integrates only while the error is
     smaller than it, |v_d - v̄| < band, and is held otherwise (None: always integrates);
     ``clip`` (m/s): the error integrated is clipped to +-clip, so a large error integrates
-    at that rate and no faster (None: as it is).
+    at that rate and no faster (None: as it is); ``steady_gate``: after a change of the
+    command, only a steady error integrates (:class:`SteadyGate`; None: no gate).
 
     Why the band (conditional integration): a large error is a transient, a hip lagging a
     new command or a push, not the steady error an integral is for. Integrated, it wound
@@ -91,8 +126,11 @@ class IntegralConfig:
     speed_range: tuple[float, float] | None = None
     band: float | None = None
     clip: float | None = None
+    steady_gate: SteadyGate | None = None
 
     def __post_init__(self) -> None:
+        if self.steady_gate is not None and not isinstance(self.steady_gate, SteadyGate):
+            raise ValueError(f"the speed integral's steady gate must be a SteadyGate or None, got {self.steady_gate!r}")
         for name in ("limit", "dt"):
             value = getattr(self, name)
             if not (isfinite(value) and value > 0.0):
@@ -113,16 +151,41 @@ class SpeedIntegral:
 
     def __init__(self, config: IntegralConfig) -> None:
         self.config = config
-        self.value = 0.0
+        gate = config.steady_gate
+        self._shut_for, back = gate.decisions(config.dt) if gate is not None else (0, 0)
+        self._errors: deque = deque(maxlen=back + 1)  # the errors of the last ``back`` decisions and this one
+        self.reset()
 
     def reset(self) -> None:
-        """A new walk: I = 0."""
+        """A new walk: I = 0, no command change seen."""
         self.value = 0.0
+        self._errors.clear()
+        self._last_command: float | None = None
+        self._shut = 0  # decisions the steady gate stays shut
+
+    def _gate_holds(self, error: float, desired_speed: float) -> bool:
+        """The steady gate: True while it is shut (after a command change) and the error is not
+        steady (moved by ``delta`` or more over the window, or no error known)."""
+        gate = self.config.steady_gate
+        if gate is None:
+            return False
+        self._errors.append(float(error))
+        if self._last_command is not None and desired_speed != self._last_command:
+            self._shut = self._shut_for
+        self._last_command = desired_speed
+        if self._shut == 0:
+            return False
+        self._shut -= 1
+        full = len(self._errors) == self._errors.maxlen
+        return not (full and abs(error - self._errors[0]) < gate.delta)
 
     def update(self, error: float, desired_speed: float) -> float:
         """Add one decision's mean speed error (m/s, over its ``dt``) and return I (m);
-        ``desired_speed`` (m/s, v_d) places the range gate."""
+        ``desired_speed`` (m/s, v_d) places the range gate and, with a steady gate, marks a
+        command change."""
         config = self.config
+        if self._gate_holds(error, desired_speed):
+            return self.value  # the lag behind a new command, not a steady error: held
         if config.band is not None and not abs(error) < config.band:
             return self.value  # a transient, not a steady error: held
         if config.clip is not None:
