@@ -136,10 +136,10 @@ def network_text(info: dict) -> list[str]:
                       + (f"; held where v_d + {memory['gain']:g} I would leave {memory['speed_range']} m/s"
                          if memory.get("gain") and memory.get("speed_range") else "")
                       + (f"; held while |v_d − v| ≥ {memory['band']:g} m/s, a transient" if memory.get("band") else "")
-                      + (f"; for {memory['steady_gate']['seconds']:g} s after each change of v_d, held unless the "
-                         f"error moved by less than {memory['steady_gate']['delta']:g} m/s over the last "
-                         f"{memory['steady_gate']['window']:g} s (the lag behind a new command is not integrated)"
-                         if memory.get("steady_gate") else "")
+                      + (f"; once the hip has passed a new v_d, within {memory['windup_decay']['seconds']:g} s of "
+                         f"the change, what I wound up since the change decays with time constant "
+                         f"{memory['windup_decay']['tau']:g} s until {memory['windup_decay']['seconds']:g} s after it"
+                         if memory.get("windup_decay") else "")
                       + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
@@ -202,14 +202,14 @@ def card_header(info: dict, broad: list[tuple[str, dict]] | None = None) -> list
 
 def rules_set_after_training(info: dict) -> tuple[str, str]:
     """The ship_policy options that set the speed integral's rules the run trained without
-    (``--integral-band``, ``--integral-steady-gate``), and the card's note saying so; empty
+    (``--integral-band``, ``--integral-windup-decay``), and the card's note saying so; empty
     strings if none."""
     memory = info.get("memory") or {}
     band = None if info.get("config", {}).get("integral_band") else memory.get("band")  # trained with it: not set
-    gate = memory.get("steady_gate")
-    flags = (f" --integral-band {band:g}" if band else "") + (f" --integral-steady-gate {gate['seconds']:g}"
-                                                              if gate else "")
-    names = " and ".join(["band"] * bool(band) + ["steady gate"] * bool(gate))
+    decay = memory.get("windup_decay")
+    flags = (f" --integral-band {band:g}" if band else "") + (
+        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "")
+    names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay))
     return flags, (f"; the run trained without the integral's {names}, which ship_policy sets on the shipped copy"
                    if names else "")
 
@@ -262,27 +262,27 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
 
 def with_integral_rules(policy: Path, out: Path, band: float | None = None,
-                        steady_gate_s: float | None = None) -> Path:
+                        windup_decay: tuple[float, float] | None = None) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
-    speed error is ``band`` m/s or more (``MemoryConfig.band``) and, for ``steady_gate_s`` s
-    after each command change, integrates only a steady error (``MemoryConfig.steady_gate``,
-    its other fields the defaults); None: that rule as the checkpoint has it. ``ValueError``
-    naming the option for a policy without the memory inputs or a value that is not a number > 0."""
+    speed error is ``band`` m/s or more (``MemoryConfig.band``) and whose windup after a
+    command change decays, ``windup_decay`` = (seconds, tau) in s (``MemoryConfig.windup_decay``);
+    None: that rule as the checkpoint has it. ``ValueError`` naming the option for a policy
+    without the memory inputs or a value that is not a number > 0."""
     from rabbit_policy.runtime.memory import MemoryConfig
     from rabbit_policy.runtime.network import PolicyCheckpoint
-    from rabbit_policy.runtime.speed_integral import SteadyGate
+    from rabbit_policy.runtime.speed_integral import WindupDecay
 
     checkpoint = PolicyCheckpoint.load(policy)
     if "memory" not in checkpoint.info:
-        option = "--integral-band" if band is not None else "--integral-steady-gate"
+        option = "--integral-band" if band is not None else "--integral-windup-decay"
         raise ValueError(f"{option}: {policy} has no speed integral (features "
                          f"{checkpoint.info.get('features', 'paper')!r}; it needs memory or body)")
     memory = MemoryConfig(**checkpoint.info["memory"])
     for option, name, value in (("--integral-band", "band", band),
-                                ("--integral-steady-gate", "steady_gate", steady_gate_s)):
+                                ("--integral-windup-decay", "windup_decay", windup_decay)):
         if value is not None:
             try:
-                memory = replace(memory, **{name: SteadyGate(seconds=value) if name == "steady_gate" else value})
+                memory = replace(memory, **{name: WindupDecay(*value) if name == "windup_decay" else value})
             except ValueError as exc:
                 raise ValueError(f"{option}: {exc}") from None
     checkpoint.info["memory"] = memory.to_dict()
@@ -323,10 +323,13 @@ def main(argv: list[str] | None = None) -> int:
                         help="ship the policy with its speed integral held while |v_d - v| >= B m/s (conditional "
                              "integration, rabbit_policy.runtime.speed_integral; a memory policy only): the shipped "
                              "copy records it, and every check runs on it")
-    parser.add_argument("--integral-steady-gate", type=float, metavar="SECONDS",
-                        help="ship the policy with its speed integral integrating, for SECONDS s after each change "
-                             "of the command, only a steady error (rabbit_policy.runtime.speed_integral.SteadyGate; "
-                             "a memory policy only): the shipped copy records it, and every check runs on it")
+    parser.add_argument("--integral-windup-decay", type=float, metavar="SECONDS",
+                        help="ship the policy with what its speed integral winds up after a command change decaying "
+                             "once the hip has passed the new command, within and until SECONDS s after the change "
+                             "(rabbit_policy.runtime.speed_integral.WindupDecay; a memory policy only): the shipped "
+                             "copy records it, and every check runs on it")
+    parser.add_argument("--integral-windup-tau", type=float, default=1.0, metavar="TAU",
+                        help="--integral-windup-decay's time constant (s; default 1)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -334,21 +337,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band/-steady-gate copy
+    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band/-windup-decay copy
         return ship(parser, args, argv, Path(scratch))
 
 
 def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     """Measure, write the card and ship (``main``'s work once its arguments are parsed);
-    ``scratch``: a directory for the policy's ``--integral-band``/``--integral-steady-gate`` copy."""
+    ``scratch``: a directory for the policy's ``--integral-band``/``--integral-windup-decay`` copy."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     source = args.policy
     try:
-        if args.integral_band is not None or args.integral_steady_gate is not None:
-            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band,
-                                         args.integral_steady_gate)
+        decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
+        if args.integral_band is not None or decay is not None:
+            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band, decay)
         policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
     except (PolicyUnavailable, ValueError) as exc:

@@ -272,41 +272,45 @@ def test_the_speed_integral_with_a_band_holds_on_large_errors_and_integrates_sma
 
 
 
-def test_the_steady_gate_holds_the_lag_behind_a_new_command_and_nothing_else():
-    """SteadyGate: for ``seconds`` after a change of v_d, I integrates only an error that moved
-    by less than ``delta`` over the last ``window`` s; before any change, and once the gate
-    has opened again, it integrates every error exactly as without the gate."""
+def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_new_command():
+    """WindupDecay: after a change of v_d, I integrates as before until the error turns against
+    the change; from then until ``seconds`` after the change it decays toward its value at the
+    change (time constant ``tau``) while it integrates; at a constant command, and once the
+    window is over, it integrates exactly as without the rule."""
     from rabbit_policy.runtime.memory import MemoryConfig
-    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, SteadyGate
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, WindupDecay
 
-    gate = SteadyGate(seconds=3.0, delta=0.03, window=2.0)  # dt 1 s: shut 3 decisions, compares 2 back
-    assert gate.decisions(1.0) == (3, 2) and SteadyGate(seconds=0.001).decisions(0.02) == (1, 25)
-    gated = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, steady_gate=gate))
+    decay = WindupDecay(seconds=4.0, tau=2.0)  # dt 1 s: a window of 4 decisions, half kept per decaying decision
+    decaying = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=decay))
     plain = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0))
     for error in (0.2, -0.1, 0.3):  # a constant command: no change, every error integrates
-        assert gated.update(error, 1.0) == plain.update(error, 1.0)
-    assert gated.value == pytest.approx(0.4)
-    assert gated.update(0.5, 1.2) == pytest.approx(0.4)  # a change, the error moving (0.3 -> 0.5): held
-    assert gated.update(0.51, 1.2) == pytest.approx(0.4)  # moved 0.21 over two decisions: held
-    assert gated.update(0.52, 1.2) == pytest.approx(0.92)  # the third shut decision; moved 0.02: steady, integrated
-    assert gated.update(-0.3, 1.2) == pytest.approx(0.62)  # open again: integrates a moving error too
-    assert gated.update(math.nan, 1.3) == pytest.approx(0.62)  # a change with no error known: held, never NaN
-    assert gated.update(0.1, 1.4) == pytest.approx(0.62)  # another change: shut again, its own 3 decisions
-    gated.reset()
-    assert gated.value == 0.0 and gated.update(0.5, 1.3) == pytest.approx(0.5)  # a new walk: no change seen yet
-    for bad in ({"seconds": 0.0}, {"delta": -0.1}, {"window": math.inf}, {"seconds": math.nan}, {"delta": "0.1"}):
-        with pytest.raises(ValueError, match="steady gate"):
-            SteadyGate(**bad)
-    with pytest.raises(ValueError, match="steady gate"):
-        IntegralConfig(limit=1.0, dt=1.0, steady_gate={"seconds": 5.0})
-    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), steady_gate=SteadyGate())
+        assert decaying.update(error, 1.0) == plain.update(error, 1.0)
+    assert decaying.value == pytest.approx(0.4)  # the value at the change below
+    assert decaying.update(0.5, 1.4) == pytest.approx(0.9)  # a step up, the hip lagging: winds up as before
+    assert decaying.update(0.3, 1.4) == pytest.approx(1.2)
+    assert decaying.update(-0.2, 1.4) == pytest.approx(0.4 + 0.5 * (1.0 - 0.4))  # passed it: decays toward 0.4
+    assert decaying.update(0.0, 1.4) == pytest.approx(0.4 + 0.25 * (1.0 - 0.4))  # the window's last decision
+    assert decaying.update(0.2, 1.4) == pytest.approx(0.55 + 0.2)  # 4 decisions after the change: plain again
+    assert decaying.update(-0.3, 1.0) == pytest.approx(0.45)  # a step down: a negative error is the lag
+    assert decaying.update(0.1, 1.0) == pytest.approx(0.75 + 0.5 * (0.55 - 0.75))  # passed: toward 0.75
+    decaying.reset()
+    assert decaying.value == 0.0 and decaying.update(-0.5, 1.3) == pytest.approx(-0.5)  # no change seen yet
+    for bad in ({"seconds": 0.0}, {"tau": -0.1}, {"seconds": math.inf}, {"tau": math.nan}, {"tau": "1"}):
+        with pytest.raises(ValueError, match="windup decay"):
+            WindupDecay(**bad)
+    with pytest.raises(ValueError, match="windup decay tau must be at least dt"):
+        IntegralConfig(limit=1.0, dt=1.0, windup_decay=WindupDecay(tau=0.5))
+    with pytest.raises(ValueError, match="windup decay"):
+        IntegralConfig(limit=1.0, dt=1.0, windup_decay={"seconds": 5.0})
+    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), windup_decay=WindupDecay())
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
-    assert recorded["steady_gate"] == {"seconds": 5.0, "delta": 0.03, "window": 0.5}
-    assert MemoryConfig(**recorded) == memory and memory.integral_config().steady_gate == SteadyGate()
-    with pytest.raises(ValueError, match="steady gate"):
-        MemoryConfig(**{**recorded, "steady_gate": {"seconds": 5.0, "speed": 1.0}})
-    older = {k: v for k, v in recorded.items() if k != "steady_gate"}  # a checkpoint from before the gate
-    assert MemoryConfig(**older).integral_config().steady_gate is None
+    assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0}
+    assert MemoryConfig(**recorded) == memory and memory.integral_config().windup_decay == WindupDecay()
+    with pytest.raises(ValueError, match="windup decay"):
+        MemoryConfig(**{**recorded, "windup_decay": {"seconds": 5.0, "speed": 1.0}})
+    older = {k: v for k, v in recorded.items() if k != "windup_decay"}  # a checkpoint from before the rule
+    assert MemoryConfig(**older).integral_config().windup_decay is None
+
 
 def test_learned_policy_checkpoint_round_trip(tmp_path):
     import torch

@@ -267,13 +267,13 @@ def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(t
 
 
 def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_says_so(tmp_path):
-    """``--integral-band B`` and ``--integral-steady-gate T``: the copy ship_policy checks and
-    ships holds its speed integral while |v_d - v| >= B (``MemoryConfig.band``) and, for T s
-    after a command change, integrates only a steady error (``MemoryConfig.steady_gate``), the
-    network untouched; the card's inputs and regenerate line say so; a policy without the
+    """``--integral-band B`` and ``--integral-windup-decay T --integral-windup-tau TAU``: the
+    copy ship_policy checks and ships holds its speed integral while |v_d - v| >= B
+    (``MemoryConfig.band``) and lets what it wound up after a command change decay
+    (``MemoryConfig.windup_decay``), the network untouched; the card's inputs and regenerate line say so; a policy without the
     integral, or a value that is not a number > 0, is one line naming its option and exit 2
     before anything is measured."""
-    from rabbit_policy.runtime.speed_integral import SteadyGate
+    from rabbit_policy.runtime.speed_integral import WindupDecay
 
     sys.path.insert(0, str(ROOT / "scripts"))
     try:
@@ -283,22 +283,25 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     source = packaged_policy_file()
     original = LearnedPolicy(source)
     banded = LearnedPolicy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))
-    gated = LearnedPolicy(with_integral_rules(source, tmp_path / "gated.pt", steady_gate_s=4.0))
+    gated = LearnedPolicy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
     assert banded.memory.config == type(banded.memory.config)(**{**original.memory.config.to_dict(), "band": 0.1})
-    assert gated.memory.config.steady_gate == SteadyGate(seconds=4.0) and gated.memory.config.band is None
+    assert gated.memory.config.windup_decay == WindupDecay(4.0, 0.5) and gated.memory.config.band is None
     for copy in (banded, gated):
         assert all(torch.equal(a, b) for a, b in zip(copy.checkpoint.state_dict.values(),
                                                       original.checkpoint.state_dict.values()))
     assert "held while |v_d − v| ≥ 0.1 m/s" in " ".join(network_text(banded.checkpoint.info))
-    assert "for 4 s after each change of v_d" in " ".join(network_text(gated.checkpoint.info))
+    assert "within 4 s of the change, what I wound up since the change decays with time constant 0.5 s" in " ".join(
+        network_text(gated.checkpoint.info))
     flags, note = rules_set_after_training(gated.checkpoint.info)  # the card's regenerate line
-    assert flags == " --integral-steady-gate 4" and "trained without the integral's steady gate" in note
+    assert flags == " --integral-windup-decay 4 --integral-windup-tau 0.5" and "without the integral's windup decay" in note
     assert rules_set_after_training(banded.checkpoint.info)[0] == " --integral-band 0.1"
     assert rules_set_after_training(original.checkpoint.info) == ("", "")
     for args, message in ((["--integral-band", "0"], "--integral-band: the speed integral's band must be"),
                           (["--integral-band", "nan"], "--integral-band: the speed integral's band must be"),
-                          (["--integral-steady-gate", "-1"], "--integral-steady-gate: the speed integral's steady"),
-                          (["--integral-steady-gate", "5", "--integral-band", "inf"], "--integral-band: ")):
+                          (["--integral-windup-decay", "-1"], "--integral-windup-decay: the speed integral's windup"),
+                          (["--integral-windup-decay", "5", "--integral-windup-tau", "0.01"],
+                           "--integral-windup-decay: the speed integral's windup decay tau must be at least dt"),
+                          (["--integral-windup-decay", "5", "--integral-band", "inf"], "--integral-band: ")):
         out = run_script("scripts/ship_policy.py", str(source), *args, "--quick", "--dry-run")
         assert out.returncode == 2 and message in out.stderr, out.stderr[-2000:]
         assert len(out.stderr.strip().splitlines()) == 1, out.stderr

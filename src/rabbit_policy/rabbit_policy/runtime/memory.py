@@ -22,7 +22,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rabbit_policy.runtime.body import N_BODY
-from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, SteadyGate, decision_dt, integral_limit
+from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, WindupDecay, decision_dt, integral_limit
 
 N_ACTION = 21
 DEFAULT_LIMIT = 0.2
@@ -53,9 +53,10 @@ class MemoryConfig:
     before the gate, whose checkpoints record none); ``band`` (m/s): the integral is held
     while the speed error is as large as that, ``clip`` (m/s): the error it integrates is
     clipped to +-clip (:class:`~.speed_integral.IntegralConfig`; None, the checkpoints
-    before 2026-11-27: neither); ``steady_gate``: after a change of the command only a steady
-    error integrates (:class:`~.speed_integral.SteadyGate`, a checkpoint records its fields;
-    None: no gate, as in every checkpoint before it)."""
+    before 2026-11-27: neither); ``windup_decay``: after a change of the command, what the
+    integral wound up decays once the hip has passed the new command
+    (:class:`~.speed_integral.WindupDecay`, a checkpoint records its fields; None: no decay,
+    as in every checkpoint before it)."""
 
     dt: float
     limit: float = DEFAULT_LIMIT
@@ -64,14 +65,14 @@ class MemoryConfig:
     speed_range: tuple[float, float] | None = None
     band: float | None = None
     clip: float | None = None
-    steady_gate: SteadyGate | None = None
+    windup_decay: WindupDecay | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.steady_gate, dict):  # as a checkpoint's info holds it
+        if isinstance(self.windup_decay, dict):  # as a checkpoint's info holds it
             try:
-                object.__setattr__(self, "steady_gate", SteadyGate(**self.steady_gate))
+                object.__setattr__(self, "windup_decay", WindupDecay(**self.windup_decay))
             except TypeError as exc:
-                raise ValueError(f"the memory's steady gate: {exc}") from None
+                raise ValueError(f"the memory's windup decay: {exc}") from None
         if not (self.dt > 0.0 and self.limit > 0.0):
             raise ValueError(f"memory dt and limit must be > 0, got {self.dt}, {self.limit}")
         if self.speed_range is not None:  # a checkpoint's JSON-like info holds a list
@@ -84,7 +85,7 @@ class MemoryConfig:
     def integral_config(self) -> IntegralConfig:
         """The configuration of the memory's :class:`~.speed_integral.SpeedIntegral`."""
         return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range, band=self.band,
-                              clip=self.clip, steady_gate=self.steady_gate)
+                              clip=self.clip, windup_decay=self.windup_decay)
 
     @classmethod
     def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False,

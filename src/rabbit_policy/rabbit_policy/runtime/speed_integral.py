@@ -4,8 +4,8 @@
 ``v_d - v̄`` the observation's mean speed error and ``dt`` the time between decisions;
 conditional integration: at the bound the sum stops growing, so it unwinds at once when the
 error turns (with a ``band``, it also integrates only errors smaller than the band; with a
-``clip``, the error clipped; with a :class:`SteadyGate`, for a few seconds after each change of
-the command it integrates only an error that has stopped moving). Where I offsets the library's gait (below), it is also held
+``clip``, the error clipped; with a :class:`WindupDecay`, what it wound up after a change of the
+command decays once the hip has passed the new command). Where I offsets the library's gait (below), it is also held
 where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
 ``speed_range``): beyond them ``interpolate`` clamps, so anything integrated there is
 windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
@@ -27,7 +27,6 @@ remove: it corrects only in proportion to the error it sees.
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 from math import isfinite
 
@@ -69,35 +68,32 @@ def integral_limit(gain: float, offset_limit: float = DEFAULT_OFFSET_LIMIT) -> f
 
 
 @dataclass(frozen=True)
-class SteadyGate:
-    """For ``seconds`` s after each change of the command, the integral integrates only a
-    *steady* error: one that moved by less than ``delta`` m/s over the last ``window`` s
-    (about a step); elsewhere (a walk's start, pushes, model errors at a constant command) it
-    integrates as without the gate.
+class WindupDecay:
+    """What the integral winds up after a change of the command decays once the hip has passed
+    the new command. After a change, I integrates as without the rule (the windup buys a fast
+    reach); the first time within ``seconds`` s of the change that the error turns against the
+    change (v_d - v̄ < 0 after a step up, > 0 after a step down), I starts to decay toward the
+    value it had at the change, with time constant ``tau`` s, while it goes on integrating;
+    ``seconds`` s after the change the decay stops and I integrates as before. A walk at a
+    constant command is the same walk bit for bit with and without the rule.
 
-    Why: after a change the error is the hip's lag behind the new command, a transient that
-    ends on its own. Integrated, it wound the shipped policy's offset up by as much as 0.12 m/s,
-    which then took about 10 s to unwind (34 of 60 changes settled within 0.03 m/s 5-10 s after
-    the change; classic 57). A band (hold while the error is large, ``IntegralConfig.band``)
-    removed the overshoot but also every steady error larger than itself, and lost the 3 ms
-    torque delay at 1.3 m/s; this gate leaves every walk at a constant command bit for bit as
-    it was, so the model errors and push margins cannot change, and settled 56 of the 60
-    (docs/learning.md, 2026-11-27 (sixth))."""
+    Why: the shipped policy's integral wound up by as much as 0.13 m/s of offset while the hip
+    lagged a new command and then took about 10 s to unwind: 34 of 60 random changes settled
+    within 0.03 m/s 5-10 s after the change (classic 57). Holding I during the lag (a band, or a
+    gate that integrates only a steady error) removed the overshoot but also the fast reach: 49
+    of 72 ordered changes within 4 s, the shipped policy 66. With this rule (5 s, 1 s): 55 of the
+    60 and 67 of the 72 (docs/learning.md, 2026-11-27 (sixth)). A decay that lasts until the next
+    change settles fewer (48): the new speed's own steady error is then never integrated fully."""
 
     seconds: float = 5.0
-    delta: float = 0.03
-    window: float = 0.5
+    tau: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("seconds", "delta", "window"):
+        for name in ("seconds", "tau"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and isfinite(value) and value > 0.0):
-                raise ValueError(f"the speed integral's steady gate {name} must be a finite number > 0, got {value!r}")
-
-    def decisions(self, dt: float) -> tuple[int, int]:
-        """(decisions the gate stays shut after a change, decisions back the error is compared
-        with), each at least 1, for decisions every ``dt`` s."""
-        return max(1, round(self.seconds / dt)), max(1, round(self.window / dt))
+                raise ValueError(f"the speed integral's windup decay {name} must be a finite number > 0 (s), "
+                                 f"got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -109,8 +105,9 @@ class IntegralConfig:
     policies trained before it); ``band`` (m/s): I integrates only while the error is
     smaller than it, |v_d - v̄| < band, and is held otherwise (None: always integrates);
     ``clip`` (m/s): the error integrated is clipped to +-clip, so a large error integrates
-    at that rate and no faster (None: as it is); ``steady_gate``: after a change of the
-    command, only a steady error integrates (:class:`SteadyGate`; None: no gate).
+    at that rate and no faster (None: as it is); ``windup_decay``: after a change of the
+    command, what I wound up decays once the hip has passed the new command
+    (:class:`WindupDecay`; None: no decay).
 
     Why the band (conditional integration): a large error is a transient, a hip lagging a
     new command or a push, not the steady error an integral is for. Integrated, it wound
@@ -126,11 +123,15 @@ class IntegralConfig:
     speed_range: tuple[float, float] | None = None
     band: float | None = None
     clip: float | None = None
-    steady_gate: SteadyGate | None = None
+    windup_decay: WindupDecay | None = None
 
     def __post_init__(self) -> None:
-        if self.steady_gate is not None and not isinstance(self.steady_gate, SteadyGate):
-            raise ValueError(f"the speed integral's steady gate must be a SteadyGate or None, got {self.steady_gate!r}")
+        decay = self.windup_decay
+        if decay is not None and not isinstance(decay, WindupDecay):
+            raise ValueError(f"the speed integral's windup decay must be a WindupDecay or None, got {decay!r}")
+        if decay is not None and not decay.tau >= self.dt:
+            raise ValueError(f"the speed integral's windup decay tau must be at least dt ({self.dt:g} s), got "
+                             f"{decay.tau!r}")
         for name in ("limit", "dt"):
             value = getattr(self, name)
             if not (isfinite(value) and value > 0.0):
@@ -151,41 +152,47 @@ class SpeedIntegral:
 
     def __init__(self, config: IntegralConfig) -> None:
         self.config = config
-        gate = config.steady_gate
-        self._shut_for, back = gate.decisions(config.dt) if gate is not None else (0, 0)
-        self._errors: deque = deque(maxlen=back + 1)  # the errors of the last ``back`` decisions and this one
+        decay = config.windup_decay
+        self._window = max(1, round(decay.seconds / config.dt)) if decay is not None else 0  # decisions
+        self._keep = 1.0 - config.dt / decay.tau if decay is not None else 1.0  # per decision while decaying
         self.reset()
 
     def reset(self) -> None:
         """A new walk: I = 0, no command change seen."""
         self.value = 0.0
-        self._errors.clear()
         self._last_command: float | None = None
-        self._shut = 0  # decisions the steady gate stays shut
-
-    def _gate_holds(self, error: float, desired_speed: float) -> bool:
-        """The steady gate: True while it is shut (after a command change) and the error is not
-        steady (moved by ``delta`` or more over the window, or no error known)."""
-        gate = self.config.steady_gate
-        if gate is None:
-            return False
-        self._errors.append(float(error))
-        if self._last_command is not None and desired_speed != self._last_command:
-            self._shut = self._shut_for
-        self._last_command = desired_speed
-        if self._shut == 0:
-            return False
-        self._shut -= 1
-        full = len(self._errors) == self._errors.maxlen
-        return not (full and abs(error - self._errors[0]) < gate.delta)
+        self._anchor = 0.0  # I at the last change
+        self._direction = 0.0  # the last change's sign (m/s)
+        self._looking = 0  # decisions left to look for the hip passing the new command
+        self._since = 0  # decisions since the last change
+        self._decaying = False
 
     def update(self, error: float, desired_speed: float) -> float:
         """Add one decision's mean speed error (m/s, over its ``dt``) and return I (m);
-        ``desired_speed`` (m/s, v_d) places the range gate and, with a steady gate, marks a
+        ``desired_speed`` (m/s, v_d) places the range gate and, with a windup decay, marks a
         command change."""
+        if self.config.windup_decay is None:
+            return self._integrate(error, desired_speed)
+        if self._last_command is not None and desired_speed != self._last_command:
+            if not self._decaying:  # (a change during a decay keeps the value it decays toward)
+                self._anchor = self.value
+            self._looking, self._direction, self._decaying, self._since = self._window, desired_speed - self._last_command, False, 0
+        self._last_command = desired_speed
+        self._since += 1
+        if self._since > self._window:
+            self._decaying = False
+        value = self._integrate(error, desired_speed)
+        if self._looking > 0:
+            self._looking -= 1
+            if self._direction * error < 0.0:  # the hip has passed the new command
+                self._looking, self._decaying = 0, True
+        if self._decaying:
+            self.value = value = self._anchor + (value - self._anchor) * self._keep
+        return value
+
+    def _integrate(self, error: float, desired_speed: float) -> float:
+        """The integral's step without the windup decay (band, clip, range gate, bound)."""
         config = self.config
-        if self._gate_holds(error, desired_speed):
-            return self.value  # the lag behind a new command, not a steady error: held
         if config.band is not None and not abs(error) < config.band:
             return self.value  # a transient, not a steady error: held
         if config.clip is not None:
