@@ -280,7 +280,9 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
         from ship_policy import network_text, rules_set_after_training, with_integral_rules
     finally:
         sys.path.remove(str(ROOT / "scripts"))
-    source = packaged_policy_file()
+    trained = PolicyCheckpoint.load(packaged_policy_file())  # the network as its run left it: no rule set after
+    trained.info["memory"].pop("windup_decay", None)
+    trained.save(source := tmp_path / "trained.pt")
     original = LearnedPolicy(source)
     banded = LearnedPolicy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))
     gated = LearnedPolicy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
