@@ -204,9 +204,9 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     """The ship_policy options that set the speed integral's rules the run trained without
     (``--integral-band``, ``--integral-windup-decay``), and the card's note saying so; empty
     strings if none."""
-    memory = info.get("memory") or {}
-    band = None if info.get("config", {}).get("integral_band") else memory.get("band")  # trained with it: not set
-    decay = memory.get("windup_decay")
+    memory, config = info.get("memory") or {}, info.get("config", {})
+    band = None if config.get("integral_band") else memory.get("band")  # trained with it: not set after
+    decay = None if config.get("integral_windup_decay") else memory.get("windup_decay")
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "")
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay))

@@ -451,20 +451,31 @@ def test_the_registered_presets_are_the_runs_we_ship_and_train():
     assert gym.make("RabbitHZD-Recovery-v0").unwrapped.rules.roll_back_after == 0.6
 
 
-def test_the_integral_band_and_clip_reach_the_env_memory_and_bad_ones_are_refused():
-    """``integral_band``/``integral_clip`` (train.py --integral-band/--integral-clip): the
-    env's memory integrates as the shipped copy with that band or clip would
-    (``MemoryConfig``), so a run trains on what ship_policy ships; a negative or non-finite
-    value, or one without the integral (the paper's features), is refused in one line."""
+def test_the_integral_band_clip_and_windup_decay_reach_the_env_memory_and_bad_ones_are_refused():
+    """``integral_band``/``integral_clip``/``integral_windup_decay`` (train.py
+    --integral-band/--integral-clip/--integral-windup-decay): the env's memory integrates as
+    the shipped copy with that rule would (``MemoryConfig``, the shipped policy's windup decay
+    among them), so a run trains on what ship_policy ships; a negative or non-finite value, or
+    one without the integral (the paper's features), is refused in one line."""
     from rabbit_policy.learning.es import ESConfig
+    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.runtime.speed_integral import WindupDecay
 
     config = ESConfig(max_steps=5, decision_period=20, features="memory", action="residual", integral_gain=0.2,
-                      integral_band=0.1, integral_clip=0.05)
+                      integral_band=0.1, integral_clip=0.05, integral_windup_decay=5.0)
     memory = RabbitHZDEnv(**config.env_kwargs()).memory.config
-    assert (memory.band, memory.clip, memory.gain) == (0.1, 0.05, 0.2)
-    assert RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0).env_kwargs()).memory.config.band is None
+    assert (memory.band, memory.clip, memory.gain, memory.windup_decay) == (0.1, 0.05, 0.2, WindupDecay(5.0))
+    assert config.memory_config(GaitLibrary.load().speed_range) == memory
+    off = RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0,
+                                 integral_windup_decay=0.0).env_kwargs()).memory.config
+    assert (off.band, off.clip, off.windup_decay) == (None, None, None)
+    shipped = make_policy("learned").memory.config  # what a run with the shipped preset and the decay trains on
+    assert RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0).env_kwargs()).memory.config == shipped
     for bad, message in (({"integral_band": -0.1}, "integral_band must be a finite number >= 0"),
                          ({"integral_clip": float("nan")}, "integral_clip must be a finite number >= 0"),
+                         ({"integral_windup_decay": -1.0}, r"integral_windup_decay must be a finite number >= 0 \(s"),
+                         ({"integral_band": 0.0, "integral_clip": 0.0, "features": "paper", "action": "direct",
+                           "integral_gain": 0.0}, "integral_windup_decay acts on the speed integral"),
                          ({"integral_band": 0.1, "features": "paper", "action": "direct", "integral_gain": 0.0},
                           "integral_band acts on the speed integral")):
         with pytest.raises(ValueError, match=message):

@@ -115,6 +115,7 @@ TimeLimit wrapper only, so every id carries :class:`EpisodeLength`, which makes 
 | ``integral_gain`` | 0.0 | residual only: the base gait at v_d + gain x the speed integral (1/s; see Observation space) |
 | ``integral_band`` | 0.0 | memory or body features: the speed integral is held while the speed error is this or more (m/s; 0 = never; :mod:`rabbit_policy.runtime.speed_integral`) |
 | ``integral_clip`` | 0.0 | memory or body features: the error the speed integral adds is clipped to +-this (m/s; 0 = not clipped) |
+| ``integral_windup_decay`` | 0.0 | memory or body features: after a command change, what the speed integral wound up decays (time constant 1 s) once the hip has passed the new command, until this long after the change (s; 0 = never; :class:`~rabbit_policy.runtime.speed_integral.WindupDecay`) |
 | ``residual_base`` | ``"classic"`` | residual only: what it adds to, the library's gait (``classic``) or the recovery controller's decision (``recovery``; needs a decision period; the controller then applies gaits at once), or that scaled by the recovery rule's weight at the decision (``recovery_gated``: zero until something slows the hip) |
 | ``render_mode`` | None | ``"rgb_array"`` (offscreen, a side camera following the hip; needs an OpenGL backend: ``MUJOCO_GL=egl`` on a headless machine) or ``"human"`` (MuJoCo's viewer; needs a display) |
 
@@ -143,7 +144,7 @@ from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds
                                            ResidualAction, clip, residual_gate, residual_sum_bounds)
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
-from rabbit_policy.runtime.speed_integral import check_gain
+from rabbit_policy.runtime.speed_integral import WindupDecay, check_gain
 from rabbit_policy.runtime.policies import GaitCommand, controller_settings, reset_policy, residual_base_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
@@ -304,6 +305,9 @@ class EpisodeConfig:
                                        "(m/s; conditional integration against windup after a speed change; 0 = never)")
     integral_clip: float = option(0.0, "memory or body features: the speed error the integral adds is clipped to "
                                        "+-this (m/s; error saturation against windup; 0 = not clipped)")
+    integral_windup_decay: float = option(0.0, "memory or body features: after a command change, what the speed "
+                                               "integral wound up decays (time constant 1 s) once the hip has passed "
+                                               "the new command, until this long after the change (s; 0 = never)")
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
@@ -323,10 +327,11 @@ class EpisodeConfig:
         check_integral_gain(self.integral_gain, self.action)
         check_features(self.features, self.decision_period, self.integral_gain)
         check_residual_base(self.residual_base, self.action, self.decision_period, self.integral_gain)
-        for name in ("integral_band", "integral_clip"):
+        for name in ("integral_band", "integral_clip", "integral_windup_decay"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be a finite number >= 0 (m/s; 0 = off), got {value!r}")
+                unit = "s" if name == "integral_windup_decay" else "m/s"
+                raise ValueError(f"{name} must be a finite number >= 0 ({unit}; 0 = off), got {value!r}")
             if value and self.features == "paper":
                 raise ValueError(f"{name} acts on the speed integral: it needs features memory or body")
 
@@ -334,7 +339,8 @@ class EpisodeConfig:
         """The memory these options give a policy (None: the paper's features), for the
         library's ``speed_range`` (m/s): what the env keeps and a checkpoint records."""
         return MemoryConfig.for_features(self.features, self.decision_period, self.integral_gain, speed_range,
-                                         self.integral_band or None, self.integral_clip or None)
+                                         self.integral_band or None, self.integral_clip or None,
+                                         windup_decay_for(self.integral_windup_decay))
 
     def env_kwargs(self) -> dict:
         """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
@@ -344,7 +350,14 @@ class EpisodeConfig:
                 "action": self.action,
                 "residual_base": self.residual_base, "integral_gain": self.integral_gain,
                 "integral_band": self.integral_band, "integral_clip": self.integral_clip,
+                "integral_windup_decay": self.integral_windup_decay,
                 "rules": StopRules(roll_back_after=self.roll_back_after)}
+
+
+def windup_decay_for(seconds: float) -> WindupDecay | None:
+    """The speed integral's windup decay for ``integral_windup_decay`` = ``seconds`` (s; 0: none),
+    its time constant the default."""
+    return WindupDecay(seconds=seconds) if seconds else None
 
 
 def check_slow_penalty(penalty: float) -> None:
@@ -400,7 +413,8 @@ class RabbitHZDEnv(gym.Env):
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
                  features: str = "paper", action: str = "direct", integral_gain: float = 0.0,
-                 residual_base: str = "classic", integral_band: float = 0.0, integral_clip: float = 0.0) -> None:
+                 residual_base: str = "classic", integral_band: float = 0.0, integral_clip: float = 0.0,
+                 integral_windup_decay: float = 0.0) -> None:
         if isinstance(distribution, str) and distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {distribution!r}")
         self.distribution = DISTRIBUTIONS[distribution] if isinstance(distribution, str) else distribution
@@ -430,7 +444,8 @@ class RabbitHZDEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)
         self.features = features
         memory = MemoryConfig.for_features(features, decision_period, integral_gain,  # raises for a bad combination
-                                           self.library.speed_range, integral_band or None, integral_clip or None)
+                                           self.library.speed_range, integral_band or None, integral_clip or None,
+                                           windup_decay_for(integral_windup_decay))
         self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:

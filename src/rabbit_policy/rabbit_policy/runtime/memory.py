@@ -89,33 +89,35 @@ class MemoryConfig:
 
     @classmethod
     def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False,
-                   band: float | None = None, clip: float | None = None) -> "MemoryConfig":
+                   band: float | None = None, clip: float | None = None,
+                   windup_decay: WindupDecay | None = None) -> "MemoryConfig":
         """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
         per walking step, about 0.6 s)."""
-        return cls(decision_dt(decision_period), limit, body, band=band, clip=clip)
+        return cls(decision_dt(decision_period), limit, body, band=band, clip=clip, windup_decay=windup_decay)
 
     @classmethod
     def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0,
                      speed_range: tuple[float, float] | None = None, band: float | None = None,
-                     clip: float | None = None) -> "MemoryConfig | None":
+                     clip: float | None = None, windup_decay: WindupDecay | None = None) -> "MemoryConfig | None":
         """The memory a policy with ``features`` (:data:`FEATURES`) keeps; None for the paper's.
         ``integral_gain`` > 0 (1/s): its integral also offsets a residual's base gait by
         ``integral_gain * I`` m/s, so I is bounded by
         :func:`~.speed_integral.integral_limit` (the offset within +-0.2 m/s) and held where
         the base gait would leave ``speed_range`` (m/s: the library's speeds; needed with a gain).
-        ``band``, ``clip`` (m/s; None: none): the integral's anti-windup on large errors
-        (:class:`~.speed_integral.IntegralConfig`)."""
+        ``band``, ``clip`` (m/s; None: none), ``windup_decay`` (None: none): the integral's
+        anti-windup (:class:`~.speed_integral.IntegralConfig`)."""
         check_features(features, decision_period, integral_gain)
         if features == "paper":
-            if band is not None or clip is not None:
-                raise ValueError("an integral band or clip needs the speed integral: features memory or body")
+            if band is not None or clip is not None or windup_decay is not None:
+                raise ValueError("an integral band, clip or windup decay needs the speed integral: features memory "
+                                 "or body")
             return None
         if not integral_gain:
-            return cls.for_period(decision_period, DEFAULT_LIMIT, features == "body", band, clip)
+            return cls.for_period(decision_period, DEFAULT_LIMIT, features == "body", band, clip, windup_decay)
         if speed_range is None:
             raise ValueError("a memory whose integral offsets the base gait needs the library's speed range")
         return cls(decision_dt(decision_period), integral_limit(integral_gain), features == "body", integral_gain,
-                   speed_range, band, clip)
+                   speed_range, band, clip, windup_decay)
 
 
 class SpeedMemory:
