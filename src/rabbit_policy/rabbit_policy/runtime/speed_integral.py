@@ -4,9 +4,9 @@
 ``v_d - v̄`` the observation's mean speed error and ``dt`` the time between decisions;
 conditional integration: at the bound the sum stops growing, so it unwinds at once when the
 error turns (with a ``band``, it also integrates only errors smaller than the band; with a
-``clip``, the error clipped; with a :class:`WindupDecay`, what it wound up after a change of the
-command decays once the hip has passed the new command). Where I offsets the library's gait (below), it is also held
-where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
+``clip``, the error clipped; with a :class:`WindupDecay`, what it wound up after a change of
+the command decays once the hip has passed the new command). Where I offsets the library's
+gait (below), it is also held where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
 ``speed_range``): beyond them ``interpolate`` clamps, so anything integrated there is
 windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
 + integral 0.3 from 91 to 95 of 100 random sequences and from 50 to 52 of 72 speed changes,
@@ -81,8 +81,9 @@ class WindupDecay:
     lagged a new command and then took about 10 s to unwind: 34 of 60 random changes settled
     within 0.03 m/s 5-10 s after the change (classic 57). Holding I during the lag (a band, or a
     gate that integrates only a steady error) removed the overshoot but also the fast reach: 49
-    of 72 ordered changes within 4 s, the shipped policy 66. With this rule (5 s, 1 s): 55 of the
-    60 and 67 of the 72 (docs/learning.md, 2026-11-27 (sixth)). A decay that lasts until the next
+    of 72 ordered changes within 4 s, the network without a rule 68. With this rule (5 s, 1 s):
+    55 of the 60 and 67 of the 72, and 183 of 200 other changes (docs/learning.md, 2026-11-27
+    (sixth)); the learned policy ships with it. A decay that lasts until the next
     change settles fewer (48): the new speed's own steady error is then never integrated fully."""
 
     seconds: float = 5.0
