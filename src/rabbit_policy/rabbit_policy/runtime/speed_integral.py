@@ -6,9 +6,9 @@ conditional integration: at the bound the sum stops growing, so it unwinds at on
 error turns (with a ``band``, it also integrates only errors smaller than the band; with a
 ``clip``, the error clipped; with a :class:`WindupDecay`, what it wound up after a change of
 the command decays once the hip has passed the new command). Where I offsets the library's
-gait (below), it is also held where that gait ``v_d + gain * I`` would leave the library's speeds (:class:`IntegralConfig`'s
-``speed_range``): beyond them ``interpolate`` clamps, so anything integrated there is
-windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
+gait (below), it is also held where that gait ``v_d + gain * I`` would leave the library's
+speeds (:class:`IntegralConfig`'s ``speed_range``): beyond them ``interpolate`` clamps, so
+anything integrated there is windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
 + integral 0.3 from 91 to 95 of 100 random sequences and from 50 to 52 of 72 speed changes,
 the model errors unchanged. Its users:
 
