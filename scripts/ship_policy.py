@@ -36,6 +36,8 @@ from rabbit_policy.evaluation.acceptance import broad_table
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 
 ROOT = Path(__file__).resolve().parents[1]
+FEEDFORWARD_SPEEDS = tuple(round(0.7 + 0.025 * i, 3) for i in range(33))
+"""``--integral-feedforward``'s table speeds (m/s): the library's range, every 0.025."""
 TARGET = ROOT / "src" / "rabbit_policy" / "rabbit_policy" / "trained"
 
 
@@ -140,6 +142,10 @@ def network_text(info: dict) -> list[str]:
                          f"the change, what I wound up since the change decays with time constant "
                          f"{memory['windup_decay']['tau']:g} s until {memory['windup_decay']['seconds']:g} s after it"
                          if memory.get("windup_decay") else "")
+                      + ("; it starts a walk at its steady value for v_d and moves by the difference of steady "
+                         "values when v_d changes (a feed-forward table of "
+                         f"{len(memory['feedforward']['speeds'])} speeds measured on this network)"
+                         if memory.get("feedforward") else "")
                       + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
@@ -202,14 +208,16 @@ def card_header(info: dict, broad: list[tuple[str, dict]] | None = None) -> list
 
 def rules_set_after_training(info: dict) -> tuple[str, str]:
     """The ship_policy options that set the speed integral's rules the run trained without
-    (``--integral-band``, ``--integral-windup-decay``), and the card's note saying so; empty
-    strings if none."""
+    (``--integral-band``, ``--integral-windup-decay``, ``--integral-feedforward``), and the
+    card's note saying so; empty strings if none."""
     memory, config = info.get("memory") or {}, info.get("config", {})
     band = None if config.get("integral_band") else memory.get("band")  # trained with it: not set after
     decay = None if config.get("integral_windup_decay") else memory.get("windup_decay")
+    feedforward = memory.get("feedforward")  # never trained with
     flags = (f" --integral-band {band:g}" if band else "") + (
-        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "")
-    names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay))
+        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
+        " --integral-feedforward" if feedforward else "")
+    names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     return flags, (f"; the run trained without the integral's {names}, which ship_policy sets on the shipped copy"
                    if names else "")
 
@@ -262,19 +270,25 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
 
 def with_integral_rules(policy: Path, out: Path, band: float | None = None,
-                        windup_decay: tuple[float, float] | None = None) -> Path:
+                        windup_decay: tuple[float, float] | None = None,
+                        feedforward: tuple[float, ...] | None = None) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
     speed error is ``band`` m/s or more (``MemoryConfig.band``) and whose windup after a
     command change decays, ``windup_decay`` = (seconds, tau) in s (``MemoryConfig.windup_decay``);
-    None: that rule as the checkpoint has it. ``ValueError`` naming the option for a policy
-    without the memory inputs or a value that is not a number > 0."""
+    None: that rule as the checkpoint has it. ``feedforward``: also the integral's
+    feed-forward table (``MemoryConfig.feedforward``) at these speeds (m/s), measured on the
+    copy with those rules (:func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`:
+    a minute for its 33 speeds).
+    ``ValueError`` naming the option for a policy without the memory inputs or a value that
+    is not a number > 0."""
     from rabbit_policy.runtime.memory import MemoryConfig
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     checkpoint = PolicyCheckpoint.load(policy)
     if "memory" not in checkpoint.info:
-        option = "--integral-band" if band is not None else "--integral-windup-decay"
+        option = ("--integral-band" if band is not None else "--integral-windup-decay" if windup_decay is not None
+                  else "--integral-feedforward")
         raise ValueError(f"{option}: {policy} has no speed integral (features "
                          f"{checkpoint.info.get('features', 'paper')!r}; it needs memory or body)")
     memory = MemoryConfig(**checkpoint.info["memory"])
@@ -287,6 +301,16 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
                 raise ValueError(f"{option}: {exc}") from None
     checkpoint.info["memory"] = memory.to_dict()
     checkpoint.save(out)
+    if feedforward is not None:
+        from rabbit_policy.evaluation.steady_integral import steady_integrals
+        from rabbit_policy.runtime.policies import LearnedPolicy
+
+        try:
+            memory = replace(memory, feedforward=steady_integrals(LearnedPolicy(out), feedforward))
+        except ValueError as exc:
+            raise ValueError(f"--integral-feedforward: {exc}") from None
+        checkpoint.info["memory"] = memory.to_dict()
+        checkpoint.save(out)
     return out
 
 
@@ -330,6 +354,11 @@ def main(argv: list[str] | None = None) -> int:
                              "copy records it, and every check runs on it")
     parser.add_argument("--integral-windup-tau", type=float, default=1.0, metavar="TAU",
                         help="--integral-windup-decay's time constant (s; default 1)")
+    parser.add_argument("--integral-feedforward", action="store_true",
+                        help="ship the policy with its speed integral starting a walk at its steady value for the "
+                             "command and moving by the difference of steady values at a change (a table measured "
+                             "on the policy with its other rules, rabbit_policy.evaluation.steady_integral; a memory "
+                             "policy only): the shipped copy records it, and every check runs on it")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -337,21 +366,22 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
-    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the --integral-band/-windup-decay copy
+    with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the copy with --integral-* rules
         return ship(parser, args, argv, Path(scratch))
 
 
 def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     """Measure, write the card and ship (``main``'s work once its arguments are parsed);
-    ``scratch``: a directory for the policy's ``--integral-band``/``--integral-windup-decay`` copy."""
+    ``scratch``: a directory for the policy's copy with its ``--integral-*`` rules."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     source = args.policy
     try:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
-        if args.integral_band is not None or decay is not None:
-            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band, decay)
+        if args.integral_band is not None or decay is not None or args.integral_feedforward:
+            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band, decay,
+                                         FEEDFORWARD_SPEEDS if args.integral_feedforward else None)
         policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
     except (PolicyUnavailable, ValueError) as exc:

@@ -267,12 +267,14 @@ def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(t
 
 
 def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_says_so(tmp_path):
-    """``--integral-band B`` and ``--integral-windup-decay T --integral-windup-tau TAU``: the
-    copy ship_policy checks and ships holds its speed integral while |v_d - v| >= B
-    (``MemoryConfig.band``) and lets what it wound up after a command change decay
-    (``MemoryConfig.windup_decay``), the network untouched; the card's inputs and regenerate line say so; a policy without the
+    """``--integral-band B``, ``--integral-windup-decay T --integral-windup-tau TAU`` and
+    ``--integral-feedforward``: the copy ship_policy checks and ships holds its speed integral
+    while |v_d - v| >= B (``MemoryConfig.band``), lets what it wound up after a command change
+    decay (``MemoryConfig.windup_decay``) and carries the table of its steady values measured
+    with those rules (``MemoryConfig.feedforward``), the network untouched; the card's inputs and regenerate line say so; a policy without the
     integral, or a value that is not a number > 0, is one line naming its option and exit 2
     before anything is measured."""
+    from rabbit_policy.evaluation.steady_integral import steady_integral
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     sys.path.insert(0, str(ROOT / "scripts"))
@@ -282,13 +284,19 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
         sys.path.remove(str(ROOT / "scripts"))
     trained = PolicyCheckpoint.load(packaged_policy_file())  # the network as its run left it: no rule set after
     trained.info["memory"].pop("windup_decay", None)
+    trained.info["memory"].pop("feedforward", None)
     trained.save(source := tmp_path / "trained.pt")
     original = LearnedPolicy(source)
     banded = LearnedPolicy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))
     gated = LearnedPolicy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
+    fed = LearnedPolicy(with_integral_rules(source, tmp_path / "fed.pt", windup_decay=(4.0, 0.5),
+                                            feedforward=(1.0, 1.2)))
     assert banded.memory.config == type(banded.memory.config)(**{**original.memory.config.to_dict(), "band": 0.1})
     assert gated.memory.config.windup_decay == WindupDecay(4.0, 0.5) and gated.memory.config.band is None
-    for copy in (banded, gated):
+    table = fed.memory.config.feedforward  # measured on the copy with the decay, as steady_integrals does
+    assert table.speeds == (1.0, 1.2) and table.values == tuple(round(steady_integral(gated, v), 4) for v in (1.0, 1.2))
+    assert fed.memory.config.windup_decay == WindupDecay(4.0, 0.5)
+    for copy in (banded, gated, fed):
         assert all(torch.equal(a, b) for a, b in zip(copy.checkpoint.state_dict.values(),
                                                       original.checkpoint.state_dict.values()))
     assert "held while |v_d − v| ≥ 0.1 m/s" in " ".join(network_text(banded.checkpoint.info))
@@ -297,6 +305,9 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     flags, note = rules_set_after_training(gated.checkpoint.info)  # the card's regenerate line
     assert flags == " --integral-windup-decay 4 --integral-windup-tau 0.5" and "without the integral's windup decay" in note
     assert rules_set_after_training(banded.checkpoint.info)[0] == " --integral-band 0.1"
+    flags, note = rules_set_after_training(fed.checkpoint.info)
+    assert flags.endswith(" --integral-feedforward") and "windup decay and feed-forward" in note
+    assert "steady value for v_d" in " ".join(network_text(fed.checkpoint.info))
     assert rules_set_after_training(original.checkpoint.info) == ("", "")
     for args, message in ((["--integral-band", "0"], "--integral-band: the speed integral's band must be"),
                           (["--integral-band", "nan"], "--integral-band: the speed integral's band must be"),
@@ -307,6 +318,11 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
         out = run_script("scripts/ship_policy.py", str(source), *args, "--quick", "--dry-run")
         assert out.returncode == 2 and message in out.stderr, out.stderr[-2000:]
         assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    trained.info.pop("memory")  # a checkpoint that keeps no integral
+    trained.save(paper := tmp_path / "paper.pt")
+    out = run_script("scripts/ship_policy.py", str(paper), "--integral-feedforward", "--quick", "--dry-run")
+    assert out.returncode == 2 and "--integral-feedforward: " in out.stderr and "has no speed integral" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1, out.stderr
 
 
 @pytest.mark.slow

@@ -176,13 +176,42 @@ def test_the_windup_decay_leaves_a_constant_command_alone_and_takes_the_overshoo
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     plain, decaying = make_policy("learned"), make_policy("learned")
-    plain.memory = SpeedMemory(replace(plain.memory.config, windup_decay=None))  # the trained network's own
-    decaying.memory = SpeedMemory(replace(decaying.memory.config, windup_decay=WindupDecay()))
+    plain.memory = SpeedMemory(replace(plain.memory.config, windup_decay=None, feedforward=None))  # the network's own
+    decaying.memory = SpeedMemory(replace(decaying.memory.config, windup_decay=WindupDecay(), feedforward=None))
     constant = Scenario.constant(1.1)
     assert (walk(plain, constant, 8.0).hip_x == walk(decaying, constant, 8.0).hip_x).all()
     change = Scenario(schedule=((0.0, 0.8), (6.0, 1.4)))
     late = [walk(policy, change, 16.0).mean_speed(11.0, 16.0) - 1.4 for policy in (plain, decaying)]
     assert late[0] > 0.05 and abs(late[1]) < 0.5 * late[0], late
+
+
+@pytest.mark.slow
+def test_the_integral_feedforward_takes_the_start_transient_out():
+    """The learned network needs I of about -0.25 m to walk at 1.0 m/s (it walks fast at
+    I = 0), so a walk that starts its integral at 0 is about 0.04 m/s too fast 3-6 s in; with
+    the table measured on it (steady_integrals) the integral starts at its steady value and
+    the walk is within 0.02. The table is each speed's mean I; a policy without an integral, or
+    one that does not walk at a speed, has none (one line)."""
+    from dataclasses import replace
+
+    from rabbit_policy.evaluation.steady_integral import steady_integral, steady_integrals
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.runtime.memory import SpeedMemory
+    from rabbit_policy.runtime.policies import NetworkPolicy, make_policy
+
+    plain, fed = make_policy("learned"), make_policy("learned")
+    plain.memory = SpeedMemory(replace(plain.memory.config, feedforward=None))
+    table = steady_integrals(plain, (0.95, 1.0, 1.05))
+    assert table.values[1] < -0.15 and table.values == steady_integrals(fed, (0.95, 1.0, 1.05)).values
+    fed.memory = SpeedMemory(replace(fed.memory.config, feedforward=table))
+    early = [walk(policy, Scenario.constant(1.0), 6.0).mean_speed(3.0, 6.0) - 1.0 for policy in (plain, fed)]
+    assert early[0] > 0.03 and abs(early[1]) < 0.02, early
+    with pytest.raises(ValueError, match="did not walk"):
+        steady_integral(plain, 0.5, duration=3.0, settle=1.0)
+    with pytest.raises(ValueError, match="settle"):
+        steady_integral(plain, 1.0, duration=3.0, settle=3.0)
+    with pytest.raises(ValueError, match="keeps no speed integral"):
+        steady_integrals(NetworkPolicy(plain.net, "no integral"), (1.0, 1.1))
 
 
 @pytest.mark.parametrize("args, word", [

@@ -22,7 +22,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from rabbit_policy.runtime.body import N_BODY
-from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, WindupDecay, decision_dt, integral_limit
+from rabbit_policy.runtime.speed_integral import (IntegralConfig, IntegralFeedforward, SpeedIntegral, WindupDecay,
+                                                  decision_dt, integral_limit)
 
 N_ACTION = 21
 DEFAULT_LIMIT = 0.2
@@ -56,7 +57,10 @@ class MemoryConfig:
     before 2026-11-27: neither); ``windup_decay``: after a change of the command, what the
     integral wound up decays once the hip has passed the new command
     (:class:`~.speed_integral.WindupDecay`, a checkpoint records its fields; None: no decay,
-    as in every checkpoint before it)."""
+    as in every checkpoint before it); ``feedforward``: the integral starts a walk at its
+    steady value for the command and moves by the difference of steady values at a change
+    (:class:`~.speed_integral.IntegralFeedforward`, a checkpoint records its table; None: as
+    in every checkpoint before it)."""
 
     dt: float
     limit: float = DEFAULT_LIMIT
@@ -66,13 +70,15 @@ class MemoryConfig:
     band: float | None = None
     clip: float | None = None
     windup_decay: WindupDecay | None = None
+    feedforward: IntegralFeedforward | None = None
 
     def __post_init__(self) -> None:
-        if isinstance(self.windup_decay, dict):  # as a checkpoint's info holds it
-            try:
-                object.__setattr__(self, "windup_decay", WindupDecay(**self.windup_decay))
-            except TypeError as exc:
-                raise ValueError(f"the memory's windup decay: {exc}") from None
+        for name, kind in (("windup_decay", WindupDecay), ("feedforward", IntegralFeedforward)):
+            if isinstance(getattr(self, name), dict):  # as a checkpoint's info holds it
+                try:
+                    object.__setattr__(self, name, kind(**getattr(self, name)))
+                except TypeError as exc:
+                    raise ValueError(f"the memory's {name.replace('_', ' ')}: {exc}") from None
         if not (self.dt > 0.0 and self.limit > 0.0):
             raise ValueError(f"memory dt and limit must be > 0, got {self.dt}, {self.limit}")
         if self.speed_range is not None:  # a checkpoint's JSON-like info holds a list
@@ -85,7 +91,7 @@ class MemoryConfig:
     def integral_config(self) -> IntegralConfig:
         """The configuration of the memory's :class:`~.speed_integral.SpeedIntegral`."""
         return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range, band=self.band,
-                              clip=self.clip, windup_decay=self.windup_decay)
+                              clip=self.clip, windup_decay=self.windup_decay, feedforward=self.feedforward)
 
     @classmethod
     def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False,

@@ -27,6 +27,7 @@ remove: it corrects only in proportion to the error it sees.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass
 from math import isfinite
 
@@ -98,6 +99,50 @@ class WindupDecay:
 
 
 @dataclass(frozen=True)
+class IntegralFeedforward:
+    """The integral's steady value per commanded speed: I walks to ``values[i]`` (m) at a
+    constant command ``speeds[i]`` (m/s, increasing) on the nominal model; linear in between,
+    the end values beyond the ends. With it, a walk's integral starts at I*(v_d) instead of 0,
+    and a change of the command from v to v' adds I*(v') - I*(v) (a feed-forward: what a
+    model error added to I is kept). The integral still integrates every error.
+
+    Why: the shipped network needs I between -0.25 and +0.07 to walk at its command (it
+    walks fast with I = 0 at most speeds), so a walk that starts at I = 0 overshoots for
+    several seconds, and after a change I has to wind from the old speed's steady value to
+    the new one's, through the error. Measured on the shipped network (docs/learning.md,
+    2026-11-27 (seventh)). :func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`
+    measures a table; ``ship_policy.py --integral-feedforward`` records it."""
+
+    speeds: tuple[float, ...]
+    values: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        try:
+            speeds, values = tuple(float(v) for v in self.speeds), tuple(float(v) for v in self.values)
+        except (TypeError, ValueError):
+            raise ValueError(f"the speed integral's feed-forward needs numbers, got {self.speeds!r} and "
+                             f"{self.values!r}") from None
+        if not (len(speeds) == len(values) >= 2 and all(isfinite(v) for v in speeds + values)
+                and all(a < b for a, b in zip(speeds, speeds[1:]))):
+            raise ValueError("the speed integral's feed-forward needs at least two finite (speed, value) pairs, "
+                             f"the speeds increasing, got {self.speeds!r} and {self.values!r}")
+        object.__setattr__(self, "speeds", speeds)
+        object.__setattr__(self, "values", values)
+
+    def at(self, speed: float) -> float:
+        """I* (m) at the commanded ``speed`` (m/s): linear between the table's speeds, the end
+        values beyond them."""
+        speeds, values = self.speeds, self.values
+        if speed <= speeds[0]:
+            return values[0]
+        if speed >= speeds[-1]:
+            return values[-1]
+        i = bisect_right(speeds, speed) - 1
+        share = (speed - speeds[i]) / (speeds[i + 1] - speeds[i])
+        return values[i] + share * (values[i + 1] - values[i])
+
+
+@dataclass(frozen=True)
 class IntegralConfig:
     """``limit``: the bound on I (m, anti-windup); ``dt``: s between decisions; ``gain``
     (1/s) with ``speed_range`` (m/s, low, high): I is also held where the commanded gait
@@ -108,7 +153,9 @@ class IntegralConfig:
     ``clip`` (m/s): the error integrated is clipped to +-clip, so a large error integrates
     at that rate and no faster (None: as it is); ``windup_decay``: after a change of the
     command, what I wound up decays once the hip has passed the new command
-    (:class:`WindupDecay`; None: no decay).
+    (:class:`WindupDecay`; None: no decay); ``feedforward``: I starts a walk at its steady
+    value for the command and moves by the difference of steady values at a change
+    (:class:`IntegralFeedforward`; None: starts at 0, moves only by integrating).
 
     Why the band (conditional integration): a large error is a transient, a hip lagging a
     new command or a push, not the steady error an integral is for. Integrated, it wound
@@ -125,8 +172,12 @@ class IntegralConfig:
     band: float | None = None
     clip: float | None = None
     windup_decay: WindupDecay | None = None
+    feedforward: IntegralFeedforward | None = None
 
     def __post_init__(self) -> None:
+        if self.feedforward is not None and not isinstance(self.feedforward, IntegralFeedforward):
+            raise ValueError(f"the speed integral's feed-forward must be an IntegralFeedforward or None, got "
+                             f"{self.feedforward!r}")
         decay = self.windup_decay
         if decay is not None and not isinstance(decay, WindupDecay):
             raise ValueError(f"the speed integral's windup decay must be a WindupDecay or None, got {decay!r}")
@@ -170,15 +221,21 @@ class SpeedIntegral:
 
     def update(self, error: float, desired_speed: float) -> float:
         """Add one decision's mean speed error (m/s, over its ``dt``) and return I (m);
-        ``desired_speed`` (m/s, v_d) places the range gate and, with a windup decay, marks a
-        command change."""
+        ``desired_speed`` (m/s, v_d) places the range gate and, with a windup decay or a
+        feed-forward, marks the start and command changes."""
+        previous, self._last_command = self._last_command, desired_speed
+        feedforward = self.config.feedforward
+        if feedforward is not None and previous is None:  # a walk's first decision
+            self.value = self._bounded(feedforward.at(desired_speed), desired_speed)
+        elif feedforward is not None and desired_speed != previous:
+            self.value = self._bounded(self.value + feedforward.at(desired_speed) - feedforward.at(previous),
+                                       desired_speed)
         if self.config.windup_decay is None:
             return self._integrate(error, desired_speed)
-        if self._last_command is not None and desired_speed != self._last_command:
+        if previous is not None and desired_speed != previous:
             if not self._decaying:  # (a change during a decay keeps the value it decays toward)
                 self._anchor = self.value
-            self._looking, self._direction, self._decaying, self._since = self._window, desired_speed - self._last_command, False, 0
-        self._last_command = desired_speed
+            self._looking, self._direction, self._decaying, self._since = self._window, desired_speed - previous, False, 0
         self._since += 1
         if self._since > self._window:
             self._decaying = False
@@ -198,9 +255,13 @@ class SpeedIntegral:
             return self.value  # a transient, not a steady error: held
         if config.clip is not None:
             error = min(max(float(error), -config.clip), config.clip)
-        value = self.value + float(error) * config.dt
+        self.value = self._bounded(self.value + float(error) * config.dt, desired_speed)
+        return self.value
+
+    def _bounded(self, value: float, desired_speed: float) -> float:
+        """``value`` (m) within the range gate at ``desired_speed`` (m/s) and the bound."""
+        config = self.config
         if config.speed_range is not None:
             low, high = config.speed_range
             value = min((high - desired_speed) / config.gain, max((low - desired_speed) / config.gain, value))
-        self.value = min(config.limit, max(-config.limit, value))
-        return self.value
+        return min(config.limit, max(-config.limit, value))

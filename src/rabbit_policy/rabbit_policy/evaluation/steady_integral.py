@@ -1,0 +1,65 @@
+"""The speed integral's steady value per commanded speed, measured: the table of an
+:class:`~rabbit_policy.runtime.speed_integral.IntegralFeedforward`.
+
+For each speed, a walk at that constant command on the nominal model (the policy's own
+rules, no feed-forward); I* is the mean of I over the policy's decisions after ``settle`` s.
+A mean, not a last value: at some speeds the shipped network's walk and its integral swing
+slowly about their steady values (at 0.8 m/s, I by ±0.06 m over about 10 s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.runtime.memory import SpeedMemory
+from rabbit_policy.runtime.policies import NetworkPolicy
+from rabbit_policy.runtime.speed_integral import IntegralFeedforward
+
+class _IntegralRecorder:
+    """A memory policy, recording its integral (m) after each decision; everything else is
+    the policy's own."""
+
+    def __init__(self, policy: NetworkPolicy) -> None:
+        self._policy = policy
+        self.values: list[float] = []
+
+    def __getattr__(self, name: str):
+        return getattr(self._policy, name)
+
+    def act(self, observation):
+        command = self._policy.act(observation)
+        self.values.append(self._policy.memory.integral)
+        return command
+
+
+def steady_integral(policy: NetworkPolicy, speed: float, duration: float = 60.0, settle: float = 10.0) -> float:
+    """I* (m): the mean of ``policy``'s integral over the decisions from ``settle`` s to
+    ``duration`` s of a walk at ``speed`` m/s. ``ValueError`` if the walk fails or the policy
+    keeps no integral."""
+    if policy.memory is None:
+        raise ValueError(f"{policy.name} keeps no speed integral (features 'paper')")
+    if not 0.0 <= settle < duration:
+        raise ValueError(f"need 0 <= settle < duration (s), got {settle!r} and {duration!r}")
+    recorder = _IntegralRecorder(policy)
+    result = walk(recorder, Scenario(schedule=((0.0, float(speed)),)), duration)
+    if result.failed:
+        raise ValueError(f"{policy.name} did not walk {duration:g} s at {speed:g} m/s; no steady integral there")
+    decisions = len(recorder.values)
+    return float(np.mean(recorder.values[int(decisions * settle / duration):]))
+
+
+def steady_integrals(policy: NetworkPolicy, speeds: tuple[float, ...], duration: float = 60.0,
+                     settle: float = 10.0) -> IntegralFeedforward:
+    """The feed-forward table of ``policy`` (a memory policy): :func:`steady_integral` at each
+    of ``speeds`` (m/s, increasing), measured with the policy's memory as it is but without a
+    feed-forward (the table does not measure itself)."""
+    if policy.memory is None:
+        raise ValueError(f"{policy.name} keeps no speed integral (features 'paper')")
+    without = NetworkPolicy(policy.net, policy.name, getattr(policy, "decision_period", 0),
+                            SpeedMemory(replace(policy.memory.config, feedforward=None)), policy.residual, policy.base)
+    return IntegralFeedforward(tuple(speeds), tuple(round(steady_integral(without, v, duration, settle), 4)
+                                                    for v in speeds))
