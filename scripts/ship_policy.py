@@ -142,10 +142,11 @@ def network_text(info: dict) -> list[str]:
                          f"the change, what I wound up since the change decays with time constant "
                          f"{memory['windup_decay']['tau']:g} s until {memory['windup_decay']['seconds']:g} s after it"
                          if memory.get("windup_decay") else "")
-                      + ("; it starts a walk at its steady value for v_d and moves by the difference of steady "
-                         "values when v_d changes (a feed-forward table of "
-                         f"{len(memory['feedforward']['speeds'])} speeds measured on this network)"
-                         if memory.get("feedforward") else "")
+                      + ("; when v_d changes it moves by the difference of its steady values for the old and "
+                         + ("the new v_d, and it starts a walk at its steady value for v_d" if
+                            memory["feedforward"].get("start") else "the new v_d")
+                         + f" (a feed-forward table of {len(memory['feedforward']['speeds'])} speeds measured on "
+                         "this network)" if memory.get("feedforward") else "")
                       + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
@@ -216,7 +217,8 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     feedforward = memory.get("feedforward")  # never trained with
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
-        " --integral-feedforward" if feedforward else "")
+        (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
+        if feedforward else "")
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     return flags, (f"; the run trained without the integral's {names}, which ship_policy sets on the shipped copy"
                    if names else "")
@@ -271,14 +273,14 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
 def with_integral_rules(policy: Path, out: Path, band: float | None = None,
                         windup_decay: tuple[float, float] | None = None,
-                        feedforward: tuple[float, ...] | None = None) -> Path:
+                        feedforward: tuple[float, ...] | None = None, feedforward_start: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
     speed error is ``band`` m/s or more (``MemoryConfig.band``) and whose windup after a
     command change decays, ``windup_decay`` = (seconds, tau) in s (``MemoryConfig.windup_decay``);
     None: that rule as the checkpoint has it. ``feedforward``: also the integral's
     feed-forward table (``MemoryConfig.feedforward``) at these speeds (m/s), measured on the
     copy with those rules (:func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`:
-    a minute for its 33 speeds).
+    a minute for its 33 speeds), acting at a walk's start too if ``feedforward_start``.
     ``ValueError`` naming the option for a policy without the memory inputs or a value that
     is not a number > 0."""
     from rabbit_policy.runtime.memory import MemoryConfig
@@ -306,7 +308,8 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
         from rabbit_policy.runtime.policies import LearnedPolicy
 
         try:
-            memory = replace(memory, feedforward=steady_integrals(LearnedPolicy(out), feedforward))
+            table = steady_integrals(LearnedPolicy(out), feedforward)
+            memory = replace(memory, feedforward=replace(table, start=feedforward_start))
         except ValueError as exc:
             raise ValueError(f"--integral-feedforward: {exc}") from None
         checkpoint.info["memory"] = memory.to_dict()
@@ -355,10 +358,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--integral-windup-tau", type=float, default=1.0, metavar="TAU",
                         help="--integral-windup-decay's time constant (s; default 1)")
     parser.add_argument("--integral-feedforward", action="store_true",
-                        help="ship the policy with its speed integral starting a walk at its steady value for the "
-                             "command and moving by the difference of steady values at a change (a table measured "
-                             "on the policy with its other rules, rabbit_policy.evaluation.steady_integral; a memory "
-                             "policy only): the shipped copy records it, and every check runs on it")
+                        help="ship the policy with its speed integral moving by the difference of its steady values "
+                             "when the command changes (a table measured on the policy with its other rules, "
+                             "rabbit_policy.runtime.speed_integral.IntegralFeedforward; a memory policy only): the "
+                             "shipped copy records it, and every check runs on it")
+    parser.add_argument("--integral-feedforward-start", action="store_true",
+                        help="with --integral-feedforward: the integral also starts a walk at its steady value for "
+                             "the command (off by default: see IntegralFeedforward)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -366,6 +372,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.workers < 1:
         parser.error("--workers must be >= 1")
+    if args.integral_feedforward_start and not args.integral_feedforward:
+        parser.error("--integral-feedforward-start needs --integral-feedforward")
     with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the copy with --integral-* rules
         return ship(parser, args, argv, Path(scratch))
 
@@ -381,7 +389,8 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
         if args.integral_band is not None or decay is not None or args.integral_feedforward:
             source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band, decay,
-                                         FEEDFORWARD_SPEEDS if args.integral_feedforward else None)
+                                         FEEDFORWARD_SPEEDS if args.integral_feedforward else None,
+                                         args.integral_feedforward_start)
         policy = make_policy("learned", policy_file=source)
         others = [make_policy("learned", policy_file=p) for p in args.compare]
     except (PolicyUnavailable, ValueError) as exc:

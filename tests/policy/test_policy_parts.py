@@ -312,17 +312,25 @@ def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_n
     assert MemoryConfig(**older).integral_config().windup_decay is None
 
 
-def test_the_integral_feedforward_starts_at_the_steady_value_and_shifts_by_its_difference_at_a_change():
-    """IntegralFeedforward: I* linear between the table's speeds, the end values beyond; a walk's
-    first decision starts I at I*(v_d), a change from v to v' adds I*(v') - I*(v) (what the
-    errors added stays), both within the range gate and the bound; every error still
-    integrates. A bad table is one line; a checkpoint records the table and one from before
-    it loads without."""
+def test_the_integral_feedforward_shifts_by_the_steady_values_difference_at_a_change_and_may_start_there():
+    """IntegralFeedforward: I* linear between the table's speeds, the end values beyond; a
+    change from v to v' adds I*(v') - I*(v) (what the errors added stays) and, with ``start``,
+    a walk's first decision starts I at I*(v_d), both within the range gate and the bound;
+    every error still integrates, and without ``start`` a constant command integrates as
+    without the table. A bad table is one line; a checkpoint records the table and one from
+    before it loads without."""
+    from dataclasses import replace
+
     from rabbit_policy.runtime.memory import MemoryConfig
     from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, SpeedIntegral, WindupDecay
 
-    table = IntegralFeedforward((0.8, 1.0, 1.2), (-0.2, 0.1, 0.3))
+    changes = IntegralFeedforward((0.8, 1.0, 1.2), (-0.2, 0.1, 0.3))
+    table = replace(changes, start=True)
     assert [table.at(v) for v in (0.5, 0.8, 0.9, 1.1, 1.2, 2.0)] == pytest.approx([-0.2, -0.2, -0.05, 0.2, 0.3, 0.3])
+    shifted, plain = (SpeedIntegral(IntegralConfig(limit=0.25, dt=1.0, feedforward=f)) for f in (changes, None))
+    for error in (0.01, -0.02, 0.03):  # a constant command from the start: as without the table
+        assert shifted.update(error, 0.9) == plain.update(error, 0.9)
+    assert shifted.update(0.0, 1.0) == pytest.approx(0.02 + 0.15)  # the change adds I*(1.0) - I*(0.9)
     fed = SpeedIntegral(IntegralConfig(limit=0.25, dt=1.0, feedforward=table))
     assert fed.update(0.01, 0.9) == pytest.approx(-0.05 + 0.01)  # starts at I*(0.9), then integrates
     assert fed.update(0.02, 0.9) == pytest.approx(-0.02)
@@ -334,22 +342,24 @@ def test_the_integral_feedforward_starts_at_the_steady_value_and_shifts_by_its_d
     assert gated.update(0.0, 0.9) == pytest.approx(-0.05)  # v_d + I = 0.85: inside the range
     assert gated.update(0.0, 0.85) == pytest.approx(-0.05)  # the shift -0.075 would leave it (0.725): gated at 0.8
     decay = WindupDecay(seconds=4.0, tau=2.0)  # the decay's anchor is the shifted value
-    both = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=decay, feedforward=table))
-    both.update(0.0, 0.8)
+    both = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=decay, feedforward=changes))
+    both.update(-0.2, 0.8)
     assert both.update(0.5, 1.0) == pytest.approx(-0.2 + 0.3 + 0.5)
     assert both.update(-0.2, 1.0) == pytest.approx(0.1 + 0.5 * (0.4 - 0.1))  # decays toward 0.1, not -0.2
     for speeds, values in (((1.0,), (0.1,)), ((1.0, 0.9), (0.0, 0.1)), ((0.8, math.nan), (0.0, 0.1)),
                            ((0.8, 1.0), (0.0, math.inf)), ((0.8, 1.0), (0.0,)), ((0.8, 1.0), ("a", 0.1))):
         with pytest.raises(ValueError, match="feed-forward"):
             IntegralFeedforward(speeds, values)
+    with pytest.raises(ValueError, match="feed-forward start"):
+        IntegralFeedforward((0.8, 1.0), (0.0, 0.1), start="yes")
     with pytest.raises(ValueError, match="feed-forward"):
         IntegralConfig(limit=1.0, dt=1.0, feedforward={"speeds": (0.8, 1.0), "values": (0.0, 0.1)})
     memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), feedforward=table)
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
-    assert recorded["feedforward"] == {"speeds": (0.8, 1.0, 1.2), "values": (-0.2, 0.1, 0.3)}
+    assert recorded["feedforward"] == {"speeds": (0.8, 1.0, 1.2), "values": (-0.2, 0.1, 0.3), "start": True}
     assert MemoryConfig(**recorded) == memory and memory.integral_config().feedforward == table
     assert MemoryConfig(**{**recorded, "feedforward": {"speeds": [0.8, 1.0], "values": [0, 1]}}).feedforward == (
-        IntegralFeedforward((0.8, 1.0), (0.0, 1.0)))  # lists, as JSON would give them
+        IntegralFeedforward((0.8, 1.0), (0.0, 1.0)))  # lists, as JSON would give them; no start: off
     with pytest.raises(ValueError, match="feedforward"):
         MemoryConfig(**{**recorded, "feedforward": {"speeds": (0.8, 1.0)}})
     older = {k: v for k, v in recorded.items() if k != "feedforward"}  # a checkpoint from before the table

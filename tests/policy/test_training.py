@@ -307,7 +307,13 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     assert rules_set_after_training(banded.checkpoint.info)[0] == " --integral-band 0.1"
     flags, note = rules_set_after_training(fed.checkpoint.info)
     assert flags.endswith(" --integral-feedforward") and "windup decay and feed-forward" in note
-    assert "steady value for v_d" in " ".join(network_text(fed.checkpoint.info))
+    assert "difference of its steady values for the old and the new v_d (a feed-forward table of 2 speeds" in " ".join(
+        network_text(fed.checkpoint.info))
+    started = LearnedPolicy(with_integral_rules(source, tmp_path / "start.pt", feedforward=(1.0, 1.2),
+                                                feedforward_start=True))
+    assert started.memory.config.feedforward.start and not fed.memory.config.feedforward.start
+    assert rules_set_after_training(started.checkpoint.info)[0] == " --integral-feedforward --integral-feedforward-start"
+    assert "starts a walk at its steady value for v_d" in " ".join(network_text(started.checkpoint.info))
     assert rules_set_after_training(original.checkpoint.info) == ("", "")
     for args, message in ((["--integral-band", "0"], "--integral-band: the speed integral's band must be"),
                           (["--integral-band", "nan"], "--integral-band: the speed integral's band must be"),
@@ -318,6 +324,9 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
         out = run_script("scripts/ship_policy.py", str(source), *args, "--quick", "--dry-run")
         assert out.returncode == 2 and message in out.stderr, out.stderr[-2000:]
         assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    out = run_script("scripts/ship_policy.py", str(source), "--integral-feedforward-start", "--quick", "--dry-run")
+    assert out.returncode == 2 and "--integral-feedforward-start needs --integral-feedforward" in out.stderr
+    assert len(out.stderr.strip().splitlines()) == 1, out.stderr
     trained.info.pop("memory")  # a checkpoint that keeps no integral
     trained.save(paper := tmp_path / "paper.pt")
     out = run_script("scripts/ship_policy.py", str(paper), "--integral-feedforward", "--quick", "--dry-run")

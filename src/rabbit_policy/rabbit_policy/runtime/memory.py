@@ -57,8 +57,8 @@ class MemoryConfig:
     before 2026-11-27: neither); ``windup_decay``: after a change of the command, what the
     integral wound up decays once the hip has passed the new command
     (:class:`~.speed_integral.WindupDecay`, a checkpoint records its fields; None: no decay,
-    as in every checkpoint before it); ``feedforward``: the integral starts a walk at its
-    steady value for the command and moves by the difference of steady values at a change
+    as in every checkpoint before it); ``feedforward``: the integral moves by the difference
+    of its steady values at a change of the command (and may start a walk at its steady value)
     (:class:`~.speed_integral.IntegralFeedforward`, a checkpoint records its table; None: as
     in every checkpoint before it)."""
 
