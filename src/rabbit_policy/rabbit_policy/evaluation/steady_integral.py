@@ -4,7 +4,8 @@
 For each speed, a walk at that constant command on the nominal model (the policy's own
 rules, no feed-forward); I* is the mean of I over the policy's decisions after ``settle`` s.
 A mean, not a last value: at some speeds the shipped network's walk and its integral swing
-slowly about their steady values (at 0.8 m/s, I by ±0.06 m over about 10 s).
+slowly about their steady values (at 0.8 m/s I swings between about −0.25 and 0 m, the
+hip between 0.64 and 0.89 m/s: docs/learning.md, 2026-11-27 (seventh)).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.memory import SpeedMemory
 from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.speed_integral import IntegralFeedforward
+
 
 class _IntegralRecorder:
     """A memory policy, recording its integral (m) after each decision; everything else is
