@@ -232,15 +232,16 @@ class SpeedIntegral:
         ``desired_speed`` (m/s, v_d) places the range gate and, with a windup decay or a
         feed-forward, marks the start and command changes."""
         previous, self._last_command = self._last_command, desired_speed
+        changed = previous is not None and desired_speed != previous
         feedforward = self.config.feedforward
         if feedforward is not None and previous is None and feedforward.start:  # a walk's first decision
             self.value = self._bounded(feedforward.at(desired_speed), desired_speed)
-        elif feedforward is not None and previous is not None and desired_speed != previous:
+        elif feedforward is not None and changed:
             self.value = self._bounded(self.value + feedforward.at(desired_speed) - feedforward.at(previous),
                                        desired_speed)
         if self.config.windup_decay is None:
             return self._integrate(error, desired_speed)
-        if previous is not None and desired_speed != previous:
+        if changed:
             if not self._decaying:  # (a change during a decay keeps the value it decays toward)
                 self._anchor = self.value
             self._looking, self._direction, self._decaying, self._since = self._window, desired_speed - previous, False, 0
