@@ -163,17 +163,27 @@ def network_text(info: dict) -> list[str]:
     else:
         outputs = f"the 20 free Bezier coefficients (rad) and Kd (N m s/rad), {output} output scaled to the action bounds"
     paper = "the paper's network" if n_in == 3 else f"the paper's network widened to {n_in} inputs"
+    overlay = info.get("recovery_overlay")
+    if overlay is not None:
+        outputs += (f"; on top, the recovery controller's rule (`rabbit_policy.runtime.recovery.RecoveryOverlay`): "
+                    "when the hip falls behind where it was at the same phase of the steps before, its offsets "
+                    "(rad, rows 1-4) are added in proportion to the deficit, held off while the hip's mean speed "
+                    f"exceeds v_d by {overlay['fast_gate']:g} of it, and from a weight of {overlay['hold']:g} on "
+                    "added to the network's last gait chosen before the rule acted")
     return [
         f"`hzd_rl_policy.pt`: {paper} ({n_in} → 12 → 12 → 12 → 21, tanh hidden layers, "
         f"{info.get('parameters', 633)} parameters; features `{features}`, action `{action}`). "
         "Loaded by default by `policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned`.", "",
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
-        "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait blended in at once; "
+        "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
+                       + ("applied from the next tick (no blend, no queue); " if overlay is not None
+                          else "blended in at once; ")
                        if period else "a decision once per step, for the next step; ")
         + "the PD controller tracks it at 1 kHz.",
         "- in the ROS stack: `policy_node` builds these inputs from `/cmd_speed`, `/hip_velocity` (1 kHz)"
-        + (", `/hzd/step`, `/joint_states` and `/hzd/phase`" if features == "body" else " and `/hzd/step`")
+        + (", `/hzd/step`, `/joint_states` and `/hzd/phase`" if features == "body" or overlay is not None
+           else " and `/hzd/step`")
         + ", keeping the memory itself (`rabbit_policy.runtime.memory.SpeedMemory`, the loops' own code); "
         "it publishes `/hzd/alpha` and `/hzd/kd`.",
     ]
@@ -215,13 +225,38 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     band = None if config.get("integral_band") else memory.get("band")  # trained with it: not set after
     decay = None if config.get("integral_windup_decay") else memory.get("windup_decay")
     feedforward = memory.get("feedforward")  # never trained with
+    overlay = info.get("recovery_overlay")  # never trained with
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
         (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
-        if feedforward else "")
+        if feedforward else "") + (" --recovery-overlay" if overlay is not None else "")
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
-    return flags, (f"; the run trained without the integral's {names}, which ship_policy sets on the shipped copy"
-                   if names else "")
+    notes = ([f"the integral's {names}"] if names else []) + (
+        ["the recovery rule on top (`RecoveryOverlay`, gaits applied at once)"] if overlay is not None else [])
+    return flags, (f"; the run trained without {' or '.join(notes)}, which ship_policy sets on the shipped copy"
+                   if notes else "")
+
+
+def with_recovery_overlay(policy: Path, out: Path) -> Path:
+    """A copy of the checkpoint ``policy`` at ``out`` that carries the recovery rule on top of
+    its gait (``info["recovery_overlay"]``: :class:`~rabbit_policy.runtime.recovery.OverlayConfig`'s
+    defaults; the loops and the stack then apply its gaits at once). ``ValueError`` for a
+    policy that does not decide within the step or already has the recovery controller under
+    its residual."""
+    from dataclasses import asdict
+
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.runtime.recovery import OverlayConfig
+
+    checkpoint = PolicyCheckpoint.load(policy)
+    info = checkpoint.info
+    if not int(info.get("config", {}).get("decision_period", 0) or 0):
+        raise ValueError(f"--recovery-overlay: {policy} decides once per step; the rule acts within the step")
+    if info.get("residual_base", "classic") != "classic":
+        raise ValueError(f"--recovery-overlay: {policy} is already a residual on {info['residual_base']!r}")
+    info["recovery_overlay"] = asdict(OverlayConfig())
+    checkpoint.save(out)
+    return out
 
 
 def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[str, dict]] | None = None,
@@ -365,6 +400,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--integral-feedforward-start", action="store_true",
                         help="with --integral-feedforward: the integral also starts a walk at its steady value for "
                              "the command (off by default: see IntegralFeedforward)")
+    parser.add_argument("--recovery-overlay", action="store_true",
+                        help="ship the policy with the recovery controller's rule on top of its gait (rabbit_policy."
+                             "runtime.recovery.RecoveryOverlay: a backward push's deficit adds the rule's offsets, "
+                             "applied at once): the shipped copy records it, and every check runs on it")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -380,15 +419,17 @@ def main(argv: list[str] | None = None) -> int:
 
 def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     """Measure, write the card and ship (``main``'s work once its arguments are parsed);
-    ``scratch``: a directory for the policy's copy with its ``--integral-*`` rules."""
+    ``scratch``: a directory for the policy's copies with its ``--integral-*`` and ``--recovery-overlay`` rules."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
 
     source = args.policy
     try:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
+        if args.recovery_overlay:  # first: the integral's feed-forward table is measured on the walk as shipped
+            source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}")
         if args.integral_band is not None or decay is not None or args.integral_feedforward:
-            source = with_integral_rules(args.policy, scratch / args.policy.name, args.integral_band, decay,
+            source = with_integral_rules(source, scratch / args.policy.name, args.integral_band, decay,
                                          FEEDFORWARD_SPEEDS if args.integral_feedforward else None,
                                          args.integral_feedforward_start)
         policy = make_policy("learned", policy_file=source)

@@ -267,3 +267,164 @@ def test_a_residual_base_is_checked_where_it_enters():
     env = RabbitHZDEnv(residual_base="recovery", action="residual", decision_period=20, max_steps=20)
     env.reset(seed=0)
     assert env.loop.controller.config.within_step_blend == 0.0  # the base's controller settings
+
+
+# ------------------------------------------------------------------ the rule as an overlay on another policy
+@pytest.mark.unit
+def test_an_overlay_configuration_is_checked_where_it_enters():
+    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
+
+    for bad in ({"fast_gate": -0.1}, {"fast_gate": float("nan")}, {"hold": 0.0}, {"hold": 1.5}):
+        with pytest.raises(ValueError, match="OverlayConfig"):
+            OverlayConfig(**bad)
+    with pytest.raises(ValueError, match="within the step"):
+        RecoveryOverlay(decision_period=0)
+
+
+@pytest.mark.unit
+def test_the_overlay_adds_the_offsets_holds_the_last_quiet_gait_and_stays_off_while_fast():
+    """Steady steps: the policy's gait passes unchanged (w = 0). The hip far behind the steps
+    before: the offsets are added, from w >= hold onto the last gait chosen with w = 0, below
+    it onto the policy's gait now. The same deficit while the hip's mean speed is more than
+    ``fast_gate`` above the command (after a forward push): nothing added."""
+    from rabbit_policy.runtime.policies import GaitCommand
+    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
+    from rabbit_policy.runtime.speed_window import Observation
+
+    taus = [i / 25 for i in range(1, 25)]
+    quiet, now = GaitCommand(tuple([0.1] * 24), 5.0), GaitCommand(tuple([0.3] * 24), 6.0)
+
+    def overlay_after_steady_steps(**config) -> RecoveryOverlay:
+        overlay = RecoveryOverlay(OverlayConfig(**config))
+        for _ in range(5):  # five steps at the command's pace (the memory holds four)
+            for tau in taus:
+                assert overlay.apply(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)), quiet) is quiet
+        return overlay
+
+    overlay = overlay_after_steady_steps(hold=0.5)
+    behind = overlay.apply(Observation(1.0, 0.95, 0.05, body=(0.0, 0.0, 0.5, 2.0, 0.3)), now)
+    assert overlay.last_weight == 1.0
+    assert behind == overlay.rule.with_offsets(quiet, 1.0) != quiet  # onto the held quiet gait
+    overlay = overlay_after_steady_steps(hold=1.0)
+    slightly = overlay.apply(Observation(1.0, 0.95, 0.05, body=(0.0, 0.0, 0.5, 2.0, 0.8)), now)
+    assert 0.0 < overlay.last_weight < 1.0
+    assert slightly == overlay.rule.with_offsets(now, overlay.last_weight)  # below hold: onto the gait now
+    overlay = overlay_after_steady_steps(fast_gate=0.1)
+    assert overlay.apply(Observation(1.0, 1.2, -0.2, body=(0.0, 0.0, 0.5, 2.0, 0.3)), now) is now
+    assert overlay.last_weight == 0.0
+    overlay = overlay_after_steady_steps(fast_gate=0.0)  # never held off
+    overlay.apply(Observation(1.0, 1.2, -0.2, body=(0.0, 0.0, 0.5, 2.0, 0.3)), now)
+    assert overlay.last_weight == 1.0
+
+
+def _ship_policy():
+    """``scripts/ship_policy.py`` as a module."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.spec_from_file_location(
+        "ship_policy", Path(__file__).resolve().parents[2] / "scripts" / "ship_policy.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _overlay_file(tmp_path):
+    """The shipped network with ``ship_policy.py --recovery-overlay``'s record, and without."""
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.runtime.policies import packaged_policy_file
+
+    plain = tmp_path / "plain.pt"  # the shipped network, without any overlay it may ship with
+    checkpoint = PolicyCheckpoint.load(packaged_policy_file())
+    checkpoint.info.pop("recovery_overlay", None)
+    checkpoint.save(plain)
+    return _ship_policy().with_recovery_overlay(plain, tmp_path / "overlay.pt"), plain
+
+
+@pytest.mark.unit
+def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
+    """The copy's checkpoint carries ``recovery_overlay``; the learned policy built from it reads
+    the body state, asks for gaits applied at once (the loops and the stack's configuration
+    alike), and the card's regenerate line and rates say so. A policy deciding once per step
+    or already on the recovery base is refused with one line."""
+    ship = _ship_policy()
+    network_text, rules_set_after_training, with_recovery_overlay = (
+        ship.network_text, ship.rules_set_after_training, ship.with_recovery_overlay)
+    overlaid, plain = _overlay_file(tmp_path)
+    policy = make_policy("learned", policy_file=overlaid)
+    assert policy.needs_body and policy.overlay is not None
+    assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("learned", overlaid)
+    assert controller_settings(make_policy("learned", policy_file=plain)) == {}
+    info = policy.checkpoint.info
+    assert rules_set_after_training(info)[0].endswith(" --recovery-overlay")
+    assert "recovery rule on top" in rules_set_after_training(info)[1]
+    text = " ".join(network_text(info))
+    assert "RecoveryOverlay" in text and "no blend, no queue" in text
+    step_file = tmp_path / "per_step.pt"
+    _zero_residual_on_recovery_file(step_file, base="classic")
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+
+    checkpoint = PolicyCheckpoint.load(step_file)
+    checkpoint.info["config"]["decision_period"] = 0
+    checkpoint.save(step_file)
+    with pytest.raises(ValueError, match="--recovery-overlay: .* once per step"):
+        with_recovery_overlay(step_file, tmp_path / "x.pt")
+    base_file = tmp_path / "on_recovery.pt"
+    _zero_residual_on_recovery_file(base_file)
+    with pytest.raises(ValueError, match="--recovery-overlay: .* already a residual on 'recovery'"):
+        with_recovery_overlay(base_file, tmp_path / "y.pt")
+
+
+@pytest.mark.sim
+@pytest.mark.slow
+def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network_alone_does_not(tmp_path):
+    """Undisturbed at 1.0 m/s the overlay never acts: the walk is the network's own, applied at
+    once, to the bit. A -14 N s push at 0.875 of a step at 1.0 m/s (the network's binding
+    phase there; its margin is 10 N s): the network alone falls or stalls, with the rule on top
+    it walks on."""
+    from rabbit_policy.evaluation.robustness import phase_times
+    from rabbit_policy.runtime.policies import LearnedPolicy
+
+    overlaid, plain = _overlay_file(tmp_path)
+    with_rule = make_policy("learned", policy_file=overlaid)
+
+    class AtOnce(LearnedPolicy):  # the network alone, with the overlay's controller settings
+        controller_settings = CONTROLLER_SETTINGS
+
+    alone = AtOnce(plain)
+    quiet = [walk(policy, Scenario.constant(1.0), 6.0) for policy in (with_rule, alone)]
+    assert np.array_equal(quiet[0].hip_x, quiet[1].hip_x)
+    time = phase_times(with_rule, 1.0, 3.0, [0.875])[0]
+    scenario = Scenario.constant(1.0, pushes=(Push(time, -140.0, 0.1),))
+    assert walk(alone, scenario, time + 5.0).failed
+    assert not walk(with_rule, scenario, time + 5.0).failed
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(tmp_path):
+    """Through a push the overlay acts on (its walk parts from the network's alone):
+    policy_node builds the body state for it, run_stack's configuration gives the controller
+    node the at-once settings from the checkpoint, and every state is the ROS-free loop's."""
+    from rabbit_policy.bringup.stack import StackConfig, run_in_process
+    from rabbit_policy.runtime.policies import LearnedPolicy
+    from test_stack_nodes import _recorder, _reference
+
+    overlaid, plain = _overlay_file(tmp_path)
+
+    class AtOnce(LearnedPolicy):
+        controller_settings = CONTROLLER_SETTINGS
+
+    pushes = (Push(2.4, -120.0, 0.1),)
+    scenario = Scenario.constant(1.0, pushes=pushes)
+    reference = _reference(3.5, policy=make_policy("learned", policy_file=overlaid), scenario=scenario)
+    assert not np.array_equal(reference, _reference(3.5, policy=AtOnce(plain), scenario=scenario))
+    config = StackConfig(duration=3.5, schedule=((0.0, 1.0),), controller="learned", policy_file=str(overlaid),
+                         pushes=pushes)
+    assert config.node_parameters()["hzd_controller_node"]["within_step_blend"] == 0.0
+    states: list = []
+    report, nodes = run_in_process(config, observers=[_recorder(states)])
+    assert report.completed and not report.fell
+    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
+    assert unique.shape == reference.shape and np.array_equal(unique, reference)
+    assert nodes["policy_node"].decisions_given_up == 0

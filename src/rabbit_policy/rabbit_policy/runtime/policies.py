@@ -234,7 +234,8 @@ def controller_settings(policy: Policy | None) -> dict[str, float]:
 def required_controller_settings(kind: str, policy_file: str | Path | None = None) -> dict[str, float]:
     """The controller settings the controller named ``kind`` needs, without building it (the
     stack's configuration gives them to ``hzd_controller_node``): the recovery controller's,
-    and a learned policy's whose residual adds to it (read from the checkpoint's ``info``,
+    and a learned policy's whose residual adds to it or that carries its rule as an overlay
+    (read from the checkpoint's ``info``,
     ``policy_file`` or the packaged one; {} if there is none to read)."""
     from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
 
@@ -246,7 +247,8 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
         if path.is_file():
             from rabbit_policy.runtime.network import PolicyCheckpoint
 
-            if PolicyCheckpoint.load(path).info.get("residual_base", "classic") != "classic":
+            info = PolicyCheckpoint.load(path).info
+            if info.get("residual_base", "classic") != "classic" or info.get("recovery_overlay") is not None:
                 return dict(CONTROLLER_SETTINGS)
     return {}
 
@@ -289,10 +291,12 @@ class NetworkPolicy:
     reads ``observation.body`` (``needs_body``). ``residual``: the network's output is a
     residual on the library (:class:`~.actions.ResidualAction`), not the gait itself;
     ``base``: on that policy's decision instead (:func:`residual_base_policy`: the recovery
-    controller, whose body state and controller settings it then needs too)."""
+    controller, whose body state and controller settings it then needs too). ``overlay``: the
+    recovery rule on top of the network's gait (:class:`~.recovery.RecoveryOverlay`; it needs
+    the body state, and gaits applied at once)."""
 
     def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None, residual=None,
-                 base: Policy | None = None) -> None:
+                 base: Policy | None = None, overlay=None) -> None:
         if base is not None and residual is None:
             raise ValueError("a base policy is what a residual adds to: give the residual too")
         from rabbit_policy.runtime.network import NetworkForward
@@ -303,9 +307,16 @@ class NetworkPolicy:
         self.memory = memory
         self.residual = residual
         self.base = base
-        self.needs_body = bool(memory is not None and memory.config.body) or bool(getattr(base, "needs_body", False))
+        self.overlay = overlay
+        self._network_needs_body = (bool(memory is not None and memory.config.body)
+                                    or bool(getattr(base, "needs_body", False)))
+        self.needs_body = self._network_needs_body or overlay is not None
         if base is not None and controller_settings(base):
             self.controller_settings = controller_settings(base)
+        if overlay is not None:
+            from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
+
+            self.controller_settings = dict(CONTROLLER_SETTINGS)
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW
@@ -316,6 +327,7 @@ class NetworkPolicy:
         if self.memory is not None:
             self.memory.reset()
         reset_policy(self.base)
+        reset_policy(self.overlay)
 
     def start_command(self, speed: float) -> GaitCommand:
         """The gait a walk starts on at ``speed`` m/s (before any state exists): the answer
@@ -323,8 +335,8 @@ class NetworkPolicy:
         gait at ``speed`` (its residual's zero; the last action remembered as that)."""
         if self.base is not None:  # the base's own start (a zero residual)
             return self.base.start_command(speed)
-        if not self.needs_body:
-            return self.act(Observation(speed, speed, 0.0))
+        if not self._network_needs_body:  # an overlay starts on the network's own start
+            return self._network_act(Observation(speed, speed, 0.0))
         gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
         if self.residual is None:
             self._remember(np.append(gait.free, gait.kd))
@@ -336,6 +348,11 @@ class NetworkPolicy:
         self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
 
     def act(self, observation: Observation) -> GaitCommand:
+        command = self._network_act(observation)
+        return command if self.overlay is None else self.overlay.apply(observation, command)
+
+    def _network_act(self, observation: Observation) -> GaitCommand:
+        """The network's gait (on its residual's base), before any overlay."""
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 
         if self.memory is None:
@@ -385,7 +402,12 @@ class LearnedPolicy(NetworkPolicy):
         base = None
         if info.get("residual_base", "classic") != "classic":
             base = residual_base_policy(info["residual_base"], residual.library, decision_period)
-        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base)
+        overlay = None
+        if info.get("recovery_overlay") is not None:
+            from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
+
+            overlay = RecoveryOverlay(OverlayConfig(**info["recovery_overlay"]), decision_period)
+        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base, overlay)
 
 
 def controller_name(name: str) -> str:

@@ -196,8 +196,6 @@ class RecoveryPolicy:
         return min(max(deficit / self.config.full, 0.0), 1.0)
 
     def act(self, observation: Observation):
-        from rabbit_policy.runtime.policies import GaitCommand
-
         if observation.body is None:
             raise ValueError("the recovery controller needs the body state (observation.body)")
         _, _, tau, _, hip_velocity = observation.body
@@ -209,7 +207,90 @@ class RecoveryPolicy:
         slowing = self._base.command > observation.desired_speed + 1e-9  # a commanded deceleration
         w = 0.0 if slowing else self.weight(tau, hip_velocity / ramped, reference)
         self.last_weight = w  # the rule's weight at this decision (read by diagnostics and gated residuals)
+        return self.with_offsets(command, w)
+
+    def with_offsets(self, command, w: float):
+        """``command`` (a ``GaitCommand``) with ``w`` (0-1) x the offsets added to Bezier
+        rows 1-4; ``command`` itself for w <= 0."""
+        from rabbit_policy.runtime.policies import GaitCommand
+
         if w <= 0.0:
             return command
         free = reduce_alpha(command.alpha).reshape(5, N_OUTPUTS) + w * self._offsets
         return GaitCommand(tuple(float(v) for v in expand_alpha(free.reshape(N_FREE))), command.kd)
+
+
+@dataclass(frozen=True)
+class OverlayConfig:
+    """The recovery rule on top of another policy (:class:`RecoveryOverlay`).
+
+    fast_gate: the rule is held off while the hip's mean speed over the policy's window
+        (its observation, m/s) exceeds the command by more than this fraction of it.
+    hold: from this weight on, the gait under the offsets is the policy's last one chosen
+        with the rule off (w = 0), not its answer now.
+    """
+
+    fast_gate: float = 0.1
+    hold: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.fast_gate) and self.fast_gate >= 0.0):
+            raise ValueError(f"OverlayConfig.fast_gate must be finite and >= 0 (a fraction), got {self.fast_gate}")
+        if not (np.isfinite(self.hold) and 0.0 < self.hold <= 1.0):
+            raise ValueError(f"OverlayConfig.hold must be a weight in (0, 1], got {self.hold}")
+
+
+class RecoveryOverlay:
+    """The recovery rule (this module's, its constants unchanged) on top of another policy's
+    gait: the shipped learned policy with ``ship_policy.py --recovery-overlay``, recorded in
+    its checkpoint (``info["recovery_overlay"]``).
+
+    Every decision, a recovery controller runs beside the policy on the same observation,
+    for its rule's weight w only (its step memory, its ramped command and the deceleration
+    gate: the module docstring), and the gait becomes the policy's plus w x the offsets,
+    applied at once (:data:`CONTROLLER_SETTINGS`). Two differences from the recovery
+    controller, both measured on the shipped network (docs/learning.md 2026-11-27 (eighth)):
+
+    * ``fast_gate``: w = 0 while the hip's mean speed exceeds the command by more than that
+      fraction. After a forward push, the network's long fast step starts with a hip slower
+      than at the same phase of the steps before, which the rule took for a backward push
+      (forward margin at 0.7 m/s 18 N s with the rule acting, 24 without; classic 25).
+    * ``hold``: once w reaches it, the offsets go onto the network's last gait chosen with
+      the rule off. The network answers a backward push by asking for speed (its integral
+      and mean speed fall), which works against the rule (backward margin at 1.3 m/s 17 N s
+      with the network's answer, 25 with the held gait). Below ``hold`` the network keeps
+      deciding: the slow end of its speed range has near-stall steps where the rule stirs
+      (w below 0.5), and holding there took the walk at 0.83 m/s 0.04 m/s slow.
+
+    Undisturbed, w stays 0 and the gait is the policy's, applied at once."""
+
+    def __init__(self, config: OverlayConfig = OverlayConfig(), decision_period: int = 20) -> None:
+        from rabbit_policy.runtime.gait_library import GaitLibrary
+        from rabbit_policy.runtime.policies import LibraryPolicy
+
+        if decision_period < 1:
+            raise ValueError("the recovery overlay acts within the step: its policy must decide every N >= 1 ticks")
+        self.config = config
+        self.rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
+        self._held = None
+        self.last_weight = 0.0
+
+    def reset(self) -> None:
+        self.rule.reset()
+        self._held = None
+        self.last_weight = 0.0
+
+    def apply(self, observation: Observation, command):
+        """The gait for this decision: ``command`` (the policy's, a ``GaitCommand``) with the
+        rule on it (needs ``observation.body``)."""
+        self.rule.act(observation)
+        w = self.rule.last_weight
+        if self.config.fast_gate > 0.0 and observation.mean_speed > observation.desired_speed * (1.0 + self.config.fast_gate):
+            w = 0.0
+        self.last_weight = w
+        if w <= 0.0:
+            self._held = command
+            return command
+        if w >= self.config.hold and self._held is not None:
+            command = self._held
+        return self.rule.with_offsets(command, w)
