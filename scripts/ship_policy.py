@@ -177,7 +177,7 @@ def network_text(info: dict) -> list[str]:
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
         "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
-                       + ("applied from the next tick (no blend, no queue); " if overlay is not None
+                       + ("applied from the next tick (no blend, no queue); " if (overlay or {}).get("at_once")
                           else "blended in at once; ")
                        if period else "a decision once per step, for the next step; ")
         + "the PD controller tracks it at 1 kHz.",
@@ -229,20 +229,21 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
         (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
-        if feedforward else "") + (" --recovery-overlay" if overlay is not None else "")
+        if feedforward else "") + ((" --recovery-overlay --recovery-overlay-at-once" if overlay.get("at_once")
+                                    else " --recovery-overlay") if overlay is not None else "")
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     notes = ([f"the integral's {names}"] if names else []) + (
-        ["the recovery rule on top (`RecoveryOverlay`, gaits applied at once)"] if overlay is not None else [])
+        ["the recovery rule on top (`RecoveryOverlay`)"] if overlay is not None else [])
     return flags, (f"; the run trained without {' or '.join(notes)}, which ship_policy sets on the shipped copy"
                    if notes else "")
 
 
-def with_recovery_overlay(policy: Path, out: Path) -> Path:
+def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` that carries the recovery rule on top of
     its gait (``info["recovery_overlay"]``: :class:`~rabbit_policy.runtime.recovery.OverlayConfig`'s
-    defaults; the loops and the stack then apply its gaits at once). ``ValueError`` for a
-    policy that does not decide within the step or already has the recovery controller under
-    its residual."""
+    defaults, ``at_once`` as given: the loops and the stack then apply its gaits at once).
+    ``ValueError`` for a policy that does not decide within the step or already has the
+    recovery controller under its residual."""
     from dataclasses import asdict
 
     from rabbit_policy.runtime.network import PolicyCheckpoint
@@ -254,7 +255,7 @@ def with_recovery_overlay(policy: Path, out: Path) -> Path:
         raise ValueError(f"--recovery-overlay: {policy} decides once per step; the rule acts within the step")
     if info.get("residual_base", "classic") != "classic":
         raise ValueError(f"--recovery-overlay: {policy} is already a residual on {info['residual_base']!r}")
-    info["recovery_overlay"] = asdict(OverlayConfig())
+    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once))
     checkpoint.save(out)
     return out
 
@@ -403,7 +404,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recovery-overlay", action="store_true",
                         help="ship the policy with the recovery controller's rule on top of its gait (rabbit_policy."
                              "runtime.recovery.RecoveryOverlay: a backward push's deficit adds the rule's offsets, "
-                             "applied at once): the shipped copy records it, and every check runs on it")
+                             "blended in as the network's gait): the shipped copy records it, and every check runs "
+                             "on it")
+    parser.add_argument("--recovery-overlay-at-once", action="store_true",
+                        help="with --recovery-overlay: the controller applies every gait at once (no blend, no queue: "
+                             "the recovery controller's settings) instead of as the network was trained")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -413,6 +418,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     if args.integral_feedforward_start and not args.integral_feedforward:
         parser.error("--integral-feedforward-start needs --integral-feedforward")
+    if args.recovery_overlay_at_once and not args.recovery_overlay:
+        parser.error("--recovery-overlay-at-once needs --recovery-overlay")
     with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the copy with --integral-* rules
         return ship(parser, args, argv, Path(scratch))
 
@@ -427,7 +434,8 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     try:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
         if args.recovery_overlay:  # first: the integral's feed-forward table is measured on the walk as shipped
-            source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}")
+            source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}",
+                                           args.recovery_overlay_at_once)
         if args.integral_band is not None or decay is not None or args.integral_feedforward:
             source = with_integral_rules(source, scratch / args.policy.name, args.integral_band, decay,
                                          FEEDFORWARD_SPEEDS if args.integral_feedforward else None,

@@ -329,8 +329,9 @@ def _ship_policy():
     return module
 
 
-def _overlay_file(tmp_path):
-    """The shipped network with ``ship_policy.py --recovery-overlay``'s record, and without."""
+def _overlay_file(tmp_path, at_once: bool = False):
+    """The shipped network with ``ship_policy.py --recovery-overlay``'s record (``at_once``:
+    with ``--recovery-overlay-at-once``), and without."""
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.runtime.policies import packaged_policy_file
 
@@ -338,28 +339,36 @@ def _overlay_file(tmp_path):
     checkpoint = PolicyCheckpoint.load(packaged_policy_file())
     checkpoint.info.pop("recovery_overlay", None)
     checkpoint.save(plain)
-    return _ship_policy().with_recovery_overlay(plain, tmp_path / "overlay.pt"), plain
+    name = "overlay_at_once.pt" if at_once else "overlay.pt"
+    return _ship_policy().with_recovery_overlay(plain, tmp_path / name, at_once), plain
 
 
 @pytest.mark.unit
 def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     """The copy's checkpoint carries ``recovery_overlay``; the learned policy built from it reads
-    the body state, asks for gaits applied at once (the loops and the stack's configuration
-    alike), and the card's regenerate line and rates say so. A policy deciding once per step
-    or already on the recovery base is refused with one line."""
+    the body state and asks for the controller's own blend (with ``--recovery-overlay-at-once``:
+    gaits applied at once, the loops and the stack's configuration alike), and the card's
+    regenerate line and rates say so. A policy deciding once per step or already on the
+    recovery base is refused with one line."""
     ship = _ship_policy()
     network_text, rules_set_after_training, with_recovery_overlay = (
         ship.network_text, ship.rules_set_after_training, ship.with_recovery_overlay)
     overlaid, plain = _overlay_file(tmp_path)
     policy = make_policy("learned", policy_file=overlaid)
     assert policy.needs_body and policy.overlay is not None
-    assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("learned", overlaid)
-    assert controller_settings(make_policy("learned", policy_file=plain)) == {}
+    assert controller_settings(policy) == {} == required_controller_settings("learned", overlaid)
     info = policy.checkpoint.info
     assert rules_set_after_training(info)[0].endswith(" --recovery-overlay")
     assert "recovery rule on top" in rules_set_after_training(info)[1]
     text = " ".join(network_text(info))
-    assert "RecoveryOverlay" in text and "no blend, no queue" in text
+    assert "RecoveryOverlay" in text and "blended in" in text
+    at_once, _ = _overlay_file(tmp_path, at_once=True)
+    policy = make_policy("learned", policy_file=at_once)
+    assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("learned", at_once)
+    assert rules_set_after_training(policy.checkpoint.info)[0].endswith(
+        " --recovery-overlay --recovery-overlay-at-once")
+    assert "no blend, no queue" in " ".join(network_text(policy.checkpoint.info))
+    assert controller_settings(make_policy("learned", policy_file=plain)) == {}
     step_file = tmp_path / "per_step.pt"
     _zero_residual_on_recovery_file(step_file, base="classic")
     from rabbit_policy.runtime.network import PolicyCheckpoint
@@ -378,20 +387,14 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
 @pytest.mark.sim
 @pytest.mark.slow
 def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network_alone_does_not(tmp_path):
-    """Undisturbed at 1.0 m/s the overlay never acts: the walk is the network's own, applied at
-    once, to the bit. A -14 N s push at 0.875 of a step at 1.0 m/s (the network's binding
-    phase there; its margin is 10 N s): the network alone falls or stalls, with the rule on top
-    it walks on."""
+    """Undisturbed at 1.0 m/s the overlay never acts: the walk is the network's own to the bit.
+    A -14 N s push at 0.875 of a step at 1.0 m/s (the network's binding phase there; its margin
+    is 10 N s): the network alone falls or stalls, with the rule on top it walks on."""
     from rabbit_policy.evaluation.robustness import phase_times
     from rabbit_policy.runtime.policies import LearnedPolicy
 
     overlaid, plain = _overlay_file(tmp_path)
-    with_rule = make_policy("learned", policy_file=overlaid)
-
-    class AtOnce(LearnedPolicy):  # the network alone, with the overlay's controller settings
-        controller_settings = CONTROLLER_SETTINGS
-
-    alone = AtOnce(plain)
+    with_rule, alone = make_policy("learned", policy_file=overlaid), LearnedPolicy(plain)
     quiet = [walk(policy, Scenario.constant(1.0), 6.0) for policy in (with_rule, alone)]
     assert np.array_equal(quiet[0].hip_x, quiet[1].hip_x)
     time = phase_times(with_rule, 1.0, 3.0, [0.875])[0]
@@ -402,26 +405,28 @@ def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network
 
 @pytest.mark.ros
 @pytest.mark.slow
-def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(tmp_path):
+@pytest.mark.parametrize("at_once", [False, True])
+def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(tmp_path, at_once):
     """Through a push the overlay acts on (its walk parts from the network's alone):
     policy_node builds the body state for it, run_stack's configuration gives the controller
-    node the at-once settings from the checkpoint, and every state is the ROS-free loop's."""
+    node the settings the checkpoint asks for, and every state is the ROS-free loop's."""
     from rabbit_policy.bringup.stack import StackConfig, run_in_process
     from rabbit_policy.runtime.policies import LearnedPolicy
     from test_stack_nodes import _recorder, _reference
 
-    overlaid, plain = _overlay_file(tmp_path)
+    overlaid, plain = _overlay_file(tmp_path, at_once)
 
-    class AtOnce(LearnedPolicy):
-        controller_settings = CONTROLLER_SETTINGS
+    class Alone(LearnedPolicy):  # the network without the overlay, under the same controller settings
+        controller_settings = CONTROLLER_SETTINGS if at_once else {}
 
     pushes = (Push(2.4, -120.0, 0.1),)
     scenario = Scenario.constant(1.0, pushes=pushes)
     reference = _reference(3.5, policy=make_policy("learned", policy_file=overlaid), scenario=scenario)
-    assert not np.array_equal(reference, _reference(3.5, policy=AtOnce(plain), scenario=scenario))
+    assert not np.array_equal(reference, _reference(3.5, policy=Alone(plain), scenario=scenario))
     config = StackConfig(duration=3.5, schedule=((0.0, 1.0),), controller="learned", policy_file=str(overlaid),
                          pushes=pushes)
-    assert config.node_parameters()["hzd_controller_node"]["within_step_blend"] == 0.0
+    controller_parameters = config.node_parameters()["hzd_controller_node"]
+    assert controller_parameters.get("within_step_blend") == (0.0 if at_once else None)  # None: its own default
     states: list = []
     report, nodes = run_in_process(config, observers=[_recorder(states)])
     assert report.completed and not report.fell

@@ -10,7 +10,8 @@ fast step looks like a backward push's deficit to the rule). ``handover``: inste
 offsets to the network's gait, hand over to the recovery controller in proportion to w:
 (1 - w) x the network's gait + w x the recovery controller's (its base gait plus w x offsets).
 ``hold`` > 0: while w >= hold the network's gait is the one it chose at the last decision with w = 0
-(the network still sees every observation, its memory moves on), plus w x offsets."""
+(the network still sees every observation, its memory moves on), plus w x offsets.
+``blended``: the controller blends every gait in as the shipped network's (no at-once settings)."""
 from __future__ import annotations
 
 import numpy as np
@@ -25,15 +26,17 @@ class RuleOnLearned:
     controller_settings = CONTROLLER_SETTINGS
 
     def __init__(self, policy_file=None, rule: bool = True, scale: float = 1.0, fast_gate: float = 0.0,
-                 handover: bool = False, hold: float = 0.0) -> None:
+                 handover: bool = False, hold: float = 0.0, blended: bool = False) -> None:
         self.learned = LearnedPolicy(policy_file or packaged_policy_file())
         self.recovery = make_policy("recovery")
         assert isinstance(self.recovery, RecoveryPolicy)
         self.rule, self.scale, self.fast_gate, self.handover, self.hold = rule, scale, fast_gate, handover, hold
         self._held = None
+        if blended:  # the controller's defaults: the network's gait (and the offsets) blended in, late ones queued
+            self.controller_settings = {}
         self.decision_period = self.learned.decision_period
         self.decision_window = self.learned.decision_window
-        self.name = f"rule-on-learned(rule={rule}, scale={scale}, fast_gate={fast_gate}, handover={handover}, hold={hold})"
+        self.name = f"rule-on-learned(rule={rule}, scale={scale}, fast_gate={fast_gate}, handover={handover}, hold={hold}, blended={blended})"
 
     def reset(self) -> None:
         self._held = None

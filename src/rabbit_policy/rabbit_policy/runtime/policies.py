@@ -235,7 +235,7 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
     """The controller settings the controller named ``kind`` needs, without building it (the
     stack's configuration gives them to ``hzd_controller_node``): the recovery controller's,
     and a learned policy's whose residual adds to it or that carries its rule as an overlay
-    (read from the checkpoint's ``info``,
+    applied at once (read from the checkpoint's ``info``,
     ``policy_file`` or the packaged one; {} if there is none to read)."""
     from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
 
@@ -248,8 +248,12 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
             from rabbit_policy.runtime.network import PolicyCheckpoint
 
             info = PolicyCheckpoint.load(path).info
-            if info.get("residual_base", "classic") != "classic" or info.get("recovery_overlay") is not None:
+            if info.get("residual_base", "classic") != "classic":
                 return dict(CONTROLLER_SETTINGS)
+            if info.get("recovery_overlay") is not None:
+                from rabbit_policy.runtime.recovery import OverlayConfig
+
+                return OverlayConfig(**info["recovery_overlay"]).controller_settings
     return {}
 
 
@@ -293,7 +297,7 @@ class NetworkPolicy:
     ``base``: on that policy's decision instead (:func:`residual_base_policy`: the recovery
     controller, whose body state and controller settings it then needs too). ``overlay``: the
     recovery rule on top of the network's gait (:class:`~.recovery.RecoveryOverlay`; it needs
-    the body state, and gaits applied at once)."""
+    the body state, and the controller settings its configuration names)."""
 
     def __init__(self, net, name: str = "learned", decision_period: int = 0, memory=None, residual=None,
                  base: Policy | None = None, overlay=None) -> None:
@@ -313,10 +317,8 @@ class NetworkPolicy:
         self.needs_body = self._network_needs_body or overlay is not None
         if base is not None and controller_settings(base):
             self.controller_settings = controller_settings(base)
-        if overlay is not None:
-            from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
-
-            self.controller_settings = dict(CONTROLLER_SETTINGS)
+        if overlay is not None and overlay.config.controller_settings:
+            self.controller_settings = overlay.config.controller_settings
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW

@@ -228,16 +228,27 @@ class OverlayConfig:
         (its observation, m/s) exceeds the command by more than this fraction of it.
     hold: from this weight on, the gait under the offsets is the policy's last one chosen
         with the rule off (w = 0), not its answer now.
+    at_once: the controller applies every gait at once (:data:`CONTROLLER_SETTINGS`, as the
+        recovery controller); False: with its default blend and queue, as the network was
+        trained.
     """
 
     fast_gate: float = 0.1
     hold: float = 0.5
+    at_once: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.fast_gate) and self.fast_gate >= 0.0):
             raise ValueError(f"OverlayConfig.fast_gate must be finite and >= 0 (a fraction), got {self.fast_gate}")
         if not (np.isfinite(self.hold) and 0.0 < self.hold <= 1.0):
             raise ValueError(f"OverlayConfig.hold must be a weight in (0, 1], got {self.hold}")
+        if not isinstance(self.at_once, bool):
+            raise ValueError(f"OverlayConfig.at_once must be true or false, got {self.at_once!r}")
+
+    @property
+    def controller_settings(self) -> dict[str, float]:
+        """The ``ControllerConfig`` fields the policy with this overlay needs."""
+        return dict(CONTROLLER_SETTINGS) if self.at_once else {}
 
 
 class RecoveryOverlay:
