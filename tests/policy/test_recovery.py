@@ -147,13 +147,22 @@ def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
     """Through a push that makes the rule act: policy_node builds the body state, run_stack's
     configuration gives the controller node the at-once settings, and every state is the
     ROS-free loop's."""
-    from rabbit_policy.bringup.stack import StackConfig, run_in_process
-    from test_stack_nodes import _recorder, _reference
+    from rabbit_policy.bringup.stack import StackConfig
+    from test_stack_nodes import _reference
 
     pushes = (Push(1.2, -90.0, 0.1),)
     reference = _reference(2.5, policy=make_policy("recovery"), scenario=Scenario.constant(1.0, pushes=pushes))
     config = StackConfig(duration=2.5, schedule=((0.0, 1.0),), controller="recovery", pushes=pushes)
     assert config.node_parameters()["hzd_controller_node"]["within_step_blend"] == 0.0
+    _assert_lockstep_is(config, reference)
+
+
+def _assert_lockstep_is(config, reference: np.ndarray) -> None:
+    """The stack of ``config``, spun in this process in lockstep, publishes every state of
+    ``reference`` (the ROS-free loop's) bit for bit, without a fall and with no decision given up."""
+    from rabbit_policy.bringup.stack import run_in_process
+    from test_stack_nodes import _recorder
+
     states: list = []
     report, nodes = run_in_process(config, observers=[_recorder(states)])
     assert report.completed and not report.fell
@@ -410,9 +419,9 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     """Through a push the overlay acts on (its walk parts from the network's alone):
     policy_node builds the body state for it, run_stack's configuration gives the controller
     node the settings the checkpoint asks for, and every state is the ROS-free loop's."""
-    from rabbit_policy.bringup.stack import StackConfig, run_in_process
+    from rabbit_policy.bringup.stack import StackConfig
     from rabbit_policy.runtime.policies import LearnedPolicy
-    from test_stack_nodes import _recorder, _reference
+    from test_stack_nodes import _reference
 
     overlaid, plain = _overlay_file(tmp_path, at_once)
 
@@ -427,9 +436,4 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
                          pushes=pushes)
     controller_parameters = config.node_parameters()["hzd_controller_node"]
     assert controller_parameters.get("within_step_blend") == (0.0 if at_once else None)  # None: its own default
-    states: list = []
-    report, nodes = run_in_process(config, observers=[_recorder(states)])
-    assert report.completed and not report.fell
-    unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
-    assert unique.shape == reference.shape and np.array_equal(unique, reference)
-    assert nodes["policy_node"].decisions_given_up == 0
+    _assert_lockstep_is(config, reference)
