@@ -288,6 +288,9 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
             OverlayConfig(**bad)
     with pytest.raises(ValueError, match="within the step"):
         RecoveryOverlay(decision_period=0)
+    with pytest.raises(ValueError, match="recovery_overlay: .*unexpected keyword argument 'gate'"):
+        OverlayConfig.from_dict({"gate": 0.1})
+    assert OverlayConfig.from_dict({"at_once": True}).controller_settings == CONTROLLER_SETTINGS
 
 
 @pytest.mark.unit

@@ -253,7 +253,7 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
             if info.get("recovery_overlay") is not None:
                 from rabbit_policy.runtime.recovery import OverlayConfig
 
-                return OverlayConfig(**info["recovery_overlay"]).controller_settings
+                return OverlayConfig.from_dict(info["recovery_overlay"]).controller_settings
     return {}
 
 
@@ -408,7 +408,7 @@ class LearnedPolicy(NetworkPolicy):
         if info.get("recovery_overlay") is not None:
             from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
 
-            overlay = RecoveryOverlay(OverlayConfig(**info["recovery_overlay"]), decision_period)
+            overlay = RecoveryOverlay(OverlayConfig.from_dict(info["recovery_overlay"]), decision_period)
         super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base, overlay)
 
 
