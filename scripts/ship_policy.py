@@ -433,7 +433,7 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     source = args.policy
     try:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
-        if args.recovery_overlay:  # first: the integral's feed-forward table is measured on the walk as shipped
+        if args.recovery_overlay:  # (the feed-forward table is the network's own: measured without the overlay)
             source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}",
                                            args.recovery_overlay_at_once)
         if args.integral_band is not None or decay is not None or args.integral_feedforward:

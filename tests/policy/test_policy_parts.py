@@ -606,10 +606,11 @@ def test_a_policy_copy_shares_what_no_decision_changes_and_copies_its_memory():
     assert copied.net is policy.net and copied.forward is policy.forward
     assert copied.residual.library is policy.residual.library
     assert copied.memory is not policy.memory
-    observation = Observation(1.0, 0.9, 0.1)
+    body = (0.0, 0.0, 0.3, 2.0, 0.9)  # the shipped policy's recovery rule reads the body state
+    observation = Observation(1.0, 0.9, 0.1, body)
     assert copied.act(observation) == policy.act(observation)  # the same decision from the same memory
     before = copy_policy(policy)
-    copied.act(Observation(1.0, 0.5, 0.5))
+    copied.act(Observation(1.0, 0.5, 0.5, body))
     assert before.act(observation) == policy.act(observation)  # the copy's decisions left the original alone
     recovery = make_policy("recovery")
     assert copy_policy(recovery).classic.library is recovery.classic.library

@@ -440,3 +440,17 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     controller_parameters = config.node_parameters()["hzd_controller_node"]
     assert controller_parameters.get("within_step_blend") == (0.0 if at_once else None)  # None: its own default
     _assert_lockstep_is(config, reference)
+
+
+@pytest.mark.unit
+def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(tmp_path):
+    """The rule acts within the step: asked to decide once per step (``decision_period`` 0:
+    ``--decision step``, ``policy_node decision_period:=0``), the learned policy loads without
+    it, reads no body state, and its name says the rule is off."""
+    from rabbit_policy.runtime.policies import LearnedPolicy
+
+    overlaid, _ = _overlay_file(tmp_path)
+    per_step = LearnedPolicy(overlaid, decision_period=0)
+    assert per_step.overlay is None and not per_step.needs_body
+    assert per_step.name.endswith("(no recovery rule: once per step)")
+    assert LearnedPolicy(overlaid).overlay is not None

@@ -285,6 +285,7 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     trained = PolicyCheckpoint.load(packaged_policy_file())  # the network as its run left it: no rule set after
     trained.info["memory"].pop("windup_decay", None)
     trained.info["memory"].pop("feedforward", None)
+    trained.info.pop("recovery_overlay", None)
     trained.save(source := tmp_path / "trained.pt")
     original = LearnedPolicy(source)
     banded = LearnedPolicy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))

@@ -57,8 +57,10 @@ def steady_integral(policy: NetworkPolicy, speed: float, duration: float = 60.0,
 def steady_integrals(policy: NetworkPolicy, speeds: tuple[float, ...], duration: float = 60.0,
                      settle: float = 10.0) -> IntegralFeedforward:
     """The feed-forward table of ``policy`` (a memory policy): :func:`steady_integral` at each
-    of ``speeds`` (m/s, increasing), measured with the policy's memory as it is but without a
-    feed-forward (the table does not measure itself)."""
+    of ``speeds`` (m/s, increasing), measured on its network with the memory as it is but
+    without a feed-forward (the table does not measure itself) and without a recovery overlay
+    (the network's own steady integral; the overlay answers pushes and stalls, and at a
+    constant command it stirs only on the slow oscillation's near-stall steps)."""
     if policy.memory is None:
         raise ValueError(f"{policy.name} keeps no speed integral (features 'paper')")
     without = NetworkPolicy(policy.net, policy.name, getattr(policy, "decision_period", 0),

@@ -381,7 +381,8 @@ class LearnedPolicy(NetworkPolicy):
 
     def __init__(self, path: str | Path, decision_period: int | None = None) -> None:
         """``decision_period``: None = as trained (the checkpoint's), 0 = once per step,
-        N = every N ticks."""
+        N = every N ticks. A checkpoint with a recovery overlay runs without it once per step
+        (the rule acts within the step), and its name says so."""
         from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
 
         self.checkpoint = PolicyCheckpoint.load(path)
@@ -408,7 +409,11 @@ class LearnedPolicy(NetworkPolicy):
         if info.get("recovery_overlay") is not None:
             from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
 
-            overlay = RecoveryOverlay(OverlayConfig.from_dict(info["recovery_overlay"]), decision_period)
+            config = OverlayConfig.from_dict(info["recovery_overlay"])
+            if decision_period:
+                overlay = RecoveryOverlay(config, decision_period)
+            else:  # the rule acts within the step: deciding once per step, the network runs alone
+                name += " (no recovery rule: once per step)"
         super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base, overlay)
 
 
