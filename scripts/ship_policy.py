@@ -177,7 +177,9 @@ def network_text(info: dict) -> list[str]:
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
         "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
-                       + ("applied from the next tick (no blend, no queue); " if (overlay or {}).get("at_once")
+                       + ("blended in by the policy itself as the controller would, the rule's offsets applied "
+                          "from the next tick; " if (overlay or {}).get("policy_blend") else
+                          "applied from the next tick (no blend, no queue); " if (overlay or {}).get("at_once")
                           else "blended in at once; ")
                        if period else "a decision once per step, for the next step; ")
         + "the PD controller tracks it at 1 kHz.",
@@ -229,8 +231,9 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
         (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
-        if feedforward else "") + ((" --recovery-overlay --recovery-overlay-at-once" if overlay.get("at_once")
-                                    else " --recovery-overlay") if overlay is not None else "")
+        if feedforward else "") + (" --recovery-overlay" + (
+            " --recovery-overlay-policy-blend" if overlay.get("policy_blend") else
+            " --recovery-overlay-at-once" if overlay.get("at_once") else "") if overlay is not None else "")
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     notes = ([f"the integral's {names}"] if names else []) + (
         ["the recovery rule on top (`RecoveryOverlay`)"] if overlay is not None else [])
@@ -238,10 +241,11 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
                    if notes else "")
 
 
-def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False) -> Path:
+def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False, policy_blend: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` that carries the recovery rule on top of
     its gait (``info["recovery_overlay"]``: :class:`~rabbit_policy.runtime.recovery.OverlayConfig`'s
-    defaults, ``at_once`` as given: the loops and the stack then apply its gaits at once).
+    defaults, ``at_once`` as given: the loops and the stack then apply its gaits at once;
+    ``policy_blend``: at once, the overlay blending the network's own gaits in).
     ``ValueError`` for a policy that does not decide within the step or already has the
     recovery controller under its residual."""
     from dataclasses import asdict
@@ -255,7 +259,7 @@ def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False) -> Pat
         raise ValueError(f"--recovery-overlay: {policy} decides once per step; the rule acts within the step")
     if info.get("residual_base", "classic") != "classic":
         raise ValueError(f"--recovery-overlay: {policy} is already a residual on {info['residual_base']!r}")
-    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once))
+    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once or policy_blend, policy_blend=policy_blend))
     checkpoint.save(out)
     return out
 
@@ -409,6 +413,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--recovery-overlay-at-once", action="store_true",
                         help="with --recovery-overlay: the controller applies every gait at once (no blend, no queue: "
                              "the recovery controller's settings) instead of as the network was trained")
+    parser.add_argument("--recovery-overlay-policy-blend", action="store_true",
+                        help="with --recovery-overlay: the controller applies every gait at once and the overlay "
+                             "blends the network's own gaits in as the controller would, so only the rule's offsets "
+                             "act at once (OverlayConfig.policy_blend)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -418,8 +426,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     if args.integral_feedforward_start and not args.integral_feedforward:
         parser.error("--integral-feedforward-start needs --integral-feedforward")
-    if args.recovery_overlay_at_once and not args.recovery_overlay:
-        parser.error("--recovery-overlay-at-once needs --recovery-overlay")
+    if (args.recovery_overlay_at_once or args.recovery_overlay_policy_blend) and not args.recovery_overlay:
+        parser.error("--recovery-overlay-at-once and --recovery-overlay-policy-blend need --recovery-overlay")
+    if args.recovery_overlay_at_once and args.recovery_overlay_policy_blend:
+        parser.error("--recovery-overlay-at-once and --recovery-overlay-policy-blend: choose one")
     with tempfile.TemporaryDirectory(prefix="rabbit_ship_") as scratch:  # the copy with --integral-* rules
         return ship(parser, args, argv, Path(scratch))
 
@@ -435,7 +445,7 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
         decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
         if args.recovery_overlay:  # (the feed-forward table is the network's own: measured without the overlay)
             source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}",
-                                           args.recovery_overlay_at_once)
+                                           args.recovery_overlay_at_once, args.recovery_overlay_policy_blend)
         if args.integral_band is not None or decay is not None or args.integral_feedforward:
             source = with_integral_rules(source, scratch / args.policy.name, args.integral_band, decay,
                                          FEEDFORWARD_SPEEDS if args.integral_feedforward else None,

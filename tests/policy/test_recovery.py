@@ -291,6 +291,28 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
     with pytest.raises(ValueError, match="recovery_overlay: .*unexpected keyword argument 'gate'"):
         OverlayConfig.from_dict({"gate": 0.1})
     assert OverlayConfig.from_dict({"at_once": True}).controller_settings == CONTROLLER_SETTINGS
+    with pytest.raises(ValueError, match="policy_blend needs at_once"):
+        OverlayConfig(policy_blend=True)
+
+
+@pytest.mark.unit
+def test_the_policy_blend_moves_the_gait_as_the_controllers_blend_and_holds_it_late_in_the_step():
+    """``policy_blend``: the gait for the next 20 ticks is the one in force moved toward the
+    policy's by the controller's smoothstep over the phase those ticks advance (phase rate 2/s:
+    0.04 of phase, 0.2 of the 0.2 blend); from 0.6 of phase it is held; the walk's start gait
+    is where it starts from."""
+    from rabbit_policy.runtime.policies import GaitCommand
+    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
+    from rabbit_policy.runtime.speed_window import Observation
+
+    overlay = RecoveryOverlay(OverlayConfig(at_once=True, policy_blend=True))
+    start, target = GaitCommand(tuple([0.0] * 24), 5.0), GaitCommand(tuple([1.0] * 24), 6.0)
+    overlay.start(start)
+    moved = overlay.blended(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, 0.3, 2.0, 1.0)), target)
+    r = 2.0 * 0.02 / 0.2
+    assert moved.alpha == pytest.approx([r * r * (3.0 - 2.0 * r)] * 24, abs=1e-15) and moved.kd == 6.0
+    late = overlay.blended(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, 0.7, 2.0, 1.0)), target)
+    assert late.alpha == moved.alpha  # held until the touchdown
 
 
 @pytest.mark.unit
@@ -362,6 +384,8 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     gaits applied at once, the loops and the stack's configuration alike), and the card's
     regenerate line and rates say so. A policy deciding once per step or already on the
     recovery base is refused with one line."""
+    from rabbit_policy.runtime.recovery import OverlayConfig
+
     ship = _ship_policy()
     network_text, rules_set_after_training, with_recovery_overlay = (
         ship.network_text, ship.rules_set_after_training, ship.with_recovery_overlay)
@@ -380,6 +404,12 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     assert rules_set_after_training(policy.checkpoint.info)[0].endswith(
         " --recovery-overlay --recovery-overlay-at-once")
     assert "no blend, no queue" in " ".join(network_text(policy.checkpoint.info))
+    blending = make_policy("learned", policy_file=with_recovery_overlay(plain, tmp_path / "pb.pt", policy_blend=True))
+    assert blending.overlay.config == OverlayConfig(at_once=True, policy_blend=True)
+    assert controller_settings(blending) == CONTROLLER_SETTINGS
+    assert rules_set_after_training(blending.checkpoint.info)[0].endswith(
+        " --recovery-overlay --recovery-overlay-policy-blend")
+    assert "blended in by the policy itself" in " ".join(network_text(blending.checkpoint.info))
     assert controller_settings(make_policy("learned", policy_file=plain)) == {}
     step_file = tmp_path / "per_step.pt"
     _zero_residual_on_recovery_file(step_file, base="classic")

@@ -328,6 +328,11 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     out = run_script("scripts/ship_policy.py", str(source), "--integral-feedforward-start", "--quick", "--dry-run")
     assert out.returncode == 2 and "--integral-feedforward-start needs --integral-feedforward" in out.stderr
     assert len(out.stderr.strip().splitlines()) == 1, out.stderr
+    for args, message in ((["--recovery-overlay-policy-blend"], "need --recovery-overlay"),
+                          (["--recovery-overlay", "--recovery-overlay-at-once", "--recovery-overlay-policy-blend"],
+                           "choose one")):
+        out = run_script("scripts/ship_policy.py", str(source), *args, "--quick", "--dry-run")
+        assert out.returncode == 2 and message in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
     trained.info.pop("memory")  # a checkpoint that keeps no integral
     trained.save(paper := tmp_path / "paper.pt")
     out = run_script("scripts/ship_policy.py", str(paper), "--integral-feedforward", "--quick", "--dry-run")

@@ -11,6 +11,7 @@ ticks is ``applied + s(dtau / 0.2) (network - applied)`` (dtau: the phase rate x
 hold 0.5) then adds its offsets to ``applied``, at once.
 
     .venv/bin/python docs/learning/overlay/policy_blend.py POLICY.pt [what...]   (what: back fwd transitions random models)
+(the measure runs the package's OverlayConfig(at_once=True, policy_blend=True) on POLICY's network)
 """
 from __future__ import annotations
 
@@ -71,16 +72,29 @@ class PolicyBlend:
 
 
 if __name__ == "__main__":
+    # The package's implementation (OverlayConfig(at_once=True, policy_blend=True), written by
+    # ship_policy.with_recovery_overlay on the network without its overlay); PolicyBlend above is the
+    # probe class it was first measured with (policy_blend_probe_class.txt; its smoothstep rounds
+    # differently from the controller's blend_shape the package reuses).
+    import importlib.util
+
     from rabbit_policy.evaluation.acceptance import BroadCriteria
     from rabbit_policy.evaluation.robustness import (RobustnessConfig, model_errors, push_margin, random_sequences,
                                                      transitions)
     from rabbit_policy.parallel import LocalBackend
 
-    policy = PolicyBlend(sys.argv[1], rule="norule" not in sys.argv)
+    spec = importlib.util.spec_from_file_location("ship_policy", "scripts/ship_policy.py")
+    ship = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(ship)
+    checkpoint = PolicyCheckpoint.load(sys.argv[1])
+    checkpoint.info.pop("recovery_overlay", None)
+    checkpoint.save("/tmp/policy_blend_plain.pt")
+    path = ship.with_recovery_overlay("/tmp/policy_blend_plain.pt", "/tmp/policy_blend_overlay.pt", policy_blend=True)
+    policy = LearnedPolicy(path)
     what = sys.argv[2:] or ["back", "fwd", "transitions", "random", "models"]
     config = replace(RobustnessConfig(), max_impulse=30)
     backend = LocalBackend(2)
-    tag = policy.name
+    tag = f"{policy.name} {policy.checkpoint.info['recovery_overlay']}"
     for d, name in ((-1, "back"), (1, "fwd")):
         if name in what:
             for v in config.push_speeds:

@@ -338,7 +338,10 @@ class NetworkPolicy:
         if self.base is not None:  # the base's own start (a zero residual)
             return self.base.start_command(speed)
         if not self._network_needs_body:  # an overlay starts on the network's own start
-            return self._network_act(Observation(speed, speed, 0.0))
+            command = self._network_act(Observation(speed, speed, 0.0))
+            if self.overlay is not None:
+                self.overlay.start(command)
+            return command
         gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
         if self.residual is None:
             self._remember(np.append(gait.free, gait.kd))

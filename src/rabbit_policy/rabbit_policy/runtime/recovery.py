@@ -231,11 +231,16 @@ class OverlayConfig:
     at_once: the controller applies every gait at once (:data:`CONTROLLER_SETTINGS`, as the
         recovery controller); False: with its default blend and queue, as the network was
         trained.
+    policy_blend: with ``at_once``, the overlay blends the policy's own gaits in itself, as
+        the controller's defaults would (over ``ControllerConfig.within_step_blend`` of phase,
+        smoothstep, restarted at each decision; from ``within_step_until`` of phase held until
+        the touchdown), so that only the rule's offsets act at once.
     """
 
     fast_gate: float = 0.1
     hold: float = 0.5
     at_once: bool = False
+    policy_blend: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.fast_gate) and self.fast_gate >= 0.0):
@@ -244,6 +249,10 @@ class OverlayConfig:
             raise ValueError(f"OverlayConfig.hold must be a weight in (0, 1], got {self.hold}")
         if not isinstance(self.at_once, bool):
             raise ValueError(f"OverlayConfig.at_once must be true or false, got {self.at_once!r}")
+        if not isinstance(self.policy_blend, bool):
+            raise ValueError(f"OverlayConfig.policy_blend must be true or false, got {self.policy_blend!r}")
+        if self.policy_blend and not self.at_once:
+            raise ValueError("OverlayConfig.policy_blend needs at_once: the controller would blend the gaits again")
 
     @classmethod
     def from_dict(cls, values: dict) -> "OverlayConfig":
@@ -298,19 +307,48 @@ class RecoveryOverlay:
 
         if decision_period < 1:
             raise ValueError("the recovery overlay acts within the step: its policy must decide every N >= 1 ticks")
+        from rabbit_hzd_controller.controller import ControllerConfig
+
         self.config = config
         self.rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
+        defaults = ControllerConfig()
+        self._blend, self._until = defaults.within_step_blend, defaults.within_step_until  # phase
+        self._decision_dt = decision_period * defaults.tick  # s
         self._held = None
+        self._applied: np.ndarray | None = None  # policy_blend: the policy's gait in force (alpha, rad)
         self.last_weight = 0.0
 
     def reset(self) -> None:
         self.rule.reset()
         self._held = None
+        self._applied = None
         self.last_weight = 0.0
+
+    def start(self, command) -> None:
+        """The gait the walk starts on (``policy_blend`` blends from it)."""
+        self._applied = np.asarray(command.alpha, dtype=float)
+
+    def blended(self, observation: Observation, command):
+        """``policy_blend``: the policy's gait for the next decision period, moved from the one
+        in force toward ``command`` by the controller's blend over the phase it will advance
+        (the phase rate x the decision period); held from ``within_step_until`` of phase."""
+        from rabbit_hzd_controller.law import blend_shape
+        from rabbit_policy.runtime.policies import GaitCommand
+
+        _, _, tau, tau_rate, _ = observation.body
+        target = np.asarray(command.alpha, dtype=float)
+        if self._applied is None:
+            self._applied = target
+        elif 0.0 <= tau < self._until:
+            moved = 1.0 - blend_shape(max(tau_rate, 0.0) * self._decision_dt / self._blend, self._blend)[0]
+            self._applied = self._applied + moved * (target - self._applied)
+        return GaitCommand(tuple(float(v) for v in self._applied), command.kd)
 
     def apply(self, observation: Observation, command):
         """The gait for this decision: ``command`` (the policy's, a ``GaitCommand``) with the
         rule on it (needs ``observation.body``)."""
+        if self.config.policy_blend:
+            command = self.blended(observation, command)
         self.rule.act(observation)
         w = self.rule.last_weight
         if self.config.fast_gate > 0.0 and observation.mean_speed > observation.desired_speed * (1.0 + self.config.fast_gate):
