@@ -219,6 +219,15 @@ def card_header(info: dict, broad: list[tuple[str, dict]] | None = None) -> list
     return lines + ["---", ""]
 
 
+def overlay_flags(overlay: dict | None) -> str:
+    """The ship_policy options that write a checkpoint's ``recovery_overlay`` record ('' for none)."""
+    if overlay is None:
+        return ""
+    if overlay.get("policy_blend"):
+        return " --recovery-overlay --recovery-overlay-policy-blend"
+    return " --recovery-overlay --recovery-overlay-at-once" if overlay.get("at_once") else " --recovery-overlay"
+
+
 def rules_set_after_training(info: dict) -> tuple[str, str]:
     """The ship_policy options that set the speed integral's rules the run trained without
     (``--integral-band``, ``--integral-windup-decay``, ``--integral-feedforward``), and the
@@ -231,9 +240,7 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     flags = (f" --integral-band {band:g}" if band else "") + (
         f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
         (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
-        if feedforward else "") + (" --recovery-overlay" + (
-            " --recovery-overlay-policy-blend" if overlay.get("policy_blend") else
-            " --recovery-overlay-at-once" if overlay.get("at_once") else "") if overlay is not None else "")
+        if feedforward else "") + overlay_flags(overlay)
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     notes = ([f"the integral's {names}"] if names else []) + (
         ["the recovery rule on top (`RecoveryOverlay`)"] if overlay is not None else [])
