@@ -177,8 +177,9 @@ def network_text(info: dict) -> list[str]:
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
         "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
-                       + ("blended in by the policy itself as the controller would, the rule's offsets applied "
-                          "from the next tick; " if (overlay or {}).get("policy_blend") else
+                       + ("blended in by the policy itself (in alpha over 0.2 of phase, queued for the touchdown "
+                          "from 0.6, as the controller's defaults would), the rule's offsets applied from the next "
+                          "tick; " if (overlay or {}).get("policy_blend") else
                           "applied from the next tick (no blend, no queue); " if (overlay or {}).get("at_once")
                           else "blended in at once; ")
                        if period else "a decision once per step, for the next step; ")
@@ -422,8 +423,9 @@ def main(argv: list[str] | None = None) -> int:
                              "the recovery controller's settings) instead of as the network was trained")
     parser.add_argument("--recovery-overlay-policy-blend", action="store_true",
                         help="with --recovery-overlay: the controller applies every gait at once and the overlay "
-                             "blends the network's own gaits in as the controller would, so only the rule's offsets "
-                             "act at once (OverlayConfig.policy_blend)")
+                             "blends the network's own gaits in itself, as the controller's defaults would (rabbit_policy."
+                             "runtime.alpha_blend.AlphaBlend), so only the rule's offsets act at once "
+                             "(OverlayConfig.policy_blend)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")

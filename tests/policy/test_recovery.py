@@ -296,23 +296,50 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
 
 
 @pytest.mark.unit
-def test_the_policy_blend_moves_the_gait_as_the_controllers_blend_and_holds_it_late_in_the_step():
-    """``policy_blend``: the gait for the next 20 ticks is the one in force moved toward the
-    policy's by the controller's smoothstep over the phase those ticks advance (phase rate 2/s:
-    0.04 of phase, 0.2 of the 0.2 blend); from 0.6 of phase it is held; the walk's start gait
-    is where it starts from."""
-    from rabbit_policy.runtime.policies import GaitCommand
-    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
-    from rabbit_policy.runtime.speed_window import Observation
+def test_the_alpha_blend_keeps_alpha_and_its_rate_continuous_when_each_decision_restarts_it():
+    """A new gait every 0.03 of phase (every 20 ticks at 1.5/s), each restarting the blend:
+    at each restart the blended alpha and its rate per unit of phase are those of the blend
+    it replaces (a blend restarted from rest at each decision, the first policy blend, drops
+    the rate and came in about 3x slower); the gait held for the period is the blend at the
+    period's middle; a gait kept reaches its own alpha within 0.2 of phase."""
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend
 
-    overlay = RecoveryOverlay(OverlayConfig(at_once=True, policy_blend=True))
-    start, target = GaitCommand(tuple([0.0] * 24), 5.0), GaitCommand(tuple([1.0] * 24), 6.0)
-    overlay.start(start)
-    moved = overlay.blended(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, 0.3, 2.0, 1.0)), target)
-    r = 2.0 * 0.02 / 0.2
-    assert moved.alpha == pytest.approx([r * r * (3.0 - 2.0 * r)] * 24, abs=1e-15) and moved.kd == 6.0
-    late = overlay.blended(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, 0.7, 2.0, 1.0)), target)
-    assert late.alpha == moved.alpha  # held until the touchdown
+    rng = np.random.default_rng(3)
+    blend = AlphaBlend(0.2, 0.6, 0.02)
+    blend.start(rng.uniform(-1.0, 1.0, 24), 5.0)
+    for k, tau in enumerate(np.arange(0.05, 0.5, 0.03)):
+        before, rate_before = blend.at(tau)
+        held, kd = blend.step(tau, 1.5, rng.uniform(-1.0, 1.0, 24), 5.0 + k)
+        after, rate_after = blend.at(tau)
+        np.testing.assert_allclose(after, before, atol=1e-12)
+        np.testing.assert_allclose(rate_after, rate_before, atol=1e-9)
+        np.testing.assert_array_equal(held, blend.at(tau + 0.5 * 1.5 * 0.02)[0])
+        assert kd == 5.0 + k
+        if k > 0:
+            assert np.abs(rate_after).max() > 0.1  # a blend in progress: its rate is carried, not dropped
+    np.testing.assert_array_equal(blend.at(tau + 0.2)[0], blend.target)  # 0.2 of phase after the last restart
+
+
+@pytest.mark.unit
+def test_the_alpha_blend_queues_a_late_gait_and_its_kd_for_the_touchdown():
+    """From 0.6 of phase a new gait (and Kd) waits: the blend in force goes on; at the
+    touchdown (the phase falling back) the queued gait blends in from the one it replaced,
+    over 0.2 of phase from the step's start, at rest."""
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend
+
+    blend = AlphaBlend(0.2, 0.6, 0.02)
+    blend.start([0.0] * 24, 5.0)
+    first, _ = blend.step(0.3, 2.0, [1.0] * 24, 6.0)
+    r = 0.5 * 2.0 * 0.02 / 0.2  # the middle of the period: 0.02 of phase into the blend
+    assert first == pytest.approx([r * r * (3.0 - 2.0 * r)] * 24, abs=1e-15)
+    assert blend.step(0.5, 2.0, [1.0] * 24, 6.0)[0] == pytest.approx([1.0] * 24, abs=1e-15)  # reached by 0.2 of phase
+    late, kd = blend.step(0.7, 2.0, [3.0] * 24, 7.0)
+    assert late == pytest.approx([1.0] * 24, abs=1e-15) and kd == 6.0  # queued
+    landed, kd = blend.step(0.01, 2.0, [3.0] * 24, 7.0)
+    r = (0.01 + 0.02) / 0.2  # the middle of the period after the touchdown
+    assert kd == 7.0 and landed == pytest.approx([1.0 + 2.0 * r * r * (3.0 - 2.0 * r)] * 24, abs=1e-12)
+    with pytest.raises(ValueError, match="AlphaBlend"):
+        AlphaBlend(0.0, 0.6, 0.02)
 
 
 @pytest.mark.unit

@@ -67,6 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, N_OUTPUTS, expand_alpha, reduce_alpha
+from rabbit_policy.runtime.alpha_blend import AlphaBlend
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLER_SETTINGS = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
@@ -232,9 +233,10 @@ class OverlayConfig:
         recovery controller); False: with its default blend and queue, as the network was
         trained.
     policy_blend: with ``at_once``, the overlay blends the policy's own gaits in itself, as
-        the controller's defaults would (over ``ControllerConfig.within_step_blend`` of phase,
-        smoothstep, restarted at each decision; from ``within_step_until`` of phase held until
-        the touchdown), so that only the rule's offsets act at once.
+        the controller's defaults would (:class:`~.alpha_blend.AlphaBlend`: over
+        ``ControllerConfig.within_step_blend`` of phase, a new gait restarting the blend from
+        the one in progress with its rate; from ``within_step_until`` of phase queued for the
+        touchdown), so that only the rule's offsets act at once.
     """
 
     fast_gate: float = 0.1
@@ -312,37 +314,31 @@ class RecoveryOverlay:
         self.config = config
         self.rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
         defaults = ControllerConfig()
-        self._blend, self._until = defaults.within_step_blend, defaults.within_step_until  # phase
-        self._decision_dt = decision_period * defaults.tick  # s
+        self._blend = AlphaBlend(defaults.within_step_blend, defaults.within_step_until,
+                                 decision_period * defaults.tick)  # policy_blend: the policy's gaits blended in
         self._held = None
-        self._applied: np.ndarray | None = None  # policy_blend: the policy's gait in force (alpha, rad)
         self.last_weight = 0.0
 
     def reset(self) -> None:
         self.rule.reset()
         self._held = None
-        self._applied = None
+        self._blend.target = None
         self.last_weight = 0.0
 
     def start(self, command) -> None:
         """The gait the walk starts on (``policy_blend`` blends from it)."""
-        self._applied = np.asarray(command.alpha, dtype=float)
+        self._blend.start(command.alpha, command.kd)
 
     def blended(self, observation: Observation, command):
-        """``policy_blend``: the policy's gait for the next decision period, moved from the one
-        in force toward ``command`` by the controller's blend over the phase it will advance
-        (the phase rate x the decision period); held from ``within_step_until`` of phase."""
-        from rabbit_hzd_controller.law import blend_shape
+        """``policy_blend``: the policy's gait for the next decision period, as the controller's
+        defaults would bring it in (:class:`~.alpha_blend.AlphaBlend`: blended over 0.2 of
+        phase, its rate kept when a new gait restarts the blend; from 0.6 of phase queued for
+        the touchdown, its Kd too)."""
         from rabbit_policy.runtime.policies import GaitCommand
 
         _, _, tau, tau_rate, _ = observation.body
-        target = np.asarray(command.alpha, dtype=float)
-        if self._applied is None:
-            self._applied = target
-        elif 0.0 <= tau < self._until:
-            moved = 1.0 - blend_shape(max(tau_rate, 0.0) * self._decision_dt / self._blend, self._blend)[0]
-            self._applied = self._applied + moved * (target - self._applied)
-        return GaitCommand(tuple(float(v) for v in self._applied), command.kd)
+        alpha, kd = self._blend.step(tau, tau_rate, command.alpha, command.kd)
+        return GaitCommand(tuple(float(v) for v in alpha), kd)
 
     def apply(self, observation: Observation, command):
         """The gait for this decision: ``command`` (the policy's, a ``GaitCommand``) with the
