@@ -48,7 +48,7 @@ def test_decision_sync_holds_a_due_state_until_its_decision_and_applies_it_to_th
     sync.on_gait_part("kd", 50.0)
     assert sync.on_state(0, q, dq) == [] and sync.missing == ["gait_timing"]  # a due decision would be missed
     actions = sync.on_gait_timing("at_once", 20)
-    assert [type(a) for a in actions] == [Log, Answer] and "blended in" in actions[0].text
+    assert [type(a) for a in actions] == [Log, Answer] and "blended in over 0.2 of phase" in actions[0].text
     for tick in range(1, 20):
         assert _answers(sync.on_state(tick * MS, q, dq)) == [tick * MS]
     assert sync.on_state(20 * MS, q, dq) == []  # due: held
@@ -133,3 +133,14 @@ def test_gait_timing_is_parsed_where_it_enters():
             parse_gait_timing(bad)
     with pytest.raises(ValueError, match="gait_timing must be"):
         GaitSync(ControllerConfig(), "whenever")
+
+
+def test_the_timing_log_says_how_gaits_apply_under_the_controllers_settings():
+    """The log names what the controller does with an at_once gait: blended (its defaults),
+    at once with no blend and no queue (the recovery settings a policy may ask for), or at
+    the next touchdown."""
+    recovery = ControllerConfig(within_step_blend=0.0, within_step_until=1.0, blend_phase=0.0)
+    sync = GaitSync(recovery, clock=FakeClock())
+    at_once = sync.on_gait_timing("at_once", 20)[0].text
+    assert "at once (no blend, no queue)" in at_once and "blended" not in at_once
+    assert "next touchdown" in sync.on_gait_timing("next_step", 0)[0].text

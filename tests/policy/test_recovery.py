@@ -390,9 +390,10 @@ def _ship_policy():
     return module
 
 
-def _overlay_file(tmp_path, at_once: bool = False):
+def _overlay_file(tmp_path, at_once: bool = False, policy_blend: bool = False):
     """The shipped network with ``ship_policy.py --recovery-overlay``'s record (``at_once``:
-    with ``--recovery-overlay-at-once``), and without."""
+    with ``--recovery-overlay-at-once``; ``policy_blend``: ``--recovery-overlay-policy-blend``),
+    and without."""
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.runtime.policies import packaged_policy_file
 
@@ -400,8 +401,8 @@ def _overlay_file(tmp_path, at_once: bool = False):
     checkpoint = PolicyCheckpoint.load(packaged_policy_file())
     checkpoint.info.pop("recovery_overlay", None)
     checkpoint.save(plain)
-    name = "overlay_at_once.pt" if at_once else "overlay.pt"
-    return _ship_policy().with_recovery_overlay(plain, tmp_path / name, at_once), plain
+    name = "overlay_policy_blend.pt" if policy_blend else "overlay_at_once.pt" if at_once else "overlay.pt"
+    return _ship_policy().with_recovery_overlay(plain, tmp_path / name, at_once, policy_blend), plain
 
 
 @pytest.mark.unit
@@ -474,16 +475,18 @@ def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network
 
 @pytest.mark.ros
 @pytest.mark.slow
-@pytest.mark.parametrize("at_once", [False, True])
-def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(tmp_path, at_once):
+@pytest.mark.parametrize("mode", ["blended", "at_once", "policy_blend"])
+def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(tmp_path, mode):
     """Through a push the overlay acts on (its walk parts from the network's alone):
-    policy_node builds the body state for it, run_stack's configuration gives the controller
-    node the settings the checkpoint asks for, and every state is the ROS-free loop's."""
+    policy_node builds the body state for it (the policy blend reads the phase and its rate
+    too), run_stack's configuration gives the controller node the settings the checkpoint asks
+    for, and every state is the ROS-free loop's."""
     from rabbit_policy.bringup.stack import StackConfig
     from rabbit_policy.runtime.policies import LearnedPolicy
     from test_stack_nodes import _reference
 
-    overlaid, plain = _overlay_file(tmp_path, at_once)
+    at_once = mode != "blended"
+    overlaid, plain = _overlay_file(tmp_path, at_once, mode == "policy_blend")
 
     class Alone(LearnedPolicy):  # the network without the overlay, under the same controller settings
         controller_settings = CONTROLLER_SETTINGS if at_once else {}

@@ -132,6 +132,17 @@ class GaitSync:
             self._answer_waiting()
         return self._out
 
+    def _timing_words(self, timing: str) -> str:
+        """How gaits apply under ``timing`` and this controller's configuration, for the log."""
+        if timing != "at_once":
+            return "at the next touchdown"
+        c = self.config
+        if c.within_step_blend <= 0.0:
+            return "when they arrive, at once (no blend" + (", no queue)" if c.within_step_until >= 1.0 else
+                                                            f"; from {c.within_step_until:g} of phase queued for the touchdown)")
+        return (f"when they arrive, blended in over {c.within_step_blend:g} of phase; from {c.within_step_until:g} "
+                "of phase queued for the touchdown")
+
     def on_gait_timing(self, timing: str, period: int) -> list[Action]:
         """The policy's ``/hzd/gait_timing``, parsed (:func:`parse_gait_timing`); ignored
         unless following the policy."""
@@ -139,7 +150,7 @@ class GaitSync:
         if not self.follow_policy_timing:
             return self._out
         if timing != self.gait_timing:
-            self._log("info", f"gaits apply {'when they arrive, blended in' if timing == 'at_once' else 'at the next touchdown'}")
+            self._log("info", f"gaits apply {self._timing_words(timing)}")
         self.gait_timing = timing
         self._timing_unknown = False
         due = PeriodicDecisions(period, TICK_NS) if period and self.decision_sync else None

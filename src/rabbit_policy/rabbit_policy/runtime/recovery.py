@@ -298,7 +298,11 @@ class RecoveryOverlay:
     own gaits jump with the command: 10 of 72 ordered speed changes fell (decelerations
     from 1.3-1.5 m/s at a step's start) and 77 of 100 random command sequences walked.
     Blended: 8 · 15 · 21 N s (classic 5 · 9 · 14), 68 of 72 changes within 4 s with none
-    falling, 98 sequences (ship_policy's checks 1-6).
+    falling, 98 sequences (ship_policy's checks 1-6). With ``policy_blend`` (shipped since
+    2026-11-28) the controller runs at once and the overlay blends the network's gaits in
+    itself (:class:`~.alpha_blend.AlphaBlend`), so only the offsets act at once: 11 · 18 · 25
+    N s backward, 24 · 15 · 6 forward (classic 25 · 16 · 11), 71 of 72 changes with none
+    falling, 100 sequences.
 
     Undisturbed, w stays 0 and the walk is the policy's own at most speeds; at the slow end
     (0.8 m/s) the network's near-stall steps stir it (w < 0.5; the walk 0.008 m/s slower)."""
