@@ -169,7 +169,9 @@ def network_text(info: dict) -> list[str]:
                     "when the hip falls behind where it was at the same phase of the steps before, its offsets "
                     "(rad, rows 1-4) are added in proportion to the deficit, held off while the hip's mean speed "
                     f"exceeds v_d by {overlay['fast_gate']:g} of it, and from a weight of {overlay['hold']:g} on "
-                    "added to the network's last gait chosen before the rule acted")
+                    "added to the network's last gait chosen before the rule acted"
+                    + (f"; from {overlay['rise_until']:g} of phase to the touchdown its weight may fall, not rise"
+                       if overlay.get("rise_until", 1.0) < 1.0 else ""))
     return [
         f"`hzd_rl_policy.pt`: {paper} ({n_in} → 12 → 12 → 12 → 21, tanh hidden layers, "
         f"{info.get('parameters', 633)} parameters; features `{features}`, action `{action}`). "
@@ -253,11 +255,13 @@ def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False, policy
     """A copy of the checkpoint ``policy`` at ``out`` that carries the recovery rule on top of
     its gait (``info["recovery_overlay"]``: :class:`~rabbit_policy.runtime.recovery.OverlayConfig`'s
     defaults, ``at_once`` as given: the loops and the stack then apply its gaits at once;
-    ``policy_blend``: at once, the overlay blending the network's own gaits in).
+    ``policy_blend``: at once, the overlay blending the network's own gaits in, and the rule's
+    weight not rising from the phase where the controller's defaults queue a gait, 0.6).
     ``ValueError`` for a policy that does not decide within the step or already has the
     recovery controller under its residual."""
     from dataclasses import asdict
 
+    from rabbit_hzd_controller.controller import ControllerConfig
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.runtime.recovery import OverlayConfig
 
@@ -267,7 +271,9 @@ def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False, policy
         raise ValueError(f"--recovery-overlay: {policy} decides once per step; the rule acts within the step")
     if info.get("residual_base", "classic") != "classic":
         raise ValueError(f"--recovery-overlay: {policy} is already a residual on {info['residual_base']!r}")
-    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once or policy_blend, policy_blend=policy_blend))
+    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once or policy_blend, policy_blend=policy_blend,
+                                                    rise_until=ControllerConfig().within_step_until if policy_blend
+                                                    else 1.0))
     checkpoint.save(out)
     return out
 

@@ -293,6 +293,9 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
     assert OverlayConfig.from_dict({"at_once": True}).controller_settings == CONTROLLER_SETTINGS
     with pytest.raises(ValueError, match="policy_blend needs at_once"):
         OverlayConfig(policy_blend=True)
+    for bad in (0.0, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="rise_until"):
+            OverlayConfig(rise_until=bad)
 
 
 @pytest.mark.unit
@@ -378,6 +381,36 @@ def test_the_overlay_adds_the_offsets_holds_the_last_quiet_gait_and_stays_off_wh
     assert overlay.last_weight == 1.0
 
 
+@pytest.mark.unit
+def test_from_rise_until_the_rules_weight_may_fall_but_not_rise_until_the_touchdown():
+    """With ``rise_until`` 0.6: steady steps, then the hip falls behind late in a step (0.7 of
+    phase). The weight stays at its value before 0.6 (0: nothing added) and may fall; after the
+    touchdown the same deficit early in the step acts in full. Without the limit it acts at
+    once, late in the step."""
+    from rabbit_policy.runtime.policies import GaitCommand
+    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
+    from rabbit_policy.runtime.speed_window import Observation
+
+    taus = [i / 25 for i in range(1, 25)]
+    gait = GaitCommand(tuple([0.1] * 24), 5.0)
+
+    def behind_late(rise_until: float) -> RecoveryOverlay:
+        overlay = RecoveryOverlay(OverlayConfig(rise_until=rise_until))
+        for _ in range(5):
+            for tau in taus:
+                overlay.apply(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)), gait)
+        for tau in [t for t in taus if t < 0.6]:
+            overlay.apply(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)), gait)
+        overlay.apply(Observation(1.0, 0.95, 0.05, body=(0.0, 0.0, 0.7, 2.0, 0.3)), gait)
+        return overlay
+
+    assert behind_late(1.0).last_weight == 1.0
+    limited = behind_late(0.6)
+    assert limited.last_weight == 0.0
+    limited.apply(Observation(1.0, 0.95, 0.05, body=(0.0, 0.0, 0.04, 2.0, 0.3)), gait)  # the next step
+    assert limited.last_weight == 1.0
+
+
 def _ship_policy():
     """``scripts/ship_policy.py`` as a module."""
     import importlib.util
@@ -433,11 +466,13 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
         " --recovery-overlay --recovery-overlay-at-once")
     assert "no blend, no queue" in " ".join(network_text(policy.checkpoint.info))
     blending = make_policy("learned", policy_file=with_recovery_overlay(plain, tmp_path / "pb.pt", policy_blend=True))
-    assert blending.overlay.config == OverlayConfig(at_once=True, policy_blend=True)
+    assert blending.overlay.config == OverlayConfig(at_once=True, policy_blend=True, rise_until=0.6)
     assert controller_settings(blending) == CONTROLLER_SETTINGS
     assert rules_set_after_training(blending.checkpoint.info)[0].endswith(
         " --recovery-overlay --recovery-overlay-policy-blend")
     assert "blended in by the policy itself" in " ".join(network_text(blending.checkpoint.info))
+    assert "from 0.6 of phase to the touchdown its weight may fall, not rise" in " ".join(
+        network_text(blending.checkpoint.info))
     assert controller_settings(make_policy("learned", policy_file=plain)) == {}
     step_file = tmp_path / "per_step.pt"
     _zero_residual_on_recovery_file(step_file, base="classic")

@@ -30,7 +30,7 @@ class LateFreezeOverlay(RecoveryOverlay):
         w = self.rule.last_weight
         fast = self.config.fast_gate > 0.0 and observation.mean_speed > observation.desired_speed * (1.0 + self.config.fast_gate)
         self._quiet_for = 0 if fast else getattr(self, "_quiet_for", 10 ** 9) + 1
-        if fast or self._quiet_for * self._decision_dt < FAST_HOLD:
+        if fast or self._quiet_for * self.rule.decision_period * 0.001 < FAST_HOLD:
             w = 0.0
         if tau >= LATE:
             if getattr(self, "_cap", None) is None:
