@@ -6,7 +6,8 @@
 # (outputs are linear in alpha): at each decision before 0.6 of phase a new blend starts from the blended gait
 # and its rate (per unit of phase); from 0.6 the new gait (and its Kd) waits for the touchdown, which starts a
 # blend from the old gait, positions only. The gait for the next 20 ticks is the blend at the middle of them.
-# Optionally with the late freeze (late_freeze_probe.py).
+# Optionally with the late freeze (late_freeze_probe.py). Run on the package's first policy blend (commit 49f2f67's
+# parent); the package's AlphaBlend (since 49f2f67) is this class's blend and gives the same figures.
 #   .venv/bin/python docs/learning/overlay/policy_blend.py src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt none
 #   .venv/bin/python docs/learning/overlay/exact_blend_probe.py LATE [back fwd transitions random]   (LATE 1: no freeze)
 import sys
@@ -26,6 +27,7 @@ from rabbit_policy.parallel import LocalBackend
 from rabbit_policy.runtime.policies import GaitCommand, LearnedPolicy
 
 LATE = float(sys.argv[1])
+BLEND, UNTIL, PERIOD_S = 0.2, 0.6, 0.02  # the controller's defaults, 20 ticks
 
 
 class ExactBlendOverlay(_ns["LateFreezeOverlay"]):
@@ -45,7 +47,7 @@ class ExactBlendOverlay(_ns["LateFreezeOverlay"]):
         self._kd = command.kd
 
     def _at(self, tau):
-        w, dw, h, dh = blend_shape((tau - self._start_phase) / self._blend, self._blend)
+        w, dw, h, dh = blend_shape((tau - self._start_phase) / BLEND, BLEND)
         return self._target + self._off * w + self._rate * h, self._off * dw + self._rate * dh
 
     def blended(self, observation, command):
@@ -60,7 +62,7 @@ class ExactBlendOverlay(_ns["LateFreezeOverlay"]):
             if self._pending_kd is not None:
                 self._kd, self._pending_kd = self._pending_kd, None
         self._last_tau = tau
-        if 0.0 <= tau < self._until:
+        if 0.0 <= tau < UNTIL:
             self._pending = self._pending_kd = None
             if not np.array_equal(new, self._target):
                 now, rate = self._at(tau)
@@ -69,7 +71,7 @@ class ExactBlendOverlay(_ns["LateFreezeOverlay"]):
             self._kd = command.kd
         else:
             self._pending, self._pending_kd = new, command.kd
-        mid, _ = self._at(tau + 0.5 * max(tau_rate, 0.0) * self._decision_dt)
+        mid, _ = self._at(tau + 0.5 * max(tau_rate, 0.0) * PERIOD_S)
         return GaitCommand(tuple(float(v) for v in mid), self._kd)
 
 

@@ -3,6 +3,7 @@
 # still the post-push fast steps, cannot raise a false alarm. Check 4's margins at 0.7/1.0/1.3 m/s.
 #   .venv/bin/python docs/learning/overlay/policy_blend.py src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt none
 #   .venv/bin/python docs/learning/overlay/fast_hold_probe.py HOLD_S [back fwd]
+# Measured on the first policy blend (before AlphaBlend, commit 0f3b395); on today's package it runs the new blend.
 import sys
 from dataclasses import replace
 from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margin
@@ -22,7 +23,7 @@ class FastHoldOverlay(RecoveryOverlay):
         fast = observation.mean_speed > observation.desired_speed * (1.0 + self.config.fast_gate)
         self._quiet_for = 0 if fast else getattr(self, "_quiet_for", 10 ** 9) + 1
         out = super().apply(observation, command)
-        if self._quiet_for * self._decision_dt < HOLD and self.last_weight > 0.0:  # held off: the policy's gait
+        if self._quiet_for * self.rule.decision_period * 0.001 < HOLD and self.last_weight > 0.0:  # held off: the policy's gait
             self.last_weight = 0.0
             self._held = command if not self.config.policy_blend else self.blended_now
             return self._held

@@ -5,6 +5,8 @@
 # (the shipped overlay), a gait after 0.6 of phase waits for the touchdown for the same reason.
 #   .venv/bin/python docs/learning/overlay/policy_blend.py src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt none
 #   .venv/bin/python docs/learning/overlay/late_freeze_probe.py LATE [FAST_HOLD_S] [back fwd]
+# Measured (late_freeze_06.txt) on the first policy blend (before AlphaBlend, commit 0f3b395); on today's package
+# it runs AlphaBlend, which with LATE 0.6 is the shipped OverlayConfig(rise_until=0.6).
 import sys
 from dataclasses import replace
 from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margin

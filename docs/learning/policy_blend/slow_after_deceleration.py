@@ -1,7 +1,8 @@
-# Probe (docs/learning.md, 2026-11-28): four of seed 38's settling changes that the policy blend (shipped 2026-11-28)
-# ends slow, 5-10 s after a deceleration, run by: the shipped file; the same with the rule's offsets never added
-# (its weight and hold still computed); the file shipped before (the overlay blended by the controller, HEAD~ of the
-# ship commit, written to /tmp/prev_shipped.pt by `git show`). Error: mean speed 5-10 s after the change - command.
+# Probe (docs/learning.md, 2026-11-28): four of seed 38's settling changes that the first policy blend (rise_until 1,
+# shipped first on 2026-11-28: first/; the .txt was measured on it) ends slow, 5-10 s after a deceleration, run by:
+# the shipped file; the same with the rule's offsets never added (its weight and hold still computed); the file
+# shipped before (the overlay blended by the controller, HEAD~ of the ship commit, written to /tmp/prev_shipped.pt by
+# `git show`). Error: mean speed 5-10 s after the change - command.
 #   git show 0f3b395:src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt > /tmp/prev_shipped.pt
 #   .venv/bin/python docs/learning/policy_blend/slow_after_deceleration.py > docs/learning/policy_blend/slow_after_deceleration.txt
 import sys
