@@ -50,6 +50,10 @@ class AlphaBlend:
         self.length, self.until, self.period_s = length, until, period_s
         self.target: np.ndarray | None = None
 
+    def reset(self) -> None:
+        """Before a walk: no gait in force until :meth:`start` (or the first :meth:`step`)."""
+        self.target = None
+
     def start(self, alpha, kd: float) -> None:
         """The gait (alpha, rad; Kd, N m s/rad) the walk starts on: in force, no blend."""
         self.target = np.asarray(alpha, dtype=float)
