@@ -541,7 +541,11 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
 def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(tmp_path):
     """The rule acts within the step: asked to decide once per step (``decision_period`` 0:
     ``--decision step``, ``policy_node decision_period:=0``), the learned policy loads without
-    it, reads no body state, and its name says the rule is off."""
+    it, reads no body state, and its name says the rule is off. Its controller then runs with
+    its defaults, in the loops and in run_stack's configuration alike, though the checkpoint's
+    rule (policy blend) asks for gaits at once: the two once disagreed by a touchdown 2 ms late."""
+    from rabbit_msgs_py.decision_ticks import DecisionTiming
+    from rabbit_policy.bringup.stack import StackConfig
     from rabbit_policy.runtime.policies import LearnedPolicy
 
     overlaid, _ = _overlay_file(tmp_path)
@@ -549,3 +553,11 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     assert per_step.overlay is None and not per_step.needs_body
     assert per_step.name.endswith("(no recovery rule: once per step)")
     assert LearnedPolicy(overlaid).overlay is not None
+    blending, _ = _overlay_file(tmp_path, at_once=True, policy_blend=True)
+    assert controller_settings(LearnedPolicy(blending, decision_period=0)) == {}
+    assert required_controller_settings("learned", blending, once_per_step=True) == {}
+    for timing, settings in (("step", {}), ("own", CONTROLLER_SETTINGS)):
+        config = StackConfig(duration=1.0, schedule=((0.0, 1.0),), controller="learned", policy_file=str(blending),
+                             decision=DecisionTiming.parse(timing))
+        node = config.node_parameters()["hzd_controller_node"]
+        assert {k: node[k] for k in CONTROLLER_SETTINGS if k in node} == settings, timing

@@ -188,9 +188,10 @@ def test_the_windup_decay_leaves_a_constant_command_alone_and_takes_the_overshoo
 @pytest.mark.slow
 def test_the_integral_feedforward_start_takes_the_start_transient_out():
     """The learned network needs I of about -0.25 m to walk at 1.0 m/s (it walks fast at
-    I = 0), so a walk that starts its integral at 0 is about 0.04 m/s too fast 3-6 s in; with
-    the table measured on it (steady_integrals) and ``start``, the integral starts at its
-    steady value and the walk is within 0.02. The table is each speed's mean I; a policy without an integral, or
+    I = 0), so a walk that starts its integral at 0 is about 0.03 m/s too fast 3-6 s in (0.04
+    before the policy blend); with the table measured on it (steady_integrals) and ``start``,
+    the integral starts at its steady value and the walk is within 0.02, and within half the
+    other's error. The table is each speed's mean I; a policy without an integral, or
     one that does not walk at a speed, has none (one line)."""
     from dataclasses import replace
 
@@ -205,7 +206,7 @@ def test_the_integral_feedforward_start_takes_the_start_transient_out():
     assert table.values[1] < -0.15 and table.values == steady_integrals(fed, (0.95, 1.0, 1.05)).values
     fed.memory = SpeedMemory(replace(fed.memory.config, feedforward=replace(table, start=True)))
     early = [walk(policy, Scenario.constant(1.0), 6.0).mean_speed(3.0, 6.0) - 1.0 for policy in (plain, fed)]
-    assert early[0] > 0.03 and abs(early[1]) < 0.02, early
+    assert early[0] > 0.02 and abs(early[1]) < min(0.02, early[0] / 2), early
     with pytest.raises(ValueError, match="did not walk"):
         steady_integral(plain, 0.5, duration=3.0, settle=1.0)
     with pytest.raises(ValueError, match="settle"):

@@ -112,7 +112,8 @@ class StackConfig:
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
                                     "pairing_key": self.pairing_key, "solo_check": 0.0,
-                                    **required_controller_settings(self.controller, self.policy_file or None)},
+                                    **required_controller_settings(self.controller, self.policy_file or None,
+                                                                   once_per_step=self.decision.param == 0)},
             "sim_node": {
                 "model": self.model,
                 "friction": self.friction,

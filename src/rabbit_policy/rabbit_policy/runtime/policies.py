@@ -231,12 +231,15 @@ def controller_settings(policy: Policy | None) -> dict[str, float]:
     return dict(getattr(policy, "controller_settings", {}))
 
 
-def required_controller_settings(kind: str, policy_file: str | Path | None = None) -> dict[str, float]:
+def required_controller_settings(kind: str, policy_file: str | Path | None = None,
+                                 once_per_step: bool = False) -> dict[str, float]:
     """The controller settings the controller named ``kind`` needs, without building it (the
     stack's configuration gives them to ``hzd_controller_node``): the recovery controller's,
     and a learned policy's whose residual adds to it or that carries its rule as an overlay
     applied at once (read from the checkpoint's ``info``,
-    ``policy_file`` or the packaged one; {} if there is none to read)."""
+    ``policy_file`` or the packaged one; {} if there is none to read). ``once_per_step``: the
+    policy decides once per step, so a learned policy loads without its overlay
+    (:class:`LearnedPolicy`) and asks for nothing on its account."""
     from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
 
     kind = controller_name(kind)
@@ -250,7 +253,7 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
             info = PolicyCheckpoint.load(path).info
             if info.get("residual_base", "classic") != "classic":
                 return dict(CONTROLLER_SETTINGS)
-            if info.get("recovery_overlay") is not None:
+            if info.get("recovery_overlay") is not None and not once_per_step:
                 from rabbit_policy.runtime.recovery import OverlayConfig
 
                 return OverlayConfig.from_dict(info["recovery_overlay"]).controller_settings
