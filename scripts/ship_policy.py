@@ -122,8 +122,10 @@ def distribution_text(name: str) -> str:
 def network_text(info: dict) -> list[str]:
     """The card's first paragraphs: the network's inputs, outputs and rates, from the
     checkpoint's ``info`` (what :class:`~rabbit_policy.runtime.policies.NetworkPolicy` runs)."""
+    from rabbit_hzd_controller.controller import ControllerConfig
     from rabbit_policy.runtime.memory import INPUTS
 
+    defaults = ControllerConfig()  # the blend a policy blend follows
     features, action = info.get("features", "paper"), info.get("action", "direct")
     cfg, memory = info.get("config", {}), info.get("memory") or {}
     period = cfg.get("decision_period")
@@ -179,9 +181,10 @@ def network_text(info: dict) -> list[str]:
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
         "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
-                       + ("blended in by the policy itself (in alpha over 0.2 of phase, queued for the touchdown "
-                          "from 0.6, as the controller's defaults would), the rule's offsets applied from the next "
-                          "tick; " if (overlay or {}).get("policy_blend") else
+                       + (f"blended in by the policy itself (in alpha over {defaults.within_step_blend:g} of phase, "
+                          f"queued for the touchdown from {defaults.within_step_until:g}, as the controller's defaults "
+                          "would), the rule's offsets applied from the next tick; "
+                          if (overlay or {}).get("policy_blend") else
                           "applied from the next tick (no blend, no queue); " if (overlay or {}).get("at_once")
                           else "blended in at once; ")
                        if period else "a decision once per step, for the next step; ")

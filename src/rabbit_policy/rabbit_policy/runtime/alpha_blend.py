@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from rabbit_hzd_controller.law import blend_shape
+from rabbit_policy.runtime.body import touched_down
 
 
 class AlphaBlend:
@@ -76,7 +77,7 @@ class AlphaBlend:
         new = np.asarray(alpha, dtype=float)
         if self.target is None:
             self.start(new, kd)
-        if self._last_tau is not None and tau < self._last_tau - 0.5 and self._queued is not None:
+        if touched_down(self._last_tau, tau) and self._queued is not None:
             queued, self.kd = self._queued
             self._offset, self._rate = self.target - queued, np.zeros_like(queued)  # the blend in progress is dropped
             self.target, self._start, self._queued = queued, 0.0, None

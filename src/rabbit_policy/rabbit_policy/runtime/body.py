@@ -26,6 +26,12 @@ BODY_OFFSET = (0.0, 0.0, 0.5, 2.0, 1.1)
 BODY_SCALE = (0.1, 1.0, 0.5, 1.0, 0.4)
 
 
+def touched_down(last_tau: float | None, tau: float) -> bool:
+    """A touchdown between two decisions, seen from the phase alone: it fell back by more
+    than half a step (``last_tau`` None: no decision before)."""
+    return last_tau is not None and tau < last_tau - 0.5
+
+
 def body_state(qpos: Sequence[float], qvel: Sequence[float], tau: float, tau_rate: float) -> tuple[float, ...]:
     """The five body inputs from the planar state (``qpos``/``qvel`` in ``JOINT_NAMES``
     order: hip x, hip z, torso pitch, ...) and the controller's phase ``tau`` and its rate

@@ -68,6 +68,7 @@ import numpy as np
 
 from rabbit_hzd_controller.alpha import N_FREE, N_OUTPUTS, expand_alpha, reduce_alpha
 from rabbit_policy.runtime.alpha_blend import AlphaBlend
+from rabbit_policy.runtime.body import touched_down
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLER_SETTINGS = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
@@ -132,7 +133,7 @@ class StepMemory:
         > 0); the reference there: the slowest of the previous steps' hip velocity over the
         larger of their command and ``command`` (each at its bin, or its nearest recorded
         one), None before ``depth`` whole steps are known."""
-        if self._last_tau is not None and tau < self._last_tau - 0.5:
+        if touched_down(self._last_tau, tau):
             self.steps = [np.full((self.bins, 2), np.nan)] + self.steps[:self.depth]
         self._last_tau = tau
         b = min(max(int(tau * self.bins), 0), self.bins - 1)
