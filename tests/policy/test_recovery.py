@@ -35,6 +35,51 @@ def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
 
 
 @pytest.mark.unit
+def test_a_forgotten_step_is_dropped_and_the_steps_before_stay_the_reference():
+    memory = StepMemory(bins=4, depth=2)
+    for _ in range(2):  # two whole steps at the command's pace
+        for b in range(4):
+            memory.observe(0.125 + 0.25 * b, 1.0, 1.0)
+    assert memory.observe(0.1, 0.3, 1.0) == 1.0  # a touchdown; a pushed step begins
+    memory.forget()
+    for b in range(1, 4):
+        memory.observe(0.125 + 0.25 * b, 0.3, 1.0)
+    assert memory.observe(0.1, 1.0, 1.0) == 1.0  # kept, this step would be the slowest: 0.3
+    memory.forget()  # undone by a reset
+    memory.reset()
+    for _ in range(3):
+        for b in range(4):
+            memory.observe(0.125 + 0.25 * b, 0.3 if _ == 2 else 1.0, 1.0)
+    assert memory.observe(0.1, 1.0, 1.0) == 0.3  # not forgotten: the slow step is in the memory
+    with pytest.raises(ValueError):
+        RecoveryConfig(forget_weight=0.0)
+
+
+@pytest.mark.unit
+def test_the_rule_forgets_a_pushed_step_so_that_it_sees_the_next_push():
+    """Three pushes 2 s apart: with the pushed step kept in the memory (the slowest of the
+    four), the rule did not act on a second push within four steps (docs/learning.md
+    2026-11-28 (second)). Here the rule's weight saturates in one step; that step is left
+    out, and the same deficit in the next step is seen again."""
+    from rabbit_policy.runtime.speed_window import Observation
+
+    policy = make_policy("recovery")
+
+    def decide(tau: float, hip_velocity: float) -> float:
+        policy.act(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, hip_velocity)))
+        return policy.last_weight
+
+    taus = [i / 25 for i in range(1, 25)]
+    for _ in range(5):
+        for tau in taus:
+            decide(tau, 1.0)
+    pushed = [decide(tau, 0.4) for tau in taus]  # a whole step far behind: w saturates
+    assert max(pushed) >= policy.config.forget_weight
+    again = [decide(tau, 0.4) for tau in taus]
+    assert again[len(taus) // 2] == pytest.approx(pushed[len(taus) // 2])  # the reference is the walk before the push
+
+
+@pytest.mark.unit
 def test_the_rule_acts_only_inside_the_step_and_only_when_the_hip_falls_behind():
     policy = make_policy("recovery")
     assert policy.weight(0.3, 1.0, None) == 0.0  # no reference yet
