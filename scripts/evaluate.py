@@ -11,7 +11,8 @@ Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
 * limit cycles: phase portraits at several speeds after a perturbation, and the
   Poincaré test (eigenvalues of the step-to-step return map's Jacobian);
 * push recovery: three push scenarios at 2, 4 and 6 s, who fell, speed plots, an
-  impulse sweep, and a GIF of each controller under the pushes;
+  impulse sweep, repeated pushes (three equal pushes 2 s apart, broadly) and a GIF of each
+  controller under the pushes;
 
 with ``--ablation``, the checks 1-6 table of ``scripts/compare_policies.py --out`` files (the
 learning issue's ablation); and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
@@ -147,6 +148,10 @@ def main(argv: list[str] | None = None) -> int:
             log("impulse sweep")
             sweep = evaluation.push_sweep(policies, config, model, map_fn)
             figures.sweep_figure(sweep, out / "sweep.png")
+        repeated = {}
+        if config.repeated is not None:
+            log("repeated pushes")
+            repeated = evaluation.repeated_push_table(policies, config, model, map_fn)
         robust = {}
         if config.robustness is not None:
             for name, policy in policies.items():
@@ -170,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
                         "wall_time_s": time.perf_counter() - start,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
-               "push": push, "push_sweep": sweep, "robustness": robust,
+               "push": push, "push_sweep": sweep, "repeated_pushes": repeated, "robustness": robust,
                "acceptance_1_6": verdicts if config.robustness is not None else {}, "videos": videos,
                "ablation": ablation}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))

@@ -15,7 +15,8 @@ import pytest
 from rabbit_policy.evaluation.experiments import convergence, filtered_speed, settling_time
 from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
 from rabbit_policy.runtime.policies import CONTROLLERS, make_policy
-from rabbit_policy.evaluation.push_recovery import PUSH_SCENARIOS, SweepConfig, impulse_sweep, push_trial, survives
+from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, RepeatedConfig, SweepConfig, impulse_sweep,
+                                                    push_trial, repeated_pushes, survives)
 
 pytestmark = pytest.mark.sim
 
@@ -193,6 +194,16 @@ def test_impulse_sweep_largest_survived():
         impulse_sweep(CLASSIC, 1.0, 0, config)
 
 
+def test_repeated_pushes_count_the_trials_survived_per_speed_and_impulse():
+    config = RepeatedConfig(impulses=((1.0, (2.0, 40.0)),), first_times=(2.0,), count=2, horizon=5.0)
+    assert config.scenario(2.0, 2.0).times == (2.0, 4.0) and config.scenario(2.0, 2.0).impulse == pytest.approx(-2.0)
+    result = repeated_pushes(CLASSIC, config)
+    assert result == {"by_speed": {"1.00": {"2": 1, "40": 0}}, "survived": 1, "trials": 2}
+    for bad in ({"count": 0}, {"first_times": ()}, {"horizon": 4.0}, {"impulses": ((1.0, (-3.0,)),)}):
+        with pytest.raises(ValueError):
+            RepeatedConfig(**{"impulses": ((1.0, (2.0,)),), "first_times": (2.0,), "count": 2, "horizon": 5.0, **bad})
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("scenario", ["large_backward"])  # the paper's third scenario: one push, one stack run
 def test_ros_stack_push_outcome_matches_the_fast_path(scenario):
@@ -279,6 +290,9 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert set(table) == {"small_forward", "small_backward", "large_backward"}
     assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in CONTROLLERS)
     assert set(results["push_sweep"]) == set(CONTROLLERS)
+    assert set(results["repeated_pushes"]) == set(CONTROLLERS)
+    assert all(r["trials"] == 2 and r["by_speed"]["1.00"]["40"] == 0 for r in results["repeated_pushes"].values())
+    assert "### Repeated pushes" in report and "| 1.0 m/s, 3 N s | 1.0 m/s, 40 N s | all |" in report
     assert set(results["robustness"]) == set(CONTROLLERS)
     for name in CONTROLLERS:
         robust = results["robustness"][name]

@@ -5,6 +5,8 @@
 # With LEVEL, only a step in which w exceeded LEVEL is left out (the learned walk's near-stall
 # steps at 0.7-0.8 m/s stir the rule below 0.5; left out, the memory goes stale).
 #   .venv/bin/python docs/learning/repeated_pushes/memory_probe.py [skip|base] [LEVEL] > ...
+# (Run on the package of 08abeef, whose memory kept every step: "skip" here is the probe's own rule.
+# On a later package, which forgets itself, "skip" would stack two rules: read repeated.txt.)
 import sys
 from concurrent.futures import ProcessPoolExecutor
 

@@ -2,6 +2,9 @@
 # at 2.0-2.5 s in 0.1 s steps (6 offsets) x 4 impulses per speed; survived = neither fell nor
 # stalled within 10 s. For the memory variants of memory_probe.py (MODE, LEVEL as there):
 #   .venv/bin/python docs/learning/repeated_pushes/repeated.py [base|skip] [LEVEL]
+# repeated.txt: "base" and "skip" ran on the package of 08abeef (the memory kept every step);
+# "classic" is the same trials for classic HZD. Since ec29e5a the package forgets at 0.9
+# (RecoveryConfig.forget_weight), and "base" gives the "skip level 0.9" lines.
 import sys
 from concurrent.futures import ProcessPoolExecutor
 

@@ -28,8 +28,8 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
 
-from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, SweepConfig, impulse_sweep,
-                                                    push_trial, scenario_table)
+from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, RepeatedConfig, SweepConfig,
+                                                    impulse_sweep, push_trial, repeated_pushes, scenario_table)
 from rabbit_policy.evaluation.robustness import RobustnessConfig
 from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
 from rabbit_policy.experiment.loop import walk as run_walk
@@ -65,6 +65,7 @@ class EvaluationConfig:
     push_duration: float = 10.0
     scenarios: tuple[PushScenario, ...] = PUSH_SCENARIOS
     sweep: SweepConfig | None = field(default_factory=SweepConfig)
+    repeated: RepeatedConfig | None = field(default_factory=RepeatedConfig)
     video_scenarios: tuple[str, ...] = ("small_backward", "large_backward")
     video_fps: float = 10.0
     video_size: tuple[int, int] = (224, 168)
@@ -78,6 +79,8 @@ class EvaluationConfig:
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
                    sweep=SweepConfig(impulses=(3.0, 12.0), push_times=(3.0,), horizon=2.0),
+                   repeated=RepeatedConfig(impulses=((1.0, (3.0, 40.0)),), first_times=(2.0,), count=2,
+                                           horizon=5.0),
                    video_scenarios=("large_backward",), video_fps=5.0, video_size=(160, 120),
                    robustness=RobustnessConfig.quick())
 
@@ -101,6 +104,7 @@ class EvaluationConfig:
                 "sweep": None if self.sweep is None else {
                     "impulses_Ns": list(self.sweep.impulses), "push_duration_s": self.sweep.duration,
                     "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon},
+                "repeated": None if self.repeated is None else self.repeated.to_dict(),
                 "video_scenarios": list(self.video_scenarios), "video_fps": self.video_fps,
                 "video_size": list(self.video_size),
                 "robustness": None if self.robustness is None else self.robustness.to_dict()}
@@ -287,6 +291,14 @@ def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, mo
     return {"speed": config.push_speed, "duration_s": config.push_duration,
             "scenarios": [s.to_dict() for s in config.scenarios],
             "table": scenario_table(walks, config.scenarios), "series": series}, walks
+
+
+def repeated_push_table(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions(),
+                        map_fn: MapFn = map) -> dict:
+    """Repeated pushes (:func:`~.push_recovery.repeated_pushes`) per controller."""
+    if config.repeated is None:
+        return {}
+    return {name: repeated_pushes(policy, config.repeated, model, map_fn) for name, policy in controllers.items()}
 
 
 def push_sweep(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions(),

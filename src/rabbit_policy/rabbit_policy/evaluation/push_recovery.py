@@ -1,4 +1,5 @@
-"""Push recovery on the ROS-free fast path: the paper's three scenarios and an impulse sweep.
+"""Push recovery on the ROS-free fast path: the paper's three scenarios, an impulse sweep and
+repeated pushes.
 
 The paper pushes the torso at t = 2, 4 and 6 s with "small forward", "small backward"
 and "large backward" forces but gives no magnitudes; ours are in :data:`PUSH_SCENARIOS`
@@ -127,6 +128,68 @@ def impulse_sweep(policy: Policy, speed: float, direction: int, config: SweepCon
         largest = impulse
     return {"direction": "forward" if direction > 0 else "backward", "impulses": list(config.impulses),
             "survived_fraction": fraction.tolist(), "largest_survived_Ns": largest}
+
+
+@dataclass(frozen=True)
+class RepeatedConfig:
+    """Repeated pushes (beyond the paper; the shape of its scenarios, broadly): ``count`` equal
+    backward pushes ``spacing`` s apart (``duration`` s each), the first at each of
+    ``first_times`` s, for every impulse (N s, magnitudes) of every speed (m/s) in
+    ``impulses``; a trial survives when the walk neither falls nor stalls within ``horizon`` s
+    of the start. Pushes 2 s apart land within the four steps the recovery rule remembers
+    (:class:`~rabbit_policy.runtime.recovery.StepMemory`), at phases that vary with the
+    walk. The default impulses run from about classic's backward margin to twice the
+    recovery controller's at 0.7 m/s and about its margin at 1.0 and 1.3 m/s."""
+
+    impulses: tuple[tuple[float, tuple[float, ...]], ...] = (
+        (0.7, (8.0, 10.0, 12.0, 14.0)), (1.0, (13.0, 16.0, 19.0, 22.0)), (1.3, (18.0, 22.0, 26.0, 30.0)))
+    first_times: tuple[float, ...] = (2.0, 2.1, 2.2, 2.3, 2.4, 2.5)
+    count: int = 3
+    spacing: float = 2.0
+    duration: float = 0.1
+    horizon: float = 10.0
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.count, int) and self.count >= 1):
+            raise ValueError(f"RepeatedConfig.count must be a whole number >= 1, got {self.count!r}")
+        if not (self.spacing > 0.0 and self.duration > 0.0 and self.first_times):
+            raise ValueError("RepeatedConfig: spacing and duration > 0 s and at least one first push time")
+        last = max(self.first_times) + (self.count - 1) * self.spacing + self.duration
+        if not self.horizon > last:
+            raise ValueError(f"RepeatedConfig.horizon ({self.horizon} s) must end after the last push ({last:g} s)")
+        for speed, impulses in self.impulses:
+            if not (speed > 0.0 and impulses and all(i > 0.0 for i in impulses)):
+                raise ValueError(f"RepeatedConfig.impulses: a speed > 0 m/s with magnitudes > 0 N s, got "
+                                 f"{speed!r}: {impulses!r}")
+
+    def scenario(self, impulse: float, first: float) -> PushScenario:
+        """The trial's pushes: ``count`` backward pushes of ``impulse`` N s from ``first`` s."""
+        times = tuple(round(first + k * self.spacing, 9) for k in range(self.count))
+        return PushScenario(f"repeated_{impulse:g}", -impulse / self.duration, self.duration, times)
+
+    def to_dict(self) -> dict:
+        return {"impulses_Ns": {f"{speed:.2f}": list(imps) for speed, imps in self.impulses},
+                "first_times_s": list(self.first_times), "count": self.count, "spacing_s": self.spacing,
+                "push_duration_s": self.duration, "horizon_s": self.horizon}
+
+
+def _repeated_job(job: tuple) -> bool:
+    policy, speed, scenario, horizon, model = job
+    return not push_trial(policy, speed, scenario, horizon, model).failed
+
+
+def repeated_pushes(policy: Policy, config: RepeatedConfig = RepeatedConfig(), model: ModelOptions = ModelOptions(),
+                    map_fn: Callable[[Callable, Iterable], Iterable] = map) -> dict:
+    """Trials survived per speed and impulse (over ``config.first_times``), and in all:
+    ``{"by_speed": {"0.70": {"8": n, ...}, ...}, "survived": n, "trials": n}``."""
+    cells = [(speed, impulse) for speed, impulses in config.impulses for impulse in impulses]
+    jobs = [(policy, speed, config.scenario(impulse, first), config.horizon, model)
+            for speed, impulse in cells for first in config.first_times]
+    outcomes = np.array(list(map_fn(_repeated_job, jobs)), dtype=bool).reshape(len(cells), len(config.first_times))
+    by_speed: dict[str, dict[str, int]] = {}
+    for (speed, impulse), row in zip(cells, outcomes):
+        by_speed.setdefault(f"{speed:.2f}", {})[f"{impulse:g}"] = int(row.sum())
+    return {"by_speed": by_speed, "survived": int(outcomes.sum()), "trials": int(outcomes.size)}
 
 
 def scenario_table(trials: dict[str, dict[str, WalkResult]], scenarios: Sequence[PushScenario]) -> list[dict]:

@@ -111,6 +111,27 @@ def _against_margins(impulse: float, sweep: dict) -> str:
     return f"between the controllers' {direction} margins ({min(margins):g}–{max(margins):g} N s)"
 
 
+def repeated_section(repeated: dict, config: dict | None) -> list[str]:
+    """The repeated-push table: trials survived per controller, speed and impulse."""
+    if not repeated or not config:
+        return []
+    cells = [(speed, impulse) for speed, impulses in config["impulses_Ns"].items() for impulse in impulses]
+    trials = len(config["first_times_s"])
+    lines = ["### Repeated pushes (beyond the paper)", "",
+             f"{config['count']} equal backward pushes of {config['push_duration_s']} s, {config['spacing_s']:g} s apart "
+             f"(the shape of the paper's scenarios), the first at each of "
+             f"{', '.join(f'{t:g}' for t in config['first_times_s'])} s; a trial survives when the walk neither "
+             f"falls nor stalls within {config['horizon_s']:g} s. Trials survived of {trials} per speed (m/s) "
+             "and impulse (N s):", "",
+             "| controller | " + " | ".join(f"{float(s):.1f} m/s, {i:g} N s" for s, i in cells) + " | all |",
+             "|---|" + "---|" * (len(cells) + 1)]
+    for name, result in repeated.items():
+        counts = [result["by_speed"][speed][f"{impulse:g}"] for speed, impulse in cells]
+        lines.append(f"| {_label(name)} | " + " | ".join(str(c) for c in counts)
+                     + f" | {result['survived']}/{result['trials']} |")
+    return lines + [""]
+
+
 def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
     lines = ["## Push recovery", "",
              f"Walking at {push['speed']} m/s, a horizontal force on the torso's centre of mass at the times "
@@ -303,6 +324,7 @@ def render_report(results: dict) -> str:
     lines += limit_cycle_section(results["limit_cycle"], results["config"])
     lines += poincare_section(results["poincare"])
     lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", []))
+    lines += repeated_section(results.get("repeated_pushes", {}), results["config"].get("repeated"))
     lines += robustness_section(results.get("robustness", {}))
     lines += acceptance_section(results.get("acceptance_1_6", {}))
     lines += ablation_section(results.get("ablation", {}))
