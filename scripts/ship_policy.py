@@ -34,6 +34,7 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_policy.evaluation.acceptance import broad_table
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
+from rabbit_policy.runtime.recovery import RecoveryConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 FEEDFORWARD_SPEEDS = tuple(round(0.7 + 0.025 * i, 3) for i in range(33))
@@ -168,7 +169,8 @@ def network_text(info: dict) -> list[str]:
     overlay = info.get("recovery_overlay")
     if overlay is not None:
         outputs += (f"; on top, the recovery controller's rule (`rabbit_policy.runtime.recovery.RecoveryOverlay`): "
-                    "when the hip falls behind where it was at the same phase of the steps before, its offsets "
+                    "when the hip falls behind where it was at the same phase of the steps before (a step in "
+                    f"which the rule's weight reached {RecoveryConfig().forget_weight:g} left out), its offsets "
                     "(rad, rows 1-4) are added in proportion to the deficit, held off while the hip's mean speed "
                     f"exceeds v_d by {overlay['fast_gate']:g} of it, and from a weight of {overlay['hold']:g} on "
                     "added to the network's last gait chosen before the rule acted"
