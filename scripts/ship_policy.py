@@ -144,6 +144,8 @@ def network_text(info: dict) -> list[str]:
                       + (f"; once the hip has passed a new v_d, within {memory['windup_decay']['seconds']:g} s of "
                          f"the change, what I wound up since the change decays with time constant "
                          f"{memory['windup_decay']['tau']:g} s until {memory['windup_decay']['seconds']:g} s after it"
+                         + (" (a walk's start counts as a change up to v_d)" if memory["windup_decay"].get("at_start")
+                            else "")
                          if memory.get("windup_decay") else "")
                       + ("; when v_d changes it moves by the difference of its steady values for the old and "
                          + ("the new v_d, and it starts a walk at its steady value for v_d" if
@@ -246,7 +248,8 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     feedforward = memory.get("feedforward")  # never trained with
     overlay = info.get("recovery_overlay")  # never trained with
     flags = (f" --integral-band {band:g}" if band else "") + (
-        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}" if decay else "") + (
+        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}"
+        + (" --integral-windup-at-start" if decay.get("at_start") else "") if decay else "") + (
         (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
         if feedforward else "") + overlay_flags(overlay)
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
@@ -331,11 +334,12 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
 
 
 def with_integral_rules(policy: Path, out: Path, band: float | None = None,
-                        windup_decay: tuple[float, float] | None = None,
+                        windup_decay: tuple[float, float] | tuple[float, float, bool] | None = None,
                         feedforward: tuple[float, ...] | None = None, feedforward_start: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
     speed error is ``band`` m/s or more (``MemoryConfig.band``) and whose windup after a
-    command change decays, ``windup_decay`` = (seconds, tau) in s (``MemoryConfig.windup_decay``);
+    command change decays, ``windup_decay`` = (seconds, tau) in s and optionally at_start
+    (``MemoryConfig.windup_decay``);
     None: that rule as the checkpoint has it. ``feedforward``: also the integral's
     feed-forward table (``MemoryConfig.feedforward``) at these speeds (m/s), measured on the
     copy with those rules (:func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`:
@@ -416,6 +420,10 @@ def main(argv: list[str] | None = None) -> int:
                              "copy records it, and every check runs on it")
     parser.add_argument("--integral-windup-tau", type=float, default=1.0, metavar="TAU",
                         help="--integral-windup-decay's time constant (s; default 1)")
+    parser.add_argument("--integral-windup-at-start", action="store_true",
+                        help="with --integral-windup-decay: a walk's start counts as a change of the command up "
+                             "to v_d, so what the integral winds up over the first (slow) steps decays too "
+                             "(WindupDecay.at_start)")
     parser.add_argument("--integral-feedforward", action="store_true",
                         help="ship the policy with its speed integral moving by the difference of its steady values "
                              "when the command changes (a table measured on the policy with its other rules, "
@@ -446,6 +454,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--workers must be >= 1")
     if args.integral_feedforward_start and not args.integral_feedforward:
         parser.error("--integral-feedforward-start needs --integral-feedforward")
+    if args.integral_windup_at_start and args.integral_windup_decay is None:
+        parser.error("--integral-windup-at-start needs --integral-windup-decay")
     if (args.recovery_overlay_at_once or args.recovery_overlay_policy_blend) and not args.recovery_overlay:
         parser.error("--recovery-overlay-at-once and --recovery-overlay-policy-blend need --recovery-overlay")
     if args.recovery_overlay_at_once and args.recovery_overlay_policy_blend:
@@ -462,7 +472,8 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
 
     source = args.policy
     try:
-        decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau)
+        decay = None if args.integral_windup_decay is None else (args.integral_windup_decay, args.integral_windup_tau,
+                                                                 args.integral_windup_at_start)
         if args.recovery_overlay:  # (the feed-forward table is the network's own: measured without the overlay)
             source = with_recovery_overlay(source, scratch / f"overlay_{args.policy.name}",
                                            args.recovery_overlay_at_once, args.recovery_overlay_policy_blend)

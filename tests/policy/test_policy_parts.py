@@ -272,6 +272,27 @@ def test_the_speed_integral_with_a_band_holds_on_large_errors_and_integrates_sma
 
 
 
+def test_the_windup_decay_at_start_treats_the_walks_start_as_a_change_up():
+    """WindupDecay.at_start: what I winds up over a walk's first (slow) steps decays toward its
+    value at the start once the hip has passed v_d, as after a change up; with the feed-forward's
+    start, toward I*(v_d). Without it, the same errors integrate as before."""
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, SpeedIntegral, WindupDecay
+
+    errors = (0.5, 0.3, -0.2, 0.0, 0.2)  # slow first steps, then the hip passes v_d
+    plain = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=WindupDecay(seconds=4.0, tau=2.0)))
+    assert [plain.update(e, 1.0) for e in errors] == pytest.approx([0.5, 0.8, 0.6, 0.6, 0.8])
+    start = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=WindupDecay(4.0, 2.0, at_start=True)))
+    assert [start.update(e, 1.0) for e in errors] == pytest.approx([0.5, 0.8, 0.3, 0.15, 0.35])
+    start.reset()  # every walk's start
+    assert [start.update(e, 1.0) for e in errors] == pytest.approx([0.5, 0.8, 0.3, 0.15, 0.35])
+    table = IntegralFeedforward((0.5, 1.5), (-0.2, -0.2), start=True)
+    both = SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=WindupDecay(4.0, 2.0, True), feedforward=table))
+    assert [both.update(e, 1.0) for e in errors] == pytest.approx([0.3, 0.6, -0.2 + 0.5 * 0.6, -0.2 + 0.25 * 0.6,
+                                                                   -0.05 + 0.2])
+    with pytest.raises(ValueError, match="at_start"):
+        WindupDecay(at_start=1)
+
+
 def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_new_command():
     """WindupDecay: after a change of v_d, I integrates as before until the error turns against
     the change; from then until ``seconds`` after the change it decays toward its value at the
@@ -304,7 +325,8 @@ def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_n
         IntegralConfig(limit=1.0, dt=1.0, windup_decay={"seconds": 5.0})
     memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), windup_decay=WindupDecay())
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
-    assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0}
+    assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0, "at_start": False}
+    assert MemoryConfig(**{**recorded, "windup_decay": {"seconds": 5.0, "tau": 1.0}}) == memory  # a checkpoint from before
     assert MemoryConfig(**recorded) == memory and memory.integral_config().windup_decay == WindupDecay()
     with pytest.raises(ValueError, match="windup decay"):
         MemoryConfig(**{**recorded, "windup_decay": {"seconds": 5.0, "speed": 1.0}})

@@ -80,6 +80,54 @@ def test_the_rule_forgets_a_pushed_step_so_that_it_sees_the_next_push():
 
 
 @pytest.mark.unit
+def test_at_most_forget_steps_steps_in_a_row_are_forgotten():
+    memory = StepMemory(bins=4, depth=2, max_dropped=2)
+
+    def step(hip_velocity: float, forget: bool = False) -> float | None:
+        """One step (4 bins; the phase falling back starts the next); the reference at its end."""
+        for b in range(4):
+            reference = memory.observe(0.125 + 0.25 * b, hip_velocity, 1.0)
+            if forget:
+                memory.forget()
+        return reference
+
+    references = [step(1.0), step(1.0), step(0.3, True), step(0.3, True), step(0.3, True), step(1.0)]
+    assert references[2:5] == [1.0, 1.0, 1.0]  # two slow steps dropped; the reference stays the walk before
+    assert references[5] == pytest.approx(0.3)  # the third slow step in a row is kept
+    with pytest.raises(ValueError):
+        RecoveryConfig(forget_steps=-1)
+    with pytest.raises(ValueError):
+        RecoveryConfig(forget_after=float("nan"))
+
+
+@pytest.mark.unit
+def test_nothing_is_forgotten_within_forget_after_of_a_change_of_the_command():
+    """After a change of the command the hip lags the new one step after step (accelerating
+    from the slow end, the rule catches a stall at full weight); those steps are kept, so the
+    memory follows the walk. A walk's start is not a change."""
+    from rabbit_policy.runtime.speed_window import Observation
+
+    def run(change: bool) -> list[float]:
+        policy = make_policy("recovery").with_config(RecoveryConfig(forget_after=4.0))
+        taus = [i / 25 for i in range(1, 25)]  # a step of 24 decisions (0.48 s)
+        for _ in range(5):
+            for tau in taus:
+                policy.act(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)))
+        command = 1.02 if change else 1.0  # a small step up, ramped within one decision
+        weights = []
+        for _ in range(2):  # two slow steps at the new command
+            for tau in taus:
+                policy.act(Observation(command, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 0.4)))
+                weights.append(policy.last_weight)
+        return weights
+
+    steady, changed = run(False), run(True)
+    assert max(steady[:24]) >= 0.9 and max(changed[:24]) >= 0.9  # the first slow step: full weight either way
+    assert steady[36] > 0.9  # forgotten: the second slow step is measured against the walk before
+    assert changed[36] == 0.0  # kept: the second is measured against the first
+
+
+@pytest.mark.unit
 def test_the_rule_acts_only_inside_the_step_and_only_when_the_hip_falls_behind():
     policy = make_policy("recovery")
     assert policy.weight(0.3, 1.0, None) == 0.0  # no reference yet

@@ -97,6 +97,14 @@ class RecoveryConfig:
         with this rule 38 and 43 (docs/learning.md 2026-11-28 (second)). Left out at any
         weight (0), the learned walk's near-stall steps at 0.7-0.8 m/s, which stir the rule,
         were left out too and the memory went stale (the walk at 0.8 m/s 0.015 m/s faster).
+    forget_steps: at most this many steps in a row are left out; the next is kept whatever
+        its weight (a walk slower than its memory step after step is not pushed step after
+        step). 1 lost half the gain (repeated pushes 28 and 38); 2, 39 and 43.
+    forget_after: nothing is left out within this many seconds (s) after a change of the
+        command (the walk's start is not one). Accelerating from the slow end (0.7-0.76 m/s),
+        the recovery controller's rule catches the stall it runs into at w >= 0.9 step after
+        step; left out, those steps took the memory stale and the walk ended 0.1-0.65 m/s slow
+        (settling seed 38: 182 of 200 against 186). With 4 s every such change ends as before.
     """
 
     offsets: tuple[float, float, float, float] = (-0.11, 0.01, 0.08, -0.23)
@@ -106,6 +114,8 @@ class RecoveryConfig:
     hold_from: float = 0.2
     bins: int = 20
     forget_weight: float = 0.9
+    forget_steps: int = 2
+    forget_after: float = 4.0
 
     def __post_init__(self) -> None:
         if len(self.offsets) != N_OUTPUTS or not all(np.isfinite(self.offsets)):
@@ -120,6 +130,10 @@ class RecoveryConfig:
             raise ValueError(f"RecoveryConfig.bins must be a whole number >= 2, got {self.bins!r}")
         if not (np.isfinite(self.forget_weight) and 0.0 < self.forget_weight <= 1.0):
             raise ValueError(f"RecoveryConfig.forget_weight must be a weight in (0, 1], got {self.forget_weight}")
+        if not (isinstance(self.forget_steps, int) and self.forget_steps >= 0):
+            raise ValueError(f"RecoveryConfig.forget_steps must be a whole number >= 0, got {self.forget_steps!r}")
+        if not (np.isfinite(self.forget_after) and self.forget_after >= 0.0):
+            raise ValueError(f"RecoveryConfig.forget_after must be finite and >= 0 s, got {self.forget_after}")
 
 
 class StepMemory:
@@ -132,19 +146,23 @@ class StepMemory:
     before the push are slower than those after it), nor a commanded speed change in either
     direction (the module docstring)."""
 
-    def __init__(self, bins: int, depth: int = 4) -> None:
+    def __init__(self, bins: int, depth: int = 4, max_dropped: int = 2) -> None:
         self.bins = bins
         self.depth = depth
+        self.max_dropped = max_dropped
         self.reset()
 
     def reset(self) -> None:
         self.steps = [np.full((self.bins, 2), np.nan) for _ in range(self.depth + 1)]  # now, then the steps before
         self._last_tau: float | None = None
         self._forget = False
+        self._dropped = 0  # steps dropped in a row
 
     def forget(self) -> None:
         """Leave the step now out of the memory: at its touchdown it is dropped, and the
-        steps before it stay the reference (``RecoveryConfig.forget_weight``)."""
+        steps before it stay the reference, unless ``max_dropped`` steps in a row were dropped
+        already: a walk slower than its memory step after step is not pushed step after step
+        (``RecoveryConfig.forget_weight``, ``forget_steps``)."""
         self._forget = True
 
     def observe(self, tau: float, hip_velocity: float, command: float) -> float | None:
@@ -153,11 +171,13 @@ class StepMemory:
         larger of their command and ``command`` (each at its bin, or its nearest recorded
         one), None before ``depth`` whole steps are known."""
         if touched_down(self._last_tau, tau):
-            if self._forget:
+            if self._forget and self._dropped < self.max_dropped:
                 self.steps[0] = np.full((self.bins, 2), np.nan)
-                self._forget = False
+                self._dropped += 1
             else:
                 self.steps = [np.full((self.bins, 2), np.nan)] + self.steps[:self.depth]
+                self._dropped = 0
+            self._forget = False
         self._last_tau = tau
         b = min(max(int(tau * self.bins), 0), self.bins - 1)
         self.steps[0][b] = (hip_velocity, command)
@@ -188,7 +208,7 @@ class RecoveryPolicy:
         self.classic = classic
         self.config = config
         self._base = RateLimitedPolicy(classic, config.command_rate)
-        self.memory = StepMemory(config.bins)
+        self.memory = StepMemory(config.bins, max_dropped=config.forget_steps)
         self.decision_period = decision_period
         self.decision_window = decision_window
         self.name = f"recovery@{decision_period}ticks"
@@ -196,6 +216,9 @@ class RecoveryPolicy:
         self._offsets[1:, :] = np.asarray(config.offsets)
         self._held = None  # the base gait held late in the step
         self.last_weight = 0.0
+        self._forget_after = int(np.ceil(config.forget_after * 1000.0 / max(decision_period, 1)))  # decisions
+        self._last_desired: float | None = None
+        self._since_change = self._forget_after  # decisions since the command last changed
 
     def with_config(self, config: RecoveryConfig) -> "RecoveryPolicy":
         """The same controller with other constants (tuning)."""
@@ -206,6 +229,8 @@ class RecoveryPolicy:
         self.memory.reset()
         self._held = None
         self.last_weight = 0.0
+        self._last_desired = None
+        self._since_change = self._forget_after
 
     def start_command(self, speed: float):
         """Classic's gait at ``speed`` (no body state exists before the walk)."""
@@ -232,7 +257,11 @@ class RecoveryPolicy:
         slowing = self._base.command > observation.desired_speed + 1e-9  # a commanded deceleration
         w = 0.0 if slowing else self.weight(tau, hip_velocity / ramped, reference)
         self.last_weight = w  # the rule's weight at this decision (read by diagnostics and gated residuals)
-        if w >= self.config.forget_weight:
+        if self._last_desired is not None and observation.desired_speed != self._last_desired:
+            self._since_change = 0  # a change of the command (the walk's start is not one)
+        self._last_desired = observation.desired_speed
+        self._since_change += 1
+        if w >= self.config.forget_weight and self._since_change > self._forget_after:
             self.memory.forget()  # a pushed step is not the norm
         return self.with_offsets(command, w)
 
