@@ -1,6 +1,8 @@
 # Friction 0.35 (issue 37's bar: no fall), 20 s at each speed, per controller; the mean speed 10-20 s
 # minus the command, or how it ended. On the package of 2026-11-28 (second).
 #   .venv/bin/python docs/learning/forget/friction_035.py > docs/learning/forget/friction_035.txt
+# docs/learning/start_decay/friction_035.txt: the same script on the package with the start rule
+# shipped (2026-11-28 (second), later the same day).
 from concurrent.futures import ProcessPoolExecutor
 
 from rabbit_policy.experiment.loop import walk

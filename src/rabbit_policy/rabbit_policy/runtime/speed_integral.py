@@ -129,7 +129,8 @@ class IntegralFeedforward:
     it 55), the ordered changes as fast as before; the start moved more walks within 0.03 m/s
     over 3-6 s (24 of 33 speeds, without 14) but took the walk at 1.3 m/s to where check 6's
     return map (the integral frozen) is unstable, so it is off by default (docs/learning.md,
-    2026-11-27 (seventh)). :func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`
+    2026-11-27 (seventh)). Since 2026-11-28 (second) the shipped policy starts with it together
+    with :class:`WindupDecay`'s ``at_start`` (check 6: max |lambda| 0.85). :func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`
     measures a table; ``ship_policy.py --integral-feedforward`` records it."""
 
     speeds: tuple[float, ...]
