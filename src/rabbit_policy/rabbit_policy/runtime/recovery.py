@@ -94,7 +94,8 @@ class RecoveryConfig:
         it was the slowest of the four and the rule was blind to a second push for four
         steps: three equal pushes 2 s apart (the paper's scenario shape, 72 per controller)
         were survived 22 times by the recovery controller and 30 by the shipped policy;
-        with this rule 38 and 43 (docs/learning.md 2026-11-28 (second)). Left out at any
+        with this rule and the bounds below 39 and 43 (docs/learning.md 2026-11-28
+        (second)). Left out at any
         weight (0), the learned walk's near-stall steps at 0.7-0.8 m/s, which stir the rule,
         were left out too and the memory went stale (the walk at 0.8 m/s 0.015 m/s faster).
     forget_steps: at most this many steps in a row are left out; the next is kept whatever
