@@ -4,6 +4,7 @@
     scripts/optimize_gaits.py [--speeds 0.7,0.8,...] [--start 1.0] [--iterations 100]
                               [--workers 2] [--out DIR] [--validate 60] [--resume]
                               [--approach-from 0.9,1.2] [--approach-weight 5] [--refine]
+                              [--friction-limit 0.6]
 
 Speeds are solved by continuation outward from ``--start``: the first from a kinematic
 seed (:mod:`rabbit_policy.gait_design.seed`), each next one warm-started from the nearest speed
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +57,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--resume", action="store_true",
                         help="keep gaits in --out that passed validation; solve only the other speeds")
+    parser.add_argument("--friction-limit", type=float, default=None,
+                        help="stance-foot |F_t|/F_n the gait is designed to stay under (the model's floor has "
+                             "0.8; default: GaitProblem.friction_limit, the shipped library's); lower it to "
+                             "design for a slippery floor")
     parser.add_argument("--approach-weight", type=float, default=5.0,
                         help="cost per metre of approach shortfall (default %(default)s)")
     parser.add_argument("--approach-from", type=parse_speeds, default=[],
@@ -62,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--refine", action="store_true",
                         help="start each speed from its existing gait in --out")
     args = parser.parse_args(argv)
+    if args.friction_limit is not None and not 0.05 <= args.friction_limit <= 2.0:
+        parser.error(f"--friction-limit must be in [0.05, 2], got {args.friction_limit}")
     backend = open_backend(parser, args)
     try:
         return _optimize(args, backend)
@@ -94,6 +102,8 @@ def _optimize(args, backend) -> int:
             continue
         problem = GaitProblem(speed=speed, approach_from=tuple(args.approach_from),
                               approach_weight=args.approach_weight)
+        if args.friction_limit is not None:
+            problem = replace(problem, friction_limit=args.friction_limit)
         existing = out / f"gait_{speed:.2f}.json"
         if args.refine and existing.is_file():
             x0 = gait_to_decision(Gait.load(existing))

@@ -83,3 +83,38 @@ def test_approach_term_measures_convergence_as_stored_in_the_shipped_gait():
     assert slow.reach_time is None and slow.shortfall > 3 * measured[slowest].shortfall  # ~0.25 m/s x 8 s
     base = evaluate(gait_to_decision(fast), problem).cost
     assert total_cost(gait_to_decision(fast), problem) == pytest.approx(base + term)
+
+
+def test_a_lower_friction_limit_penalises_a_gait_that_needs_more_friction():
+    """The 1.4 m/s gait's stance foot reaches |F_t|/F_n 0.8 (docs/gait_library.md): under a
+    cone limit of 0.3 its friction penalty grows, at 1.0 (the model's floor) it vanishes."""
+    fast = GaitLibrary.load().nearest(1.4)
+    x = gait_to_decision(fast)
+    loose = evaluate(x, GaitProblem(speed=fast.speed, friction_limit=1.0))
+    shipped = evaluate(x, GaitProblem(speed=fast.speed))
+    strict = evaluate(x, GaitProblem(speed=fast.speed, friction_limit=0.3))
+    assert loose.penalties["friction"] == 0.0
+    assert strict.penalties["friction"] > shipped.penalties["friction"] > 0.0
+    assert strict.cost - shipped.cost == pytest.approx(strict.penalties["friction"] - shipped.penalties["friction"])
+
+
+@pytest.mark.slow
+def test_optimize_gaits_designs_under_the_friction_limit_it_is_given(tmp_path):
+    import json
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from rabbit_policy.runtime.gait_library import packaged_gait_dir
+
+    root = Path(__file__).resolve().parents[2]
+    shutil.copy(packaged_gait_dir() / "gait_1.10.json", tmp_path)
+    script = [sys.executable, "scripts/optimize_gaits.py", "--speeds", "1.1", "--refine", "--out", str(tmp_path),
+              "--iterations", "1", "--validate", "2", "--workers", "1"]
+    out = subprocess.run([*script, "--friction-limit", "0.3"], capture_output=True, text=True, cwd=root, timeout=300)
+    assert out.returncode in (0, 1), out.stderr  # 1: the one-generation gait missed its 2 s validation
+    saved = tmp_path / "gait_1.10.json" if out.returncode == 0 else tmp_path / "rejected" / "gait_1.10.json"
+    assert json.loads(saved.read_text())["info"]["problem"]["friction_limit"] == 0.3
+    bad = subprocess.run([*script, "--friction-limit", "0"], capture_output=True, text=True, cwd=root, timeout=60)
+    assert bad.returncode == 2 and "--friction-limit must be in [0.05, 2], got 0.0" in bad.stderr
