@@ -3,6 +3,8 @@
 #   .venv/bin/python docs/learning/friction/classic_on_library.py [GAIT_DIR] > OUT
 # classic_on_library_030.txt: on the library refined with --friction-limit 0.3 at 1.2-1.5 m/s
 # (optimize_030.log; the interpolation calibration left as the packaged library's).
+# classic_on_library_030_approach.txt, _030_family.txt (library_030) and _030_bridge.txt
+# (library_030_bridge): the later rounds (docs/gait_library.md); _shipped.txt: the shipped library.
 import sys
 from concurrent.futures import ProcessPoolExecutor
 

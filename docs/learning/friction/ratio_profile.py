@@ -5,6 +5,7 @@
 #   .venv/bin/python docs/learning/friction/ratio_profile.py [GAIT_DIR] > docs/learning/friction/ratio_profile.txt
 # GAIT_DIR: a library directory (default: the packaged one); ratio_profile_030.txt is the library
 # refined with --friction-limit 0.3 (optimize_030.log).
+# ratio_profile_030_approach.txt: on library_030's first round with the approach term.
 import sys
 import math
 from concurrent.futures import ProcessPoolExecutor
