@@ -1,11 +1,18 @@
 """The gait optimizer: its objective is deterministic, ranks falls below walks, and CMA-ES
-improves on its starting point."""
+improves on its starting point; ``optimize_gaits.py --friction-limit`` designs under the limit
+it is given."""
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from rabbit_hzd_controller.gait import Gait
-from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.gait_library import GaitLibrary, packaged_gait_dir
 from rabbit_policy.gait_design.optimization import (
     KD_SCALE,
     GaitProblem,
@@ -99,14 +106,6 @@ def test_a_lower_friction_limit_penalises_a_gait_that_needs_more_friction(gait):
 
 @pytest.mark.slow
 def test_optimize_gaits_designs_under_the_friction_limit_it_is_given(tmp_path):
-    import json
-    import shutil
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    from rabbit_policy.runtime.gait_library import packaged_gait_dir
-
     root = Path(__file__).resolve().parents[2]
     shutil.copy(packaged_gait_dir() / "gait_1.10.json", tmp_path)
     script = [sys.executable, "scripts/optimize_gaits.py", "--speeds", "1.1", "--refine", "--out", str(tmp_path),
