@@ -87,13 +87,15 @@ def next_domain(domain: int, stride: int, wait: float = 0.3) -> tuple[int, list[
 
 
 @contextmanager
-def ros_context(executor_kind: str = "events", domain_id: int | None = None) -> Iterator[tuple[object, object]]:
-    """A fresh rclpy context and executor (in ``domain_id``, default the session's); nodes
+def ros_context(executor_kind: str = "events", domain_id: int | None = None,
+                args: list[str] | None = None) -> Iterator[tuple[object, object]]:
+    """A fresh rclpy context and executor (in ``domain_id``, default the session's; ``args``:
+    the context's command line, e.g. ``["--ros-args", "-p", "use_sim_time:=true"]``); nodes
     added to it are destroyed afterwards. A node of this context the test left alive
     otherwise (taken off the executor, never added) is destroyed too, and the test fails
     saying so (unless it failed already)."""
     context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
+    rclpy.init(args=args, context=context, domain_id=domain_id)
     executor = make_executor(context, executor_kind)
     left_alive: list[str] = []
     try:

@@ -49,6 +49,7 @@ from rabbit_msgs_py.pairing import PairingKey
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
+from rabbit_msgs_py.timers import wall_timer
 
 from .controller import ControllerConfig, Leg, validate_alpha, validate_kd
 from .gait_sync import Answer, GaitSync, Repeat
@@ -126,7 +127,7 @@ class HZDControllerNode(Node):
         self.rejected_gaits = 0
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
-        self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
+        wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
         self.solo = SoloStart(self, "controller", topics.JOINT_TORQUES, solo_check, self._wire)
@@ -145,7 +146,7 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        self.create_timer(0.05, lambda: self._do(self.sync.check_held()))  # wall clock: decision_timeout
+        wall_timer(self, 0.05, lambda: self._do(self.sync.check_held()))  # decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
 
     # ----------------------------------------------------------------- status

@@ -16,6 +16,8 @@ from __future__ import annotations
 import time
 from typing import Callable
 
+from .timers import wall_timer
+
 PROCESS_SOLO_CHECK = 4.0
 """s (wall): how long a node started as a process looks for another of its kind when it
 finds none (it refuses as soon as it finds one). With ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
@@ -61,7 +63,7 @@ class SoloStart:
         self.deadline = clock() + wait
         node.get_logger().info(f"looking for another {kind} in namespace {node.get_namespace()} for {wait:g} s "
                                "before starting (solo_check)")
-        self.timer = node.create_timer(POLL_PERIOD, self._check)
+        self.timer = wall_timer(node, POLL_PERIOD, self._check)
 
     def _start(self) -> None:
         self.started = True

@@ -66,6 +66,7 @@ from rabbit_msgs_py.decision_ticks import TICK_NS, DecisionTiming, gait_timing
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
+from rabbit_msgs_py.timers import wall_timer
 
 from rabbit_policy.runtime.policies import (
     CONTROLLER_CHOICES,
@@ -184,7 +185,7 @@ class PolicyNode(Node):
         self.decisions = 0
         self.rejected_commands = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
-        self.create_timer(1.0, self._flush_rejections)  # wall clock: a burst's tail is said within a second
+        wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self.last_observation: Observation | None = None
         # a body-state policy: the state and the controller's phase, its decisions held until both are in
         self.body: BodyStateBuffer | None = BodyStateBuffer(TICK_NS) if self.needs_body else None

@@ -69,6 +69,7 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
+from rabbit_msgs_py.timers import wall_timer
 
 from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
@@ -151,11 +152,11 @@ class SimNode(Node):
         # clock: no second thread, so a tick never waits for the GIL
         mode = self.settings.mode
         if self.driver.by_replies:
-            self.create_timer(0.05, lambda: self._run(self.driver.supervise, self._torque_publishers))
+            wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers))
         if mode == "paced":
-            self.create_timer(self.sim.timestep, lambda: self._run(self.driver.paced_wake))
+            wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.paced_wake))
         if mode == "realtime":
-            self.create_timer(self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
+            wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
         self.get_logger().info(
             f"RABBIT simulation ({self.settings.model} model"
             + (f", foot friction {self.settings.friction:g}" if self.settings.friction else "")
