@@ -103,6 +103,37 @@ def test_no_other_node_ever_gets_the_robot_with_the_stacks_key(fault, rogue_from
         assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
 
 
+def test_a_rogue_publisher_does_not_keep_the_real_nodes_from_starting():
+    """A rogue publishes on ``/joint_torques`` (answering every state) and ``/hzd/alpha``
+    before the stack starts: the controller (with the stack's key) and the policy, looking
+    as processes started by hand do (``solo_check``), start all the same (the solo check
+    once counted any publisher of those topics as another of their kind, and the robot was
+    held for good), the robot walks, and the rogue's torques stay refused."""
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    key = new_key()
+    with ros_context() as (context, executor), ros_context() as (ctx_r, ex_r):
+        rogue = Rogue(ctx_r, "echo")
+        alpha = rclpy.create_node("rogue_gaits", context=ctx_r)
+        alpha_pub = alpha.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        alpha.create_timer(0.05, lambda: alpha_pub.publish(Float64MultiArray(data=[0.0] * 24)))
+        ex_r.add_node(rogue.node)
+        ex_r.add_node(alpha)
+        spin_for(ex_r, 0.5)
+        efforts = _watch(context, executor)
+        sim = SimNode(context=context, pairing_key=key)
+        policy = PolicyNode(context=context, solo_check=0.5)
+        controller = HZDControllerNode(context=context, pairing_key=key, solo_check=0.5)
+        for node in (sim, policy, controller):
+            executor.add_node(node)
+        assert spin_until((executor, ex_r), lambda: sim.time >= 0.5, timeout=60.0), f"stuck at {sim.time}"
+        assert controller.solo.started and policy.solo.started
+        assert not controller.solo.refused and not policy.solo.refused
+        assert rogue.sent > 20 and sim.torques_rejected > 0 and not sim.fallen
+        assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
+
+
 def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_once():
     """The controller is killed mid-walk, a rogue answering every state meanwhile; the stack
     starts a new instance with the key: the simulator pairs with it (logged), and it answers

@@ -109,6 +109,25 @@ def test_an_overdue_reply_makes_the_supervisor_send_the_state_again(initial_stat
     assert "no node publishes /joint_torques" in line and "re-sending it every 0.2 s" in line
 
 
+def test_the_silence_warning_names_the_silent_controller_and_the_one_to_release(initial_state):
+    """The paired controller is killed and another started by hand without a key: the
+    warning once said the dead one "is alive but has not answered", crediting it with the
+    new one's liveliness, and the remedy was on another line. It names both, and the
+    service that pairs the new one, in one line."""
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, resend_timeout=0.2)
+    assert _states(driver.on_torques(0, C, ZERO, clock.now)) == [MS]  # C paired, answering
+    clock.now += 0.3
+    driver.on_torques(MS, "hzd_controller_node/eeee", ZERO, clock.now)  # the new one answers: refused
+    clock.now += SILENCE_WARNING_AFTER
+    (line,) = [a.text for a in driver.supervise(lambda: TorquePublishers(2, 1, 1)) if isinstance(a, Log)]
+    assert f"controller {C} has not answered" in line and "is alive" not in line
+    assert "controller hzd_controller_node/eeee answers but is not paired" in line
+    assert "ros2 service call /sim/release_controller std_srvs/srv/Trigger" in line
+    _ok, _message, _actions = driver.on_release_controller()
+    assert _states(driver.on_torques(MS, "hzd_controller_node/eeee", ZERO, clock.now)) == [2 * MS]
+
+
 def test_the_silence_warning_names_the_cause():
     topic, gait = "/joint_torques", "/hzd/alpha and /hzd/kd"
     assert "no node publishes" in silence_cause(TorquePublishers(0), C, topic, gait)

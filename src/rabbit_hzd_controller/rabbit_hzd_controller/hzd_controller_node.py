@@ -130,7 +130,7 @@ class HZDControllerNode(Node):
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
-        self.solo = SoloStart(self, "controller", topics.JOINT_TORQUES, solo_check, self._wire)
+        self.solo = SoloStart(self, "controller", solo_check, self._wire)
 
     def _wire(self) -> None:
         """Publishers, subscriptions and timers: once no other controller runs in this

@@ -5,10 +5,12 @@ subscribes anything, so the running robot is never disturbed.
 Discovery takes time (a node started beside a running stack may see it only after a few
 hundred ms, more on a loaded machine), so a node started as a process of its own
 (``ros2 run``) looks for ``solo_check`` s (default :data:`PROCESS_SOLO_CHECK`) before it wires
-its topics. It refuses if it finds, in its namespace, another node of its name or another
-publisher of the topic that only its kind publishes (``/joint_states``, ``/joint_torques``,
-``/hzd/alpha``). run_stack looks for a whole stack itself before it starts any node, so it
-starts its nodes with ``solo_check`` 0, as nodes built in-process are by default.
+its topics. It refuses if it finds, in its namespace, another node of its name, or one that
+offers what only its kind offers (the simulator: ``sim/release_controller``). Any other
+publisher of its topics does not count: a rogue (or a test tool) on ``/joint_torques`` must
+not keep the real controller from starting, and with a pairing key it cannot move the robot
+anyway. run_stack looks for a whole stack itself before it starts any node, so it starts its
+nodes with ``solo_check`` 0, as nodes built in-process are by default.
 """
 
 from __future__ import annotations
@@ -34,15 +36,16 @@ SOLO_CHECK_HELP = ("wall s to look for another {kind} in this namespace before s
 """The ``solo_check`` parameter's description; ``{kind}``: simulator, controller, policy."""
 
 
-def others_of_kind(node, topic: str) -> list[str]:
-    """Nodes of ``node``'s kind in its namespace: others of its name, and publishers of
-    ``topic`` (call before ``node`` publishes it)."""
+def others_of_kind(node, service: str | None = None) -> list[str]:
+    """Nodes of ``node``'s kind in its namespace: others of its name, and nodes offering
+    ``service`` (what only that kind offers; call before ``node`` offers it)."""
     name, namespace = node.get_name(), node.get_namespace()
     same = [n for n, ns in node.get_node_names_and_namespaces() if n == name and ns == namespace]
     found = [f"{namespace.rstrip('/')}/{name}"] if len(same) > 1 else []
-    publishers = node.count_publishers(topic)
-    if publishers:
-        found.append(f"{publishers} publisher(s) of {node.resolve_topic_name(topic)}")
+    if service is not None:
+        full = node.resolve_service_name(service)
+        if any(found_name == full for found_name, _types in node.get_service_names_and_types()):
+            found.append(f"a node offering {full}")
     return found
 
 
@@ -50,11 +53,12 @@ class SoloStart:
     """Call ``start()`` on ``node`` once ``wait`` s passed with no other node of its kind in
     its namespace (at once if ``wait`` is 0); if one turns up first, log one error line and
     mark the node ``failed`` and ``done`` (its process exits 1) without starting it.
-    ``kind``: what the node is, for the line ("simulator")."""
+    ``kind``: what the node is, for the line ("simulator"); ``service``: what only a node
+    of that kind offers, if anything (:func:`others_of_kind`)."""
 
-    def __init__(self, node, kind: str, topic: str, wait: float, start: Callable[[], None],
+    def __init__(self, node, kind: str, wait: float, start: Callable[[], None], service: str | None = None,
                  clock: Callable[[], float] = time.monotonic) -> None:
-        self.node, self.kind, self.topic, self.start, self.clock = node, kind, topic, start, clock
+        self.node, self.kind, self.service, self.start, self.clock = node, kind, service, start, clock
         self.started = False
         self.refused: list[str] = []
         if wait <= 0.0:
@@ -70,7 +74,7 @@ class SoloStart:
         self.start()
 
     def _check(self) -> None:
-        found = others_of_kind(self.node, self.topic)
+        found = others_of_kind(self.node, self.service)
         if found:
             self.timer.cancel()
             self.refused = found

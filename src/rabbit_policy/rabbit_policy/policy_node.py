@@ -194,7 +194,7 @@ class PolicyNode(Node):
         self._warned_planar = False
         self._placements = 0
         self._echoes: list[float] = []  # scheduled commands published on /cmd_speed, not yet heard back
-        self.solo = SoloStart(self, "policy", topics.ALPHA, values["solo_check"], self._wire)
+        self.solo = SoloStart(self, "policy", values["solo_check"], self._wire)
 
     def _wire(self) -> None:
         """Publishers and subscriptions, and the first gait: once no other policy runs in

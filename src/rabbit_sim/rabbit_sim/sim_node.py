@@ -117,7 +117,8 @@ class SimNode(Node):
         self._liveliness: tuple[int, int] | None = None  # torque publishers (alive, lapsed); None: none declares it
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001  # (see the timers in _wire)
-        self.solo = SoloStart(self, "simulator", topics.JOINT_STATES, self.settings.solo_check, self._wire)
+        self.solo = SoloStart(self, "simulator", self.settings.solo_check, self._wire,
+                              service=topics.RELEASE_CONTROLLER_SERVICE)
 
     def _wire(self) -> None:
         """Publishers, subscriptions, services and timers: once no other simulator runs in

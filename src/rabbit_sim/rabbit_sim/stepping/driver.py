@@ -148,6 +148,7 @@ class SimDriver:
         self._held_ticks = 0
         self.published_stamp: int | None = None  # ns, the newest state sent
         self._recorder_resent = -RECORDER_RESEND
+        self._unpaired: str | None = None  # no key: the last controller refused since a reply was accepted
         self._shapes = RobotShapes(sim.model) if shapes else None
         self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
         self._out: list[Action] = []
@@ -269,7 +270,8 @@ class SimDriver:
             return self._out
         if waited >= SILENCE_WARNING_AFTER:  # (by then a stopped or killed controller's liveliness has lapsed)
             why = silence_cause(torque_publishers(), self.pairing.controller, self._topic(topics.JOINT_TORQUES),
-                                f"{self._topic(topics.ALPHA)} and {self._topic(topics.KD)}")
+                                f"{self._topic(topics.ALPHA)} and {self._topic(topics.KD)}", self._unpaired,
+                                self._topic(topics.RELEASE_CONTROLLER_SERVICE))
             self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} "
                                  f"s; re-sending it every {self.settings.resend_timeout:g} s ({why})", 5.0, "resend")
         self._send_state()
@@ -337,12 +339,16 @@ class SimDriver:
         verdict, source = self.pairing.admit(frame_id, stamp, torques)
         if verdict is Admit.REFUSE:
             self.stats.torques_rejected += 1
+            if self.pairing.key is None:
+                self._unpaired = source
             why = ("it is not signed with this stack's pairing key" if self.pairing.key is not None
-                   else f"this simulator takes them from {self.pairing.controller} only (/sim/release_controller "
-                        "pairs it with the next to answer)")
+                   else f"this simulator takes them from {self.pairing.controller} only ('ros2 service call "
+                        f"{self._topic(topics.RELEASE_CONTROLLER_SERVICE)} std_srvs/srv/Trigger' pairs the next "
+                        "to answer)")
             self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on "
                                f"{self._topic(topics.JOINT_TORQUES)}: {why}", 5.0, "refused")
             return False
+        self._unpaired = None
         if verdict is Admit.PAIR:
             self._log("info", f"paired with controller {source} at t = {self.sim.time:.3f} s"
                               + (" (signed with this stack's pairing key)" if self.pairing.key is not None else ""))

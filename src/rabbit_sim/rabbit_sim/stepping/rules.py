@@ -195,9 +195,16 @@ class TorquePublishers:
     lapsed: int = 0
 
 
-def silence_cause(publishers: TorquePublishers, controller: str | None, topic: str, gait: str) -> str:
+def silence_cause(publishers: TorquePublishers, controller: str | None, topic: str, gait: str,
+                  unpaired: str | None = None, release: str = "/sim/release_controller") -> str:
     """Why no torque reply comes, as far as the simulator can tell (``topic``: the torque
-    topic's full name; ``gait``: the gait topics the controller waits for)."""
+    topic's full name; ``gait``: the gait topics the controller waits for; ``unpaired``: a
+    controller whose replies were refused since the state went out, no key in use:
+    ``release``, the service that pairs it, is named in the same line)."""
+    if unpaired is not None and controller is not None:
+        return (f"controller {controller} has not answered: stopped, died or busy (a killed node stays listed for up "
+                f"to 20 s); controller {unpaired} answers but is not paired: 'ros2 service call {release} "
+                "std_srvs/srv/Trigger' pairs the next to answer")
     if publishers.count == 0:
         return f"no node publishes {topic}: is hzd_controller_node running?"
     name = f"controller {controller}" if controller else "no controller has answered yet; a controller"
