@@ -19,11 +19,16 @@ from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
 from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recording
 
 
-def _die_with_parent() -> None:
-    """In a node's process before it starts (Linux): SIGTERM when run_stack's thread that
+def _prepare_child() -> None:
+    """In a node's process before it starts: SIGINT ignored until the process handles it
+    itself (:mod:`rabbit_msgs_py.quiet_start`, then run_node), so a stop that comes while
+    the interpreter starts prints no "Fatal Python error" (a stop ignored there is followed
+    by SIGTERM, which ends it quietly); and (Linux) SIGTERM when run_stack's thread that
     started it ends, so a run_stack killed outright (SIGKILL, a test's timeout) leaves no
-    stack running in the domain. Elsewhere nothing."""
+    stack running in the domain."""
     import ctypes
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
@@ -34,15 +39,18 @@ def _die_with_parent() -> None:
 class NodeProcesses:
     """The three nodes as child processes, each in its own session so that Ctrl-C at the
     terminal reaches only run_stack, which then stops them in order (SIGINT, then SIGTERM,
-    then SIGKILL); a run_stack killed outright takes them with it (SIGTERM)."""
+    then SIGKILL); a run_stack killed outright takes them with it (SIGTERM). Each starts
+    through :mod:`rabbit_msgs_py.quiet_start`: stopped while still importing, it exits
+    without a traceback."""
 
     def __init__(self, config: StackConfig, log=sys.stderr) -> None:
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
         for name, params in config.node_parameters().items():
-            cmd = [sys.executable, "-m", NODE_MODULES[name], *ros_arguments(params, config.namespace)]
+            cmd = [sys.executable, "-m", "rabbit_msgs_py.quiet_start", NODE_MODULES[name],
+                   *ros_arguments(params, config.namespace)]
             self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
-                                                preexec_fn=_die_with_parent)
+                                                preexec_fn=_prepare_child)
 
     def dead(self) -> str | None:
         for name, proc in self.procs.items():
