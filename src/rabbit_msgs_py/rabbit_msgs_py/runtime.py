@@ -136,8 +136,11 @@ def drain(executor, node, context) -> None:
     """A node that must not lose what is queued (the recorder) spins on after a stop signal
     until its ``activity()`` count (messages handled) stood still for :data:`DRAIN_QUIET`
     s, at most ``drain_on_exit`` s: a loaded machine gets the time it needs, an idle one
-    stops at once."""
+    stops at once. Its ``begin_stop()``, if it has one, is called first."""
     limit = float(getattr(node, "drain_on_exit", 0.0))
+    begin_stop = getattr(node, "begin_stop", None)
+    if limit > 0.0 and begin_stop is not None:
+        begin_stop()
     activity = getattr(node, "activity", None)
     start = time.monotonic()
     last, quiet_since = (activity() if activity else None), start

@@ -109,8 +109,18 @@ class RecorderNode(Node):
     drain_on_exit = 10.0
 
     def activity(self) -> int:
-        """Messages handled so far (written, or skipped as sent again): run_node's drain."""
+        """Messages handled so far (written, or skipped as sent again): run_node's drain. Once
+        stopping, new states written only: a simulator holding for this recorder sends its
+        state again, and the controller its reply, every 50 ms, but no new one."""
+        if self.stopping:
+            return self.bag.counts.get(self.resolve_topic_name(topic_names.JOINT_STATES), 0)
         return sum(self.bag.counts.values()) + self.resends_skipped
+
+    def begin_stop(self) -> None:
+        """A stop signal came (run_node, before it drains): report no more progress, so a
+        lockstep simulator that follows this recorder holds within a few states of what is
+        written, and the drain writes what was received and ends."""
+        self.stopping = True
 
     @destroyed_if_start_fails
     def __init__(self, context=None, namespace: str | None = None, **overrides) -> None:
@@ -144,6 +154,11 @@ class RecorderNode(Node):
         # last state (transient local: the latest value reaches late joiners too)
         self._until = Clock()
         self._until_pub = self.create_publisher(Clock, topic_names.RECORDED_UNTIL, qos.STATUS_QOS)
+        self.stopping = False
+        # announce this recorder before subscribing (a negative stamp: nothing written yet): a
+        # lockstep simulator that runs already holds for it from then on, so it loses nothing
+        self._until.clock.sec = -1
+        self._until_pub.publish(self._until)
         self._torque_sub = None  # recorded torque replies: no progress is reported before it matched
         for name in names:
             spec = STACK_TOPICS[name]
@@ -195,6 +210,8 @@ class RecorderNode(Node):
         ``/recorder/recorded_until`` — once the torque replies' subscription has matched a
         controller, if they are recorded: a lockstep simulator holds its first state (sending
         it again, and the controller its reply) until then, so no reply is lost to discovery."""
+        if self.stopping:
+            return
         if self._torque_sub is not None:
             if self._torque_sub.get_publisher_count() == 0:
                 return

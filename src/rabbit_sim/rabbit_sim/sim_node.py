@@ -140,7 +140,7 @@ class SimNode(Node):
                                      liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
-        if self.driver.recorder.enabled:
+        if self.driver.by_replies:  # a recorder's progress: followed from its first report
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS)
         self.create_service(SetBool, topics.PAUSE_SERVICE, self._on_pause, qos_profile=qos.SERVICE_QOS)
@@ -153,7 +153,8 @@ class SimNode(Node):
         # clock: no second thread, so a tick never waits for the GIL
         mode = self.settings.mode
         if self.driver.by_replies:
-            wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers))
+            wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers,
+                                                      lambda: self.count_publishers(topics.RECORDED_UNTIL)))
         if mode == "paced":
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.paced_wake))
         if mode == "realtime":

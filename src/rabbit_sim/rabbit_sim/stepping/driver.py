@@ -148,6 +148,7 @@ class SimDriver:
         self._held_ticks = 0
         self.published_stamp: int | None = None  # ns, the newest state sent
         self._recorder_resent = -RECORDER_RESEND
+        self._recorder_waits_since: float | None = None  # wall s the simulation began to wait for the recorder
         self._unpaired: str | None = None  # no key: the last controller refused since a reply was accepted
         self._shapes = RobotShapes(sim.model) if shapes else None
         self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
@@ -243,28 +244,44 @@ class SimDriver:
         return message, self._out
 
     def on_recorded(self, stamp: int) -> list[Action]:
-        """The recorder has written the state at ``stamp`` (ns)."""
+        """The recorder has written the state at ``stamp`` (ns; negative: a recorder announced
+        itself). Lockstep/paced: a recorder that turns up is followed (:class:`RecorderGate`)."""
         self._out = []
-        self.recorder.recorded = stamp
+        if not self.by_replies:
+            return self._out
+        if self.recorder.report(stamp):
+            self._log("info", f"a recorder turned up at t = {self.sim.time:.3f} s: the simulation steps at its pace "
+                              "while it records, so it loses nothing")
         if not self.paused and self.lockstep.held_torques is not None:
             self._resume()
         return self._out
 
-    def supervise(self, torque_publishers: Callable[[], TorquePublishers]) -> list[Action]:
-        """Lockstep/paced, a 20 Hz wall-clock timer: the recorder's first state, and the state
-        sent again when its reply is overdue (``torque_publishers()``: who publishes torques,
+    def supervise(self, torque_publishers: Callable[[], TorquePublishers],
+                  recorders: Callable[[], int] = lambda: 1) -> list[Action]:
+        """Lockstep/paced, a 20 Hz wall-clock timer: the recorder's first state, a followed
+        recorder that left (``recorders()``: publishers of its reports), and the state sent
+        again when its reply is overdue (``torque_publishers()``: who publishes torques,
         asked only then, for the log line that names the cause)."""
         self._out = []
+        if self.recorder.following and recorders() == 0:
+            self.recorder.let_go()
+            self._log("info", f"the recorder left at t = {self.sim.time:.3f} s: the simulation steps freely again")
+            if not self.paused and self.lockstep.held_torques is not None:
+                self._resume()
         if not self.started or self.pace_pending:
             return self._out
         now = self.clock()
         if not self.paused and self.recorder.holds(self.published_stamp):
+            if self._recorder_waits_since is None:
+                self._recorder_waits_since = now
             if now - self._recorder_resent >= RECORDER_RESEND:
                 self._recorder_resent = now
                 self._send_state()  # the recorder may never have had it (connected late)
-            self._log("warning", f"lockstep: waiting for the recorder: {self.recorder.behind(self.published_stamp)}",
-                      5.0, "recorder")
+            if now - self._recorder_waits_since >= SILENCE_WARNING_AFTER:  # (a start takes a moment)
+                self._log("warning", f"lockstep: waiting for the recorder: "
+                                     f"{self.recorder.behind(self.published_stamp)}", 5.0, "recorder")
             return self._out
+        self._recorder_waits_since = None
         waited = self.lockstep.resend_due(self.paused)
         if waited is None:
             return self._out

@@ -459,12 +459,33 @@ class RecorderGate:
     ever overwritten). Stamps, not counts: a state sent twice or a report lost or late
     cannot open a gap that never closes; the newest report is all that counts. After a
     reset, a report from before it (a later stamp) holds until the placed state is
-    recorded. Disabled: never holds. Stamps in ns."""
+    recorded. Disabled: never holds. Stamps in ns.
+
+    ``wait_for_recorder`` enables it from the start (run_stack's recordings). Otherwise a
+    recorder that turns up (started by hand beside a running stack) is followed from its
+    first report (:meth:`follow`; it announces itself with a negative stamp before it
+    subscribes, so the simulation holds before the recorder takes its first state), and let
+    go once it leaves (:meth:`let_go`)."""
 
     def __init__(self, enabled: bool, max_lag: int = 4, timestep_ns: int = 1_000_000) -> None:
         self.enabled = enabled
+        self.following = False  # enabled by a recorder that turned up (not wait_for_recorder)
         self.max_lag_ns = max_lag * timestep_ns + timestep_ns // 2
         self.recorded: int | None = None  # stamp of the newest state the recorder wrote
+
+    def report(self, stamp: int) -> bool:
+        """A report on ``/recorder/recorded_until`` (ns; negative: a recorder announced itself
+        and has written nothing yet). True if it starts the following."""
+        self.recorded = stamp if stamp >= 0 else None
+        if self.enabled:
+            return False
+        self.enabled = self.following = True
+        return True
+
+    def let_go(self) -> None:
+        """The followed recorder left: never hold again until another turns up."""
+        self.enabled = self.following = False
+        self.recorded = None
 
     def holds(self, published: int | None) -> bool:
         """True while the recorder lacks every state of the last ``max_lag`` + 1 up to the
