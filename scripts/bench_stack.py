@@ -23,6 +23,10 @@
   includes start-up and shutdown, so this understates the rate during the walk), and
   /joint_states recorded vs published.
 
+* ``startup_to_physics_s``: wall s from launching ``scripts/run_stack.py`` to sim_node's
+  "simulation running" log line (its ROS timestamp), the median of 3 launches, and
+  ``startup_warnings``: WARN/ERROR lines those launches logged (0 on a normal start).
+
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
 """
@@ -41,7 +45,7 @@ from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+SCENARIOS = ("startup", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
              "realtime_multi_process", "realtime_in_process", "realtime_recording")
 
 
@@ -65,11 +69,33 @@ def recorded_ticks(bag: Path) -> int:
     return len(stamps)
 
 
+def startup(launches: int = 3) -> dict[str, object]:
+    """Wall s from launching run_stack to the physics running (median), and the warnings."""
+    import re
+    import statistics
+    import time
+
+    script = Path(__file__).resolve().parent / "run_stack.py"
+    delays, warnings = [], 0
+    for _ in range(launches):
+        start = time.time()
+        result = subprocess.run([sys.executable, str(script), "--duration", "1", "--json"], capture_output=True,
+                                text=True)
+        running = re.search(r"\[(\d+\.\d+)\] \[[\w.]*sim_node\]: simulation running", result.stderr)
+        if result.returncode != 0 or running is None:
+            raise RuntimeError(f"run_stack failed (status {result.returncode}): {result.stderr[-500:]}")
+        delays.append(float(running.group(1)) - start)
+        warnings += len(re.findall(r"^\[(WARN|ERROR)\]", result.stderr, re.M))
+    return {"startup_to_physics_s": round(statistics.median(delays), 2), "startup_warnings": warnings}
+
+
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
                  rtf: float = 1.0) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 
+    if name == "startup":
+        return startup()
     schedule = ((0.0, speed),)
     if name in ("paced_multi_process", "paced_recording"):
         prefix = "paced" if name == "paced_multi_process" else "paced_recording"

@@ -1,0 +1,51 @@
+"""hzd_controller_node's log at a start: a state answered before the policy's first gait is
+said, not warned about."""
+
+from __future__ import annotations
+
+import pytest
+from sensor_msgs.msg import JointState
+
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import stamp_from_ns
+from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_sim.model import load_model
+
+from ros_helpers import ros_context, spin_for, spin_until
+
+pytestmark = pytest.mark.ros
+
+
+def _state(stamp_ns: int) -> JointState:
+    """RABBIT as the model places it (keyframe-free: qpos0), at ``stamp_ns``."""
+    model = load_model("paper")
+    msg = JointState(name=list(JOINT_NAMES), position=[float(v) for v in model.qpos0],
+                     velocity=[0.0] * len(JOINT_NAMES), effort=[0.0] * len(JOINT_NAMES))
+    msg.header.stamp = stamp_from_ns(stamp_ns)
+    return msg
+
+
+def test_a_state_before_the_first_gait_is_a_start_not_a_warning(capfd, monkeypatch):
+    """Every normal start sends the placed state before the policy's first gait arrives: the
+    controller once warned "no gait yet" at each. It says so only once the gait has been
+    missing for GAITLESS_WARNING_AFTER s (here made 0 to see the warning come)."""
+    import rclpy
+
+    from rabbit_hzd_controller import hzd_controller_node
+    with ros_context() as (context, executor):
+        controller = HZDControllerNode(context=context)
+        sender = rclpy.create_node("state_sender", context=context)
+        for node in (controller, sender):
+            executor.add_node(node)
+        pub = sender.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        state = _state(0)
+        pub.publish(state)
+        assert spin_until(executor, lambda: controller.states_received >= 1)
+        spin_for(executor, 0.1)
+        assert "no gait yet" not in capfd.readouterr().err
+        monkeypatch.setattr(hzd_controller_node, "GAITLESS_WARNING_AFTER", 0.0)
+        pub.publish(_state(1_000_000))
+        assert spin_until(executor, lambda: controller.states_received >= 2)
+        spin_for(executor, 0.1)
+        assert "no gait yet (waiting for /hzd/alpha and /hzd/kd" in capfd.readouterr().err

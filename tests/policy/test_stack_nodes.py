@@ -336,15 +336,15 @@ def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
         for bad in (wrong_size, nan_alpha, out_of_bounds, swapped):
             alpha_pub.publish(bad)
             spin_for(executor, 0.05)
-        for bad_kd in (math.nan, -1.0, 1e6):
+        for bad_kd in (math.nan, -1.0, 1e6, 0.0):  # (0.0 was taken silently: no damping at all)
             kd_pub.publish(Float64(data=bad_kd))
             spin_for(executor, 0.05)
-        assert spin_until(executor, lambda: controller.rejected_gaits == 7)
+        assert spin_until(executor, lambda: controller.rejected_gaits == 8)
         assert controller.gait == good
         huge = alpha_to_msg(gait.alpha)
         huge.data = [1e308] * 24
         alpha_pub.publish(huge)
-        assert spin_until(executor, lambda: controller.rejected_gaits == 8)
+        assert spin_until(executor, lambda: controller.rejected_gaits == 9)
     logged = [line for line in capfd.readouterr().err.splitlines() if "rejected /hzd/alpha" in line]
     assert 1 <= len(logged) <= 5 and all(len(line) < 300 for line in logged)  # at most one a second (below)
 

@@ -105,8 +105,9 @@ def test_an_overdue_reply_makes_the_supervisor_send_the_state_again(initial_stat
     actions = driver.supervise(publishers(0))
     assert _states(actions) == [0] and not any(isinstance(a, Log) for a in actions) and not asked  # re-sent, quietly
     clock.now += SILENCE_WARNING_AFTER  # then it says why, naming the cause
-    (line,) = [a.text for a in driver.supervise(publishers(0)) if isinstance(a, Log)]
-    assert "no node publishes /joint_torques" in line and "re-sending it every 0.2 s" in line
+    (log,) = [a for a in driver.supervise(publishers(0)) if isinstance(a, Log)]
+    assert "no node publishes /joint_torques" in log.text and "re-sending it every 0.2 s" in log.text
+    assert log.level == "info"  # no controller has answered yet: a start (nodes come up seconds apart), not a fault
 
 
 def test_the_silence_warning_names_the_silent_controller_and_the_one_to_release(initial_state):
@@ -120,7 +121,9 @@ def test_the_silence_warning_names_the_silent_controller_and_the_one_to_release(
     clock.now += 0.3
     driver.on_torques(MS, "hzd_controller_node/eeee", ZERO, clock.now)  # the new one answers: refused
     clock.now += SILENCE_WARNING_AFTER
-    (line,) = [a.text for a in driver.supervise(lambda: TorquePublishers(2, 1, 1)) if isinstance(a, Log)]
+    (log,) = [a for a in driver.supervise(lambda: TorquePublishers(2, 1, 1)) if isinstance(a, Log)]
+    line = log.text
+    assert log.level == "warning"  # a controller that answered has gone silent: a fault
     assert f"controller {C} has not answered" in line and "is alive" not in line
     assert "controller hzd_controller_node/eeee answers but is not paired" in line
     assert "ros2 service call /sim/release_controller std_srvs/srv/Trigger" in line

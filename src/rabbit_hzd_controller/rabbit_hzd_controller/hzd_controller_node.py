@@ -23,6 +23,7 @@ and publishes what comes back.
 from __future__ import annotations
 
 import sys
+import time
 from dataclasses import replace
 
 from rcl_interfaces.msg import SetParametersResult
@@ -96,6 +97,8 @@ NODE_PARAMS = {
                              "unsigned replies", dynamic=True),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="controller"), range=(0.0, 60.0)),
 }
+GAITLESS_WARNING_AFTER = 2.0
+"""wall s: states held for want of a gait are warned about after this long (before, a start)."""
 SECRET_PARAMS = ("pairing_key",)
 """Read once at start and then removed (``rabbit_msgs_py.parameters.forget_secrets``)."""
 
@@ -130,6 +133,7 @@ class HZDControllerNode(Node):
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
+        self._gaitless_since: float | None = None  # wall s of the first state answered without a gait
         self.solo = SoloStart(self, "controller", solo_check, self._wire)
 
     def _wire(self) -> None:
@@ -212,6 +216,8 @@ class HZDControllerNode(Node):
 
     def _on_kd(self, msg: Float64) -> None:
         try:
+            if msg.data == 0.0:  # (the ROS-free core takes 0 as a probe of the desired outputs)
+                raise ValueError("Kd must be > 0 N m s/rad: 0 leaves the joints undamped, got 0.0")
             kd = validate_kd(msg.data, self.config)
         except ValueError as exc:
             self._reject("kd", topics.KD, exc, "the last good value")
@@ -245,7 +251,11 @@ class HZDControllerNode(Node):
             return
         self._do(self.sync.on_state(stamp_to_ns(msg.header.stamp), q, dq))
         missing = self.sync.missing
-        if missing:
+        if not missing:
+            self._gaitless_since = None
+        elif self._gaitless_since is None:
+            self._gaitless_since = time.monotonic()  # a start: the policy's first gait is on its way
+        elif time.monotonic() - self._gaitless_since >= GAITLESS_WARNING_AFTER:
             names = {"alpha": topics.ALPHA, "kd": topics.KD, "gait_timing": topics.GAIT_TIMING}
             waiting = " and ".join(self.resolve_topic_name(names[m]) for m in ("alpha", "kd") if m in missing)
             if "gait_timing" in missing:

@@ -9,6 +9,14 @@ from rabbit_msgs_py import topics
 from rabbit_msgs_py.runtime import init_context
 
 
+class AnotherStack(RuntimeError):
+    """Another stack runs in this namespace: ``found`` says what of it was seen."""
+
+    def __init__(self, found: list[str]) -> None:
+        super().__init__(", ".join(found))
+        self.found = found
+
+
 STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
 
 

@@ -12,10 +12,12 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable
 
 from rabbit_msgs_py.runtime import init_context
 
 from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
+from .probe import AnotherStack
 from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recording
 
 
@@ -43,14 +45,25 @@ class NodeProcesses:
     through :mod:`rabbit_msgs_py.quiet_start`: stopped while still importing, it exits
     without a traceback."""
 
-    def __init__(self, config: StackConfig, log=sys.stderr) -> None:
+    def __init__(self, config: StackConfig, log=sys.stderr, hold: bool = False) -> None:
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
         for name, params in config.node_parameters().items():
-            cmd = [sys.executable, "-m", "rabbit_msgs_py.quiet_start", NODE_MODULES[name],
-                   *ros_arguments(params, config.namespace)]
+            cmd = [sys.executable, "-m", "rabbit_msgs_py.quiet_start", *(["--hold"] if hold else []),
+                   NODE_MODULES[name], *ros_arguments(params, config.namespace)]
             self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
-                                                preexec_fn=_prepare_child)
+                                                preexec_fn=_prepare_child,
+                                                stdin=subprocess.PIPE if hold else subprocess.DEVNULL)
+
+    def release(self) -> None:
+        """Held processes (``hold``): start their nodes now (they may still be importing)."""
+        for proc in self.procs.values():
+            if proc.stdin is not None and proc.poll() is None:
+                try:
+                    proc.stdin.write(b"go\n")
+                    proc.stdin.close()
+                except BrokenPipeError:  # it died meanwhile: dead() says so
+                    pass
 
     def dead(self) -> str | None:
         for name, proc in self.procs.items():
@@ -79,10 +92,14 @@ class NodeProcesses:
 
 
 def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.stderr,
-                      stop=lambda: False, policy: str | None = None) -> RunReport:
+                      stop=lambda: False, policy: str | None = None,
+                      probe: Callable[[], list[str]] | None = None) -> RunReport:
     """Start the nodes as processes, supervise the run here, stop them; returns the report.
     ``stop()``: polled, true ends the run early; ``policy``: its name for the report (built
-    from ``config`` here if not given)."""
+    from ``config`` here if not given). ``probe()``: what of another stack runs here
+    (:func:`~.probe.other_stack`), asked while the node processes import, held
+    (:mod:`rabbit_msgs_py.quiet_start`); if it finds any, they are stopped unstarted and
+    :class:`~.probe.AnotherStack` is raised."""
     import rclpy
 
     from rabbit_msgs_py.runtime import make_executor
@@ -90,8 +107,18 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
     with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
         if config.record and not config.record_stats_file:  # where the recorder says how it ended
             config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
+        procs = NodeProcesses(config, log=log, hold=probe is not None)
+        if probe is not None:
+            try:
+                found = probe()
+            except BaseException:
+                procs.stop()
+                raise
+            if found:
+                procs.stop()
+                raise AnotherStack(found)
+            procs.release()
         context = init_context()
-        procs = NodeProcesses(config, log=log)
         supervisor = Supervisor(config, context=context)
         error = None
         try:

@@ -25,10 +25,10 @@
 
 from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
 from .in_process import run_in_process
-from .probe import STACK_NODE_NAMES, other_stack
+from .probe import STACK_NODE_NAMES, AnotherStack, other_stack
 from .processes import NodeProcesses, recording_error, run_multi_process
 from .supervisor import REALTIME_HALT_TIMEOUT, RunReport, Supervisor
 
-__all__ = ["NODE_MODULES", "REALTIME_HALT_TIMEOUT", "STACK_NODE_NAMES", "NodeProcesses", "RunReport", "StackConfig",
+__all__ = ["AnotherStack", "NODE_MODULES", "REALTIME_HALT_TIMEOUT", "STACK_NODE_NAMES", "NodeProcesses", "RunReport", "StackConfig",
            "Supervisor", "other_stack", "policy_name", "recording_error", "ros_arguments", "run_in_process",
            "run_multi_process"]

@@ -115,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.runtime.policies import PolicyUnavailable
     from rabbit_policy.experiment.options import schedule_from_args
     from rabbit_policy.experiment.scenario import parse_pushes
-    from rabbit_policy.bringup.stack import StackConfig, other_stack, run_in_process, run_multi_process
+    from rabbit_policy.bringup.stack import AnotherStack, StackConfig, other_stack, run_in_process, run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
 
     try:
@@ -159,22 +159,26 @@ def main(argv: list[str] | None = None) -> int:
 
     if interrupted:
         return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
-    present = other_stack(namespace=config.namespace, stop=lambda: bool(interrupted))
-    if interrupted:
-        return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
-    if present:
+    stop = lambda: bool(interrupted)  # noqa: E731
+    probe = lambda: other_stack(namespace=config.namespace, stop=stop)  # noqa: E731
+    try:
+        if args.in_process:
+            found = probe()
+            if found and not interrupted:
+                raise AnotherStack(found)
+            if interrupted:
+                return _report_and_exit(RunReport.not_started(config, "interrupted"), config, args.json)
+            report, _nodes = run_in_process(config, stop=stop, policy=built)
+        else:  # the node processes import while the probe looks
+            report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop, policy=policy,
+                                       probe=probe)
+    except AnotherStack as present:
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
         print(f"error: another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} "
-              f"({', '.join(present)}); stop it, or start this one in another namespace (--namespace rabbit2) or "
+              f"({present}); stop it, or start this one in another namespace (--namespace rabbit2) or "
               f"domain (ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} scripts/run_stack.py ...)",
               file=sys.stderr)
         return 2
-
-    stop = lambda: bool(interrupted)  # noqa: E731
-    if args.in_process:
-        report, _nodes = run_in_process(config, stop=stop, policy=built)
-    else:
-        report = run_multi_process(config, log=sys.stderr if args.json else None, stop=stop, policy=policy)
     return _report_and_exit(report, config, args.json)
 
 

@@ -289,8 +289,11 @@ class SimDriver:
             why = silence_cause(torque_publishers(), self.pairing.controller, self._topic(topics.JOINT_TORQUES),
                                 f"{self._topic(topics.ALPHA)} and {self._topic(topics.KD)}", self._unpaired,
                                 self._topic(topics.RELEASE_CONTROLLER_SERVICE))
-            self._log("warning", f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} "
-                                 f"s; re-sending it every {self.settings.resend_timeout:g} s ({why})", 5.0, "resend")
+            # before any controller has answered this is a start (nodes started by hand come up
+            # seconds apart): said, not warned; once one has, silence is a fault
+            level = "warning" if self.pairing.controller is not None else "info"
+            self._log(level, f"lockstep: no torque for the state at t = {self.sim.time:.3f} s after {waited:.1f} "
+                             f"s; re-sending it every {self.settings.resend_timeout:g} s ({why})", 5.0, "resend")
         self._send_state()
         return self._out
 
