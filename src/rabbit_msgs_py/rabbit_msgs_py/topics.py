@@ -86,10 +86,12 @@ robot_state_publisher publishes it, for RViz's RobotModel and Foxglove's URDF la
 
 RECORDED_UNTIL = "recorder/recorded_until"
 """rosgraph_msgs/Clock (transient local): the header stamp (sim time) of the newest
-``/joint_states`` message recorder_node has written, after each. In lockstep and paced
-modes with ``wait_for_recorder`` sim_node steps only while the recorder is at most a few
-states behind, so under any load no message is lost; run_stack stops the nodes of a
-recorded run only once it reaches the run's last state, so the bag ends with the run."""
+``/joint_states`` message recorder_node has written, after each; a negative stamp first
+(the recorder announces itself before it subscribes). In lockstep and paced modes sim_node
+steps only while the recorder is at most a few states behind, so under any load no message
+is lost: from the start with ``wait_for_recorder`` (run_stack), else from a recorder's first
+report until it leaves (one started by hand). run_stack stops the nodes of a recorded run
+only once it reaches the run's last state, so the bag ends with the run."""
 
 RESET_SERVICE = "sim/reset"
 """std_srvs/Trigger: put the robot back in the newest ``/sim/initial_state`` at t = 0."""
