@@ -81,11 +81,11 @@ def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, mo
 def judge_policy(policy, robust: dict, classic_margins: list[dict], stability: dict, map_fn) -> dict:
     """Checks 1-6 for one controller from this evaluation's results, plus the paper's push
     scenarios beyond classic's margins (three walks)."""
-    from rabbit_policy.evaluation.acceptance import _scenario_job, judge, paper_scenarios, policy_outputs
+    from rabbit_policy.evaluation.acceptance import _scenario_job, judge, beyond_classic_scenarios, policy_outputs
 
     speeds = sorted({m["speed"] for m in classic_margins})
     speed = 1.0 if 1.0 in speeds else speeds[0]
-    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
+    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in beyond_classic_scenarios(classic_margins, speed)]))
     return judge(robust, classic_margins, [{k: s[k] for k in ("name", "impulse_Ns", "survived")} for s in scenarios],
                  stability, max(s["peak_torque"] for s in scenarios), policy_outputs(policy))
 

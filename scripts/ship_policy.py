@@ -6,7 +6,7 @@
 
 Runs the learning issue's acceptance checks 1-6 (``rabbit_policy.evaluation.acceptance.
 broad_acceptance``: every speed, every ordered change at every phase, 100 random command
-sequences, push margins against classic HZD's and the paper's scenarios beyond them, model
+sequences, push margins against classic HZD's and three scenarios beyond them, model
 errors, Poincaré) on the policy and on classic HZD's best variant (the calibrated library,
 every 20 ticks) for comparison, and the 9-speed tracking table (``acceptance``) on the
 policy, each ``--compare`` file, the network the run started from (its warm start,

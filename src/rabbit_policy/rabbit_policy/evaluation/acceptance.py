@@ -215,7 +215,7 @@ def judge(robust: dict, classic_margins: list[dict] | None = None, scenarios: li
           criteria: BroadCriteria = BroadCriteria()) -> dict:
     """Verdicts of checks 1-6 from measured results (pure): ``robust`` = :func:`.robustness.robustness`
     of the policy, ``classic_margins`` = classic HZD's push margins (the reference of 4),
-    ``scenarios`` = rows ``{"name", "impulse_Ns", "survived"}`` of the paper's scenarios,
+    ``scenarios`` = rows ``{"name", "impulse_Ns", "survived"}`` of :func:`beyond_classic_scenarios`,
     ``stability`` = ``{speed: {"magnitudes": [...]} or {"error": ...}}`` (|lambda| per eigenvalue),
     ``peak_torque`` (N m) over the evaluation, ``outputs`` = the policy's output count (21:
     20 free coefficients + Kd). A check without its inputs fails, saying so."""
@@ -257,11 +257,13 @@ def judge(robust: dict, classic_margins: list[dict] | None = None, scenarios: li
             "failed": [name for name, c in checks.items() if not c["passed"]]}
 
 
-def paper_scenarios(classic_margins: list[dict], speed: float = 1.0, beyond: float = 2.0):
-    """The paper's three push scenarios (pushes at 2, 4 and 6 s, 0.1 s each) at ``speed``,
-    with magnitudes ``beyond`` N s past classic HZD's margin there: a small forward and a
-    small backward push at classic's forward / backward margin + ``beyond``, and a large
-    backward one at twice that."""
+def beyond_classic_scenarios(classic_margins: list[dict], speed: float = 1.0, beyond: float = 2.0):
+    """Check 4's three push scenarios: the shape of the paper's (pushes at 2, 4 and 6 s, 0.1 s
+    each) at ``speed``, with magnitudes ``beyond`` N s past classic HZD's margin there: a
+    forward and a backward push at classic's forward / backward margin + ``beyond``, and a
+    large backward one at twice that. They are not the paper's scenarios, whose one
+    definition (fixed impulses of 6, 6 and 15 N s) is
+    :data:`~rabbit_policy.evaluation.push_recovery.PUSH_SCENARIOS`."""
     from rabbit_policy.evaluation.push_recovery import PushScenario
 
     margin = {m["direction"]: m["largest_survived_Ns"] for m in classic_margins if m["speed"] == speed}
@@ -343,7 +345,7 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
         log(f"{classic.name}: push margins (the reference)")
         classic_margins = push_margins(classic, config, map_fn)
     speed = 1.0 if 1.0 in config.push_speeds else config.push_speeds[0]
-    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in paper_scenarios(classic_margins, speed)]))
+    scenarios = list(map_fn(_scenario_job, [(policy, speed, s) for s in beyond_classic_scenarios(classic_margins, speed)]))
     log(f"{policy.name}: Poincaré analysis")
     stability = stability_analyses(policy, stability_samples, config, map_fn)
     peak = max(s["peak_torque"] for s in scenarios)
@@ -390,7 +392,7 @@ def broad_table(broad: list[tuple[str, dict]]) -> list[str]:
                                  + (f"/{m['required_Ns']:g}" if m['required_Ns'] is not None else "")
                                  for m in detail["margins"])
             scen = detail.get("scenarios") or []
-            return f"{margins} N s; scenarios survived {sum(s['survived'] for s in scen)}/{len(scen)}"
+            return f"{margins} N s; beyond-classic scenarios survived {sum(s['survived'] for s in scen)}/{len(scen)}"
         if check == "5_model_errors":
             judged = [r for r in detail if r["judged"]]
             ok = sum(r["outcome"] == "walked" and (r["error"] is None or abs(r["error"]) <= 0.05) for r in judged)
