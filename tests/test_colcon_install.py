@@ -112,6 +112,10 @@ def test_the_install_space_carries_the_package_data(install_space):
     assert "interpolation.json" in packaged and len(packaged) == 12
     for name in ("hzd_rl_policy.pt", "MODEL_CARD.md", "evaluation.json"):
         assert (site[0] / "trained" / name).is_file(), name
+    specs = Path(__file__).resolve().parents[1] / "src" / "rabbit_policy" / "rabbit_policy" / "controllers"
+    shipped = sorted(p.name for p in specs.iterdir() if p.suffix in (".yaml", ".npz"))
+    assert sorted(p.name for p in (site[0] / "controllers").iterdir()) == shipped  # the specs and their weights
+    assert {"classic.yaml", "recovery.yaml", "learned.yaml"} <= set(shipped)
 
 
 def test_the_urdf_is_installed_where_ros_tools_look_for_it(install_space):

@@ -180,8 +180,8 @@ def test_a_learned_policy_is_shipped_with_a_model_card():
     path = packaged_policy_file()
     assert path.is_file()
     assert (path.parent / "MODEL_CARD.md").is_file()
-    policy = make_policy("learned")
-    assert isinstance(policy, LearnedPolicy)
+    policy = LearnedPolicy(path)  # the training checkpoint the shipped spec was written from
+    assert "hzd_rl_policy.pt" in make_policy("learned").spec.provenance["from"]
     info = policy.checkpoint.info
     assert info["algorithm"] in ("es", "ppo") and info["parameters"] == parameter_count(policy.net)
     card = (path.parent / "MODEL_CARD.md").read_text()
@@ -235,7 +235,7 @@ def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy
     assert card.startswith("---\n")
     header = card.split("---\n")[1]
     stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["acceptance_1_6"]
-    info = make_policy("learned").checkpoint.info
+    info = LearnedPolicy(packaged_policy_file()).checkpoint.info
     assert "---\n" + header + "---\n\n" == "\n".join(card_header(info, list(stored.items()))) + "\n"
     meta = yaml.safe_load(header)
     assert meta["license"] == "apache-2.0" and "reinforcement-learning" in meta["tags"]
@@ -472,7 +472,7 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = {**NEWER_FIELDS, **make_policy("learned").checkpoint.info["config"]}  # what trained it
+    trained = {**NEWER_FIELDS, **LearnedPolicy(packaged_policy_file()).checkpoint.info["config"]}  # what trained it
     assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])

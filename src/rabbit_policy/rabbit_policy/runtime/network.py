@@ -26,12 +26,14 @@ import torch
 from torch import nn
 
 from rabbit_policy.runtime.body import BODY_OFFSET, BODY_SCALE
-from rabbit_policy.runtime.speed_window import Observation
+from rabbit_policy.runtime.forward import OUTPUTS, NetworkForward
+
+__all__ = ["HZDPolicyNet", "NetworkForward", "PolicyCheckpoint", "input_normalisation", "parameter_count",
+           "widen_inputs"]
 
 HIDDEN = 12
 N_INPUTS = 3
 N_OUTPUTS = 21
-OUTPUTS = ("sigmoid", "clip", "tanh")
 
 
 class HZDPolicyNet(nn.Module):
@@ -126,50 +128,3 @@ class PolicyCheckpoint:
     def load(cls, path: str | Path) -> "PolicyCheckpoint":
         data = torch.load(Path(path), map_location="cpu", weights_only=True)
         return cls(data["state_dict"], np.array(data["low"]), np.array(data["high"]), data.get("info", {}))
-
-
-@dataclass(frozen=True)
-class NetworkForward:
-    """A network's forward pass in numpy, for deciding (torch stays for training): the same
-    float32 arithmetic as :meth:`HZDPolicyNet.forward`, equal to it within float32 rounding
-    (tested to 1e-6 of each output's range), at about a third of torch's cost per decision
-    (``scripts/bench_train.py``'s ``forward_us``). A snapshot: build another after the
-    weights change (:meth:`of`)."""
-
-    weights: tuple[np.ndarray, ...]
-    biases: tuple[np.ndarray, ...]
-    offset: np.ndarray
-    scale: np.ndarray
-    low: np.ndarray
-    high: np.ndarray
-    output: str
-
-    @classmethod
-    def of(cls, net: HZDPolicyNet) -> "NetworkForward":
-        """The forward pass of ``net``'s current weights."""
-        layers = [m for m in net.body if isinstance(m, nn.Linear)]
-
-        def array(t: torch.Tensor) -> np.ndarray:
-            a = t.detach().numpy().astype(np.float32)
-            a.setflags(write=False)
-            return a
-
-        return cls(tuple(array(m.weight) for m in layers), tuple(array(m.bias) for m in layers), array(net.offset),
-                   array(net.scale), array(net.low), array(net.high), net.output)
-
-    def __call__(self, x: Observation | np.ndarray | tuple) -> np.ndarray:
-        """One deterministic action (21 floats, physical units) for an observation (or the
-        network's whole input vector)."""
-        if isinstance(x, Observation):
-            x = x.as_tuple()
-        h = (np.asarray(x, dtype=np.float32) - self.offset) / self.scale
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < last:
-                h = np.tanh(h)
-        if self.output == "sigmoid":
-            unit = np.float32(1.0) / (np.float32(1.0) + np.exp(-h))
-        else:
-            unit = (np.float32(1.0) + (np.clip(h, -1.0, 1.0) if self.output == "clip" else np.tanh(h))) / np.float32(2.0)
-        return (self.low + (self.high - self.low) * unit).astype(float)

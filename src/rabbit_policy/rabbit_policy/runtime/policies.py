@@ -22,172 +22,34 @@ for classic, ``rl`` for learned.
 from __future__ import annotations
 
 import copy
-import math
 import sys
-from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
-from typing import Protocol
 
 import numpy as np
 
-from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
+from rabbit_msgs_py.decision_ticks import OWN, PER_STEP, DecisionTiming
+from rabbit_policy.runtime.forward import NetworkForward
+from rabbit_policy.runtime.classic import (CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW, LIBRARY_MODES,
+                                           LibraryPolicy, PeriodicPolicy, RateLimitedPolicy)
+from rabbit_policy.runtime.gait_command import (GaitCommand, Policy, PolicyUnavailable, controller_settings,
+                                                decision_period, first_command, reset_policy)
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.speed_integral import (DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, check_gain,
-                                                  decision_dt, integral_limit)
+from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, OverlayConfig, RecoveryOverlay, RecoveryPolicy
+from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, check_gain
 from rabbit_policy.runtime.speed_window import Observation
+
+__all__ = ["CLASSIC_DECISION_PERIOD", "CONTROLLERS", "CONTROLLER_ALIASES", "CONTROLLER_CHOICES",
+           "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LearnedPolicy", "LibraryPolicy",
+           "NetworkPolicy", "PeriodicPolicy", "Policy", "PolicyUnavailable", "RateLimitedPolicy", "controller_name",
+           "controller_settings", "copy_policy", "decision_period", "first_command", "make_policy",
+           "packaged_policy_file", "read_only_memo", "required_controller_settings", "reset_policy",
+           "residual_base_policy"]
 
 CONTROLLERS = ("classic", "learned", "recovery")
 CONTROLLER_ALIASES = {"hzd": "classic", "library": "classic", "rl": "learned"}
 CONTROLLER_CHOICES = CONTROLLERS + tuple(CONTROLLER_ALIASES)
 """What a script's ``--controller`` accepts: the names and their aliases."""
-LIBRARY_MODES = ("nearest", "interpolate")
-
-
-@dataclass(frozen=True)
-class GaitCommand:
-    """What a policy decides for the next step: alpha (24, rad, core order) and Kd
-    (N m s/rad)."""
-
-    alpha: tuple[float, ...]
-    kd: float
-
-
-class Policy(Protocol):
-    """Anything that maps an observation to a gait command."""
-
-    name: str
-
-    def act(self, observation: Observation) -> GaitCommand: ...
-
-
-class PolicyUnavailable(RuntimeError):
-    """The requested policy cannot be loaded (missing files, not shipped yet)."""
-
-
-class LibraryPolicy:
-    """Classic HZD: the library gait for the commanded speed (``nearest`` or
-    ``interpolate``); the measured speeds are not used. With ``integral_gain`` > 0 (1/s)
-    the gait is the one for ``v_d + integral_gain * I``, I the integral of the mean speed
-    error (:mod:`.speed_integral`: Westervelt's event-based integral, updated every ``dt``
-    s, the offset within +-``offset_limit`` m/s and I held where ``v_d + integral_gain * I``
-    would leave the library's speeds); :meth:`reset` zeroes it for a new walk."""
-
-    def __init__(self, library: GaitLibrary, mode: str = "nearest", integral_gain: float = 0.0, dt: float = 0.02,
-                 offset_limit: float = DEFAULT_OFFSET_LIMIT) -> None:
-        if mode not in LIBRARY_MODES:
-            raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
-        self.library = library
-        self.mode = mode
-        self.integral_gain = float(integral_gain)
-        self.integral = None
-        if integral_gain:
-            self.integral = SpeedIntegral(IntegralConfig(integral_limit(integral_gain, offset_limit), dt,
-                                                         integral_gain, library.speed_range))
-        self.name = f"classic/{mode}" + (f"+integral{integral_gain:g}" if integral_gain else "")
-
-    def reset(self) -> None:
-        """A new walk: the speed integral (if any) at 0."""
-        if self.integral is not None:
-            self.integral.reset()
-
-    def act(self, observation: Observation) -> GaitCommand:
-        speed = observation.desired_speed
-        if self.integral is not None:
-            speed += self.integral_gain * self.integral.update(observation.mean_error, speed)
-        gait = self.library.nearest(speed) if self.mode == "nearest" else self.library.interpolate(speed)
-        return GaitCommand(alpha=gait.alpha, kd=gait.kd)
-
-
-class RateLimitedPolicy:
-    """A policy whose command follows the requested one by at most ``max_step`` m/s per
-    decision (per walking step, or per decision of a policy deciding every N ticks): the usual rate limit on a scheduled gait library. The
-    inner policy sees the limited command, and the speed error input consistently
-    (mean(v_d - v) shifted by the limited minus the requested command). Stateful: the
-    first decision starts at the requested command."""
-
-    def __init__(self, policy: Policy, max_step: float) -> None:
-        if not (math.isfinite(max_step) and max_step > 0.0):
-            raise ValueError(f"the command rate limit must be a finite number > 0 m/s per step, got {max_step}")
-        self.policy = policy
-        self.max_step = max_step
-        self.name = f"{policy.name}+limit{max_step:g}"
-        self.needs_body = getattr(policy, "needs_body", False)
-        if self.needs_body:  # it starts on its own gait (no body state before the walk)
-            self.start_command = policy.start_command
-        self.controller_settings = controller_settings(policy)
-        self.command: float | None = None
-        if decision_period(policy):  # a learned policy trained to decide every N ticks: keep its rate
-            self.decision_period, self.decision_window = policy.decision_period, policy.decision_window
-
-    def reset(self) -> None:
-        """A new walk: the first decision starts at the requested command again."""
-        self.command = None
-        reset_policy(self.policy)
-
-    def act(self, observation: Observation) -> GaitCommand:
-        wanted = observation.desired_speed
-        if self.command is None:
-            self.command = wanted
-        else:
-            self.command += min(self.max_step, max(-self.max_step, wanted - self.command))
-        shift = self.command - wanted
-        return self.policy.act(Observation(self.command, observation.mean_speed, observation.mean_error + shift,
-                                           observation.body))
-
-
-CLASSIC_DECISION_PERIOD = 20
-"""Ticks between the classic controller's decisions unless told otherwise: measured
-(docs/evaluation.md), deciding every 20 ticks with the gait blended in at once fell in
-none of the 72 ordered speed changes where once per step fell in 8-11, and survived 20 of
-20 random command sequences where once per step survived 2-6."""
-
-DEFAULT_DECISION_WINDOW = 1000
-"""Longest moving-average window (ticks, 1 ms) of a policy deciding every N ticks; the
-average spans the last step's duration (0.36-0.73 s), this only bounds it."""
-
-
-class PeriodicPolicy:
-    """A policy that decides every ``period`` control ticks (1 ms) instead of once per step,
-    as the paper evaluates its network at every simulation step: its observation is the
-    moving average over the last step's duration (at most ``window`` ticks), and its gait applies at once, blended in
-    from the outputs in force (``HZDController.apply_now``: continuous outputs). The loop
-    that runs it reads ``decision_period``/``decision_window``; ``act`` is the inner
-    policy's."""
-
-    def __init__(self, policy: Policy, period: int, window: int = DEFAULT_DECISION_WINDOW) -> None:
-        if not (isinstance(period, int) and period >= 1):
-            raise ValueError(f"the decision period must be a whole number of ticks >= 1, got {period!r}")
-        if not (isinstance(window, int) and window >= 1):
-            raise ValueError(f"the decision window must be a whole number of ticks >= 1, got {window!r}")
-        self.policy = policy
-        self.decision_period = period
-        self.decision_window = window
-        self.name = f"{policy.name}@{period}ticks"
-        self.needs_body = getattr(policy, "needs_body", False)
-        if self.needs_body:  # it starts on its own gait (no body state before the walk)
-            self.start_command = policy.start_command
-
-    def reset(self) -> None:
-        reset_policy(self.policy)
-
-    def act(self, observation: Observation) -> GaitCommand:
-        return self.policy.act(observation)
-
-
-def first_command(policy: Policy, speed: float) -> GaitCommand:
-    """The gait a policy starts on at ``speed`` m/s (the loops and ``policy_node``): its
-    ``start_command`` if it has one (a policy that reads the body state), else its answer to
-    (v, v, 0)."""
-    start = getattr(policy, "start_command", None)
-    return start(speed) if start is not None else policy.act(Observation(speed, speed, 0.0))
-
-
-def reset_policy(policy: Policy | None) -> None:
-    """Start a policy's walk afresh: a stateful one (memory, a rate limit) has ``reset``."""
-    reset = getattr(policy, "reset", None)
-    if reset is not None:
-        reset()
 
 
 def read_only_memo(policy: Policy | None) -> dict[int, object]:
@@ -195,10 +57,10 @@ def read_only_memo(policy: Policy | None) -> dict[int, object]:
     libraries, and a network's numpy forward pass, weights and checkpoint. Deep copies of
     those cost about a hundred decisions each; the state decisions do change (a memory, a
     rate limit's command, the recovery rule's) is copied."""
-    network = sys.modules.get("rabbit_policy.runtime.network")  # not imported: no network to share
-    shared: tuple[type, ...] = (GaitLibrary,)
+    network = sys.modules.get("rabbit_policy.runtime.network")  # not imported: no torch network to share
+    shared: tuple[type, ...] = (GaitLibrary, NetworkForward)
     if network is not None:
-        shared += (network.NetworkForward, network.PolicyCheckpoint, network.HZDPolicyNet)
+        shared += (network.PolicyCheckpoint, network.HZDPolicyNet)
     memo: dict[int, object] = {}
     seen: set[int] = set()
     stack: list[object] = [policy]
@@ -224,29 +86,17 @@ def copy_policy(policy: Policy) -> Policy:
     return copy.deepcopy(policy, read_only_memo(policy))
 
 
-def controller_settings(policy: Policy | None) -> dict[str, float]:
-    """The ``ControllerConfig`` fields a policy needs the controller to run with (the
-    recovery controller: gaits applied at once); {} for the rest. The loops apply them, and
-    the stack gives them to ``hzd_controller_node`` as parameters."""
-    return dict(getattr(policy, "controller_settings", {}))
-
-
 def required_controller_settings(kind: str, policy_file: str | Path | None = None,
                                  once_per_step: bool = False) -> dict[str, float]:
-    """The controller settings the controller named ``kind`` needs, without building it (the
-    stack's configuration gives them to ``hzd_controller_node``): the recovery controller's,
-    and a learned policy's whose residual adds to it or that carries its rule as an overlay
-    applied at once (read from the checkpoint's ``info``,
-    ``policy_file`` or the packaged one; {} if there is none to read). ``once_per_step``: the
-    policy decides once per step, so a learned policy loads without its overlay
-    (:class:`LearnedPolicy`) and asks for nothing on its account."""
-    from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
-
+    """The controller settings the controller named ``kind`` needs (the stack's
+    configuration gives them to ``hzd_controller_node``): its spec's (:mod:`rabbit_policy.spec`;
+    every gait-timing field), or a training checkpoint's (``policy_file`` ``.pt``: the
+    recovery controller's for a residual on it or an overlay applied at once, read from its
+    ``info``; {} if there is none to read). ``once_per_step``: the policy decides once per
+    step, so a learned policy runs without its rule and asks for the classic settings."""
     kind = controller_name(kind)
-    if kind == "recovery":
-        return dict(CONTROLLER_SETTINGS)
-    if kind == "learned":
-        path = Path(policy_file) if policy_file else packaged_policy_file()
+    if kind == "learned" and policy_file and not is_spec_file(policy_file):
+        path = Path(policy_file)
         if path.is_file():
             from rabbit_policy.runtime.network import PolicyCheckpoint
 
@@ -254,10 +104,19 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
             if info.get("residual_base", "classic") != "classic":
                 return dict(CONTROLLER_SETTINGS)
             if info.get("recovery_overlay") is not None and not once_per_step:
-                from rabbit_policy.runtime.recovery import OverlayConfig
-
                 return OverlayConfig.from_dict(info["recovery_overlay"]).controller_settings
-    return {}
+        return {}
+    from dataclasses import asdict
+
+    from rabbit_policy.spec import SpecError
+    from rabbit_policy.spec.variants import controller_spec
+
+    try:
+        spec, _base, _source = controller_spec(kind, None, "interpolate", policy_file,
+                                               PER_STEP if once_per_step else OWN)
+    except (SpecError, ValueError):
+        return {}  # the node says why when it builds the controller
+    return asdict(spec.controller)
 
 
 def residual_base_policy(base: str, library: GaitLibrary, decision_period: int) -> Policy | None:
@@ -273,12 +132,6 @@ def residual_base_policy(base: str, library: GaitLibrary, decision_period: int) 
     recovery = _recovery(LibraryPolicy(library, "interpolate"), decision_period)
     recovery.gates_residual = base == "recovery_gated"
     return recovery
-
-
-def decision_period(policy: Policy | None) -> int:
-    """Ticks between a policy's decisions; 0: once per step, at the touchdown, for the next
-    step (every policy but a :class:`PeriodicPolicy`)."""
-    return getattr(policy, "decision_period", 0)
 
 
 def packaged_policy_file() -> Path:
@@ -306,10 +159,10 @@ class NetworkPolicy:
                  base: Policy | None = None, overlay=None) -> None:
         if base is not None and residual is None:
             raise ValueError("a base policy is what a residual adds to: give the residual too")
-        from rabbit_policy.runtime.network import NetworkForward
-
-        self.net = net
-        self.forward = NetworkForward.of(net)  # numpy per decision; a snapshot of the weights now
+        if isinstance(net, NetworkForward):  # a spec's weights (rabbit_policy.spec.build): no torch
+            self.net, self.forward = None, net
+        else:  # a torch HZDPolicyNet (training): a numpy snapshot of its weights now
+            self.net, self.forward = net, NetworkForward.of(net)
         self.name = name
         self.memory = memory
         self.residual = residual
@@ -413,8 +266,6 @@ class LearnedPolicy(NetworkPolicy):
             base = residual_base_policy(info["residual_base"], residual.library, decision_period)
         overlay = None
         if info.get("recovery_overlay") is not None:
-            from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryOverlay
-
             config = OverlayConfig.from_dict(info["recovery_overlay"])
             if decision_period:
                 overlay = RecoveryOverlay(config, decision_period)
@@ -437,12 +288,15 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
                 decision: DecisionTiming = OWN, speed_integral: float = 0.0,
                 integral_offset_limit: float = DEFAULT_OFFSET_LIMIT) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
-    message a user can act on. ``max_command_step`` > 0 wraps it in a
-    :class:`RateLimitedPolicy` (m/s per step; 0: no limit). ``decision``: the policy's own
-    timing (classic: :data:`CLASSIC_DECISION_PERIOD`; learned: as trained), once per step,
-    or every N ticks (a :class:`PeriodicPolicy`). ``speed_integral`` > 0
-    (1/s, classic only): Westervelt's event-based speed integral with that gain, its offset
-    within +-``integral_offset_limit`` m/s (see :class:`LibraryPolicy`)."""
+    message a user can act on. Every controller is its spec (:mod:`rabbit_policy.spec`): the
+    packaged one of ``kind``, or for ``learned`` the spec ``policy_file`` (``.yaml``), with
+    the options below written into it, then built by :func:`rabbit_policy.spec.build`. A
+    training checkpoint (``policy_file`` ``.pt``) is read with torch (:class:`LearnedPolicy`).
+    ``max_command_step`` > 0 wraps it in a :class:`RateLimitedPolicy` (m/s per step; 0: no
+    limit). ``decision``: the spec's own timing (classic every 20 ticks; learned as
+    trained), once per step, or every N ticks. ``speed_integral`` > 0 (1/s, classic only):
+    Westervelt's event-based speed integral with that gain, its offset within
+    +-``integral_offset_limit`` m/s (see :class:`LibraryPolicy`)."""
     if not isinstance(decision, DecisionTiming):
         raise ValueError(f"decision must be a DecisionTiming (own, step or N ticks), got {decision!r}")
     check_gain(speed_integral, "the speed integral gain")
@@ -451,33 +305,37 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
         raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "
                          "policy with memory features carries its own")
     if kind != "learned" and policy_file:
-        raise ValueError("a policy file is a learned policy's checkpoint: it is for the learned controller "
+        raise ValueError("a policy file is a learned policy's checkpoint or spec: it is for the learned controller "
                          "(policy:=learned, --controller learned); the classic one uses gait_dir")
     if kind == "learned" and gait_dir:
         raise ValueError("a gait directory is the classic controller's library: the learned one takes a policy "
                          "file (policy_file, --policy-file)")
-    period = None
-    if kind in ("classic", "recovery"):
-        try:
-            library = GaitLibrary.load(gait_dir or None)
-        except (FileNotFoundError, ValueError) as exc:
-            raise PolicyUnavailable(f"cannot load the gait library: {exc}") from exc
-        period = decision.resolve(CLASSIC_DECISION_PERIOD)
-        policy: Policy = LibraryPolicy(library, mode, speed_integral, decision_dt(period), integral_offset_limit)
-        if kind == "recovery":
-            policy = _recovery(policy, period)
-            period = None  # it decides every CLASSIC_DECISION_PERIOD ticks itself
+    if mode not in LIBRARY_MODES:
+        raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
+    if kind == "learned" and policy_file and not is_spec_file(policy_file):
+        policy = _learned(policy_file, decision.ticks)  # a training checkpoint: it carries its decision period
     else:
-        policy = _learned(policy_file, decision.ticks)  # it carries its decision period
+        from rabbit_policy.spec import SpecError, build
+        from rabbit_policy.spec.variants import controller_spec
+
+        try:
+            spec, base, source = controller_spec(kind, gait_dir, mode, policy_file, decision, speed_integral,
+                                                 integral_offset_limit)
+            policy = build(spec, base, source=source)
+        except SpecError as exc:
+            raise PolicyUnavailable(str(exc)) from None
     if max_command_step:
         policy = RateLimitedPolicy(policy, max_command_step)
-    return PeriodicPolicy(policy, period) if period else policy
+    return policy
+
+
+def is_spec_file(path: str | Path) -> bool:
+    """A controller spec (YAML or JSON), not a training checkpoint."""
+    return Path(path).suffix.lower() in (".yaml", ".yml", ".json")
 
 
 def _recovery(classic: Policy, period: int) -> Policy:
     """The recovery controller on ``classic`` (:mod:`.recovery`); it decides every ``period`` > 0 ticks."""
-    from rabbit_policy.runtime.recovery import RecoveryPolicy
-
     if period < 1:
         raise ValueError("the recovery controller acts within the step: its decision period must be >= 1 tick")
     return RecoveryPolicy(classic, decision_period=period)

@@ -71,6 +71,9 @@ import numpy as np
 from rabbit_hzd_controller.alpha import N_FREE, N_OUTPUTS, expand_alpha, reduce_alpha
 from rabbit_policy.runtime.alpha_blend import AlphaBlend
 from rabbit_policy.runtime.body import touched_down
+from rabbit_policy.runtime.classic import LibraryPolicy, RateLimitedPolicy
+from rabbit_policy.runtime.gait_command import GaitCommand
+from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLER_SETTINGS = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
@@ -204,8 +207,6 @@ class RecoveryPolicy:
 
     def __init__(self, classic, config: RecoveryConfig = RecoveryConfig(), decision_period: int = 20,
                  decision_window: int = 1000) -> None:
-        from rabbit_policy.runtime.policies import RateLimitedPolicy
-
         self.classic = classic
         self.config = config
         self._base = RateLimitedPolicy(classic, config.command_rate)
@@ -269,8 +270,6 @@ class RecoveryPolicy:
     def with_offsets(self, command, w: float):
         """``command`` (a ``GaitCommand``) with ``w`` (0-1) x the offsets added to Bezier
         rows 1-4; ``command`` itself for w <= 0."""
-        from rabbit_policy.runtime.policies import GaitCommand
-
         if w <= 0.0:
             return command
         free = reduce_alpha(command.alpha).reshape(5, N_OUTPUTS) + w * self._offsets
@@ -373,19 +372,23 @@ class RecoveryOverlay:
     Undisturbed, w stays 0 and the walk is the policy's own at most speeds; at the slow end
     (0.8 m/s) the network's near-stall steps stir it (w < 0.5; the walk 0.008 m/s slower)."""
 
-    def __init__(self, config: OverlayConfig = OverlayConfig(), decision_period: int = 20) -> None:
-        from rabbit_policy.runtime.gait_library import GaitLibrary
-        from rabbit_policy.runtime.policies import LibraryPolicy
-
+    def __init__(self, config: OverlayConfig = OverlayConfig(), decision_period: int = 20,
+                 rule: "RecoveryPolicy | None" = None, blend: AlphaBlend | None = None) -> None:
+        """``rule``: the recovery controller whose weight is used (None: its constants' defaults
+        on the packaged library); ``blend``: ``policy_blend``'s (None: the controller's default
+        blend). A controller spec gives both (:func:`rabbit_policy.spec.build`)."""
         if decision_period < 1:
             raise ValueError("the recovery overlay acts within the step: its policy must decide every N >= 1 ticks")
         from rabbit_hzd_controller.controller import ControllerConfig
 
         self.config = config
-        self.rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
-        defaults = ControllerConfig()
-        self._blend = AlphaBlend(defaults.within_step_blend, defaults.within_step_until,
-                                 decision_period * defaults.tick)  # policy_blend: the policy's gaits blended in
+        if rule is None:
+            rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
+        self.rule = rule
+        if blend is None:
+            defaults = ControllerConfig()
+            blend = AlphaBlend(defaults.within_step_blend, defaults.within_step_until, decision_period * defaults.tick)
+        self._blend = blend  # policy_blend: the policy's gaits blended in
         self._held = None
         self._cap: float | None = None  # rise_until: the weight w may not rise above until the touchdown
         self.last_weight = 0.0
@@ -406,8 +409,6 @@ class RecoveryOverlay:
         defaults would bring it in (:class:`~.alpha_blend.AlphaBlend`: blended over 0.2 of
         phase, its rate kept when a new gait restarts the blend; from 0.6 of phase queued for
         the touchdown, its Kd too)."""
-        from rabbit_policy.runtime.policies import GaitCommand
-
         _, _, tau, tau_rate, _ = observation.body
         alpha, kd = self._blend.step(tau, tau_rate, command.alpha, command.kd)
         return GaitCommand(tuple(float(v) for v in alpha), kd)

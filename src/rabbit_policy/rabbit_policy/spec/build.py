@@ -1,0 +1,152 @@
+"""``build(spec)``: a controller spec (:mod:`.schema`) assembled into the policy that runs it,
+every constant from the spec, none from a code default (ROS-free, no torch). Each stage is
+the runtime's one implementation (:mod:`rabbit_policy.runtime`); what ``controller`` names
+is what the 1 kHz controller must run with (``policy.controller_settings``: the loops and
+the stack apply it)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_policy.runtime.actions import ActionBounds, ResidualAction
+from rabbit_policy.runtime.alpha_blend import AlphaBlend
+from rabbit_policy.runtime.classic import LibraryPolicy, PeriodicPolicy
+from rabbit_policy.runtime.forward import NetworkForward
+from rabbit_policy.runtime.gait_command import Policy
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
+from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
+from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
+from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
+from rabbit_policy.spec.schema import ControllerSpec, IntegralSpec, NetworkSpec, SpecError, load_spec
+
+
+def load_controller(path: str | Path) -> Policy:
+    """The controller the spec file ``path`` describes (its files beside it)."""
+    path = Path(path)
+    return build(load_spec(path), path.parent, source=path.name)
+
+
+def load_packaged(kind: str) -> Policy:
+    """The shipped controller ``kind`` (classic, recovery, learned) from its spec in the package."""
+    return load_controller(packaged_spec(kind))
+
+
+def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, list] | None = None,
+          source: str = "") -> Policy:
+    """The policy ``spec`` describes. ``base``: the directory its files are named relative to;
+    ``weights``: the network's (weight matrices, bias vectors) when they are in memory (a
+    checkpoint being converted) instead of in the file the spec names; ``source``: for the
+    policy's name. :class:`~.schema.SpecError` with one line for a spec that cannot be
+    built (a file whose hash differs, an architecture its weights do not have)."""
+    base = Path(base) if base is not None else Path.cwd()
+    library = GaitLibrary.load(checked_library_dir(spec.gait_library.source, spec.gait_library.sha256, base))
+    period, window = spec.decision.period_ticks, spec.decision.window_ticks
+    if period < 0 or window < 1:
+        raise SpecError(f"decision: period_ticks must be >= 0 and window_ticks >= 1, got {period}, {window}")
+    integral = integral_config(spec.speed_integral)
+    try:
+        if spec.kind == "learned":
+            policy = _learned(spec, base, library, integral, weights, source)
+        else:
+            classic = LibraryPolicy(library, spec.gait_library.mode, integral)
+            if spec.kind == "recovery":
+                policy = RecoveryPolicy(classic, rule_config(spec), period, window)
+            else:
+                policy = PeriodicPolicy(classic, period, window) if period else classic
+    except SpecError:
+        raise
+    except ValueError as exc:
+        raise SpecError(f"{spec.kind} spec {source or spec.name}: {exc}") from None
+    policy.controller_settings = asdict(spec.controller)
+    policy.spec = spec
+    return policy
+
+
+def integral_config(spec: IntegralSpec | None) -> IntegralConfig | None:
+    """The speed integral's configuration, every field from the spec."""
+    if spec is None:
+        return None
+    decay = WindupDecay(**asdict(spec.windup_decay)) if spec.windup_decay is not None else None
+    feedforward = (IntegralFeedforward(tuple(spec.feedforward.speeds), tuple(spec.feedforward.values),
+                                       spec.feedforward.start) if spec.feedforward is not None else None)
+    try:
+        return IntegralConfig(spec.limit, spec.dt, spec.gain, spec.speed_range, spec.band, spec.clip, decay,
+                              feedforward)
+    except ValueError as exc:
+        raise SpecError(f"speed_integral: {exc}") from None
+
+
+def rule_config(spec: ControllerSpec) -> RecoveryConfig:
+    """The recovery rule's constants, every one from the spec."""
+    try:
+        return RecoveryConfig(**asdict(spec.recovery_rule))
+    except ValueError as exc:
+        raise SpecError(f"recovery_rule: {exc}") from None
+
+
+def network_forward(spec: NetworkSpec, base: Path, weights: tuple[list, list] | None = None) -> NetworkForward:
+    """The network's numpy forward pass: its numbers from the spec, its weights from the
+    weights file (hash checked) or ``weights``; the architecture checked against them."""
+    layers = len(spec.hidden) + 1
+    if weights is None:
+        weights = load_weights(spec.weights.file, spec.weights.sha256, base, layers)
+    matrices, biases = weights
+    widths = [spec.inputs, *spec.hidden, spec.outputs]
+    for k, (w, b) in enumerate(zip(matrices, biases)):
+        if np.shape(w) != (widths[k + 1], widths[k]) or np.shape(b) != (widths[k + 1],):
+            raise SpecError(f"network layer {k} is {np.shape(w)}, the spec's architecture "
+                            f"{' -> '.join(map(str, widths))} needs {(widths[k + 1], widths[k])}")
+    for name, values, size in (("input_offset", spec.input_offset, spec.inputs),
+                               ("input_scale", spec.input_scale, spec.inputs),
+                               ("low", spec.low, spec.outputs), ("high", spec.high, spec.outputs)):
+        if len(values) != size:
+            raise SpecError(f"network.{name} holds {len(values)} numbers, the architecture needs {size}")
+    try:
+        return NetworkForward.from_arrays(matrices, biases, spec.input_offset, spec.input_scale, spec.low, spec.high,
+                                          spec.output)
+    except ValueError as exc:
+        raise SpecError(f"network: {exc}") from None
+
+
+def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: IntegralConfig | None,
+             weights: tuple[list, list] | None, source: str) -> Policy:
+    from rabbit_policy.runtime.policies import NetworkPolicy
+
+    net = spec.network
+    period, window = spec.decision.period_ticks, spec.decision.window_ticks
+    if net.features not in INPUTS or INPUTS[net.features] != net.inputs:
+        raise SpecError(f"network.features {net.features!r} with {net.inputs} inputs: features take "
+                        f"{ {k: v for k, v in INPUTS.items()} }")
+    forward = network_forward(net, base, weights)
+    memory = None
+    if net.features != "paper":
+        if integral is None:
+            raise SpecError(f"network.features {net.features!r} keep the speed integral: speed_integral is needed")
+        memory = SpeedMemory(MemoryConfig(integral.dt, integral.limit, net.features == "body", integral.gain,
+                                          integral.speed_range, integral.band, integral.clip, integral.windup_decay,
+                                          integral.feedforward))
+    residual = None
+    if net.residual is not None:
+        if net.residual.base != "classic":
+            raise SpecError(f"network.residual.base {net.residual.base!r}: a spec's residual adds to classic")
+        bounds = ActionBounds.from_library(library, net.residual.bounds_margin, net.residual.kd_bounds)
+        residual = ResidualAction(library, bounds, tuple(net.residual.scale),
+                                  integral.gain if integral is not None else 0.0)
+    overlay = None
+    if spec.overlay is not None:
+        at_once = spec.controller.within_step_blend == 0.0 and spec.controller.within_step_until == 1.0
+        config = OverlayConfig(spec.overlay.fast_gate, spec.overlay.hold, at_once=at_once, policy_blend=at_once,
+                               rise_until=spec.overlay.rise_until)
+        rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule_config(spec), period, window)
+        blend = AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
+        overlay = RecoveryOverlay(config, period, rule, blend)
+    name = f"learned/{source or spec.name}" + (f"@{period}ticks" if period else "")
+    policy = NetworkPolicy(forward, name, period, memory, residual, None, overlay)
+    if period:
+        policy.decision_window = window
+    return policy

@@ -1,0 +1,133 @@
+"""Controller specs written from what the code and a checkpoint hold today: classic's and the
+recovery controller's from their constants, a learned one from a training checkpoint
+(``.pt``, which needs torch to read) and the constants of the rules it is shipped with.
+``write_packaged`` wrote the three specs in ``rabbit_policy/controllers``; from then on the
+specs are what ships, and a change of a code default moves nothing shipped."""
+
+from __future__ import annotations
+
+import subprocess
+from dataclasses import asdict, fields
+from pathlib import Path
+
+import numpy as np
+
+from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_policy.runtime.classic import CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW
+from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
+from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
+from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
+                                       FeedforwardSpec, IntegralSpec, LibrarySpec, NetworkSpec, OverlaySpec,
+                                       ResidualSpec, RuleSpec, SpecError, WeightsSpec, WindupDecaySpec)
+
+RESIDUAL_BOUNDS_MARGIN = 0.15
+"""rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
+RESIDUAL_KD_BOUNDS = (20.0, 150.0)
+"""N m s/rad: ``actions.ActionBounds.from_library``' Kd range (what the checkpoints ran with)."""
+
+
+def code_commit(root: Path | None = None) -> str:
+    """The git commit of the code here ("unknown" outside a checkout), "+dirty" if changed."""
+    root = root or Path(__file__).resolve().parents[3]
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
+                             timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (sha + ("+dirty" if dirty else "")) if sha else "unknown"
+
+
+def _library(source: str, base: Path, mode: str = "interpolate") -> LibrarySpec:
+    return LibrarySpec(source, library_hash(library_dir(source, base)), mode)
+
+
+def _settings(values: dict) -> ControllerSettingsSpec:
+    defaults = ControllerConfig()
+    return ControllerSettingsSpec(**{f.name: float(values.get(f.name, getattr(defaults, f.name)))
+                                     for f in fields(ControllerSettingsSpec)})
+
+
+def _rule(config: RecoveryConfig) -> RuleSpec:
+    return RuleSpec(**asdict(config))
+
+
+def classic_spec(source: str = PACKAGED, base: Path = Path("."), provenance: dict | None = None) -> ControllerSpec:
+    """Classic HZD as shipped: the calibrated library interpolated, deciding every 20 ticks,
+    no speed integral (the paper's baseline), the controller's gait timing as it is now."""
+    return ControllerSpec(SPEC_VERSION, "classic", "classic", _library(source, base),
+                          DecisionSpec(CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW), None, None, None, None, None,
+                          _settings({}), provenance or {})
+
+
+def recovery_spec(source: str = PACKAGED, base: Path = Path("."), provenance: dict | None = None) -> ControllerSpec:
+    """The recovery controller as shipped: classic plus the rule's constants, gaits at once."""
+    return ControllerSpec(SPEC_VERSION, "recovery", "recovery", _library(source, base),
+                          DecisionSpec(CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW), None, None, None,
+                          _rule(RecoveryConfig()), None, _settings(CONTROLLER_SETTINGS), provenance or {})
+
+
+def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, np.ndarray]]:
+    """(weight matrices, bias vectors, the buffers offset/scale/low/high) of a checkpoint's
+    ``HZDPolicyNet`` state dict."""
+    state = {k: np.asarray(v.detach().numpy() if hasattr(v, "detach") else v, dtype=np.float32)
+             for k, v in checkpoint.state_dict.items()}
+    layers = sorted({int(k.split(".")[1]) for k in state if k.startswith("body.") and k.endswith(".weight")})
+    return ([state[f"body.{i}.weight"] for i in layers], [state[f"body.{i}.bias"] for i in layers],
+            {k: state[k] for k in ("offset", "scale", "low", "high")})
+
+
+def learned_spec(checkpoint, out_dir: Path, name: str = "learned", source: str = PACKAGED,
+                 decision_period: int | None = None, provenance: dict | None = None) -> ControllerSpec:
+    """The spec of a learned policy from its checkpoint (``PolicyCheckpoint``), its weights
+    written beside it in ``out_dir``: the network and its memory as the checkpoint records
+    them, and as shipped since 2026-11-28 the recovery rule's constants, the policy blend's
+    (the controller's default blend) and the controller's at-once settings, read from the
+    code now and written down here. Only what the runtime's spec can say is converted: a
+    residual on classic, an overlay that blends the policy's gaits (``policy_blend``)."""
+    info = checkpoint.info
+    weights, biases, buffers = network_arrays(checkpoint)
+    file, sha = save_weights(weights, biases, out_dir, name)
+    residual = None
+    if info.get("action", "direct") == "residual":
+        if info.get("residual_base", "classic") != "classic":
+            raise SpecError(f"residual base {info['residual_base']!r}: a spec's residual adds to classic")
+        residual = ResidualSpec("classic", tuple(float(v) for v in info["residual_scale"]), RESIDUAL_BOUNDS_MARGIN,
+                                RESIDUAL_KD_BOUNDS)
+    network = NetworkSpec(info.get("features", "paper"), int(weights[0].shape[1]),
+                          tuple(int(w.shape[0]) for w in weights[:-1]), int(weights[-1].shape[0]),
+                          info.get("output", "sigmoid"), _floats(buffers["offset"]), _floats(buffers["scale"]),
+                          _floats(buffers["low"]), _floats(buffers["high"]), residual, WeightsSpec(file, sha))
+    integral = None
+    memory = info.get("memory")
+    if memory is not None:
+        decay, ff = memory.get("windup_decay"), memory.get("feedforward")
+        integral = IntegralSpec(float(memory.get("gain", 0.0)), float(memory["limit"]), float(memory["dt"]),
+                                tuple(memory["speed_range"]) if memory.get("speed_range") is not None else None,
+                                memory.get("band"), memory.get("clip"),
+                                WindupDecaySpec(**decay) if decay is not None else None,
+                                FeedforwardSpec(tuple(ff["speeds"]), tuple(ff["values"]), bool(ff["start"]))
+                                if ff is not None else None)
+    if decision_period is None:
+        decision_period = int(info.get("config", {}).get("decision_period", 0))
+    overlay = blend = rule = None
+    settings: dict = {}
+    if info.get("recovery_overlay") is not None and decision_period:
+        values = info["recovery_overlay"]
+        if not (values.get("at_once") and values.get("policy_blend")):
+            raise SpecError("an overlay that does not blend the policy's gaits itself (policy_blend) has no spec form")
+        overlay = OverlaySpec(float(values["fast_gate"]), float(values["hold"]), float(values["rise_until"]))
+        defaults = ControllerConfig()
+        blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)
+        rule = _rule(RecoveryConfig())
+        settings = CONTROLLER_SETTINGS
+    return ControllerSpec(SPEC_VERSION, name, "learned", _library(source, out_dir),
+                          DecisionSpec(decision_period, DEFAULT_DECISION_WINDOW), integral, network, blend, rule,
+                          overlay, _settings(settings), provenance or {})
+
+
+def _floats(values) -> tuple[float, ...]:
+    """float32 numbers as the shortest decimals that read back as the same float32 (the
+    network casts them so): 0.1, not 0.10000000149011612."""
+    return tuple(float(str(v)) for v in np.asarray(values, dtype=np.float32))

@@ -1,0 +1,335 @@
+"""A controller spec: one versioned, human-readable document that names every stage of a
+controller in order and every constant it uses (ROS-free, no torch). Read by
+:func:`load_spec`, written by :func:`dump_spec`, assembled by
+:func:`rabbit_policy.spec.build`. Stages, in the order a decision runs them:
+
+1. ``gait_library``: the library the gaits come from (``packaged`` or a directory beside the
+   spec, checked by its content hash) and how a speed picks a gait (``mode``);
+2. ``decision``: when the policy decides (every ``period_ticks`` control ticks of 1 ms; 0:
+   once per step, at the touchdown) and its moving-average window;
+3. ``speed_integral``: the integral of the mean speed error with every rule it runs by (its
+   bound, gate, windup decay, feed-forward table), or null;
+4. ``network``: the HZD-RL network (architecture, input normalisation, action bounds, the
+   residual it adds to the library's gait; its weights in a weights-only file named by
+   hash), or null;
+5. ``blend``: the network's gaits blended in alpha before the rule acts
+   (:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`), or null;
+6. ``recovery_rule``: the push-recovery rule's constants
+   (:class:`~rabbit_policy.runtime.recovery.RecoveryConfig`), or null; ``overlay``: how it
+   sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
+7. ``controller``: the 1 kHz HZD controller's settings this controller needs (every
+   gait-timing field of ``ControllerConfig``).
+
+``provenance`` is free text for people (what made it, from which commit); it is not read.
+Every other key is required, none more is allowed: a spec with an unknown or missing key,
+a value of the wrong kind, or a file whose hash differs fails with one line
+(:class:`SpecError`).
+"""
+
+from __future__ import annotations
+
+import math
+import typing
+from dataclasses import MISSING, asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+SPEC_VERSION = 1
+KINDS = ("classic", "recovery", "learned")
+
+
+class SpecError(ValueError):
+    """A controller spec that cannot be built as written: one line saying where and why."""
+
+
+@dataclass(frozen=True)
+class LibrarySpec:
+    """``source``: ``packaged`` (rabbit_policy/gaits) or a directory, relative to the spec
+    file; ``sha256``: of its gait files (:func:`rabbit_policy.spec.files.library_hash`);
+    ``mode``: ``interpolate`` (the calibrated blend) or ``nearest``."""
+
+    source: str
+    sha256: str
+    mode: str
+
+
+@dataclass(frozen=True)
+class DecisionSpec:
+    """``period_ticks``: control ticks (1 ms) between decisions, 0 = once per step;
+    ``window_ticks``: the longest moving-average window of the observation (ticks)."""
+
+    period_ticks: int
+    window_ticks: int
+
+
+@dataclass(frozen=True)
+class WindupDecaySpec:
+    """:class:`~rabbit_policy.runtime.speed_integral.WindupDecay`: s, s, bool."""
+
+    seconds: float
+    tau: float
+    at_start: bool
+
+
+@dataclass(frozen=True)
+class FeedforwardSpec:
+    """:class:`~rabbit_policy.runtime.speed_integral.IntegralFeedforward`: the integral's
+    steady value (m) at each speed (m/s), and whether a walk starts at it."""
+
+    speeds: tuple[float, ...]
+    values: tuple[float, ...]
+    start: bool
+
+
+@dataclass(frozen=True)
+class IntegralSpec:
+    """:class:`~rabbit_policy.runtime.speed_integral.IntegralConfig`: ``gain`` 1/s (the
+    offset ``gain * I`` m/s added to the commanded speed), ``limit`` m (|I| bound), ``dt`` s
+    between updates, ``speed_range`` m/s where the commanded gait must stay (null: no such
+    gate), ``band``/``clip`` m/s (null: none), ``windup_decay`` and ``feedforward`` (null:
+    none)."""
+
+    gain: float
+    limit: float
+    dt: float
+    speed_range: tuple[float, float] | None
+    band: float | None
+    clip: float | None
+    windup_decay: WindupDecaySpec | None
+    feedforward: FeedforwardSpec | None
+
+
+@dataclass(frozen=True)
+class ResidualSpec:
+    """The network's output is a residual on the library's gait for v_d + gain * I:
+    ``base`` (``classic``), ``scale`` (21 numbers: the residual's bound per output, rad and
+    N m s/rad), ``bounds_margin`` (rad: how far the sum's coefficients may leave the
+    library's range), ``kd_bounds`` (N m s/rad: the sum's Kd range)."""
+
+    base: str
+    scale: tuple[float, ...]
+    bounds_margin: float
+    kd_bounds: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class WeightsSpec:
+    """A weights-only file (.npz of float32 arrays) beside the spec, and its SHA-256."""
+
+    file: str
+    sha256: str
+
+
+@dataclass(frozen=True)
+class NetworkSpec:
+    """The HZD-RL network: ``features`` (``paper``: v_d, mean v, mean error; ``memory``: and the
+    integral and the last action; ``body``: and the body state), ``inputs``, ``hidden``
+    (widths of the tanh layers), ``outputs`` (21: 20 free Bezier coefficients and Kd),
+    ``output`` (how the last layer maps onto [low, high]: ``sigmoid``, ``clip``, ``tanh``),
+    ``input_offset``/``input_scale`` (the network sees (x - offset) / scale), ``low``/``high``
+    (the action's bounds, physical units), ``residual`` (null: the action is the gait
+    itself), ``weights``."""
+
+    features: str
+    inputs: int
+    hidden: tuple[int, ...]
+    outputs: int
+    output: str
+    input_offset: tuple[float, ...]
+    input_scale: tuple[float, ...]
+    low: tuple[float, ...]
+    high: tuple[float, ...]
+    residual: ResidualSpec | None
+    weights: WeightsSpec
+
+
+@dataclass(frozen=True)
+class BlendSpec:
+    """:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`: ``length`` (phase the blend
+    takes), ``until`` (phase from which a new gait waits for the touchdown)."""
+
+    length: float
+    until: float
+
+
+@dataclass(frozen=True)
+class RuleSpec:
+    """:class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, every field."""
+
+    offsets: tuple[float, float, float, float]
+    threshold: float
+    full: float
+    command_rate: float
+    hold_from: float
+    bins: int
+    forget_weight: float
+    forget_steps: int
+    forget_after: float
+
+
+@dataclass(frozen=True)
+class OverlaySpec:
+    """How the rule sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`
+    with ``at_once``: the controller applies every gait at once, and ``policy_blend``: the
+    network's gaits blended by ``blend``)."""
+
+    fast_gate: float
+    hold: float
+    rise_until: float
+
+
+@dataclass(frozen=True)
+class ControllerSettingsSpec:
+    """The 1 kHz HZD controller's gait timing this controller needs (``ControllerConfig``
+    fields, phase units): a gait that arrives within the step blends in over
+    ``within_step_blend`` (0: at once) unless it arrives at or after ``within_step_until``
+    (then it waits for the touchdown); a gait that arrives with a touchdown blends in over
+    ``blend_phase``."""
+
+    within_step_blend: float
+    within_step_until: float
+    blend_phase: float
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """One controller, every stage and constant (the module docstring)."""
+
+    spec_version: int
+    name: str
+    kind: str
+    gait_library: LibrarySpec
+    decision: DecisionSpec
+    speed_integral: IntegralSpec | None
+    network: NetworkSpec | None
+    blend: BlendSpec | None
+    recovery_rule: RuleSpec | None
+    overlay: OverlaySpec | None
+    controller: ControllerSettingsSpec
+    provenance: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.spec_version != SPEC_VERSION:
+            raise SpecError(f"spec_version {self.spec_version} is not supported (this code reads {SPEC_VERSION})")
+        if self.kind not in KINDS:
+            raise SpecError(f"kind must be one of {KINDS}, got {self.kind!r}")
+        if (self.kind == "learned") != (self.network is not None):
+            raise SpecError("a learned spec has a network and only a learned one does")
+        if (self.kind == "recovery") and self.recovery_rule is None:
+            raise SpecError("a recovery spec needs its recovery_rule")
+        if self.overlay is not None and (self.network is None or self.recovery_rule is None or self.blend is None):
+            raise SpecError("an overlay sits on a network's gaits: it needs network, blend and recovery_rule")
+        if self.kind != "learned" and self.blend is not None:
+            raise SpecError("blend is a learned spec's (the network's gaits blended before the rule)")
+        if self.recovery_rule is not None and self.kind == "learned" and self.overlay is None:
+            raise SpecError("a learned spec with a recovery_rule needs its overlay")
+        if self.recovery_rule is not None and self.decision.period_ticks < 1:
+            raise SpecError("the recovery rule acts within the step: decision.period_ticks must be >= 1")
+
+    def to_dict(self) -> dict:
+        """As written in the file (tuples as lists)."""
+        return _plain(asdict(self))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+def parse_spec(data: Any) -> ControllerSpec:
+    """A :class:`ControllerSpec` from a parsed document; :class:`SpecError` with one line
+    for an unknown or missing key or a value of the wrong kind."""
+    return _parse(ControllerSpec, data, "spec")
+
+
+def _parse(cls, data: Any, where: str):
+    if not isinstance(data, dict):
+        raise SpecError(f"{where} must be a mapping, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    known = [f.name for f in fields(cls)]
+    unknown = sorted(set(data) - set(known))
+    if unknown:
+        raise SpecError(f"unknown key {unknown[0]!r} in {where} (known: {', '.join(known)})")
+    values = {}
+    for f in fields(cls):
+        if f.name not in data:
+            if f.default is not MISSING or f.default_factory is not MISSING:
+                continue
+            raise SpecError(f"missing key {f.name!r} in {where}")
+        values[f.name] = _value(hints[f.name], data[f.name], f"{where}.{f.name}")
+    try:
+        return cls(**values)
+    except SpecError:
+        raise
+    except (TypeError, ValueError) as exc:
+        raise SpecError(f"{where}: {exc}") from None
+
+
+def _value(kind, value: Any, where: str):
+    origin = typing.get_origin(kind)
+    args = typing.get_args(kind)
+    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
+        if value is None and type(None) in args:
+            return None
+        (inner,) = [a for a in args if a is not type(None)]
+        return _value(inner, value, where)
+    if isinstance(kind, type) and hasattr(kind, "__dataclass_fields__"):
+        return _parse(kind, value, where)
+    if origin is tuple:
+        if not isinstance(value, (list, tuple)):
+            raise SpecError(f"{where} must be a list, got {value!r}")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_value(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+        if len(value) != len(args):
+            raise SpecError(f"{where} must hold {len(args)} values, got {len(value)}")
+        return tuple(_value(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
+    if kind is dict or origin is dict:
+        if not isinstance(value, dict):
+            raise SpecError(f"{where} must be a mapping, got {value!r}")
+        return dict(value)
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise SpecError(f"{where} must be true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SpecError(f"{where} must be a whole number, got {value!r}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise SpecError(f"{where} must be a finite number, got {value!r}")
+        return float(value)
+    if kind is str:
+        if not isinstance(value, str):
+            raise SpecError(f"{where} must be a string, got {value!r}")
+        return value
+    raise TypeError(f"no parser for {kind!r} at {where}")  # a schema bug, not a user's
+
+
+def load_spec(path: str | Path) -> ControllerSpec:
+    """Read and parse the spec file ``path`` (YAML or JSON); :class:`SpecError` with one line."""
+    import yaml
+
+    path = Path(path)
+    try:
+        data = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise SpecError(f"cannot read controller spec {path}: {exc.strerror or exc}") from None
+    except yaml.YAMLError as exc:
+        raise SpecError(f"controller spec {path} is not YAML: {str(exc).splitlines()[0]}") from None
+    try:
+        return parse_spec(data)
+    except SpecError as exc:
+        raise SpecError(f"controller spec {path}: {exc}") from None
+
+
+def dump_spec(spec: ControllerSpec, path: str | Path, header: str = "") -> None:
+    """Write ``spec`` as YAML (keys in the schema's order; ``header``: comment lines first)."""
+    import yaml
+
+    text = yaml.safe_dump(spec.to_dict(), sort_keys=False, default_flow_style=None, width=110)
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    Path(path).write_text("\n".join(lines) + ("\n" if lines else "") + text)

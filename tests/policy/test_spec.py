@@ -1,0 +1,185 @@
+"""Controller specs (rabbit_policy.spec): each shipped controller is one readable file that
+names every stage and constant, built by one ``build``; what ships is what the spec says,
+whatever the code's defaults."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.scenario import Push, Scenario
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.policies import (LearnedPolicy, LibraryPolicy, PeriodicPolicy, PolicyUnavailable,
+                                            make_policy, packaged_policy_file, required_controller_settings)
+from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
+from rabbit_policy.spec import SpecError, build, load_controller, load_packaged, load_spec, packaged_spec
+from rabbit_policy.spec.schema import KINDS
+
+pytestmark = pytest.mark.sim
+
+SRC = Path(__file__).resolve().parents[2] / "src" / "rabbit_policy" / "rabbit_policy"
+# a backward push the rule answers (13 N s at 1.0 m/s: classic stalls), a speed change and a forward push, in 7 s
+SCENARIO = Scenario(schedule=((0.0, 1.0), (4.5, 1.3)), pushes=(Push(3.0, -130.0, 0.1), Push(5.5, 100.0, 0.1)))
+
+
+def _trajectory(policy) -> np.ndarray:
+    result = walk(policy, SCENARIO, 7.0, record_state=True)
+    return np.hstack([np.asarray(result.qpos), np.asarray(result.qvel)])
+
+
+@pytest.mark.slow
+def test_the_shipped_specs_walk_as_the_controllers_assembled_before_them_bit_for_bit():
+    """The specs were written from the code's constants and the shipped checkpoint: built,
+    each walks exactly as the controller the code assembled from them (the learned one read
+    from its ``.pt`` with torch)."""
+    library = GaitLibrary.load()
+    before = {"classic": PeriodicPolicy(LibraryPolicy(library, "interpolate"), 20),
+              "recovery": RecoveryPolicy(LibraryPolicy(library, "interpolate"), decision_period=20),
+              "learned": LearnedPolicy(packaged_policy_file())}
+    for kind in KINDS:
+        spec_built = load_packaged(kind)
+        assert np.array_equal(_trajectory(spec_built), _trajectory(before[kind])), kind
+        assert spec_built.controller_settings == {f: getattr(spec_built.spec.controller, f)
+                                                  for f in ("within_step_blend", "within_step_until", "blend_phase")}
+
+
+@pytest.mark.slow
+def test_no_code_default_moves_a_shipped_controller(monkeypatch):
+    """The recovery rule's constants, the overlay's and the controller's blend defaults are
+    changed in the code: the controllers the code assembles from its defaults walk
+    differently (the test can fail), the shipped specs' do not move."""
+    from rabbit_hzd_controller.controller import ControllerConfig
+    from rabbit_policy.runtime.recovery import OverlayConfig
+
+    shipped = {kind: _trajectory(load_packaged(kind)) for kind in ("recovery", "learned")}
+    defaults = list(RecoveryConfig.__init__.__defaults__)
+    defaults[0] = (-0.3, 0.1, 0.2, -0.4)  # offsets
+    monkeypatch.setattr(RecoveryConfig.__init__, "__defaults__", tuple(defaults))
+    blend = list(ControllerConfig.__init__.__defaults__)
+    names = [f for f in ControllerConfig.__dataclass_fields__ if ControllerConfig.__dataclass_fields__[f].init]
+    blend[names.index("within_step_blend") - (len(names) - len(blend))] = 0.5
+    monkeypatch.setattr(ControllerConfig.__init__, "__defaults__", tuple(blend))
+    overlay = list(OverlayConfig.__init__.__defaults__)
+    overlay[0] = 0.3  # fast_gate
+    monkeypatch.setattr(OverlayConfig.__init__, "__defaults__", tuple(overlay))
+    assert RecoveryConfig().offsets == (-0.3, 0.1, 0.2, -0.4) and ControllerConfig().within_step_blend == 0.5
+    from_defaults = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), RecoveryConfig(), 20)
+    assert not np.array_equal(_trajectory(from_defaults), shipped["recovery"])
+    assert not np.array_equal(_trajectory(LearnedPolicy(packaged_policy_file())), shipped["learned"])
+    for kind in ("recovery", "learned"):
+        assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), kind
+
+
+def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
+    """The packaged spec and its weights copied into ``tmp_path``; (path, parsed document)."""
+    source = packaged_spec(kind)
+    data = yaml.safe_load(source.read_text())
+    if data["network"] is not None:
+        weights = source.parent / data["network"]["weights"]["file"]
+        (tmp_path / weights.name).write_bytes(weights.read_bytes())
+    path = tmp_path / source.name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path, data
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.update(extra=1), "unknown key 'extra' in spec"),
+    (lambda d: d["recovery_rule"].pop("forget_after"), "missing key 'forget_after' in spec.recovery_rule"),
+    (lambda d: d["network"].update(activation="relu"), "unknown key 'activation' in spec.network"),
+    (lambda d: d["recovery_rule"].update(bins=2.5), "spec.recovery_rule.bins must be a whole number"),
+    (lambda d: d["network"].update(hidden=[12, 12]), "the spec's architecture needs"),
+    (lambda d: d["network"].update(hidden=[12, 12, 11]), "network layer 2 is (12, 12)"),
+    (lambda d: d["network"]["weights"].update(sha256="0" * 64), "the spec names 0000000000000000"),
+    (lambda d: d["gait_library"].update(sha256="1" * 64), "the library changed since the spec was written"),
+    (lambda d: d.update(spec_version=2), "spec_version 2 is not supported"),
+    (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral: the speed integral's limit"),
+])
+def test_a_spec_that_cannot_be_built_as_written_fails_with_one_line(tmp_path, edit, message):
+    path, data = _spec_copy(tmp_path)
+    edit(data)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    with pytest.raises(SpecError) as raised:
+        load_controller(path)
+    text = str(raised.value)
+    assert message in text and "\n" not in text, text
+
+
+def test_a_weights_file_that_changed_is_refused(tmp_path):
+    path, data = _spec_copy(tmp_path)
+    weights = tmp_path / data["network"]["weights"]["file"]
+    content = bytearray(weights.read_bytes())
+    content[-40] ^= 1
+    weights.write_bytes(bytes(content))
+    with pytest.raises(SpecError, match="network weights .* have sha256"):
+        load_controller(path)
+
+
+def test_the_shipped_specs_name_every_constant_of_the_recovery_rule():
+    rule = load_spec(packaged_spec("learned")).recovery_rule
+    assert {f for f in RecoveryConfig.__dataclass_fields__} == set(vars(rule))
+    assert load_spec(packaged_spec("recovery")).recovery_rule == rule
+    for kind in KINDS:
+        spec = load_spec(packaged_spec(kind))
+        assert spec.kind == kind and set(vars(spec.controller)) == {"within_step_blend", "within_step_until",
+                                                                   "blend_phase"}
+
+
+def test_make_policy_builds_the_specs_and_their_variants():
+    """Every script builds through the specs: the packaged one, or a variant with its options
+    written in; a learned spec file is a policy file; the stack's controller settings are
+    the spec's."""
+    assert make_policy("learned").spec == load_spec(packaged_spec("learned"))
+    assert make_policy("learned", policy_file=packaged_spec("learned")).spec == load_spec(packaged_spec("learned"))
+    variant = make_policy("classic", mode="nearest", speed_integral=0.3)
+    assert variant.spec.gait_library.mode == "nearest" and variant.spec.speed_integral.gain == 0.3
+    assert variant.name == "classic/nearest+integral0.3@20ticks"
+    assert required_controller_settings("recovery") == {"within_step_blend": 0.0, "within_step_until": 1.0,
+                                                        "blend_phase": 0.0}
+    with pytest.raises(PolicyUnavailable, match="is a classic controller, not learned"):
+        make_policy("learned", policy_file=packaged_spec("classic"))
+
+
+def test_a_spec_is_built_without_torch():
+    """policy_node and the loops run a learned spec on numpy alone."""
+    code = ("import sys; from rabbit_policy.spec import load_packaged; import rabbit_policy.policy_node; "
+            "from rabbit_policy.runtime.policies import make_policy; p = make_policy('learned'); "
+            "from rabbit_policy.runtime.speed_window import Observation; "
+            "p.act(Observation(1.0, 1.0, 0.0, (0.0, 0.0, 0.5, 1.0, 1.0))); "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr[-2000:]
+
+
+def test_the_runtime_has_no_import_circle():
+    """recovery.py once imported policies.py inside functions and policies.py recovery.py:
+    now the runtime's modules import each other one way only."""
+    graph = {}
+    for path in (SRC / "runtime").glob("*.py"):
+        names = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("rabbit_policy.runtime."):
+                names.add(node.module.rsplit(".", 1)[1])
+        graph[path.stem] = names
+
+    def reaches(start: str, goal: str, seen: set) -> bool:
+        return any(n == goal or (n not in seen and reaches(n, goal, seen | {n})) for n in graph.get(start, ()))
+
+    circles = sorted(m for m in graph if reaches(m, m, {m}))
+    assert not circles, circles
+
+
+def test_a_spec_round_trips_through_its_file(tmp_path):
+    from rabbit_policy.spec import dump_spec
+
+    spec = load_spec(packaged_spec("learned"))
+    dump_spec(replace(spec, name="copy"), tmp_path / "copy.yaml", "a copy")
+    assert load_spec(tmp_path / "copy.yaml") == replace(spec, name="copy")
+    assert build(spec, packaged_spec("learned").parent).spec == spec
