@@ -183,3 +183,38 @@ def test_a_spec_round_trips_through_its_file(tmp_path):
     dump_spec(replace(spec, name="copy"), tmp_path / "copy.yaml", "a copy")
     assert load_spec(tmp_path / "copy.yaml") == replace(spec, name="copy")
     assert build(spec, packaged_spec("learned").parent).spec == spec
+
+
+@pytest.mark.slow
+def test_the_learned_spec_env_is_the_deployed_loop_with_the_network_as_the_agent():
+    """``RabbitHZD-Learned-v1``: an agent that gives the network's own outputs walks the
+    deployed controller's walk bit for bit (the same scenario: a push the rule answers, a
+    speed change, a forward push), every rule of the spec acting."""
+    import gymnasium as gym
+
+    env = gym.make("RabbitHZD-Learned-v1", max_steps=350)
+    obs, _ = env.reset(seed=0, options={"scenario": SCENARIO})
+    network = load_packaged("learned").forward
+    steps, truncated = 0, False
+    while not truncated:
+        obs, _reward, terminated, truncated, info = env.step(network.normalised(obs))
+        steps += 1
+        assert not terminated and not info["rejected"]
+    trained_on = env.unwrapped.loop.result()
+    deployed = walk(load_packaged("learned"), SCENARIO, 7.0)
+    assert steps == 350 and np.array_equal(trained_on.hip_x, deployed.hip_x)
+    assert env.unwrapped.policy.spec == load_spec(packaged_spec("learned"))
+
+
+def test_the_learned_spec_env_passes_gymnasiums_checker():
+    import gymnasium as gym
+    from gymnasium.utils.env_checker import check_env
+
+    env = gym.make("RabbitHZD-Learned-v1", max_steps=5)
+    check_env(env.unwrapped, skip_render_check=True)
+    obs, _ = env.reset(seed=1)
+    assert env.observation_space.contains(obs) and env.action_space.shape == (21,)
+    with pytest.raises(ValueError, match="decides every N ticks"):
+        from rabbit_policy.learning.spec_env import SpecEnv
+
+        SpecEnv(spec=packaged_spec("classic"))

@@ -1,6 +1,7 @@
-"""``RabbitHZD-v0`` (the paper's problem) and the ids of the runs we ship and train
+"""``RabbitHZD-v0`` (the paper's problem), the ids of the runs we ship and train
 (:data:`PRESET_IDS`: ``RabbitHZD-Shipped-v0``, the shipped policy's episodes;
-``RabbitHZD-Recovery-v0``, the push-recovery residual's) in Gymnasium's registry once
+``RabbitHZD-Recovery-v0``, the push-recovery residual's) and of the shipped learned spec's
+loop (:data:`SPEC_IDS`: ``RabbitHZD-Learned-v1``) in Gymnasium's registry once
 ``rabbit_policy`` is imported, at no cost to
 what does not use Gymnasium (``policy_node``): the id is registered by entry-point string
 (the env module is imported only by ``gymnasium.make``), at once if Gymnasium is imported
@@ -19,6 +20,9 @@ MAX_EPISODE_STEPS = 60
 PRESET_IDS = {"RabbitHZD-Shipped-v0": "shipped", "RabbitHZD-Recovery-v0": "recovery"}
 """id -> ``learning.env.PRESETS`` name; their episodes are 500 env steps (10 s of sim time)."""
 PRESET_EPISODE_STEPS = 500
+SPEC_IDS = {"RabbitHZD-Learned-v1": "rabbit_policy.learning.spec_env:SpecEnv"}
+"""id -> entry point of the envs built from a controller spec: the shipped learned controller's
+closed loop with the network as the agent (``spec=`` another learned spec); 500 decisions."""
 
 
 def register(gymnasium_module) -> None:
@@ -30,6 +34,10 @@ def register(gymnasium_module) -> None:
     if ENV_ID not in gymnasium_module.registry:
         gymnasium_module.register(id=ENV_ID, entry_point=ENTRY_POINT, max_episode_steps=MAX_EPISODE_STEPS,
                                   additional_wrappers=length)
+    for env_id, entry_point in SPEC_IDS.items():
+        if env_id not in gymnasium_module.registry:
+            gymnasium_module.register(id=env_id, entry_point=entry_point, max_episode_steps=PRESET_EPISODE_STEPS,
+                                      additional_wrappers=length)
     for env_id, preset in PRESET_IDS.items():
         if env_id not in gymnasium_module.registry:
             gymnasium_module.register(id=env_id, entry_point="rabbit_policy.learning.env:make_preset",

@@ -73,7 +73,9 @@ class ClosedLoop:
                  controller: ControllerConfig | None = None,
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
                  record_state: bool = False, observe_speed: bool = False,
-                 observe_period: int = 0) -> None:
+                 observe_period: int = 0, decide_outside: bool = False) -> None:
+        if decide_outside and (policy is not None or not observe_speed or not observe_period):
+            raise ValueError("decide_outside is for a loop without a policy, observing every N > 0 ticks")
         reset_policy(policy)  # a policy with memory starts each walk afresh
         if start is None:
             if policy is None:
@@ -95,6 +97,11 @@ class ClosedLoop:
         self.placed_pushes: list = []  # the phase pushes as placed (rabbit_msgs_py.pushes.Push)
         self.observer = observer
         self.record_state = record_state
+        # decide_outside: the decisions fall due as for a policy deciding every N ticks, each kept
+        # in `pending` (with the body state) for the caller to decide on (the learning env)
+        self._deciding = policy is not None or decide_outside
+        self.decide_outside = decide_outside
+        self.pending: Observation | None = None
         self._period = decision_period(policy) if policy is not None else observe_period
         window = policy.decision_window if (policy is not None and self._period) else scenario.window
         # when the policy decides and what it sees: the rule policy_node runs too (stamps: sim
@@ -225,7 +232,7 @@ class ClosedLoop:
         if limit == 1 or self.observer is not None or self.record_state:
             return 1
         n = min(limit, CHUNK)
-        if self.clock is not None and self.policy is not None:  # nobody decides: the samples only
+        if self.clock is not None and self._deciding:  # nobody decides: the samples only
             due = self.clock.next_due
             if due is not None:
                 n = min(n, max(1, due - self.ticks))
@@ -255,7 +262,7 @@ class ClosedLoop:
         self.ticks = i + k
         t = round(float(times[k - 1]), 9)  # on the ns grid of the stack's stamps (16.132)
         if self.clock is not None and k > 1:  # the samples before the last decide nothing (_quiet_ticks)
-            self.clock.add_quiet(range(i + 1, i + k), speeds[:k - 1], self.desired_speed, self.policy is not None)
+            self.clock.add_quiet(range(i + 1, i + k), speeds[:k - 1], self.desired_speed, self._deciding)
         if t >= self._next_change:
             speed = self.schedule.due(stamp_of(t))
             if speed is not None:
@@ -269,7 +276,7 @@ class ClosedLoop:
             self.observer(self, self._applied.tolist())
         if self.clock is not None:
             for observation in self.clock.sample(i + k, float(speeds[k - 1]), self.desired_speed,
-                                                 self.policy is not None):  # every N ticks
+                                                 self._deciding):  # every N ticks
                 self._decide(observation, t)
         stop = False
         flags = int(state[ticks.STOP])
@@ -315,6 +322,9 @@ class ClosedLoop:
         """The policy's decision on ``observation``: the gait for the next step (once per step)
         or applied at once, blended in (every N ticks); nothing without a policy (the
         learning environment decides itself)."""
+        if self.decide_outside:
+            self.pending = replace(observation, body=self.body_state())
+            return
         if self.policy is None:
             return
         if getattr(self.policy, "needs_body", False):
@@ -325,9 +335,10 @@ class ClosedLoop:
 
     # -------------------------------------------------------------------- run
     def run(self, duration: float | None = None, stop_on_fall: bool = True, until_touchdown: bool = False,
-            max_ticks: int | None = None) -> bool:
+            max_ticks: int | None = None, until_decision: bool = False) -> bool:
         """Tick for ``duration`` s of sim time (or ``max_ticks`` ticks); with
-        ``until_touchdown`` stop after the next touchdown. Returns True if a stop rule
+        ``until_touchdown`` stop after the next touchdown, with ``until_decision``
+        (``decide_outside``) once a decision is ``pending``. Returns True if a stop rule
         ended it (fell or stalled; with ``stop_on_fall`` False the walk goes on)."""
         if duration is not None:
             if not duration > 0:
@@ -345,6 +356,8 @@ class ClosedLoop:
             if stop and stop_on_fall:
                 return True
             if until_touchdown and controller.touchdown:
+                return False
+            if until_decision and self.pending is not None:
                 return False
         return False
 

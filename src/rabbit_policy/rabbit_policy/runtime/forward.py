@@ -68,6 +68,30 @@ class NetworkForward:
         return cls.from_arrays([array(m.weight) for m in layers], [array(m.bias) for m in layers], array(net.offset),
                                array(net.scale), array(net.low), array(net.high), net.output)
 
+    def normalised(self, x) -> np.ndarray:
+        """The action in [-1, 1] (float32) an agent in a [-1, 1] Box would give for this output:
+        :meth:`physical` of it is this network's output (bit for bit for ``tanh`` and ``clip``)."""
+        h = self._last_layer(x)
+        if self.output == "sigmoid":
+            return np.float32(2.0) / (np.float32(1.0) + np.exp(-h)) - np.float32(1.0)
+        return np.clip(h, -1.0, 1.0) if self.output == "clip" else np.tanh(h)
+
+    def physical(self, action) -> np.ndarray:
+        """A normalised action (in [-1, 1]) on the action bounds (physical units, float)."""
+        unit = (np.float32(1.0) + np.asarray(action, dtype=np.float32)) / np.float32(2.0)
+        return (self.low + (self.high - self.low) * unit).astype(float)
+
+    def _last_layer(self, x) -> np.ndarray:
+        if isinstance(x, Observation):
+            x = x.as_tuple()
+        h = (np.asarray(x, dtype=np.float32) - self.offset) / self.scale
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            h = w @ h + b
+            if i < last:
+                h = np.tanh(h)
+        return h
+
     @property
     def inputs(self) -> int:
         return int(self.offset.shape[0])

@@ -194,14 +194,21 @@ class NetworkPolicy:
         if self.base is not None:  # the base's own start (a zero residual)
             return self.base.start_command(speed)
         if not self._network_needs_body:  # an overlay starts on the network's own start
-            command = self._network_act(Observation(speed, speed, 0.0))
-            if self.overlay is not None:
-                self.overlay.start(command)
-            return command
+            observation = Observation(speed, speed, 0.0)
+            return self.start_from(observation, self.forward(self.network_input(observation)))
         gait = (self.residual.library if self.residual is not None else GaitLibrary.load()).interpolate(speed)
         if self.residual is None:
             self._remember(np.append(gait.free, gait.kd))
         return GaitCommand(alpha=gait.alpha, kd=gait.kd)
+
+    def start_from(self, observation: Observation, action: np.ndarray) -> GaitCommand:
+        """The start gait from the network's ``action`` (physical units) on the start's
+        observation (v, v, 0): the overlay, if any, starts on it (:meth:`start_command`; the
+        learning env's first step)."""
+        command = self.gait_from(observation, action)
+        if self.overlay is not None:
+            self.overlay.start(command)
+        return command
 
     def _remember(self, action: np.ndarray) -> None:
         """Record the network-side action (physical units) in the memory, normalised to its bounds."""
@@ -209,17 +216,29 @@ class NetworkPolicy:
         self.memory.record(2.0 * (action - low) / (high - low) - 1.0)
 
     def act(self, observation: Observation) -> GaitCommand:
-        command = self._network_act(observation)
+        return self.decide(observation, self.forward(self.network_input(observation)))
+
+    def decide(self, observation: Observation, action: np.ndarray) -> GaitCommand:
+        """The gait for ``observation`` when the network's output is ``action`` (21 numbers,
+        physical units): remembered, composed on its residual's base, the overlay on top.
+        :meth:`act` with the network's own output; the learning env with the agent's
+        (:class:`~rabbit_policy.learning.spec_env.SpecEnv`), so it learns in this very loop."""
+        command = self.gait_from(observation, action)
         return command if self.overlay is None else self.overlay.apply(observation, command)
 
-    def _network_act(self, observation: Observation) -> GaitCommand:
-        """The network's gait (on its residual's base), before any overlay."""
+    def network_input(self, observation: Observation) -> np.ndarray | tuple:
+        """What the network sees for ``observation`` (the memory's inputs update its integral:
+        call once per decision, before :meth:`decide`)."""
+        if self.memory is None:
+            return observation.as_tuple()
+        return self.memory.inputs(observation.as_tuple(), observation.body)
+
+    def gait_from(self, observation: Observation, action: np.ndarray) -> GaitCommand:
+        """The network's gait for its ``action`` (physical units; on its residual's base),
+        before any overlay; the action remembered."""
         from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
 
-        if self.memory is None:
-            action = self.forward(observation.as_tuple())
-        else:
-            action = self.forward(self.memory.inputs(observation.as_tuple(), observation.body))
+        if self.memory is not None:
             self._remember(action)
         if self.base is not None:
             from rabbit_hzd_controller.alpha import reduce_alpha
