@@ -18,7 +18,7 @@ queues it). Parameters:
   ``policy_file``); ``library`` is an alias of classic.
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
-* ``policy_file``: learned policy checkpoint ('' = the packaged one).
+* ``policy_file``: learned controller spec (.yaml) or training checkpoint (.pt) ('' = the packaged spec).
 * ``initial_speed``: v_d before the first ``/cmd_speed`` and the hip speed of the initial
   state (m/s).
 * ``speed_integral``: classic only, Westervelt's event-based speed integral, gain in 1/s
@@ -96,7 +96,8 @@ POLICY_PARAMS = {
     "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) "
                                          "or nearest gait", choices=LIBRARY_MODES),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
-    "policy_file": Param("", "learned: policy checkpoint ('' = the packaged one)"),
+    "policy_file": Param("", "learned: controller spec (.yaml) or training checkpoint (.pt) ('' = the packaged "
+                                 "spec, rabbit_policy/controllers/learned.yaml)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
                                 "within [min_speed, max_speed]", range=(0.1, 3.0)),
     "speed_integral": Param(0.0, "classic: event-based speed integral gain, 1/s (0 = off): the gait for the command "

@@ -42,7 +42,8 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic: the nearest gait or the blend of the two around the command")
     parser.add_argument("--gait-dir", default="", help="classic: gait library directory (default: packaged)")
-    parser.add_argument("--policy-file", default="", help="learned: policy checkpoint (default: packaged)")
+    parser.add_argument("--policy-file", default="", help="learned: a controller spec (.yaml, docs/controller_spec.md) "
+                                                          "or a training checkpoint (.pt) (default: the packaged spec)")
     parser.add_argument("--decision-period", type=decision_timing, default=OWN, metavar="own|step|TICKS",
                         help="when the policy decides: own = as it was made (classic every 20 ticks, learned as "
                              "trained; the default), step = once per step, N = every N ticks (1 ms), each gait "
