@@ -212,7 +212,7 @@ def test_the_integral_feedforward_start_takes_the_start_transient_out():
     with pytest.raises(ValueError, match="settle"):
         steady_integral(plain, 1.0, duration=3.0, settle=3.0)
     with pytest.raises(ValueError, match="keeps no speed integral"):
-        steady_integrals(NetworkPolicy(plain.net, "no integral"), (1.0, 1.1))
+        steady_integrals(NetworkPolicy(plain.forward, "no integral"), (1.0, 1.1))
 
 
 @pytest.mark.parametrize("args, word", [

@@ -63,7 +63,7 @@ def steady_integrals(policy: NetworkPolicy, speeds: tuple[float, ...], duration:
     constant command it stirs only on the slow oscillation's near-stall steps)."""
     if policy.memory is None:
         raise ValueError(f"{policy.name} keeps no speed integral (features 'paper')")
-    without = NetworkPolicy(policy.net, policy.name, getattr(policy, "decision_period", 0),
+    without = NetworkPolicy(policy.forward, policy.name, getattr(policy, "decision_period", 0),
                             SpeedMemory(replace(policy.memory.config, feedforward=None)), policy.residual, policy.base)
     return IntegralFeedforward(tuple(speeds), tuple(round(steady_integral(without, v, duration, settle), 4)
                                                     for v in speeds))
