@@ -218,3 +218,35 @@ def test_the_learned_spec_env_passes_gymnasiums_checker():
         from rabbit_policy.learning.spec_env import SpecEnv
 
         SpecEnv(spec=packaged_spec("classic"))
+
+
+@pytest.mark.slow
+def test_train_es_on_a_spec_trains_its_network_in_its_deployed_loop_and_writes_a_spec(tmp_path):
+    """``train.py --spec``: ES starts from the spec's network, runs its episodes in the spec's
+    deployed loop (RabbitHZD-Learned-v1) and writes the policy as the spec with the trained
+    weights, which walk.py runs; PPO is refused with one line."""
+    root = Path(__file__).resolve().parents[2]
+    spec = packaged_spec("learned")
+    common = [sys.executable, "scripts/train.py", "--algo", "es", "--spec", str(spec), "--seed", "1", "--workers",
+              "1", "--pairs", "1", "--episodes", "1", "--max-steps", "5", "--no-progress", "--distribution",
+              "paper", "--iterations", "1", "--eval-every", "0", "--sigma", "0.02"]
+    run = subprocess.run([*common, "--out", str(tmp_path / "run")], cwd=root, capture_output=True, text=True,
+                         timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    trained = load_spec(tmp_path / "run" / "policy.yaml")
+    shipped = load_spec(spec)
+    assert trained.network.weights.sha256 != shipped.network.weights.sha256  # one generation moved them
+    assert replace(trained, network=replace(trained.network, weights=shipped.network.weights),
+                   provenance=shipped.provenance) == shipped  # every other stage and constant as the spec's
+    policy = make_policy("learned", policy_file=tmp_path / "run" / "policy.yaml")
+    assert not walk(policy, Scenario.constant(1.0), 3.0).failed
+    with pytest.raises(PolicyUnavailable, match="its policy is policy.yaml"):
+        make_policy("learned", policy_file=tmp_path / "run" / "policy.pt")
+    walked = subprocess.run([sys.executable, "scripts/walk.py", "--controller", "learned", "--policy-file",
+                             str(tmp_path / "run" / "policy.yaml"), "--duration", "2", "--json"], cwd=root,
+                            capture_output=True, text=True, timeout=300)
+    assert walked.returncode == 0, walked.stderr[-2000:]
+    refused = subprocess.run([sys.executable, "scripts/train.py", "--algo", "ppo", "--spec", str(spec), "--out",
+                              str(tmp_path / "ppo"), "--no-progress"], cwd=root, capture_output=True, text=True,
+                             timeout=300)
+    assert refused.returncode == 2 and refused.stderr.strip().splitlines()[-1].startswith("error: --spec trains with ES")

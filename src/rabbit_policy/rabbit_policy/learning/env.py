@@ -308,9 +308,22 @@ class EpisodeConfig:
     integral_windup_decay: float = option(0.0, "memory or body features: after a command change, what the speed "
                                                "integral wound up decays (time constant 1 s) once the hip has passed "
                                                "the new command, until this long after the change (s; 0 = never)")
+    spec: str = option("", "train the network of this learned controller spec (a .yaml, docs/controller_spec.md) "
+                           "in its deployed closed loop (RabbitHZD-Learned-v1), starting from its weights; the spec "
+                           "sets the inputs, the action, the decision period and every rule, so features, action, "
+                           "residual_base, decision_period and the integral options must be left as they are "
+                           "('' = train the network these options describe)")
     seed: int = option(0, "seed of the episodes, the perturbations and the network")
 
     def __post_init__(self) -> None:
+        if self.spec:
+            from rabbit_policy.spec import load_spec
+
+            spec = load_spec(self.spec)  # one line for a bad one
+            if spec.kind != "learned" or spec.decision.period_ticks != self.decision_period:
+                raise ValueError(f"spec {self.spec}: a learned spec deciding every decision_period "
+                                 f"({self.decision_period}) ticks is needed, got {spec.kind} every "
+                                 f"{spec.decision.period_ticks}")
         if not (isinstance(self.max_steps, int) and self.max_steps >= 1):
             raise ValueError(f"max_steps must be a whole number >= 1, got {self.max_steps!r}")
         decision_ticks(self.decision_period)  # raises for anything but 0 or N ticks
@@ -343,7 +356,13 @@ class EpisodeConfig:
                                          windup_decay_for(self.integral_windup_decay))
 
     def env_kwargs(self) -> dict:
-        """The :class:`RabbitHZDEnv` arguments of these episodes (ES and PPO build their envs from it)."""
+        """The env arguments of these episodes (ES and PPO build their envs from it:
+        :func:`make_env`): a spec's env (:class:`~.spec_env.SpecEnv`) with ``spec``, else
+        :class:`RabbitHZDEnv`'s."""
+        if self.spec:
+            return {"spec": self.spec, "max_steps": self.max_steps, "distribution": self.distribution,
+                    "fall_penalty": self.fall_penalty, "alive_bonus": self.alive_bonus,
+                    "slow_penalty": self.slow_penalty, "rules": StopRules(roll_back_after=self.roll_back_after)}
         return {"max_steps": self.max_steps, "decision_period": self.decision_period,
                 "distribution": self.distribution, "fall_penalty": self.fall_penalty,
                 "alive_bonus": self.alive_bonus, "slow_penalty": self.slow_penalty, "features": self.features,
@@ -352,6 +371,15 @@ class EpisodeConfig:
                 "integral_band": self.integral_band, "integral_clip": self.integral_clip,
                 "integral_windup_decay": self.integral_windup_decay,
                 "rules": StopRules(roll_back_after=self.roll_back_after)}
+
+
+def make_env(kwargs: dict) -> "RabbitHZDEnv":
+    """The env of :meth:`EpisodeConfig.env_kwargs`: a controller spec's loop when they name one."""
+    if kwargs.get("spec"):
+        from rabbit_policy.learning.spec_env import SpecEnv
+
+        return SpecEnv(**kwargs)
+    return RabbitHZDEnv(**kwargs)
 
 
 def windup_decay_for(seconds: float) -> WindupDecay | None:

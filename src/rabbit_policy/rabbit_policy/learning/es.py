@@ -25,9 +25,9 @@ import numpy as np
 import torch
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv, make_env
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
-from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward
+from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_network
 
 
 @dataclass(frozen=True)
@@ -75,9 +75,13 @@ def _worker_env(key: EnvKey) -> tuple[RabbitHZDEnv, HZDPolicyNet]:
     if key not in _WORKER:
         torch.set_num_threads(1)
         kwargs = dict(key)
-        env = RabbitHZDEnv(**kwargs)
-        _WORKER[key] = (env, HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0],
-                                          output="tanh" if kwargs["action"] == "residual" else "sigmoid"))
+        env = make_env(kwargs)
+        if kwargs.get("spec"):  # the spec's network (its weights are set from theta before every use)
+            net = spec_network(env.policy.forward)
+        else:
+            net = HZDPolicyNet(env.bounds.low, env.bounds.high, inputs=env.observation_space.shape[0],
+                               output="tanh" if kwargs["action"] == "residual" else "sigmoid")
+        _WORKER[key] = (env, net)
     return _WORKER[key]
 
 

@@ -42,7 +42,7 @@ import torch
 from torch import nn
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import PRIVILEGED_STATE, EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.env import PRIVILEGED_STATE, EpisodeConfig, RabbitHZDEnv, make_env
 from rabbit_policy.runtime.actions import policy_bounds
 from rabbit_policy.learning.vector import make_vector_env
 from rabbit_policy.parallel import Backend, ignore_interrupts
@@ -185,7 +185,7 @@ def _make_env(kwargs: dict):
     def make() -> RabbitHZDEnv:
         if parent_process() is not None:  # a worker; AsyncVectorEnv also builds one env in the parent
             ignore_interrupts()
-        return RabbitHZDEnv(**kwargs)
+        return make_env(kwargs)
 
     return make
 

@@ -37,7 +37,7 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.learning.env import SLOW_HIP_SPEED, RabbitHZDEnv
-from rabbit_policy.runtime.actions import clip
+from rabbit_policy.runtime.actions import ActionBounds, clip
 from rabbit_policy.runtime.gait_command import reset_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_policy.spec import load_controller, packaged_spec
@@ -79,6 +79,7 @@ class SpecEnv(RabbitHZDEnv):
         self.observation_space = gym.spaces.Box(np.array(low[:inputs], dtype=np.float32),
                                                 np.array(high[:inputs], dtype=np.float32), dtype=np.float32)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.policy.forward.low.shape[0],), dtype=np.float32)
+        self.bounds = ActionBounds(self.policy.forward.low.astype(float), self.policy.forward.high.astype(float))
 
     def _input(self, observation: Observation) -> np.ndarray:
         """The network's input for ``observation``, noise on the measured speeds first."""

@@ -138,6 +138,10 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.runtime.policies import NetworkPolicy, residual_base_policy
     from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
 
+    if getattr(args.trainer, "spec", "") and args.algo != "es":
+        print("error: --spec trains with ES (the spec's network in its deployed loop); PPO's sampler and critic "
+              "are not wired to it", file=sys.stderr)
+        return 2
     try:  # before anything slow: a backend that cannot start is a one-line error at once
         backend = make_backend(args.backend)
     except BackendUnavailable as exc:
@@ -154,7 +158,20 @@ def train(args: TrainingConfig) -> int:
     memory = args.trainer.memory_config(library.speed_range)
     residual = (ResidualAction(library, residual_sum_bounds(library, args.trainer.residual_base), integral_gain=gain)
                 if action == "residual" else None)
-    if residual is not None:  # a zero residual: the classic controller (or the residual's base)
+    spec_file = getattr(args.trainer, "spec", "")
+    if spec_file:  # the spec's network, in the spec's deployed loop (RabbitHZD-Learned-v1)
+        from rabbit_policy.runtime.actions import ActionBounds
+        from rabbit_policy.runtime.network import spec_network
+        from rabbit_policy.spec import load_controller
+
+        deployed = load_controller(spec_file)
+        net, mse = spec_network(deployed.forward), None
+        bounds = ActionBounds(net.low.numpy().astype(float), net.high.numpy().astype(float))
+        features, action = deployed.spec.network.features, "spec"
+        memory, residual = None, None
+        if not args.resume:
+            print(f"spec {spec_file}: starts from its network, in its deployed loop", flush=True)
+    elif residual is not None:  # a zero residual: the classic controller (or the residual's base)
         net, mse = zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), None
         if args.warm_start != "none" and not args.resume:
             print(f"action residual: starts from the zero residual (classic HZD); --warm-start {args.warm_start} "
@@ -194,12 +211,23 @@ def train(args: TrainingConfig) -> int:
                 **({"memory": memory.to_dict()} if memory is not None else {}),
                 **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain,
                     "residual_base": args.trainer.residual_base} if residual is not None else {}),
+                **({"spec": str(Path(spec_file).resolve())} if spec_file else {}),
                 **(extra or {})}
+
+    def save_policy(name: str, extra: dict | None = None) -> None:
+        """OUT/NAME.pt, and for a spec's run OUT/NAME.yaml: the spec with these weights."""
+        PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info(extra)).save(out / f"{name}.pt")
+        if spec_file:
+            from rabbit_policy.spec.convert import trained_spec
+
+            trained_spec(spec_file, net, out / f"{name}.yaml", {"trained_by": "scripts/train.py --spec",
+                                                               "iteration": trainer.iteration,
+                                                               "env_steps": trainer.env_steps, "seed": args.seed})
 
     def save_checkpoint() -> None:
         torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
                     "best": best, "first_pass": first_pass, "warm_start": warm_start_result}, checkpoint_path)
-        PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()).save(out / "policy.pt")
+        save_policy("policy")
         (out / "summary.json").write_text(strict_json.dumps({"info": info(), "first_pass": first_pass, "best": best,
                                                       "warm_start": warm_start_result}, indent=2) + "\n")
 
@@ -207,10 +235,17 @@ def train(args: TrainingConfig) -> int:
 
     def evaluate() -> None:
         nonlocal best, first_pass
-        base = residual_base_policy(args.trainer.residual_base, library, args.trainer.decision_period)
-        policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
-                               memory=SpeedMemory(memory) if memory is not None else None, residual=residual,
-                               base=base)
+        if spec_file:  # the deployed controller with the weights now
+            from rabbit_policy.runtime.network import NetworkForward
+            from rabbit_policy.spec import load_controller
+
+            policy = load_controller(spec_file)
+            policy.forward = NetworkForward.of(net)
+        else:
+            base = residual_base_policy(args.trainer.residual_base, library, args.trainer.decision_period)
+            policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
+                                   memory=SpeedMemory(memory) if memory is not None else None, residual=residual,
+                                   base=base)
         result = acceptance(policy, map_fn=backend.map, recovery=args.validate_recovery)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)
@@ -221,13 +256,12 @@ def train(args: TrainingConfig) -> int:
             warm_start_result["failures"] = result["failures"]
         elif result["passed"] and first_pass is None:
             first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
-        evaluated = PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info({"acceptance": result}))
         if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
             best = {**row, "rank": list(acceptance_rank(result))}
-            evaluated.save(out / "best.pt")
+            save_policy("best", {"acceptance": result})
         if args.keep_evaluated:
             (out / "evaluated").mkdir(exist_ok=True)
-            evaluated.save(out / "evaluated" / f"{trainer.iteration:05d}.pt")
+            save_policy(f"evaluated/{trainer.iteration:05d}", {"acceptance": result})
         bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
                   f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
                   f"slowest reach {row['slowest_reach_s']} s)")

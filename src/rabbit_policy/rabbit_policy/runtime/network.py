@@ -29,7 +29,7 @@ from rabbit_policy.runtime.body import BODY_OFFSET, BODY_SCALE
 from rabbit_policy.runtime.forward import OUTPUTS, NetworkForward
 
 __all__ = ["HZDPolicyNet", "NetworkForward", "PolicyCheckpoint", "input_normalisation", "parameter_count",
-           "widen_inputs"]
+           "spec_network", "widen_inputs"]
 
 HIDDEN = 12
 N_INPUTS = 3
@@ -97,6 +97,23 @@ def widen_inputs(net: HZDPolicyNet, inputs: int, memory_limit: float = 0.2) -> H
     state["offset"][:N_INPUTS], state["scale"][:N_INPUTS] = net.offset[:N_INPUTS], net.scale[:N_INPUTS]
     wide.load_state_dict(state)
     return wide
+
+
+def spec_network(forward: NetworkForward) -> HZDPolicyNet:
+    """The torch network with ``forward``'s weights, input normalisation, bounds and output (a
+    controller spec's network, to train it): :meth:`NetworkForward.of` of it is ``forward``."""
+    if forward.hidden != (HIDDEN,) * 3:
+        raise ValueError(f"training takes the paper's three hidden layers of {HIDDEN}, the spec has {forward.hidden}")
+    net = HZDPolicyNet(np.array(forward.low), np.array(forward.high), output=forward.output, inputs=forward.inputs)
+    layers = [m for m in net.body if isinstance(m, nn.Linear)]
+    state = net.state_dict()
+    for layer_index, (w, b) in zip(range(0, 2 * len(layers), 2), zip(forward.weights, forward.biases)):
+        state[f"body.{layer_index}.weight"] = torch.tensor(np.array(w))
+        state[f"body.{layer_index}.bias"] = torch.tensor(np.array(b))
+    state["offset"], state["scale"] = torch.tensor(np.array(forward.offset)), torch.tensor(np.array(forward.scale))
+    net.load_state_dict(state)
+    net.eval()
+    return net
 
 
 def parameter_count(net: nn.Module) -> int:

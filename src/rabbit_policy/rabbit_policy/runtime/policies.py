@@ -265,6 +265,9 @@ class LearnedPolicy(NetworkPolicy):
 
         self.checkpoint = PolicyCheckpoint.load(path)
         info = self.checkpoint.info
+        if info.get("action") == "spec":
+            raise ValueError(f"a run of train.py --spec: its policy is {Path(path).with_suffix('.yaml').name}, the "
+                             "spec with these weights (this file records the run)")
         if decision_period is None:
             decision_period = int(info.get("config", {}).get("decision_period", 0))
         name = f"learned/{Path(path).name}" + (f"@{decision_period}ticks" if decision_period else "")

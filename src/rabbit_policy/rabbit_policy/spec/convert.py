@@ -131,3 +131,26 @@ def _floats(values) -> tuple[float, ...]:
     """float32 numbers as the shortest decimals that read back as the same float32 (the
     network casts them so): 0.1, not 0.10000000149011612."""
     return tuple(float(str(v)) for v in np.asarray(values, dtype=np.float32))
+
+
+def trained_spec(spec_file: str | Path, net, path: Path, provenance: dict) -> ControllerSpec:
+    """Write the spec ``spec_file`` with ``net``'s weights (a torch ``HZDPolicyNet`` trained
+    from it) as ``path``, its weights file beside it; the gait library by an absolute path
+    unless packaged. Returns the spec written."""
+    from dataclasses import replace
+
+    from rabbit_policy.runtime.forward import NetworkForward
+    from rabbit_policy.spec.schema import dump_spec, load_spec
+
+    source = Path(spec_file).resolve()
+    spec = load_spec(source)
+    forward = NetworkForward.of(net)
+    file, sha = save_weights(list(forward.weights), list(forward.biases), path.parent, path.stem)
+    library = spec.gait_library
+    if library.source != PACKAGED:
+        library = replace(library, source=str(library_dir(library.source, source.parent)))
+    trained = replace(spec, gait_library=library,
+                      network=replace(spec.network, weights=WeightsSpec(file, sha)),
+                      provenance={**provenance, "from_spec": str(source), "code_commit": code_commit()})
+    dump_spec(trained, path, f"{spec.name}, trained from {source.name} (rabbit_policy.spec.convert.trained_spec)")
+    return trained
