@@ -1,0 +1,69 @@
+"""scripts/reproduce.py: one command from a preset to a shipped learned controller under
+--out (never into the package): train -> screen -> ship -> evaluate -> model card."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rabbit_policy.commands.reproduce import load_preset, train_arguments
+from rabbit_policy.spec import load_controller, load_spec, packaged_spec, packaged_spec_dir
+
+pytestmark = pytest.mark.sim
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.slow
+def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wrote(tmp_path):
+    packaged_before = sorted(p.name for p in packaged_spec_dir().iterdir())
+    out = tmp_path / "tiny"
+    run = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out)], cwd=ROOT,
+                         capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    assert sorted(p.name for p in packaged_spec_dir().iterdir()) == packaged_before  # nothing into the package
+    spec = load_spec(out / "learned.yaml")
+    assert (out / spec.network.weights.file).is_file()
+    provenance = spec.provenance
+    assert provenance["commands"][0] == f"scripts/reproduce.py --preset tiny --out {out}"
+    assert provenance["commands"][2].startswith("scripts/train.py --algo es --spec ")
+    assert len(provenance["code_commit"]) >= 40 and len(provenance["library_sha256"]) == 64
+    evaluation = json.loads((out / "evaluation.json").read_text())
+    card = (out / "MODEL_CARD.md").read_text()
+    assert f"scripts/reproduce.py --preset tiny --out {out}" in card  # its regenerate line is what ran
+    first = evaluation["constant"][0]
+    assert f"| {first['speed']:.2f} | {first['mean_speed_last']:.3f} | {first['error']:+.3f} |" in card
+    assert load_controller(out / "learned.yaml").spec == spec
+    walked = subprocess.run([sys.executable, "scripts/walk.py", "--controller", "learned", "--policy-file",
+                             str(out / "learned.yaml"), "--duration", "3", "--json"], cwd=ROOT, capture_output=True,
+                            text=True, timeout=300)
+    assert walked.returncode == 0 and json.loads(walked.stdout)["fell"] is False, walked.stderr[-2000:]
+    again = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out)], cwd=ROOT,
+                           capture_output=True, text=True, timeout=300)
+    assert again.returncode == 2 and "is not empty" in again.stderr
+
+
+def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
+    for name in ("tiny", "shipped"):
+        preset = load_preset(name)
+        assert preset["start"] == "packaged" and preset["evaluation"] in ("quick", "full")
+    shipped = load_preset("shipped")["train"]
+    run = yaml.safe_load((ROOT / "config" / "train" / "shipped_es.yaml").read_text())
+    for key in ("pairs", "episodes", "max_steps", "iterations", "sigma", "lr", "weight_decay", "distribution",
+                "fall_penalty", "seed"):
+        assert shipped[key] == run[key], key  # the shipped run's ES settings
+    assert train_arguments({"pairs": 2, "keep_evaluated": True, "resume": False}) == ["--pairs", "2",
+                                                                                      "--keep-evaluated"]
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("start: packaged\ntrain: {}\n")
+    for preset, message in (("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys")):
+        out = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", preset, "--out",
+                              str(tmp_path / "x")], cwd=ROOT, capture_output=True, text=True, timeout=120)
+        lines = out.stderr.strip().splitlines()
+        assert out.returncode == 2 and message in lines[-1] and "Traceback" not in out.stderr, out.stderr
+    assert packaged_spec("learned").is_file()
