@@ -82,6 +82,7 @@ class NetworkForward:
         return (self.low + (self.high - self.low) * unit).astype(float)
 
     def _last_layer(self, x) -> np.ndarray:
+        """The last layer's output (float32) before it is mapped onto the bounds."""
         if isinstance(x, Observation):
             x = x.as_tuple()
         h = (np.asarray(x, dtype=np.float32) - self.offset) / self.scale
@@ -103,14 +104,7 @@ class NetworkForward:
     def __call__(self, x: Observation | np.ndarray | tuple) -> np.ndarray:
         """One deterministic action (21 floats, physical units) for an observation (or the
         network's whole input vector)."""
-        if isinstance(x, Observation):
-            x = x.as_tuple()
-        h = (np.asarray(x, dtype=np.float32) - self.offset) / self.scale
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < last:
-                h = np.tanh(h)
+        h = self._last_layer(x)
         if self.output == "sigmoid":
             unit = np.float32(1.0) / (np.float32(1.0) + np.exp(-h))
         else:
