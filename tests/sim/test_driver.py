@@ -12,8 +12,8 @@ from rabbit_sim.model import load_model
 from rabbit_sim.settings import SimSettings
 from rabbit_sim.simulation import Simulator
 from rabbit_sim.stepping import (
-    RECORDER_LAG, SILENCE_WARNING_AFTER, Fallen, Log, Placed, PushApplied, SimDriver, State, TorquePublishers,
-    silence_cause)
+    FOLLOW_PATIENCE, RECORDER_LAG, SILENCE_WARNING_AFTER, Fallen, Log, Placed, PushApplied, SimDriver, State,
+    TorquePublishers, silence_cause)
 
 from fake_clock import FakeClock
 
@@ -200,3 +200,30 @@ def test_stop_time_halts_the_physics(initial_state):
         actions = driver.on_torques(tick * MS, C, ZERO, 100.0)
     assert driver.halted and not driver.fallen and any("stop_time" in a.text for a in actions if isinstance(a, Log))
     assert driver.on_torques(3 * MS, C, ZERO, 100.0) == []
+
+
+def test_a_recorder_that_turns_up_is_followed_and_one_that_stalls_is_let_go(initial_state):
+    """Without wait_for_recorder (a recorder started by hand): a recorder's announcement (a
+    negative stamp) makes lockstep wait for it; one that keeps the simulation waiting
+    FOLLOW_PATIENCE s is let go with a warning (a stalled recorder, or a node that only
+    announces one, must not hold the robot for good), and none is followed until every
+    publisher of the reports has left; then a new one is followed again."""
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, resend_timeout=0.2)
+    recorders = [1]
+    count = lambda: recorders[0]  # noqa: E731
+    driver.on_recorded(-1_000_000_000)  # "here, nothing written yet"
+    assert driver.recorder.following
+    assert _states(driver.on_torques(0, C, ZERO, clock.now)) == [] and driver.sim.time == 0.0  # held for the recorder
+    driver.supervise(lambda: TorquePublishers(1), count)  # starts the wait
+    clock.now += FOLLOW_PATIENCE
+    logs = [a for a in driver.supervise(lambda: TorquePublishers(1), count) if isinstance(a, Log)]
+    assert any(a.level == "warning" and "has not kept up for 5 s" in a.text for a in logs), logs
+    assert not driver.recorder.following and round(driver.sim.time, 9) == 0.001  # the held step ran
+    driver.on_recorded(-1_000_000_000)  # the same node announcing again: not followed
+    assert not driver.recorder.following
+    recorders[0] = 0
+    driver.supervise(lambda: TorquePublishers(1), count)  # every publisher has left
+    recorders[0] = 1
+    driver.on_recorded(-1_000_000_000)  # a new recorder
+    assert driver.recorder.following

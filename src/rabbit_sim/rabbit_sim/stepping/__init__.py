@@ -7,6 +7,7 @@ from .driver import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver,
 from .rules import (
     Admit,
     ControllerPairing,
+    FOLLOW_PATIENCE,
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
@@ -26,7 +27,7 @@ from .rules import (
 )
 
 __all__ = [
-    "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "SILENCE_WARNING_AFTER", "Admit", "ControllerPairing", "Fallen", "Frame", "Lateness",
+    "FOLLOW_PATIENCE", "RECORDER_LAG", "RECORDER_RESEND", "REPLY_GRACE", "SILENCE_WARNING_AFTER", "Admit", "ControllerPairing", "Fallen", "Frame", "Lateness",
     "LatenessMonitor", "Lockstep", "Log", "Markers", "Pacer", "Placed", "PushApplied", "RealtimeClock",
     "RecorderGate", "Reply", "SimDriver", "State", "TickStatistics", "TorquePublishers", "Watchdog", "WatchdogEvent",
     "silence_cause",

@@ -27,6 +27,7 @@ from ..markers import RobotShapes, marker_period_ticks
 from ..settings import REPLY_MODES, SimSettings
 from ..simulation import Simulator, TorqueDelay
 from .rules import (
+    FOLLOW_PATIENCE,
     RECORDER_LAG,
     RECORDER_RESEND,
     REPLY_GRACE,
@@ -149,6 +150,7 @@ class SimDriver:
         self.published_stamp: int | None = None  # ns, the newest state sent
         self._recorder_resent = -RECORDER_RESEND
         self._recorder_waits_since: float | None = None  # wall s the simulation began to wait for the recorder
+        self._recorder_ignored = False  # a followed recorder did not keep up: none followed until all have left
         self._unpaired: str | None = None  # no key: the last controller refused since a reply was accepted
         self._shapes = RobotShapes(sim.model) if shapes else None
         self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
@@ -247,7 +249,7 @@ class SimDriver:
         """The recorder has written the state at ``stamp`` (ns; negative: a recorder announced
         itself). Lockstep/paced: a recorder that turns up is followed (:class:`RecorderGate`)."""
         self._out = []
-        if not self.by_replies:
+        if not self.by_replies or self._recorder_ignored:
             return self._out
         if self.recorder.report(stamp):
             self._log("info", f"a recorder turned up at t = {self.sim.time:.3f} s: the simulation steps at its pace "
@@ -263,14 +265,22 @@ class SimDriver:
         again when its reply is overdue (``torque_publishers()``: who publishes torques,
         asked only then, for the log line that names the cause)."""
         self._out = []
-        if self.recorder.following and recorders() == 0:
-            self.recorder.let_go()
-            self._log("info", f"the recorder left at t = {self.sim.time:.3f} s: the simulation steps freely again")
-            if not self.paused and self.lockstep.held_torques is not None:
-                self._resume()
+        now = self.clock()
+        if self.recorder.following or self._recorder_ignored:
+            if recorders() == 0:
+                if self.recorder.following:
+                    self._log("info", f"the recorder left at t = {self.sim.time:.3f} s: the simulation steps freely "
+                                      "again")
+                self._let_recorder_go(ignore=False)
+            elif (self.recorder.following and self._recorder_waits_since is not None
+                  and now - self._recorder_waits_since >= FOLLOW_PATIENCE):
+                self._log("warning", f"the recorder on {self._topic(topics.RECORDED_UNTIL)} has not kept up for "
+                                     f"{FOLLOW_PATIENCE:g} s ({self.recorder.behind(self.published_stamp)}): stepping "
+                                     "freely, and following no recorder until every publisher of it has left (a "
+                                     "recording started by hand may lose states from here; run_stack's wait)")
+                self._let_recorder_go(ignore=True)
         if not self.started or self.pace_pending:
             return self._out
-        now = self.clock()
         if not self.paused and self.recorder.holds(self.published_stamp):
             if self._recorder_waits_since is None:
                 self._recorder_waits_since = now
@@ -296,6 +306,16 @@ class SimDriver:
                              f"s; re-sending it every {self.settings.resend_timeout:g} s ({why})", 5.0, "resend")
         self._send_state()
         return self._out
+
+    def _let_recorder_go(self, ignore: bool) -> None:
+        """Stop following the recorder (``ignore``: and any other until every publisher of its
+        reports has left: a recorder that stalls, or a node that only announces one, cannot
+        hold the simulation for good)."""
+        self.recorder.let_go()
+        self._recorder_ignored = ignore
+        self._recorder_waits_since = None
+        if not self.paused and self.lockstep.held_torques is not None:
+            self._resume()
 
     def paced_wake(self) -> list[Action]:
         """Paced, a 1 ms timer: send the state that waits for its wall time; report the

@@ -39,6 +39,11 @@ from rabbit_msgs_py.pairing import PairingKey, source_of
 RECORDER_LAG = 4
 """Lockstep with wait_for_recorder: states the recorder may lag behind (its subscriptions
 keep 10: with at most 4 outstanding none is ever overwritten)."""
+FOLLOW_PATIENCE = 5.0
+"""s (wall): a recorder the simulation follows without ``wait_for_recorder`` (one started by
+hand) that keeps it waiting this long is let go: a stalled recorder, or a node that only
+announces one, must not hold the robot for good. run_stack's recordings (``wait_for_recorder``)
+wait as long as they need; their supervisor fails a recorder that stops."""
 RECORDER_RESEND = 0.05
 """s (wall): while the recorder lacks the state it waits for, the state goes out again this
 often (a recorder that connected late, or a report lost)."""
