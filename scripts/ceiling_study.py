@@ -4,7 +4,7 @@ an oracle that knows the push searches the actions after it with CMA-ES, on an i
 multiples of classic HZD's margin, at every speed and phase asked for. Results go to a JSON-lines
 file as they come (a rerun skips the cases already there), then a table per family and speed.
 
-    python scripts/ceiling_study.py --out docs/learning/ceiling/ceiling.jsonl --workers 2
+    python scripts/ceiling_study.py --out runs/ceiling.jsonl --workers 2
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 CMA-ES over its four offsets and saturation, from the packaged constants; prints JSON (the best
 constants, pushes survived, each generation's scores).
 
-    python scripts/tune_recovery.py --workers 2 > docs/learning/recovery_tuning.json
+    python scripts/tune_recovery.py --workers 2 > runs/recovery_tuning.json
 """
 
 from __future__ import annotations

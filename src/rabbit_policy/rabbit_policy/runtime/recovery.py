@@ -6,7 +6,7 @@ model-based baseline"): classic HZD's backward failures end in the first stance 
 push. The hip stops short of the stance foot, the phase stalls and the robot rocks back (a
 stall, not a fall), and a new gait queued for the next touchdown never lands. The ceiling
 study found that gaits applied at once, inside that stance, reach far beyond classic's
-margin, and a scan of single directions (``docs/learning/ceiling/direction_scan.py``) found
+margin, and a scan of single directions (a probe at commit fb3c2fc, docs/learning/README.md) found
 directions that rescue most pushes at 1.5x classic's margin; a CMA-ES tuning on a push grid
 (``scripts/tune_recovery.py``) settled on **swinging the swing leg forward with its knee
 straighter, the torso brought back** over the middle of the step (Bezier rows 1-4, so the

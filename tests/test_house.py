@@ -1,0 +1,55 @@
+"""The house's bars (issue 57): the tree is the product, not the lab notebook.
+
+What the research log keeps under docs/learning/ is small and each file is there for a reader
+(docs/learning/README.md); checkpoints outside the package and the test fixtures are only
+the shipped controller's provenance and the tests'; ruff reads the whole tree."""
+
+from __future__ import annotations
+
+import subprocess
+import tomllib
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.unit
+
+ROOT = Path(__file__).resolve().parents[1]
+LEARNING = "docs/learning"
+MAX_LEARNING_FILES = 60
+MAX_LEARNING_BYTES = 3 * 1024 * 1024
+MAX_LOOSE_CHECKPOINTS = 5
+
+
+def tracked(*paths: str) -> list[str]:
+    """Files git tracks under ``paths`` (the whole tree if none)."""
+    out = subprocess.run(["git", "ls-files", "-z", "--", *paths], cwd=ROOT, capture_output=True, check=True)
+    return [name for name in out.stdout.decode().split("\0") if name]
+
+
+def test_the_research_log_keeps_few_small_files_and_says_why_each_stays():
+    files = tracked(LEARNING)
+    size = sum((ROOT / name).stat().st_size for name in files)
+    assert len(files) <= MAX_LEARNING_FILES, f"{len(files)} files under {LEARNING}/"
+    assert size <= MAX_LEARNING_BYTES, f"{size} bytes under {LEARNING}/"
+    manifest = (ROOT / LEARNING / "README.md").read_text()
+    for name in files:
+        rel = name[len(LEARNING) + 1:]
+        if rel == "README.md":
+            continue
+        # each kept file is named in the manifest, by its path, its name or its folder
+        assert any(part in manifest for part in (rel, Path(rel).name, str(Path(rel).parent) + "/")), \
+            f"{name} is kept but docs/learning/README.md does not say why"
+
+
+def test_checkpoints_outside_the_package_and_fixtures_are_only_provenance():
+    loose = [name for name in tracked() if name.endswith(".pt") and not name.startswith(("src/", "tests/"))]
+    assert len(loose) <= MAX_LOOSE_CHECKPOINTS, loose
+
+
+def test_ruff_reads_the_whole_tree():
+    """No tracked folder is excluded: the only exclusions are the untracked virtual environment
+    and run outputs."""
+    config = tomllib.loads((ROOT / "ruff.toml").read_text())
+    excluded = config.get("exclude", []) + config.get("extend-exclude", [])
+    assert not [name for name in tracked() if any(name.startswith(folder.rstrip("/") + "/") for folder in excluded)]
