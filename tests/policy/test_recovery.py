@@ -508,14 +508,9 @@ def test_from_rise_until_the_rules_weight_may_fall_but_not_rise_until_the_touchd
 
 def _ship_policy():
     """``scripts/ship_policy.py`` as a module."""
-    import importlib.util
-    from pathlib import Path
+    import importlib
 
-    spec = importlib.util.spec_from_file_location(
-        "ship_policy", Path(__file__).resolve().parents[2] / "scripts" / "ship_policy.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return importlib.import_module("rabbit_policy.commands.ship_policy")
 
 
 def _overlay_file(tmp_path, at_once: bool = False, policy_blend: bool = False):

@@ -28,11 +28,9 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_the_sb3_presets_parse(tmp_path):
-    import importlib.util
+    import importlib
 
-    spec = importlib.util.spec_from_file_location("train_sb3", ROOT / "scripts" / "train_sb3.py")
-    script = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(script)
+    script = importlib.import_module("rabbit_policy.commands.train_sb3")
     presets = sorted((ROOT / "config" / "train").glob("sb3*.yaml"))
     assert presets
     for path in presets:

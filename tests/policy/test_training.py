@@ -438,12 +438,10 @@ def test_train_defaults_are_the_first_shipped_run_and_the_card_command_rebuilds_
     defaults are the paper's network as first shipped (config/train/first_shipped_es.yaml:
     the three inputs, direct coefficients), and the model card's regenerate command parses
     back to the shipped checkpoint's trainer configuration."""
-    import importlib.util
+    import importlib
     import shlex
 
-    spec = importlib.util.spec_from_file_location("train", ROOT / "scripts" / "train.py")
-    train = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(train)
+    train = importlib.import_module("rabbit_policy.commands.train")
     info = PolicyCheckpoint.load(packaged_policy_file()).info
     defaults = train.parse_config(["--algo", "es", "--out", "runs/X"])
     first = train.parse_config(["--config", str(ROOT / "config/train/first_shipped_es.yaml"), "--out", "runs/X"])
@@ -458,12 +456,9 @@ def test_train_defaults_are_the_first_shipped_run_and_the_card_command_rebuilds_
 
 # ------------------------------------------------------------------------- presets
 def _train_module():
-    import importlib.util
+    import importlib
 
-    spec = importlib.util.spec_from_file_location("train_script", ROOT / "scripts" / "train.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return importlib.import_module("rabbit_policy.commands.train")
 
 
 def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(tmp_path):

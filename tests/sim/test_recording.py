@@ -117,11 +117,9 @@ def test_plot_run_writes_the_figures(recorded, tmp_path):
     for name in ("speed.png", "joints.png", "limit_cycle.png", "pitch.png"):
         png = bag.parent / f"{bag.name}_plots" / name
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
-    import importlib.util
+    import importlib
 
-    spec = importlib.util.spec_from_file_location("plot_run", ROOT / "scripts" / "plot_run.py")
-    plot_run = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(plot_run)
+    plot_run = importlib.import_module("rabbit_sim.commands.plot_run")
     run = plot_run.read_run(bag)
     intervals = plot_run.push_intervals(run["push"], float(run["t"][-1]))
     assert intervals == ([(1.0, pytest.approx(1.1), 40.0)] if _compression == "zstd" else [])

@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     reproduce_line = f"scripts/reproduce.py --preset {shlex.quote(args.preset)} --out {shlex.quote(str(out))}"
     train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
     print(f"[1/5] train: {train_line}", flush=True)
-    trained = subprocess.run([sys.executable, str(root / "scripts" / "train.py"), *train_argv], cwd=root)
+    trained = subprocess.run([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
     if trained.returncode != 0:
         print(f"error: training failed with status {trained.returncode} (its output is above; {run} holds the run)",
               file=sys.stderr)

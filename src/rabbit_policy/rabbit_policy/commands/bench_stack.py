@@ -1,0 +1,206 @@
+"""Benchmark the ROS 2 stack; prints one JSON object.
+
+* ``lockstep_rtf_in_process``: real-time factor (sim s / wall s) of a lockstep walk with
+  all nodes on one EventsExecutor in this process (goal >= 3).
+* ``lockstep_rtf_multi_process``: the same with the three nodes as separate processes
+  (goal >= 1.5).
+* realtime mode, nodes as separate processes: ``realtime_rate_hz`` (physics/control ticks
+  per wall second), ``realtime_late_fraction`` (share of ticks whose torque, the reply to
+  the previous state, had not arrived when the step was due; goal < 1 %),
+  ``latency_p50_ms`` / ``latency_p99_ms`` (state published -> its torque received, as
+  seen by sim_node), ``realtime_damped_ticks``.
+
+* ``realtime_in_process_*``: the realtime run with all nodes in this process.
+* ``paced_*``: paced mode (lockstep held to the wall clock, ``--rtf`` target), nodes as
+  separate processes: the achieved real-time factor (sim s / wall s over the run), whether
+  it fell, and with ``--record`` (``paced_recording_*``) the states lost: distinct
+  ``/joint_states`` ticks simulated minus those in the bag (0 by design).
+* Realtime runs halt when the loop falls too far behind (``*_halted``: the reason, or None).
+* ``--busy N`` runs N busy loops (``while True: pass``) beside every scenario: a loaded machine.
+* ``recorder_*``: the realtime multi-process run with ``--record``: the recorder process's
+  CPU share (CPU s / wall s over its life), messages written per wall second (its life
+  includes start-up and shutdown, so this understates the rate during the walk), and
+  /joint_states recorded vs published.
+
+* ``startup_to_physics_s``: wall s from launching ``scripts/run_stack.py`` to sim_node's
+  "simulation running" log line (its ROS timestamp), the median of 3 launches, and
+  ``startup_warnings``: WARN/ERROR lines those launches logged (0 on a normal start).
+
+RTFs are measured from the first to the last state the supervisor saw (start-up
+excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+
+SCENARIOS = ("startup", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+             "realtime_multi_process", "realtime_in_process", "realtime_recording")
+
+
+def rounded(value: float | None, digits: int) -> float | None:
+    """``round`` that passes None (a statistic without data) through."""
+    return None if value is None else round(value, digits)
+
+
+def recorded_ticks(bag: Path) -> int:
+    """Distinct /joint_states stamps in a bag."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    stamps = set()
+    with Reader(bag) as reader:
+        connections = [c for c in reader.connections if c.topic == "/joint_states"]
+        for connection, _t, raw in reader.messages(connections):
+            stamp = typestore.deserialize_cdr(raw, connection.msgtype).header.stamp
+            stamps.add((stamp.sec, stamp.nanosec))
+    return len(stamps)
+
+
+def startup(launches: int = 3) -> dict[str, object]:
+    """Wall s from launching run_stack to the physics running (median), and the warnings."""
+    import re
+    import statistics
+    import time
+
+    delays, warnings = [], 0
+    for _ in range(launches):
+        start = time.time()
+        result = subprocess.run([sys.executable, "-m", "rabbit_policy.commands.run_stack", "--duration", "1", "--json"], capture_output=True,
+                                text=True)
+        running = re.search(r"\[(\d+\.\d+)\] \[[\w.]*sim_node\]: simulation running", result.stderr)
+        if result.returncode != 0 or running is None:
+            raise RuntimeError(f"run_stack failed (status {result.returncode}): {result.stderr[-500:]}")
+        delays.append(float(running.group(1)) - start)
+        warnings += len(re.findall(r"^\[(WARN|ERROR)\]", result.stderr, re.M))
+    return {"startup_to_physics_s": round(statistics.median(delays), 2), "startup_warnings": warnings}
+
+
+def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
+                 rtf: float = 1.0) -> dict[str, object]:
+    """One measurement; each runs in a fresh interpreter (see main)."""
+    from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
+
+    if name == "startup":
+        return startup()
+    schedule = ((0.0, speed),)
+    if name in ("paced_multi_process", "paced_recording"):
+        prefix = "paced" if name == "paced_multi_process" else "paced_recording"
+        with tempfile.TemporaryDirectory() as tmp:
+            sim_stats = Path(tmp) / "sim.json"
+            bag = Path(tmp) / "bag" if name == "paced_recording" else None
+            config = StackConfig(duration=realtime_duration, schedule=schedule, mode="paced", rtf=rtf,
+                                 stats_file=str(sim_stats), record=str(bag) if bag else "")
+            report = run_multi_process(config, log=sys.stderr)
+            sim = json.loads(sim_stats.read_text())
+            out = {f"{prefix}_rtf": round(report.rtf, 3), f"{prefix}_target_rtf": rtf, f"{prefix}_fell": report.fell,
+                   f"{prefix}_completed": report.completed}
+            if bag is not None:
+                out[f"{prefix}_states_lost"] = sim["ticks"] + 1 - recorded_ticks(bag)
+            return out
+    if name == "lockstep_in_process":
+        report, _ = run_in_process(StackConfig(duration=duration, schedule=schedule))
+        return {"lockstep_rtf_in_process": round(report.rtf, 3), "lockstep_in_process_fell": report.fell}
+    if name == "lockstep_multi_process":
+        report = run_multi_process(StackConfig(duration=duration, schedule=schedule), log=sys.stderr)
+        return {"lockstep_rtf_multi_process": round(report.rtf, 3), "lockstep_multi_process_fell": report.fell}
+    if name == "realtime_in_process":
+        report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
+        stats = nodes["sim_node"].statistics()
+        return {
+            "realtime_in_process_late_fraction": rounded(stats["late_fraction"], 5),
+            "realtime_in_process_latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
+            "realtime_in_process_latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
+            "realtime_in_process_worst_delay_ms": rounded(stats["latency_max_ms"], 3),
+            "realtime_in_process_skipped_ticks": stats["skipped_ticks"],
+            "realtime_in_process_fell": report.fell,
+            "realtime_in_process_halted": stats["halt_reason"],
+        }
+    if name == "realtime_recording":
+        with tempfile.TemporaryDirectory() as tmp:
+            sim_stats, rec_stats = Path(tmp) / "sim.json", Path(tmp) / "rec.json"
+            config = StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime",
+                                 stats_file=str(sim_stats), record=str(Path(tmp) / "bag"),
+                                 record_stats_file=str(rec_stats))
+            report = run_multi_process(config, log=sys.stderr)
+            sim, rec = json.loads(sim_stats.read_text()), json.loads(rec_stats.read_text())
+        return {
+            "recorder_cpu_share": round(rec["cpu_share"], 3),
+            "recorder_msgs_per_s": round(rec["messages"] / rec["wall_s"], 1),
+            "recorder_joint_states_recorded": rec["counts"]["/joint_states"],
+            "recorder_joint_states_published": sim["states_published"],
+            "recorder_realtime_late_fraction": rounded(sim["late_fraction"], 5),
+            "recorder_run_fell": report.fell,
+            "recorder_realtime_halted": sim["halt_reason"],
+        }
+    with tempfile.TemporaryDirectory() as tmp:
+        stats_path = Path(tmp) / "sim_stats.json"
+        config = StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime", stats_file=str(stats_path))
+        report = run_multi_process(config, log=sys.stderr)
+        stats = json.loads(stats_path.read_text())
+    return {
+        "realtime_rtf": round(report.rtf, 3),
+        "realtime_rate_hz": rounded(stats["tick_rate_hz"], 1),
+        "realtime_late_fraction": rounded(stats["late_fraction"], 5),
+        "latency_p50_ms": rounded(stats["latency_p50_ms"], 3),
+        "latency_p99_ms": rounded(stats["latency_p99_ms"], 3),
+        "worst_delay_ms": rounded(stats["latency_max_ms"], 3),
+        "realtime_skipped_ticks": stats["skipped_ticks"],
+        "realtime_ticks": stats["ticks"],
+        "realtime_damped_ticks": stats["damped_ticks"],
+        "realtime_fell": report.fell,
+        "realtime_halted": stats["halt_reason"],
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
+    parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime runs, s")
+    parser.add_argument("--speed", type=float, default=1.0)
+    parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--rtf", type=float, default=1.0, help="paced runs: target real-time factor")
+    parser.add_argument("--busy", type=int, default=0, metavar="N", help="busy loops beside every scenario")
+    parser.add_argument("--only", choices=SCENARIOS, action="append",
+                        help="run only this scenario (repeatable)")
+    args = parser.parse_args(argv)
+    if args.child:
+        print(strict_json.dumps(run_scenario(args.only[0], args.duration, args.realtime_duration, args.speed,
+                                             args.rtf)))
+        return 0
+    # every scenario in a fresh interpreter: a run must not inherit another's ROS state
+    out: dict[str, object] = {}
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
+    try:
+        for name in args.only or SCENARIOS:
+            cmd = [sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--child", "--only", name, "--duration", str(args.duration),
+                   "--realtime-duration", str(args.realtime_duration), "--speed", str(args.speed),
+                   "--rtf", str(args.rtf)]
+            result = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
+            if result.returncode != 0:
+                print(f"error: scenario {name} failed with status {result.returncode}", file=sys.stderr)
+                return 1
+            out.update(json.loads(result.stdout.strip().splitlines()[-1]))
+    finally:
+        for hog in hogs:
+            hog.kill()
+    out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration, "busy_loops": args.busy,
+                "executor": "EventsExecutor"})
+    print(strict_json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
