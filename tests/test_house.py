@@ -6,6 +6,7 @@ the shipped controller's provenance and the tests'; ruff reads the whole tree.""
 
 from __future__ import annotations
 
+import re
 import subprocess
 import tomllib
 from pathlib import Path
@@ -53,3 +54,42 @@ def test_ruff_reads_the_whole_tree():
     config = tomllib.loads((ROOT / "ruff.toml").read_text())
     excluded = config.get("exclude", []) + config.get("extend-exclude", [])
     assert not [name for name in tracked() if any(name.startswith(folder.rstrip("/") + "/") for folder in excluded)]
+
+
+def module_map() -> dict[str, set[str]]:
+    """README's "Where is what": each package folder's row, as {folder: the modules it names}."""
+    text = (ROOT / "README.md").read_text()
+    table = text[text.index("## Where is what"):].split("\n## ")[0]
+    rows = {}
+    for line in table.splitlines():
+        cells = line.split("|")
+        if len(cells) > 2 and cells[1].strip().startswith("`rabbit_"):
+            folder = cells[1].strip().strip("`").rstrip("/")
+            rows[folder] = set(re.findall(r"`(\w+)\.py`", cells[2]))
+    return rows
+
+
+def package_folders() -> dict[str, set[str]]:
+    """Every folder of python modules in the four packages, as {folder: its modules}."""
+    folders: dict[str, set[str]] = {}
+    for name in tracked("src"):
+        path = Path(name)
+        if path.suffix != ".py" or path.name in ("__init__.py", "setup.py") or len(path.parts) < 4:
+            continue
+        if path.parts[2] != path.parts[1]:  # src/<pkg>/<pkg>/...: the package, not its tests
+            continue
+        folders.setdefault("/".join(path.parts[2:-1]), set()).add(path.stem)
+    return folders
+
+
+def test_the_readme_module_map_is_the_tree():
+    rows, tree = module_map(), package_folders()
+    assert set(rows) == set(tree), f"folders without a row: {set(tree) - set(rows)}; rows without a folder: " \
+                                   f"{set(rows) - set(tree)}"
+    for folder, modules in tree.items():
+        assert rows[folder] == modules, f"{folder}/: the map misses {sorted(modules - rows[folder])} and names " \
+                                        f"{sorted(rows[folder] - modules)} that are not there"
+
+
+def test_the_readme_is_a_short_front_door():
+    assert len((ROOT / "README.md").read_text().splitlines()) <= 150
