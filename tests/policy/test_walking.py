@@ -280,3 +280,32 @@ def test_times_are_on_the_tick_grid_whatever_decimals_a_schedule_and_duration_ha
                                                                        for td in result.touchdowns)
     assert all(row["reach_time"] is None or round(row["reach_time"], 9) == row["reach_time"]
                for row in summary["segments"][:1])
+
+
+def _times(report: dict) -> list[tuple[str, float]]:
+    """Every time a walk.py JSON report gives (s): durations, failure times, segment bounds,
+    reach times and touchdowns."""
+    found = [(k, report[k]) for k in ("duration", "fall_time", "stall_time") if report[k] is not None]
+    found += [("touchdown", t) for t in report["touchdowns"]]
+    for row in report["segments"]:
+        found += [(k, row[k]) for k in ("start", "end", "reach_time") if row[k] is not None]
+    return found
+
+
+@pytest.mark.slow
+def test_walk_json_times_are_on_the_ms_grid_for_off_grid_schedules_and_durations():
+    """Issue 57's case (a reach time of 2.0389999999999997) and changes and durations off the
+    ms grid: every reported time is a whole number of ms, and a change takes effect at the
+    first tick at or after its time (6.0004 s walks as 6.001 s)."""
+    off = json.loads(_walk_script("--controller", "learned", "--speed-schedule", "0:1.5,6.0004:0.8", "--duration",
+                                  "13.9996", "--json").stdout)
+    on = json.loads(_walk_script("--controller", "learned", "--speed-schedule", "0:1.5,6.001:0.8", "--duration",
+                                 "14", "--json").stdout)
+    plain = json.loads(_walk_script("--controller", "learned", "--speed-schedule", "0:1.5,6:0.8", "--duration", "14",
+                                    "--json").stdout)
+    for report in (off, on, plain):
+        times = _times(report)
+        assert len(times) > 20 and [(k, t) for k, t in times if t != round(t, 3)] == []
+        assert all(row["reach_time"] is not None for row in report["segments"])
+    assert off["segments"] == on["segments"] and off["touchdowns"] == on["touchdowns"]
+    assert off["segments"][1]["start"] == 6.001

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rabbit_msgs_py.strict_json import finite_or_none
-from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.experiment.scenario import Scenario, whole_ticks
 
 REACH_TOLERANCE = 0.05
 """m/s: a speed is "reached" when a whole step's mean is this close to the command."""
@@ -163,7 +163,7 @@ class WalkResult:
         (and ending by ``end``) whose mean speed is within ``tolerance`` of ``command``."""
         for step_start, step_end, speed in self.step_speeds():
             if step_start >= start - 1e-9 and step_end <= end + 1e-9 and abs(speed - command) <= tolerance:
-                return step_end - start
+                return (whole_ticks(step_end) - whole_ticks(start)) / 1000.0  # on the ms grid
         return None
 
     def segments(self, tolerance: float = REACH_TOLERANCE) -> list[dict]:

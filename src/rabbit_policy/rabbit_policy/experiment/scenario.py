@@ -30,6 +30,12 @@ def whole_ticks(seconds: float, tick: float = 0.001) -> int:
     return int(round(seconds / tick))
 
 
+def first_tick_at(seconds: float, tick: float = 0.001) -> float:
+    """The sim time (s) of the first tick at or after ``seconds``, on the ns grid: when a
+    schedule change at ``seconds`` takes effect (6.0004 -> 6.001; 6.0 -> 6.0)."""
+    return round(math.ceil(round(seconds / tick, 6)) * tick, 9)
+
+
 def on_tick_grid(seconds: float, tick: float = 0.001) -> float:
     """The sim time (s) a walk of ``seconds`` ends at: its whole ticks, on the ns grid of
     the stack's stamps (16.132268 -> 16.132), so that a duration, a segment's end and the
@@ -112,7 +118,9 @@ class PhasePush:
 class Scenario:
     """One experiment's conditions (times s, speeds m/s).
 
-    schedule: commanded speed from each start time on (first at t = 0).
+    schedule: commanded speed from each start time on (first at t = 0); each time is taken
+        as the first 1 ms tick at or after it (:func:`first_tick_at`), where the change takes
+        effect, so that every time a walk reports is on the tick grid.
     pushes: pushes on the torso at sim times (:class:`~rabbit_msgs_py.pushes.Push`).
     phase_pushes: pushes at a phase of a step (:class:`PhasePush`; the fast path only).
     model: the model and its errors (:class:`~rabbit_sim.model.ModelOptions`).
@@ -132,7 +140,7 @@ class Scenario:
 
     def __post_init__(self) -> None:
         validate_schedule(self.schedule)
-        object.__setattr__(self, "schedule", tuple((float(t), float(v)) for t, v in self.schedule))
+        object.__setattr__(self, "schedule", tuple((first_tick_at(float(t)), float(v)) for t, v in self.schedule))
         object.__setattr__(self, "pushes", tuple(sorted(self.pushes, key=lambda p: p.time)))
         object.__setattr__(self, "phase_pushes", tuple(sorted(self.phase_pushes, key=lambda p: p.after)))
         ticks = self.torque_delay * 1000.0 if math.isfinite(self.torque_delay) else -1.0
