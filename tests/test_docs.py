@@ -275,7 +275,10 @@ def test_parallel_jobs_go_through_the_execution_backend():
     script starts a pool of its own, and each that takes ``--workers`` for walks takes
     ``--backend`` too (the benchmarks of other things aside)."""
     for name in SCRIPTS:
-        source = (ROOT / "scripts" / f"{name}.py").read_text()
+        shim = (ROOT / "scripts" / f"{name}.py").read_text()
+        module = re.search(r"^from (rabbit_\w+)\.commands\.(\w+) import main$", shim, re.M)
+        assert module, f"scripts/{name}.py is not a shim over a commands module"
+        source = (ROOT / "src" / module[1] / module[1] / "commands" / f"{module[2]}.py").read_text()
         assert "get_context(" not in source and "Pool(" not in source, f"{name}.py starts its own pool"
         every, _ = script_options(name)
         if "--workers" in every and not name.startswith("bench_stack"):

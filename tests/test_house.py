@@ -93,3 +93,10 @@ def test_the_readme_module_map_is_the_tree():
 
 def test_the_readme_is_a_short_front_door():
     assert len((ROOT / "README.md").read_text().splitlines()) <= 150
+
+
+def test_nodes_are_thin_and_scripts_are_shims():
+    sim_node = (ROOT / "src/rabbit_sim/rabbit_sim/sim_node.py").read_text()
+    assert len(sim_node.splitlines()) <= 300 and "noqa: E402" not in sim_node
+    long = {p.name: n for p in (ROOT / "scripts").glob("*.py") if (n := len(p.read_text().splitlines())) > 30}
+    assert not long, f"scripts over 30 lines (a script is a shim over a commands module): {long}"

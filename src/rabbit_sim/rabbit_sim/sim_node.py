@@ -1,47 +1,14 @@
 """``sim_node``: the RABBIT MuJoCo simulation as a ROS 2 node.
 
 Publishes ``/joint_states`` (7 joints: position, velocity, applied effort), ``/hip_velocity``
-and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes; applies the
-four ``/joint_torques``; takes ``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and
-``/sim/release_controller``;
-publishes the URDF of its model once on ``/robot_description`` (transient local, as
-robot_state_publisher does: ``rabbit_sim.urdf``).
-
-Modes (parameter ``mode``):
-
-* ``lockstep`` (default): after publishing the state of tick n the node waits for one
-  torque reply, applies it for one step and publishes tick n+1. Runs as fast as the
-  loop allows and is deterministic: the same stack gives the same trajectory as the
-  ROS-free ``ClosedLoop`` (``scripts/walk.py``). A reply is applied only if it carries the
-  stamp of the state now due and comes from the controller the node is paired with
-  (``header.frame_id`` of the reply): with ``pairing_key`` (run_stack sets one per stack)
-  a reply signed with that key, without one the first controller to answer
-  (``rabbit_msgs_py.pairing``). A rogue publisher, a second controller or a late duplicate
-  never moves the robot, and silence never hands the robot to another node: the
-  controller changes only by an explicit act (a controller the stack started with the
-  key; ``/sim/release_controller`` without one). If no reply arrives within
-  ``resend_timeout`` s (wall) the state is re-sent; a live controller ignores the duplicate (it answers each distinct state
-  once). A reset or pause requested while a reply is due takes effect when it arrives.
-* ``paced``: lockstep held back to the wall clock: a state goes out no earlier than its
-  sim time divided by ``rtf`` (target real-time factor, default 1.0) after the start.
-  The physics never steps without the torque for its state, so the trajectory is
-  lockstep's bit for bit; a machine that cannot keep up runs slower (the achieved
-  real-time factor is logged every 5 s) and never falls or stalls because of it.
-* ``realtime`` (free-running, for latency studies): the physics steps at 1 kHz of wall-clock
-  time, zero-order hold on the newest torque, in the thread that spins the node (a 1 ms
-  timer wakes it): no second thread, so a tick never waits for the GIL. A watchdog applies
-  damping ``-damping * joint rate`` when no torque came for ``watchdog_timeout`` s; when
-  more than ``max_late_fraction`` of a second's ticks ran on a stale torque the physics
-  halts with a log line naming the cause (``paced`` is the mode for a slow or busy machine).
-
-How each mode steps is :class:`rabbit_sim.stepping.SimDriver` (ROS-free, unit-tested): this
-node hands it its events and carries out the actions it returns.
-
-The robot starts (and restarts on ``/sim/reset``) in the newest state on
-``/sim/initial_state`` (transient local; ``policy_node`` publishes the state at phase 0 of
-the gait in force); until one arrives the simulation waits. The simulator knows no gait
-and no controller. When the robot falls (the paper's limits) ``/fallen`` turns true and
-the physics halts until a reset.
+and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes, and the URDF
+of its model once on ``/robot_description`` (transient local); applies the four
+``/joint_torques`` of the controller it is paired with (``rabbit_msgs_py.pairing``); takes
+``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and ``/sim/release_controller``.
+The robot starts (and restarts on a reset) in the newest ``/sim/initial_state``; it knows no
+gait and no controller. How it steps in each ``mode`` (lockstep, paced, realtime) is
+:class:`rabbit_sim.stepping.SimDriver` (ROS-free): this node hands it its events and carries
+out the actions it returns. The modes and their guarantees: docs/architecture.md.
 """
 
 from __future__ import annotations
@@ -307,12 +274,7 @@ class SimNode(Node):
                 return
             self._logged[line.key] = now
         logger = self.get_logger()
-        if line.level == "error":
-            logger.error(line.text)
-        elif line.level == "warning":
-            logger.warning(line.text)
-        else:
-            logger.info(line.text)
+        {"error": logger.error, "warning": logger.warning}.get(line.level, logger.info)(line.text)
 
     def _publish_state(self, state: State) -> None:
         """Joint states, hip velocity (world frame: x forward, z up, pitch rate) and clock."""
