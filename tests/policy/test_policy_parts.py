@@ -552,7 +552,7 @@ def test_a_speed_schedule_applies_each_change_at_the_first_state_at_or_after_its
 
 
 def test_policy_node_takes_a_speed_schedule_checked_as_walk_pys():
-    from rabbit_policy.policy_node import speed_schedule
+    from rabbit_policy.policy_driver import speed_schedule
 
     assert speed_schedule("", 1.0) is None
     assert speed_schedule("2:1.2,4.5:0.9", 1.0).changes == ((2_000_000_000, 1.2), (4_500_000_000, 0.9))

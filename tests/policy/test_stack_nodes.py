@@ -1038,7 +1038,7 @@ def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_u
             send(tick, with_phase=False)
             assert spin_until(executor, lambda: taken(tick))
         assert spin_until(executor, lambda: policy.decisions_given_up >= 1)
-        assert policy.decisions == 1 and len(policy._awaiting) >= 1  # 40 and 60 wait, 20 was given up
+        assert policy.decisions == 1 and len(policy.core.awaiting) >= 1  # 40 and 60 wait, 20 was given up
         for tick in range(80, 130):
             send(tick, with_phase=True)
             assert spin_until(executor, lambda: taken(tick) and policy.body.newest_phase == (tick - 1) * 1_000_000)

@@ -226,11 +226,7 @@ def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy
     import gymnasium
     import yaml
 
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        from ship_policy import card_header
-    finally:
-        sys.path.remove(str(ROOT / "scripts"))
+    from rabbit_policy.commands.ship_policy import card_header
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     assert card.startswith("---\n")
     header = card.split("---\n")[1]
@@ -277,11 +273,7 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     from rabbit_policy.evaluation.steady_integral import steady_integral
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        from ship_policy import network_text, rules_set_after_training, with_integral_rules
-    finally:
-        sys.path.remove(str(ROOT / "scripts"))
+    from rabbit_policy.commands.ship_policy import network_text, rules_set_after_training, with_integral_rules
     trained = PolicyCheckpoint.load(packaged_policy_file())  # the network as its run left it: no rule set after
     trained.info["memory"].pop("windup_decay", None)
     trained.info["memory"].pop("feedforward", None)

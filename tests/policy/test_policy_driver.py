@@ -1,0 +1,87 @@
+"""``PolicyDriver``, policy_node's ROS-free core: the node's rules run without a node (events
+in, actions out), as SimDriver's and GaitSync's do."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from rabbit_policy.policy_driver import Gait, Log, PolicyDriver, PolicySettings, Scheduled
+from rabbit_policy.runtime.policies import make_policy
+
+pytestmark = pytest.mark.sim
+
+MS = 1_000_000  # ns per tick
+
+
+def driver(policy: str = "classic", schedule: str = "", **settings) -> PolicyDriver:
+    values = dict(min_speed=0.7, max_speed=1.5, initial_speed=1.0, window=1000, decision_window=1000,
+                  speed_schedule=schedule)
+    return PolicyDriver(make_policy(policy), PolicySettings(**{**values, **settings}))
+
+
+def test_the_core_imports_no_ros():
+    code = "import sys, rabbit_policy.policy_driver; print(any(m.startswith('rclpy') for m in sys.modules))"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout == "False\n"
+
+
+def test_start_then_a_decision_every_20_ticks_on_the_mean_hip_speed():
+    core = driver()
+    first = core.start()
+    assert len(first) == 1 and isinstance(first[0], Gait) and first[0].initial_state is not None
+    gaits = [a for tick in range(1, 61) for a in core.on_hip_velocity(tick * MS, 1.0) if isinstance(a, Gait)]
+    assert len(gaits) == 3 and core.decisions == 4
+    assert core.last_observation.desired_speed == 1.0
+
+
+def test_bad_commands_are_rejected_with_one_line_and_the_last_good_one_stays():
+    core = driver()
+    assert core.on_command(1.2, "/cmd_speed") == [Log("info", "commanded speed 1.20 m/s")]
+    rejected = core.on_command(float("nan"), "/cmd_speed")
+    assert core.desired_speed == 1.2 and core.rejected_commands == 1
+    assert [a.level for a in rejected] == ["error"] and "keeping 1.20 m/s" in rejected[0].text
+    assert core.on_command(float("inf"), "/cmd_speed") == []  # the same kind within a second: counted, said later
+    assert core.rejected_commands == 2
+    clamped = core.on_command(9.0, "/cmd_speed")
+    assert core.desired_speed == 1.5 and clamped[0].level == "warning"
+    with pytest.raises(ValueError, match="must not be above"):
+        core.set_range(1.3, 1.0)
+    core.set_range(0.8, 1.1)
+    assert core.desired_speed == 1.1  # the command in force clamped into the new range
+
+
+def test_a_scheduled_change_is_commanded_published_once_and_its_echo_ignored():
+    core = driver(schedule="0.105:1.3")
+    actions = [a for tick in range(1, 108) for a in core.on_hip_velocity(tick * MS, 1.0)]
+    assert [a for a in actions if isinstance(a, Scheduled)] == [Scheduled(1.3)] and core.desired_speed == 1.3
+    assert core.on_cmd_speed(1.3, "/cmd_speed") == [] and core.rejected_commands == 0  # our own, heard back
+    core.on_cmd_speed(1.0, "/cmd_speed")
+    assert core.desired_speed == 1.0
+    core.on_placed(1)
+    core.on_placed(2)  # a reset: the schedule starts over from the start's command
+    assert core.desired_speed == 1.0 and [a for tick in range(1, 108) for a in core.on_hip_velocity(tick * MS, 1.0)
+                                          if isinstance(a, Scheduled)] == [Scheduled(1.3)]
+
+
+def test_a_body_state_decision_waits_for_its_phase_and_is_given_up_with_a_line():
+    core = driver("learned")
+    assert core.needs_body and core.decision_period == 20
+    core.start()
+    actions = []
+    for tick in range(1, 100):  # states but never a phase from the controller
+        actions += core.on_hip_velocity(tick * MS, 1.0)
+        actions += core.on_body_state(tick * MS, np.zeros(7), np.zeros(7))
+    given_up = [a for a in actions if isinstance(a, Log) and a.level == "error"]
+    assert core.decisions_given_up >= 1 and given_up and "/hzd/phase" in given_up[0].text
+    assert not [a for a in actions if isinstance(a, Gait)]  # the gait in force stays
+
+
+@pytest.mark.parametrize("settings, word", [({"min_speed": 1.2, "max_speed": 1.0}, "min_speed"),
+                                            ({"window": 0}, "window"), ({"decision_window": 0}, "decision_window"),
+                                            ({"speed_schedule": "2:1.2,2.05:1.3"}, "speed_schedule")])
+def test_settings_it_cannot_run_with_are_one_line(settings, word):
+    with pytest.raises(ValueError, match=word):
+        driver(**settings)
