@@ -5,9 +5,9 @@
 Identities used throughout (and tested): ``y_d(0) = a[0]``, ``y_d(1) = a[M]``,
 ``dy_d/dtau(0) = M (a[1] - a[0])`` and ``dy_d/dtau(1) = M (a[M] - a[M-1])``.
 
-The functions here are pure and work on plain Python floats so that the 1 kHz
-controller can call them without numpy overhead; ``bezier_matrix`` is the
-vectorised form for plotting, fitting and tests.
+The functions here are pure and work on plain Python floats (the states on a gait, gait
+design and tests); the 1 kHz tick evaluates the same polynomials compiled, in
+:mod:`.law`. ``bezier_matrix`` is the vectorised form for plotting, fitting and tests.
 """
 
 from __future__ import annotations

@@ -3,13 +3,12 @@
 ``ros2 run <pkg> <node>``, the console scripts and ``python -m`` all end up here, so the
 executor choice, discovery default and shutdown behaviour are the same everywhere.
 
-Executor: rclpy's experimental ``EventsExecutor`` by default — measured on this project's
-2-core machine it turns a 1 kHz state->torque round trip about 5x faster than the
-``SingleThreadedExecutor`` (see README, "Executors"). ``RABBIT_EXECUTOR=single`` selects
-the SingleThreadedExecutor instead. The EventsExecutor is only ever spun with
-``spin()`` or with a timeout: in rclpy 7.1 both ``EventsExecutor.spin()`` and ``spin_until_future_complete``
-without a timeout busy-loop at 100 % CPU and ignore shutdown (measured here), so nodes
-spin with ``spin_once(timeout_sec=0.1)`` until a signal asks them to stop.
+Executor: rclpy's experimental ``EventsExecutor`` by default, for the 1 kHz state->torque
+round trip (why and how much faster: docs/architecture.md, "Executors");
+``RABBIT_EXECUTOR=single`` selects the ``SingleThreadedExecutor`` instead. Nodes spin with
+``spin_once(timeout_sec=0.1)`` until a signal asks them to stop: in rclpy 7.1
+``EventsExecutor.spin()`` and ``spin_until_future_complete`` without a timeout busy-loop at
+100 % CPU and ignore shutdown.
 """
 
 from __future__ import annotations

@@ -25,38 +25,26 @@ The rule, every 20 ticks (as classic decides), from the body state (:mod:`.body`
 2. w = clip(d / ``full``, 0, 1) while the phase is inside the step (0 < tau < 1: at its
    ends the hip phase is clamped and says nothing of the hip's progress), the previous
    steps are known and the command is not ramping down, else 0 (a commanded deceleration
-   is not a push: judged on checks 1-6 without this gate, 9 of 72 decelerations fell).
+   is not a push).
 
    Why the larger command: after a deceleration the steps before were fast for their
    (higher) command, so their hip velocity over it keeps the fast steps from looking like
    the norm; after an acceleration the hip is as fast as in the steps before or faster,
    so their hip velocity over today's (higher) command keeps the hip's lag behind the new
-   command from looking like a push. Until 2026-11-27 the memory held v_x / v_c of its own
-   step and the gate held the rule off during every ramp, up or down: the gate kept the rule
-   off through the stall an acceleration from 0.7 m/s to 1.3-1.5 m/s runs into (the base
-   gait ramps to the new speed within the first 0.2 of a long step and the hip stops at 0.4
-   of it), and every such change fell. Measured (docs/learning.md 2026-11-27 (fourth), the
-   ordered changes and the 100 random sequences of checks 1-6): the old rule 3 pairs fell
-   or stalled and 97 sequences walked; hip velocity in m/s over today's command with the
-   gate on ramp-down only, 0 and 93 (after a deceleration the fast steps look like the
-   norm); this rule, 0 and 98 (classic 1 and 98);
+   command from looking like a push. The gate holds the rule off only while the command
+   ramps down: held off during a ramp up, it missed the stall an acceleration from 0.7 m/s
+   to 1.3-1.5 m/s runs into (docs/learning.md, 2026-11-27 (fourth));
 3. the gait is classic's with ``w * offsets`` (rad) added to rows 1-4 of the four outputs
    (stance hip, stance knee, swing hip, swing knee), applied at once: no blend, no queue
    (:data:`CONTROLLER_SETTINGS`, which the loops and the stack give the controller).
    Classic's gait is the library's for the command rate-limited to ``command_rate`` m/s per
    decision, the ramp held from ``hold_from`` of phase to the touchdown: applied at once, a
-   library gait that jumps with the command made 12 of 72 ordered speed changes fall or stall
-   (decelerations from 1.4-1.5 m/s at the start of a step), and one that keeps changing late
-   in the step moves the swing leg's path just before it lands (decelerations from 1.5 m/s
-   commanded at mid-step fell; classic queues such a gait for the touchdown for the same
-   reason, ``ControllerConfig.within_step_until``). The ramp's rate and hold were chosen on
-   100 random one-minute command sequences (docs/learning.md): 0.015 m/s per decision held
-   from 0.6 of phase lost 13, 0.04 held from 0.2 lost 3 (classic 2). A gait for another
-   speed applied at once moves the phase itself (the start and end postures set it): after
-   a large acceleration command the phase can stay below 0.2 for most of a step, and the
-   ramp runs on (0.7 to 1.26 m/s within one step); the rule of 1-2 is what catches the
-   stall that follows. Capping the ramp per step instead (0.2 m/s) made every acceleration
-   from 0.7 m/s to 1.1 m/s and beyond fall or stall (with the old rule).
+   library gait that jumps with the command, or keeps changing late in the step (moving the
+   swing leg's path just before it lands), makes decelerations fall; classic queues such a
+   gait for the touchdown for the same reason (``ControllerConfig.within_step_until``). A
+   gait for another speed applied at once moves the phase itself, so after a large
+   acceleration the ramp can run on for most of a step; the rule of 1-2 catches the stall
+   that follows. How the rate and hold were chosen: docs/learning.md.
 
 Undisturbed, w stays 0 and the gait is classic's (the limit cycle is classic's). The rule
 never speeds up: a forward push (the hip ahead of its last step) leaves classic alone.
@@ -93,22 +81,17 @@ class RecoveryConfig:
     hold_from: phase from which the base gait is held until the touchdown.
     bins: phase bins of the step memory.
     forget_weight: a step in which the rule's weight reaches this is left out of the step
-        memory (:meth:`StepMemory.forget`): a pushed step is not how the robot walks. Kept,
-        it was the slowest of the four and the rule was blind to a second push for four
-        steps: three equal pushes 2 s apart (the paper's scenario shape, 72 per controller)
-        were survived 22 times by the recovery controller and 30 by the shipped policy;
-        with this rule and the bounds below 39 and 43 (docs/learning.md 2026-11-28
-        (second)). Left out at any
-        weight (0), the learned walk's near-stall steps at 0.7-0.8 m/s, which stir the rule,
-        were left out too and the memory went stale (the walk at 0.8 m/s 0.015 m/s faster).
+        memory (:meth:`StepMemory.forget`): a pushed step is not how the robot walks, and
+        kept, as the slowest of the four, it hides a second push for four steps. Near-stall
+        steps at the slow end stir the rule a little; a low ``forget_weight`` would leave
+        them out too and let the memory go stale (docs/learning.md, 2026-11-28 (second)).
     forget_steps: at most this many steps in a row are left out; the next is kept whatever
         its weight (a walk slower than its memory step after step is not pushed step after
-        step). 1 lost half the gain (repeated pushes 28 and 38); 2, 39 and 43.
+        step).
     forget_after: nothing is left out within this many seconds (s) after a change of the
-        command (the walk's start is not one). Accelerating from the slow end (0.7-0.76 m/s),
-        the recovery controller's rule catches the stall it runs into at w >= 0.9 step after
-        step; left out, those steps took the memory stale and the walk ended 0.1-0.65 m/s slow
-        (settling seed 38: 182 of 200 against 186). With 4 s every such change ends as before.
+        command (the walk's start is not one): accelerating from the slow end, the rule
+        catches the stall it runs into step after step, and those steps are how the robot
+        walks while it speeds up; left out, the memory goes stale.
     """
 
     offsets: tuple[float, float, float, float] = (-0.11, 0.01, 0.08, -0.23)
@@ -293,11 +276,9 @@ class OverlayConfig:
         the one in progress with its rate; from ``within_step_until`` of phase queued for the
         touchdown), so that only the rule's offsets act at once.
     rise_until: from this phase until the touchdown the rule's weight may fall but not rise
-        above its value at the last decision before it (1: no limit). Offsets that rise late
-        in the step, applied at once, move the swing leg's path just before it lands: with a 3
-        ms torque delay at 0.7 m/s the policy blend's rule fired late in step after step and
-        the walk slowed into a fall; from 0.6 (the phase from which the controller's defaults
-        queue a gait for the touchdown) it walks (docs/learning.md 2026-11-28).
+        above its value at the last decision before it (1: no limit): offsets that rise late
+        in the step, applied at once, move the swing leg's path just before it lands
+        (docs/learning.md, 2026-11-28).
     """
 
     fast_gate: float = 0.1
@@ -335,42 +316,27 @@ class OverlayConfig:
 
 
 class RecoveryOverlay:
-    """The recovery rule (this module's, its constants unchanged) on top of another policy's
-    gait: the shipped learned policy with ``ship_policy.py --recovery-overlay``, recorded in
-    its checkpoint (``info["recovery_overlay"]``).
+    """The recovery rule (this module's) on top of another policy's gait: the shipped learned
+    controller's ``overlay`` (its spec names every constant).
 
     Every decision, a recovery controller runs beside the policy on the same observation,
     for its rule's weight w only (its step memory, its ramped command and the deceleration
     gate: the module docstring), and the gait becomes the policy's plus w x the offsets. Two
-    differences from the recovery controller, both chosen on the shipped network with gaits
-    applied at once (docs/learning.md 2026-11-27 (eighth)):
+    differences from the recovery controller:
 
     * ``fast_gate``: w = 0 while the hip's mean speed exceeds the command by more than that
-      fraction. After a forward push, the network's long fast step starts with a hip slower
-      than at the same phase of the steps before, which the rule took for a backward push
-      (forward margin at 0.7 m/s 18 N s with the rule acting, 24 without; classic 25).
-    * ``hold``: once w reaches it, the offsets go onto the network's last gait chosen with
-      the rule off. The network answers a backward push by asking for speed (its integral
-      and mean speed fall), which works against the rule (backward margin at 1.3 m/s 17 N s
-      with the network's answer, 25 with the held gait). Below ``hold`` the network keeps
-      deciding: the slow end of its speed range has near-stall steps where the rule stirs
-      (w below 0.5), and holding there took the walk at 0.83 m/s 0.04 m/s slow.
+      fraction: after a forward push the policy's long fast step starts with a hip slower than
+      at the same phase of the steps before, which the rule would take for a backward push.
+    * ``hold``: once w reaches it, the offsets go onto the policy's last gait chosen with the
+      rule off (a network answers a backward push by asking for speed, which works against
+      the rule); below ``hold`` the policy keeps deciding.
 
-    By default the controller blends every gait in, the offsets too, as the network was
-    trained (``OverlayConfig.at_once`` False). Applied at once, as the recovery controller's,
-    the backward margins reach 10 · 20 · 25 N s at 0.7 · 1.0 · 1.3 m/s, but the network's
-    own gaits jump with the command: 10 of 72 ordered speed changes fell (decelerations
-    from 1.3-1.5 m/s at a step's start) and 77 of 100 random command sequences walked.
-    Blended: 8 · 15 · 21 N s (classic 5 · 9 · 14), 68 of 72 changes within 4 s with none
-    falling, 98 sequences (ship_policy's checks 1-6). With ``policy_blend`` (shipped since
-    2026-11-28) the controller runs at once and the overlay blends the network's gaits in
-    itself (:class:`~.alpha_blend.AlphaBlend`), so only the offsets act at once, and the
-    rule's weight does not rise from 0.6 of phase (``rise_until``): 11 · 18 · 25 N s
-    backward, 24 · 15 · 6 forward (classic 25 · 16 · 11), 71 of 72 changes with none
-    falling, 100 sequences, 15 judged model cases.
-
-    Undisturbed, w stays 0 and the walk is the policy's own at most speeds; at the slow end
-    (0.8 m/s) the network's near-stall steps stir it (w < 0.5; the walk 0.008 m/s slower)."""
+    ``at_once``: the controller applies every gait at once (else it blends them in);
+    ``policy_blend``: with ``at_once``, the overlay blends the policy's own gaits in itself
+    (:class:`~.alpha_blend.AlphaBlend`), so that only the offsets act at once; ``rise_until``:
+    w does not rise from that phase of the step on. Undisturbed, w stays 0 and the walk is the
+    policy's own. What each choice measured: docs/learning.md, "2026-11-27 (eighth)" and
+    "2026-11-28"; the shipped controller's figures: docs/results.md."""
 
     def __init__(self, config: OverlayConfig = OverlayConfig(), decision_period: int = 20,
                  rule: "RecoveryPolicy | None" = None, blend: AlphaBlend | None = None) -> None:

@@ -8,9 +8,7 @@ error turns (with a ``band``, it also integrates only errors smaller than the ba
 the command decays once the hip has passed the new command). Where I offsets the library's
 gait (below), it is also held where that gait ``v_d + gain * I`` would leave the library's
 speeds (:class:`IntegralConfig`'s ``speed_range``): beyond them ``interpolate`` clamps, so
-anything integrated there is windup. Measured on checks 2, 3 and 5 (docs/learning.md, "the range gate"), that gate took classic
-+ integral 0.3 from 91 to 95 of 100 random sequences and from 50 to 52 of 72 speed changes,
-the model errors unchanged. Its users:
+anything integrated there is windup (docs/learning.md, "the range gate"). Its users:
 
 * :class:`~.memory.SpeedMemory`: the learned policy's memory input is I itself;
 * Westervelt's event-based integral (Westervelt, Grizzle, Koditschek, IEEE TAC 2003: an
@@ -36,8 +34,8 @@ NOMINAL_STEP_S = 0.6
 
 DEFAULT_OFFSET_LIMIT = 0.2
 """Bound (m/s) on the integral's speed offset on the library: beyond it the library's
-fastest gaits walk *slower* on the ``drives`` model (measured: the 1.45-1.5 m/s gaits walk
-0.87 m/s there, the 1.3 m/s one 1.18), and a larger offset winds up into them."""
+fastest gaits walk *slower* on the ``drives`` model, and a larger offset winds up into them
+(docs/learning.md)."""
 
 
 SPEED_INTEGRAL_HELP = ("classic: Westervelt's event-based speed integral, gain in 1/s (the gait for the command "
@@ -78,25 +76,13 @@ class WindupDecay:
     ``seconds`` s after the change the decay stops and I integrates as before. A walk at a
     constant command is the same walk bit for bit with and without the rule.
 
-    Why: the shipped policy's integral wound up by as much as 0.13 m/s of offset while the hip
-    lagged a new command and then took about 10 s to unwind: 34 of 60 random changes settled
-    within 0.03 m/s 5-10 s after the change (classic 57). Holding I during the lag (a band, or a
-    gate that integrates only a steady error) removed the overshoot but also the fast reach: 49
-    of 72 ordered changes within 4 s, the network without a rule 68. With this rule (5 s, 1 s):
-    55 of the 60 and 67 of the 72, and 183 of 200 other changes (docs/learning.md, 2026-11-27
-    (sixth)); the learned policy ships with it. A decay that lasts until the next
-    change settles fewer (48): the new speed's own steady error is then never integrated fully.
-
-    ``at_start``: a walk's start counts as a change of the command up to v_d (from rest), so
-    what I winds up over the first steps decays toward its value at the start once the hip has
-    passed v_d. Every walk's first steps run slow (the robot starts on its gait with the hip at
-    v_d, and the step after slows; classic at 0.8 m/s: 0.586 m/s), I wound up over them, and the
-    shipped network then ran fast for seconds: 3-6 s after the start +0.070 m/s at 0.8, and a
-    change of the command 6-7 s after the start carried the excess to the new speed. With this
-    and the feed-forward's start (:class:`IntegralFeedforward`), 3-6 s after the start is within
-    0.03 m/s at 17 of 17 speeds from 0.7 to 1.5 (without, 11), and 100 of the first 100 changes
-    of a settling seed settle (without, 96) (docs/learning.md, 2026-11-28 (second)). Off, a walk
-    is the same walk bit for bit as before the option existed."""
+    Why: while the hip lags a new command, the integral winds up, and unwinding it takes
+    seconds of overshoot; holding it during the lag (a ``band``) also loses the fast reach.
+    The decay keeps the windup's fast reach and takes the overshoot out. ``at_start``: a
+    walk's start counts as a change of the command up to v_d (from rest): every walk's first
+    steps run slow, and what I winds up over them decays once the hip has passed v_d. Off, a
+    walk is the same walk bit for bit as before the option existed (what each choice
+    measured: docs/learning.md, 2026-11-27 (sixth) and 2026-11-28 (second))."""
 
     seconds: float = 5.0
     tau: float = 1.0
@@ -122,16 +108,12 @@ class IntegralFeedforward:
     integrates every error; without ``start``, a walk at a constant command is the same walk
     bit for bit.
 
-    Why: the shipped network needs I between -0.25 and +0.07 to walk at its command (it
-    walks fast with I = 0 at most speeds), so after a change I has to wind from the old
-    speed's steady value to the new one's through the error, and a walk that starts at I = 0
-    is fast for several seconds. At changes the shift settled 58 of 60 random changes (without
-    it 55), the ordered changes as fast as before; the start moved more walks within 0.03 m/s
-    over 3-6 s (24 of 33 speeds, without 14) but took the walk at 1.3 m/s to where check 6's
-    return map (the integral frozen) is unstable, so it is off by default (docs/learning.md,
-    2026-11-27 (seventh)). Since 2026-11-28 (second) the shipped policy starts with it together
-    with :class:`WindupDecay`'s ``at_start`` (check 6: max |lambda| 0.85). :func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`
-    measures a table; ``ship_policy.py --integral-feedforward`` records it."""
+    Why: a network trained with I as an input may need a different I at each speed to walk
+    at its command, so after a change I has to wind from the old speed's steady value to the
+    new one's through the error, and a walk that starts at I = 0 runs off its command for
+    seconds (docs/learning.md, 2026-11-27 (seventh) and 2026-11-28 (second)).
+    :func:`~rabbit_policy.evaluation.steady_integral.steady_integrals` measures a table; a
+    controller spec records it."""
 
     speeds: tuple[float, ...]
     values: tuple[float, ...]
@@ -180,13 +162,9 @@ class IntegralConfig:
     its steady values at a change of the command (and may start a walk at its steady value)
     (:class:`IntegralFeedforward`; None: moves only by integrating, starts at 0).
 
-    Why the band (conditional integration): a large error is a transient, a hip lagging a
-    new command or a push, not the steady error an integral is for. Integrated, it wound
-    the shipped policy's offset up to 0.12 m/s after a speed change, which then took about
-    10 s to unwind: 34 of 60 changes settled within 0.03 m/s, classic 57. Held while the
-    error is 0.1 m/s or more, 57; clipped to 0.05 m/s, 56 (docs/learning.md, 2026-11-27
-    (fifth)). Neither is shipped yet: each costs the shipped network something it won with
-    the windup (the same section)."""
+    Why the band (conditional integration) and the clip: a large error is a transient, a hip
+    lagging a new command or a push, not the steady error an integral is for (docs/learning.md,
+    2026-11-27 (fifth))."""
 
     limit: float
     dt: float
