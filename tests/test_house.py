@@ -100,3 +100,20 @@ def test_nodes_are_thin_and_scripts_are_shims():
     assert len(sim_node.splitlines()) <= 300 and "noqa: E402" not in sim_node
     long = {p.name: n for p in (ROOT / "scripts").glob("*.py") if (n := len(p.read_text().splitlines())) > 30}
     assert not long, f"scripts over 30 lines (a script is a shim over a commands module): {long}"
+
+
+def test_shared_options_are_declared_once():
+    """walk.py and run_stack.py take the walk's options from one declaration (the same types,
+    defaults and choices), and ``--workers`` is declared in one place."""
+    from rabbit_policy.commands import run_stack, walk
+
+    def actions(parser):
+        return {a.dest: (a.type, a.default, a.choices, a.option_strings) for a in parser._actions}
+
+    fast, stack = actions(walk.build_parser()), actions(run_stack.build_parser())
+    for dest in ("controller", "speed", "speed_schedule", "duration", "push", "model", "friction",
+                 "torso_mass_scale", "torque_delay", "policy_file", "decision_period", "speed_integral"):
+        assert fast[dest] == stack[dest], dest
+    declared = [name for name in tracked("src") if name.endswith(".py")
+                and 'add_argument("--workers"' in (ROOT / name).read_text()]
+    assert declared == ["src/rabbit_policy/rabbit_policy/parallel.py"], declared

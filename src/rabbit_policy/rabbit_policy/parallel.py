@@ -302,9 +302,15 @@ class ProgressMap:
         self.bar.close()
 
 
-def add_backend_arguments(parser, progress: bool = False) -> None:
-    """``--backend`` and ``--ray-address`` for a script's argument parser (``--workers`` is
-    the script's own); with ``progress`` also ``--no-progress`` (for :class:`ProgressMap`)."""
+def add_backend_arguments(parser, progress: bool = False, workers: bool = True) -> None:
+    """``--workers``, ``--backend`` and ``--ray-address`` for a script's argument parser (with
+    ``workers`` False the script declares ``--workers`` itself: train.py's is a
+    ``TrainingConfig`` field); with ``progress`` also ``--no-progress`` (for :class:`ProgressMap`)."""
+    if workers:
+        from rabbit_msgs_py.cli import positive_int
+
+        parser.add_argument("--workers", type=positive_int, default=2,
+                            help="processes (local) or Ray CPUs for the independent walks (default 2)")
     if progress:
         parser.add_argument("--no-progress", action="store_true", help="no progress bar (log lines only)")
     parser.add_argument("--backend", choices=BACKENDS, default="local",

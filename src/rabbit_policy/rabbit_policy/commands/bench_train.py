@@ -194,7 +194,6 @@ def acceptance_1_6(policy_file: Path, workers: int) -> dict:
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=600, help="env steps per throughput measurement")
-    parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--train", action="store_true", help="also measure the wall time to a passing policy")
     parser.add_argument("--algo", choices=("es", "ppo"), default="es")
     parser.add_argument("--seed", type=int, default=0)

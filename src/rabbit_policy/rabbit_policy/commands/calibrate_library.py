@@ -24,7 +24,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--gait-dir", type=Path, default=None, help="gait library directory (default: packaged)")
     parser.add_argument("--weights", type=int, default=11, help="blend weights per pair (>= 2)")
     parser.add_argument("--duration", type=float, default=20.0, help="walk per blend, s of sim time")
-    parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
     from rabbit_policy.gait_design.calibration import CalibrationConfig, calibrate
@@ -36,8 +35,6 @@ def main(argv: list[str] | None = None) -> int:
         library = GaitLibrary.load(directory)
     except (ValueError, FileNotFoundError) as exc:
         parser.error(str(exc))
-    if args.workers < 1:
-        parser.error("--workers must be >= 1")
     backend = open_backend(parser, args)
     try:
         calibration = calibrate(library, config, backend.map)

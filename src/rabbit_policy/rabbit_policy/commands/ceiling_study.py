@@ -55,7 +55,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--families", default=",".join(FAMILIES), help=f"some of {', '.join(FAMILIES)}")
     parser.add_argument("--budget", type=int, default=240, help="CMA-ES rollouts per impulse")
     parser.add_argument("--blocks", type=int, default=5, help="200 ms blocks of actions after the push")
-    parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
     families = [f for f in args.families.split(",") if f]

@@ -42,7 +42,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--names", nargs="+", help="a column name per policy (default: the file paths)")
     parser.add_argument("--quick", action="store_true", help="the fast subset (RobustnessConfig.quick(), 30 "
                                                              "Poincaré samples): a first look only")
-    parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--out", type=Path, help="also write every figure to this JSON file")
     parser.add_argument("--recheck-stability", action="store_true",
@@ -50,8 +49,6 @@ def main(argv: list[str] | None = None) -> int:
                              "of these same arguments), judged again on the file's other figures")
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
-    if args.workers < 1:
-        parser.error("--workers must be >= 1")
     if args.names is not None and len(args.names) != len(args.policies):
         parser.error(f"--names gives {len(args.names)} names for {len(args.policies)} policies")
     if not args.policies and not args.classic_integral and not args.recovery:

@@ -43,7 +43,6 @@ def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
     parser.add_argument("--quick", action="store_true", help="short version for tests")
-    parser.add_argument("--workers", type=int, default=2, help="processes for the independent walks")
     add_backend_arguments(parser, progress=True)
     parser.add_argument("--model", choices=("paper", "drives"), default="paper")
     parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
@@ -93,8 +92,6 @@ def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONUNBUFFERED", "1")  # worker processes print as they go
     ensure_localhost_discovery()
     args = build_parser().parse_args(argv)
-    if args.workers < 1:
-        build_parser().error("--workers must be >= 1")
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures

@@ -49,7 +49,6 @@ def design(argv: list[str] | None = None) -> int:
     parser.add_argument("--start", type=float, default=1.0, help="speed solved first (m/s)")
     parser.add_argument("--iterations", "--generations", type=int, default=100, dest="iterations",
                         help="CMA-ES generations per gait (as train.py's --iterations)")
-    parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--validate", type=float, default=60.0, help="validation walk (s)")

@@ -34,13 +34,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-command-step", type=non_negative, default=0.0,
                         help="command rate limit (m/s per step)")
     parser.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS))
-    parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser, progress=True)
     parser.add_argument("--quick", action="store_true", help="a small version (seconds)")
     parser.add_argument("--out", type=Path, default=None, help="also write the JSON here")
     args = parser.parse_args(argv)
-    if args.workers < 1:
-        parser.error("--workers must be >= 1")
 
     from rabbit_policy.evaluation import robustness as rb
     from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy

@@ -39,24 +39,15 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.experiment.options import add_model_options, add_policy_options  # here: after main() took Ctrl-C over
-    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+    from rabbit_policy.experiment.options import add_model_options, add_policy_options, add_walk_options  # here: after main() took Ctrl-C over
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--speed", type=float, default=1.0, help="desired speed (m/s) if no schedule is given")
-    parser.add_argument("--duration", type=float, default=20.0, help="simulated time (s)")
-    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
-                        help="classic: the classic HZD gait library; learned: the HZD-RL policy; recovery: classic plus the "
-                             "model-based push-recovery rule (hzd, rl: aliases)")
+    add_walk_options(parser)
     parser.add_argument("--mode", choices=("lockstep", "paced", "realtime"), default="lockstep",
                         help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "
                              "held to the wall clock (--rtf), slower if the machine cannot keep up; realtime: "
                              "free-running 1 kHz wall clock (latency studies; halts if it falls behind)")
     parser.add_argument("--rtf", type=float, default=1.0, help="--mode paced: target real-time factor (default 1)")
-    parser.add_argument("--speed-schedule", default=None, metavar="T:V,...",
-                        help='speed changes at sim times, e.g. "0:0.8,10:1.2,20:1.0"')
-    parser.add_argument("--push", default=None, metavar="T:FX:DUR,...",
-                        help='pushes on the torso, e.g. "5:60:0.1" (s, N, s)')
     add_model_options(parser)
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "

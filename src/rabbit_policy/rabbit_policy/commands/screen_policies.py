@@ -30,13 +30,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--classic-integral", nargs="+", type=float, default=[], metavar="KI",
                         help="also classic HZD with the event-based speed integral of this gain (1/s)")
     parser.add_argument("--quick", action="store_true", help="a few walks per controller (a smoke test)")
-    parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--out", type=Path, help="also append each controller's JSON line to this file")
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
-    if args.workers < 1:
-        parser.error("--workers must be >= 1")
     if not (args.policies or args.classic or args.classic_integral):
         parser.error("give policy files, --classic, --classic-integral gains, or several")
 

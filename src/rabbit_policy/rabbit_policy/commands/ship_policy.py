@@ -404,7 +404,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--allow-failing", action="store_true")
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
-    parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--classic-integral", type=float, metavar="KI",
                         help="also classic HZD with the event-based speed integral of this gain (1/s) in both "
                              "tables (the base of a residual policy trained with --integral-gain KI)")
@@ -449,8 +448,6 @@ def main(argv: list[str] | None = None) -> int:
                              "policies (train.py --keep-evaluated), for the card")
     add_backend_arguments(parser, progress=True)
     args = parser.parse_args(argv)
-    if args.workers < 1:
-        parser.error("--workers must be >= 1")
     if args.integral_feedforward_start and not args.integral_feedforward:
         parser.error("--integral-feedforward-start needs --integral-feedforward")
     if args.integral_windup_at_start and args.integral_windup_decay is None:

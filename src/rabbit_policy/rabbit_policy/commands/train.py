@@ -37,7 +37,7 @@ def build_parser() -> ArgumentParser:
     parser.add_argument("--algo", choices=tuple(TRAINERS), required=True, help="the trainer")
     parser.add_argument("--out", type=Path, required=True, help="run directory (new, or --resume)")
     add_config_arguments(parser, TrainingConfig)
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, workers=False)
     add_config_arguments(parser.add_argument_group("episodes (ES and PPO)"), EpisodeConfig)
     add_config_arguments(parser.add_argument_group("ES"), ESConfig)
     add_config_arguments(parser.add_argument_group("PPO"), PPOConfig)

@@ -36,7 +36,7 @@ def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, Backend
     parser.add_argument("--resume", action="store_true", help="continue from OUT/sb3_checkpoint.zip (give the same "
                                                               "options)")
     add_config_arguments(parser, SB3Config)
-    add_backend_arguments(parser)
+    add_backend_arguments(parser, workers=False)
     args = parse_with_preset(parser, argv)
     try:
         config = config_from_args(SB3Config, args)

@@ -21,7 +21,6 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--iterations", type=int, default=6, help="CMA-ES generations (as optimize_gaits.py)")
     parser.add_argument("--popsize", type=int, default=8)
-    parser.add_argument("--workers", type=int, default=2)
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
     if args.iterations < 1 or args.popsize < 2:

@@ -46,19 +46,10 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from rabbit_policy.experiment.options import add_model_options, add_policy_options  # here: after main() took Ctrl-C over
-    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+    from rabbit_policy.experiment.options import add_model_options, add_policy_options, add_walk_options  # here: after main() took Ctrl-C over
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
-                        help="classic HZD, the learned HZD-RL policy, or recovery: classic plus the model-based "
-                             "push-recovery rule (hzd, rl: aliases)")
-    command = parser.add_mutually_exclusive_group()
-    command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
-    command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",
-                         help='speed schedule "0:0.8,8:1.2" (s:m/s)')
-    parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
-    parser.add_argument("--push", default="", metavar="T:FX:DUR,...", help='pushes on the torso, "3:-100:0.1"')
+    add_walk_options(parser)
     add_model_options(parser)
     add_policy_options(parser)
     parser.add_argument("--max-command-step", type=non_negative, default=0.0,

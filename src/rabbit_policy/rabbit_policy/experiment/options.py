@@ -1,5 +1,6 @@
 """Options shared by ``scripts/walk.py`` (the fast path) and ``scripts/run_stack.py`` (the
-node stack), one definition each: the model errors (the model variant, the foot friction,
+node stack), one definition each: the walk (controller, speed or schedule, duration, pushes),
+the model errors (the model variant, the foot friction,
 the torso mass and the torque delay; sim_node parameters in the stack) and the policy
 (library mode, gait directory, policy file, decision timing, speed integral; policy_node
 parameters in the stack)."""
@@ -12,6 +13,22 @@ from rabbit_msgs_py.cli import non_negative, positive
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
+
+
+def add_walk_options(parser: argparse.ArgumentParser) -> None:
+    """``--controller``, ``--speed`` or ``--speed-schedule``, ``--duration``, ``--push``."""
+    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+
+    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
+                        help="classic: the HZD gait library; learned: the HZD-RL policy; recovery: classic plus the "
+                             "model-based push-recovery rule (hzd, rl: aliases)")
+    command = parser.add_mutually_exclusive_group()
+    command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
+    command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",
+                         help='speed changes at sim times, "0:0.8,8:1.2" (s:m/s; at least 0.1 s apart)')
+    parser.add_argument("--duration", type=positive, default=20.0, help="simulated time (s)")
+    parser.add_argument("--push", default="", metavar="T:FX:DUR,...",
+                        help='pushes on the torso, "3:-100:0.1" (s, N, s)')
 
 
 def add_model_options(parser: argparse.ArgumentParser) -> None:
