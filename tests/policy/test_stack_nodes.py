@@ -980,11 +980,11 @@ def test_policy_node_starts_a_memory_policy_afresh_when_the_robot_is_placed_agai
         memory = policy.policy.memory
         assert memory is not None
         pub.publish(UInt32(data=1))  # the start: nothing to forget
-        assert spin_until(executor, lambda: policy._placements == 1)
+        assert spin_until(executor, lambda: policy.core.placements == 1)
         memory.inputs(np.array([1.0, 0.9, 0.1]))  # some error integrated
         assert memory.integral != 0.0
         pub.publish(UInt32(data=2))  # a reset
-        assert spin_until(executor, lambda: policy._placements == 2)
+        assert spin_until(executor, lambda: policy.core.placements == 2)
         assert memory.integral == 0.0
         for node in (policy, user):
             executor.remove_node(node)

@@ -120,7 +120,7 @@ class PolicyDriver:
         self.rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         self.decisions = self.rejected_commands = self.decisions_given_up = 0
         self.last_observation: Observation | None = None
-        self._placements = 0
+        self.placements = 0
         self._echoes: list[float] = []  # scheduled commands published on /cmd_speed, not yet heard back
 
     # ----------------------------------------------------------------- events
@@ -150,13 +150,13 @@ class PolicyDriver:
         """The robot was placed for the ``count``-th time: from the second on (a reset), a
         policy with memory starts afresh and the schedule starts over, as each walk of the
         ROS-free loop does."""
-        if count > 1 and count != self._placements:
+        if count > 1 and count != self.placements:
             reset_policy(self.policy)
             self.awaiting.clear()  # decisions of the walk before the placement
             if self.schedule is not None:
                 self.schedule.restart()
                 self.desired_speed = self.initial_speed
-        self._placements = count
+        self.placements = count
 
     def on_hip_velocity(self, stamp: int, speed: float) -> list[Action]:
         """A state's hip velocity (m/s, world x) stamped ``stamp`` ns: a scheduled change due

@@ -263,7 +263,12 @@ class PolicyNode(Node):
                 return
             self._logged[line.key] = now
         logger = self.get_logger()
-        {"error": logger.error, "warning": logger.warning}.get(line.level, logger.info)(line.text)
+        if line.level == "error":  # one call site per severity (rclpy caches a call site's severity)
+            logger.error(line.text)
+        elif line.level == "warning":
+            logger.warning(line.text)
+        else:
+            logger.info(line.text)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -120,6 +120,14 @@ class SimSettings:
         """``push_schedule`` parsed, by time."""
         return parse_pushes(self.push_schedule)
 
+    def describe(self) -> str:
+        """One line for the start-up log: the model, its errors, the mode."""
+        return (f"{self.model} model"
+                + (f", foot friction {self.friction:g}" if self.friction else "")
+                + (f", torso mass x{self.torso_mass_scale:g}" if self.torso_mass_scale != 1.0 else "")
+                + (f", torque delay {self.torque_delay * 1000:g} ms" if self.torque_delay else "")
+                + f", {self.mode} mode" + (f", rtf {self.rtf:g}" if self.mode == "paced" else ""))
+
 
 SECRET_PARAMS = ("pairing_key",)
 """Parameters read once at start and then removed (``ros2 param get`` must not show them)."""

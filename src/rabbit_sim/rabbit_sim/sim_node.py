@@ -126,15 +126,8 @@ class SimNode(Node):
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.paced_wake))
         if mode == "realtime":
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
-        self.get_logger().info(
-            f"RABBIT simulation ({self.settings.model} model"
-            + (f", foot friction {self.settings.friction:g}" if self.settings.friction else "")
-            + (f", torso mass x{self.settings.torso_mass_scale:g}" if self.settings.torso_mass_scale != 1.0 else "")
-            + (f", torque delay {self.settings.torque_delay * 1000:g} ms" if self.settings.torque_delay else "")
-            + f", {mode} mode"
-            + (f", rtf {self.settings.rtf:g}" if mode == "paced" else "")
-            + f") waiting for a state on {self.resolve_topic_name(topics.INITIAL_STATE)}"
-        )
+        self.get_logger().info(f"RABBIT simulation ({self.settings.describe()}) waiting for a state on "
+                               f"{self.resolve_topic_name(topics.INITIAL_STATE)}")
 
     # ----------------------------------------------------------------- status
     fallen = property(lambda self: self.driver.fallen)
@@ -274,7 +267,12 @@ class SimNode(Node):
                 return
             self._logged[line.key] = now
         logger = self.get_logger()
-        {"error": logger.error, "warning": logger.warning}.get(line.level, logger.info)(line.text)
+        if line.level == "error":  # one call site per severity (rclpy caches a call site's severity)
+            logger.error(line.text)
+        elif line.level == "warning":
+            logger.warning(line.text)
+        else:
+            logger.info(line.text)
 
     def _publish_state(self, state: State) -> None:
         """Joint states, hip velocity (world frame: x forward, z up, pitch rate) and clock."""
