@@ -329,6 +329,9 @@ def test_a_recorder_that_connects_late_never_wedges_lockstep(tmp_path):
     for topic in ("/joint_states", "/clock"):
         stamps = _stamps_ms(bag, topic)
         assert len(stamps) >= sim_end and stamps == list(range(len(stamps))), f"{topic}: {stamps[:10]}..."
+    from rabbit_sim.bag import joint_state_stamps  # bench_stack's count of the states a bag holds
+
+    assert sorted(joint_state_stamps(bag)) == [ms * 1_000_000 for ms in _stamps_ms(bag, "/joint_states")]
 
 
 def test_a_recorder_that_stops_fails_the_run_within_a_bounded_time(tmp_path):

@@ -60,6 +60,24 @@ def open_bag(path: Path):
     return reader
 
 
+def joint_state_stamps(path: Path) -> set[int]:
+    """The distinct header stamps (ns) of the ``/joint_states`` messages in the bag ``path``
+    (:class:`BagError` as :func:`open_bag`)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    reader = open_bag(path)
+    try:
+        connections = [c for c in reader.connections if c.topic == "/joint_states"]
+        stamps = set()
+        for connection, _t, raw in reader.messages(connections):
+            stamp = typestore.deserialize_cdr(raw, connection.msgtype).header.stamp
+            stamps.add(stamp.sec * 1_000_000_000 + stamp.nanosec)
+        return stamps
+    finally:
+        reader.close()
+
+
 @dataclass(frozen=True)
 class QosSpec:
     """The QoS a publisher offers, as recorded in metadata.yaml."""

@@ -55,17 +55,9 @@ def rounded(value: float | None, digits: int) -> float | None:
 
 def recorded_ticks(bag: Path) -> int:
     """Distinct /joint_states stamps in a bag."""
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_typestore
+    from rabbit_sim.bag import joint_state_stamps
 
-    typestore = get_typestore(Stores.ROS2_JAZZY)
-    stamps = set()
-    with Reader(bag) as reader:
-        connections = [c for c in reader.connections if c.topic == "/joint_states"]
-        for connection, _t, raw in reader.messages(connections):
-            stamp = typestore.deserialize_cdr(raw, connection.msgtype).header.stamp
-            stamps.add((stamp.sec, stamp.nanosec))
-    return len(stamps)
+    return len(joint_state_stamps(bag))
 
 
 def startup(launches: int = 3) -> dict[str, object]:
