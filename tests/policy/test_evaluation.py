@@ -277,7 +277,9 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     report = (tmp_path / "report.md").read_text()
     assert "## Summary" in report and "walking cycle stable at every speed tested" in report
     assert list(results["ablation"]) == ["classic HZD", "a best", "b best", "c best", "d best", "c final", "d final"]
-    assert "## The ablation" in report and "| check | classic HZD | a best |" in report
+    ablation_page = (tmp_path / "ablation.md").read_text()  # the research log's table, apart from the report
+    assert "## The ablation" not in report and "[ablation.md](ablation.md)" in report
+    assert ablation_page.startswith("# The ablation") and "| check | classic HZD | a best |" in ablation_page
     assert results["meta"]["command"].endswith(f"--ablation {ablation}")
     for name, dimension in (("classic", 10), ("learned", 13), ("recovery", 13)):
         analysis = results["poincare"][name]["1.00"]
@@ -300,7 +302,7 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
         assert robust["random_sequences"]["total"] == 2 and len(robust["push_margins"]) == 2
     assert "## Robustness" in report
     for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "limit_cycle_recovery", "convergence",
-                   "poincare", "push", "sweep", "transitions"):
+                   "poincare", "push", "sweep", "transitions", "margins", "model_cases"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
     assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {

@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures
-    from rabbit_policy.evaluation.report import load_comparisons, render_report
+    from rabbit_policy.evaluation.report import load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_sim.model import ModelOptions
@@ -154,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
             for name, policy in policies.items():
                 robust[name] = robustness(policy, config.robustness, map_fn, log)
             figures.transitions_figure(robust, out / "transitions.png")
+            figures.margins_figure(robust, out / "margins.png")
+            figures.model_cases_figure(robust, out / "model_cases.png")
             log("acceptance checks 1-6")
             verdicts = {name: judge_policy(policy, robust[name], robust["classic"]["push_margins"],
                                            poincare[name], map_fn) for name, policy in policies.items()}
@@ -177,6 +179,8 @@ def main(argv: list[str] | None = None) -> int:
                "ablation": ablation}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
+    if ablation:
+        (out / "ablation.md").write_text(render_ablation(results))
     log(f"wrote {out / 'report.md'}")
     return 0
 

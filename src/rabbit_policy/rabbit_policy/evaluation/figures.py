@@ -175,3 +175,49 @@ def transitions_figure(robustness: dict[str, dict], path: Path) -> Path:
         ax.set_title(f"{_label(name)}: {result['passed']}/{result['total']} passed", fontsize=9)
     return _save(fig, path)
 
+
+
+def margins_figure(robustness: dict[str, dict], path: Path) -> Path:
+    """Push margins (the largest impulse survived at every phase, N s) per speed, backward and
+    forward, one bar per controller."""
+    names = list(robustness)
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.2), sharey=True)
+    for ax, direction in zip(axes, ("backward", "forward")):
+        speeds = [m["speed"] for m in robustness[names[0]]["push_margins"] if m["direction"] == direction]
+        width = 0.8 / len(names)
+        for k, name in enumerate(names):
+            margins = {m["speed"]: m["largest_survived_Ns"] for m in robustness[name]["push_margins"]
+                       if m["direction"] == direction}
+            x = np.arange(len(speeds)) + (k - (len(names) - 1) / 2) * width
+            bars = ax.bar(x, [margins[v] for v in speeds], width, color=COLORS.get(name), label=_label(name))
+            ax.bar_label(bars, fontsize=7)
+        ax.set_xticks(range(len(speeds)), [f"{v:.1f} m/s" for v in speeds])
+        ax.set_title(f"{direction} pushes", fontsize=9)
+        ax.grid(alpha=0.3, axis="y")
+    axes[0].set_ylabel("margin (N s, every phase)")
+    axes[0].legend(fontsize=7, loc="upper left")
+    return _save(fig, path)
+
+
+def model_cases_figure(robustness: dict[str, dict], path: Path) -> Path:
+    """The model-error cases per controller: green = walked (the speed error in the cell, m/s),
+    orange = stalled, red = fell."""
+    names = list(robustness)
+    rows = robustness[names[0]]["model_errors"]["rows"]
+    columns = [(r["case"], r["speed"]) for r in rows]
+    colours = {"walked": (0.2, 0.7, 0.3), "stalled": (0.95, 0.6, 0.1), "fell": (0.85, 0.2, 0.2)}
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.32 * len(columns)), 0.6 * len(names) + 1.9))
+    grid = np.zeros((len(names), len(columns), 3))
+    for i, name in enumerate(names):
+        cells = {(r["case"], r["speed"]): r for r in robustness[name]["model_errors"]["rows"]}
+        for j, column in enumerate(columns):
+            cell = cells[column]
+            grid[i, j] = colours.get(cell["outcome"], colours["walked"] if cell["error"] is not None else (0.6,) * 3)
+            if cell["error"] is not None:
+                ax.text(j, i, f"{cell['error']:+.2f}", ha="center", va="center", fontsize=5, rotation=90)
+    ax.imshow(grid, aspect="auto")
+    walked = {n: sum(r["error"] is not None for r in robustness[n]["model_errors"]["rows"]) for n in names}
+    ax.set_yticks(range(len(names)), [f"{n}: {walked[n]}/{len(columns)}" for n in names], fontsize=8)
+    ax.set_title("model errors: walked (green, the speed error m/s), stalled (orange), fell (red)", fontsize=9)
+    ax.set_xticks(range(len(columns)), [f"{case} {speed:.1f}" for case, speed in columns], fontsize=6, rotation=90)
+    return _save(fig, path)

@@ -174,6 +174,10 @@ def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
 def summary_section(results: dict) -> list[str]:
     """Headline facts computed from the results (no hand-written numbers)."""
     lines = ["## Summary", ""]
+    if results.get("robustness"):
+        lines += ["![push margins per speed: backward and forward, every phase](margins.png)", "",
+                  "![model errors: walked (green, the speed error), stalled (orange), fell (red)](model_cases.png)",
+                  ""]
     for name, tracking in results["tracking"].items():
         errors = [abs(seg["mean_error_second_half"]) for seg in tracking["segments"]
                   if seg["mean_error_second_half"] is not None]
@@ -327,5 +331,14 @@ def render_report(results: dict) -> str:
     lines += repeated_section(results.get("repeated_pushes", {}), results["config"].get("repeated"))
     lines += robustness_section(results.get("robustness", {}))
     lines += acceptance_section(results.get("acceptance_1_6", {}))
-    lines += ablation_section(results.get("ablation", {}))
+    if results.get("ablation"):
+        lines += ["The checks 1-6 of the trained ablation rows (`--ablation`) are in [ablation.md](ablation.md), "
+                  "with the research log (docs/learning.md).", ""]
     return "\n".join(lines)
+
+
+def render_ablation(results: dict) -> str:
+    """``--ablation``'s table as a page of its own (``ablation.md``)."""
+    return "\n".join(["# The ablation: checks 1-6 per trained row", "",
+                      f"Written by `{results['meta']['command']}` beside report.md.", "",
+                      *ablation_section(results["ablation"])[2:]])
