@@ -309,3 +309,15 @@ def test_walk_json_times_are_on_the_ms_grid_for_off_grid_schedules_and_durations
         assert all(row["reach_time"] is not None for row in report["segments"])
     assert off["segments"] == on["segments"] and off["touchdowns"] == on["touchdowns"]
     assert off["segments"][1]["start"] == 6.001
+
+
+def test_a_reach_time_counts_from_the_tick_the_change_takes_effect():
+    """A change at 2.0005 s takes effect at 2.001 s: its reach (the robustness check's, asked
+    with the nominal time) is counted from there, in whole ticks."""
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.runtime.policies import make_policy
+
+    result = walk(make_policy("classic"), Scenario(schedule=((0.0, 0.9), (2.0005, 1.1))), 7.0)
+    assert result.scenario.schedule[1][0] == 2.001
+    nominal, effective = result.reach_time(2.0005, 7.0, 1.1), result.reach_time(2.001, 7.0, 1.1)
+    assert nominal is not None and nominal == effective == round(nominal, 3)

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rabbit_msgs_py.strict_json import finite_or_none
-from rabbit_policy.experiment.scenario import Scenario, whole_ticks
+from rabbit_policy.experiment.scenario import Scenario, first_tick_at, whole_ticks
 
 REACH_TOLERANCE = 0.05
 """m/s: a speed is "reached" when a whole step's mean is this close to the command."""
@@ -159,11 +159,12 @@ class WalkResult:
         return [(t, end, v) for (t, v), end in zip(schedule, ends) if t <= self.end_time + 1e-9]
 
     def reach_time(self, start: float, end: float, command: float, tolerance: float = REACH_TOLERANCE) -> float | None:
-        """Seconds from ``start`` to the end of the first whole step starting at or after it
-        (and ending by ``end``) whose mean speed is within ``tolerance`` of ``command``."""
+        """Seconds from the tick a change at ``start`` takes effect (the first at or after it) to
+        the end of the first whole step starting at or after it (and ending by ``end``) whose
+        mean speed is within ``tolerance`` of ``command``; whole ticks, so on the ms grid."""
         for step_start, step_end, speed in self.step_speeds():
             if step_start >= start - 1e-9 and step_end <= end + 1e-9 and abs(speed - command) <= tolerance:
-                return (whole_ticks(step_end) - whole_ticks(start)) / 1000.0  # on the ms grid
+                return (whole_ticks(step_end) - whole_ticks(first_tick_at(start))) / 1000.0
         return None
 
     def segments(self, tolerance: float = REACH_TOLERANCE) -> list[dict]:
