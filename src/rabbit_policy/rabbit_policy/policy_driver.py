@@ -21,6 +21,7 @@ import numpy as np
 
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.log_lines import LogLine
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_policy.experiment.scenario import parse_schedule, validate_schedule
 from rabbit_policy.runtime import exact_sum
@@ -53,12 +54,8 @@ class Scheduled:
     speed: float
 
 
-@dataclass(frozen=True)
-class Log:
-    level: str  # "info", "warning" or "error"
-    text: str
-    throttle: float = 0.0  # s (wall): at most one line of this ``key`` this often
-    key: str = ""
+Log = LogLine
+"""A log line for the node (:class:`rabbit_msgs_py.log_lines.LogLine`)."""
 
 
 Action = Gait | Scheduled | Log

@@ -49,7 +49,6 @@ NaN/inf commands are rejected with an error; the last good command stays in forc
 from __future__ import annotations
 
 import sys
-import time
 
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -61,6 +60,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_vectors, phase_from_msg, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -141,7 +141,7 @@ class PolicyNode(Node):
                                    + " ".join(f"{k}:={v}" for k, v in settings.items()) + " (run_stack sets them)")
         self.add_on_set_parameters_callback(self._on_set_parameters)
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second
-        self._logged: dict[str, float] = {}  # throttled log lines: key -> when last logged (monotonic s)
+        self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self._warned_planar = False
         self.solo = SoloStart(self, "policy", values["solo_check"], self._wire)
 
@@ -254,21 +254,6 @@ class PolicyNode(Node):
                 self._speed_pub.publish(Float64(data=action.speed))
             elif isinstance(action, Log):
                 self._log(action)
-
-    def _log(self, line: Log) -> None:
-        """A core's log line; throttled ones by their key (rclpy throttles per call site)."""
-        if line.throttle:
-            now = time.monotonic()
-            if now - self._logged.get(line.key, -line.throttle) < line.throttle:
-                return
-            self._logged[line.key] = now
-        logger = self.get_logger()
-        if line.level == "error":  # one call site per severity (rclpy caches a call site's severity)
-            logger.error(line.text)
-        elif line.level == "warning":
-            logger.warning(line.text)
-        else:
-            logger.info(line.text)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -33,6 +33,7 @@ from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
     MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
 from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
@@ -74,7 +75,7 @@ class SimNode(Node):
         self._joint_msg = JointState(name=list(JOINT_NAMES))
         self._hip_msg = TwistStamped(header=Header(frame_id="world"))
         self._marker_builder = MarkerArrayBuilder()
-        self._logged: dict[str, float] = {}  # throttled log lines: key -> when last logged (monotonic s)
+        self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self.viewer = None
         if self.settings.viewer:
             try:
@@ -257,22 +258,6 @@ class SimNode(Node):
                 self._fallen_pub.publish(Bool(data=action.value))
             elif kind is Placed:
                 self._resets_pub.publish(UInt32(data=action.count))
-
-    def _log(self, line: Log) -> None:
-        """A driver's log line; throttled ones by their key (rclpy's own throttling is per
-        call site, and all of the driver's lines come through this one)."""
-        if line.throttle:
-            now = time.monotonic()
-            if now - self._logged.get(line.key, -line.throttle) < line.throttle:
-                return
-            self._logged[line.key] = now
-        logger = self.get_logger()
-        if line.level == "error":  # one call site per severity (rclpy caches a call site's severity)
-            logger.error(line.text)
-        elif line.level == "warning":
-            logger.warning(line.text)
-        else:
-            logger.info(line.text)
 
     def _publish_state(self, state: State) -> None:
         """Joint states, hip velocity (world frame: x forward, z up, pitch rate) and clock."""

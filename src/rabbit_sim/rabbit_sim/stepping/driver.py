@@ -16,6 +16,7 @@ Stamps are ns of sim time; wall times are seconds of ``clock`` (``time.perf_coun
 from __future__ import annotations
 
 import time
+from rabbit_msgs_py.log_lines import LogLine
 from dataclasses import dataclass
 from typing import Callable
 
@@ -97,12 +98,8 @@ class Frame:
     force: bool = False
 
 
-@dataclass(frozen=True)
-class Log:
-    level: str  # "info", "warning" or "error"
-    text: str
-    throttle: float = 0.0  # s (wall): at most one line of this ``key`` this often
-    key: str = ""
+Log = LogLine
+"""A log line for the node (:class:`rabbit_msgs_py.log_lines.LogLine`)."""
 
 
 Action = State | PushApplied | Fallen | Placed | Markers | Frame | Log
