@@ -14,6 +14,7 @@ record) and :class:`Log`. The node turns messages into events and actions into m
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, replace
 
@@ -94,8 +95,10 @@ class PolicyDriver:
     (one line) for settings it cannot run with."""
 
     def __init__(self, policy: Policy, settings: PolicySettings) -> None:
-        if not settings.min_speed <= settings.max_speed:
-            raise ValueError(f"min_speed ({settings.min_speed}) must not be above max_speed ({settings.max_speed})")
+        self.set_range(settings.min_speed, settings.max_speed, settings.initial_speed)
+        if not math.isfinite(settings.initial_speed) or not self.min_speed <= settings.initial_speed <= self.max_speed:
+            raise ValueError(f"initial_speed must be a finite number in [{self.min_speed}, {self.max_speed}], "
+                             f"got {settings.initial_speed}")
         for name in ("window", "decision_window"):
             if getattr(settings, name) < 1:
                 raise ValueError(f"{name} must be >= 1 tick, got {getattr(settings, name)}")
@@ -109,7 +112,6 @@ class PolicyDriver:
         self.clock = DecisionClock(self.decision_period,
                                    settings.decision_window if self.decision_period else settings.window, tick=TICK_NS)
         exact_sum.warm()  # the window's compiled sum loaded now, not on the first decision
-        self.min_speed, self.max_speed = settings.min_speed, settings.max_speed
         self.initial_speed = self.desired_speed = settings.initial_speed
         self.schedule = speed_schedule(settings.speed_schedule, self.initial_speed)
         self.body: BodyStateBuffer | None = BodyStateBuffer(TICK_NS) if self.needs_body else None
@@ -125,12 +127,13 @@ class PolicyDriver:
         """The first gait: the start, on the command."""
         return [self._gait(first_command(self.policy, self.desired_speed))]
 
-    def set_range(self, low: float, high: float) -> None:
-        """A new command range (m/s, validated by the caller): the command in force is clamped into it."""
+    def set_range(self, low: float, high: float, command: float | None = None) -> None:
+        """A new command range (m/s, each end validated by the caller): the command in force
+        (``command`` if given) is clamped into it; ``ValueError`` if ``low`` > ``high``."""
         if not low <= high:
             raise ValueError(f"min_speed ({low}) must not be above max_speed ({high})")
         self.min_speed, self.max_speed = low, high
-        self.desired_speed = min(max(self.desired_speed, low), high)
+        self.desired_speed = min(max(self.desired_speed if command is None else command, low), high)
 
     def on_command(self, value: float, source: str) -> list[Action]:
         """A commanded speed (m/s) from ``source`` (a topic's name, in log lines)."""

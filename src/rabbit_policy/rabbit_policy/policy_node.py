@@ -127,10 +127,8 @@ class PolicyNode(Node):
                 values["policy"], values["gait_dir"] or None, values["library_mode"], values["policy_file"] or None,
                 finite("max_command_step", values["max_command_step"], 0.0),
                 DecisionTiming.parse(values["decision_period"]), finite("speed_integral", values["speed_integral"], 0.0))
-            if not low <= high:
-                raise ValueError(f"min_speed ({low}) must not be above max_speed ({high})")
             self.core = PolicyDriver(policy, PolicySettings(
-                low, high, finite("initial_speed", values["initial_speed"], low, high),
+                low, high, values["initial_speed"],
                 values["window"], values["decision_window"], values["speed_schedule"],
                 self.resolve_topic_name(topics.PHASE)))
         except (PolicyUnavailable, ValueError) as exc:
