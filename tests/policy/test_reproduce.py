@@ -36,9 +36,18 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     evaluation = json.loads((out / "evaluation.json").read_text())
     card = (out / "MODEL_CARD.md").read_text()
     assert f"scripts/reproduce.py --preset tiny --out {out}" in card  # its regenerate line is what ran
-    first = evaluation["constant"][0]
+    first = evaluation["acceptance"]["constant"][0]
     assert f"| {first['speed']:.2f} | {first['mean_speed_last']:.3f} | {first['error']:+.3f} |" in card
     assert load_controller(out / "learned.yaml").spec == spec
+    screen = json.loads((out / "screen.json").read_text())
+    assert [c["candidate"] for c in screen["candidates"]] == ["start", "run/policy.yaml"]
+    for row in screen["candidates"]:  # the paper's scenarios as evaluate.py walks them, and the push grid
+        assert sorted(row["scenarios"]) == ["large_backward", "small_backward", "small_forward"]
+        assert row["margin_grid"]["of"] == {"forward": 2, "backward": 2}
+    assert screen["candidates"][0]["scenarios"]["large_backward"]["outcome"] == "fell"  # today's, as the report says
+    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"]}
+    assert "| start | 0 | walked | walked | fell |" in card and "Beats the start" in card
+    assert evaluation["margin_grid"] == screen["candidates"][1]["margin_grid"]
     walked = subprocess.run([sys.executable, "scripts/walk.py", "--controller", "learned", "--policy-file",
                              str(out / "learned.yaml"), "--duration", "3", "--json"], cwd=ROOT, capture_output=True,
                             text=True, timeout=300)
@@ -46,12 +55,18 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     again = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out)], cwd=ROOT,
                            capture_output=True, text=True, timeout=300)
     assert again.returncode == 2 and "is not empty" in again.stderr
+    resumed = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out),
+                              "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]  # a finished training trains no further
+    assert load_spec(out / "learned.yaml").network == spec.network
+    assert load_spec(out / "learned.yaml").provenance["commands"][0].endswith(" --resume")
 
 
 def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
     for name in ("tiny", "shipped"):
         preset = load_preset(name)
         assert preset["start"] == "packaged" and preset["evaluation"] in ("quick", "full")
+        assert preset["screen"]["grid"] in ("quick", "full") and preset["screen"]["candidates"] >= 1
     shipped = load_preset("shipped")["train"]
     run = yaml.safe_load((ROOT / "config" / "train" / "shipped_es.yaml").read_text())
     for key in ("pairs", "episodes", "max_steps", "iterations", "sigma", "lr", "weight_decay", "distribution",
@@ -61,7 +76,10 @@ def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
                                                                                       "--keep-evaluated"]
     bad = tmp_path / "bad.yaml"
     bad.write_text("start: packaged\ntrain: {}\n")
-    for preset, message in (("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys")):
+    bad_screen = tmp_path / "bad_screen.yaml"
+    bad_screen.write_text("start: packaged\ntrain: {}\nscreen: {candidates: 0, grid: full}\nevaluation: quick\n")
+    for preset, message in (("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys"),
+                            (str(bad_screen), "screen is {candidates: a whole number >= 1")):
         out = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", preset, "--out",
                               str(tmp_path / "x")], cwd=ROOT, capture_output=True, text=True, timeout=120)
         lines = out.stderr.strip().splitlines()
