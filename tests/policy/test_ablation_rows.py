@@ -170,7 +170,7 @@ def test_a_body_and_residual_run_ships_a_policy_that_every_loop_runs_policy_node
     policy = make_policy("learned", policy_file=out / "policy.pt")
     info = policy.checkpoint.info
     assert (info["features"], info["action"], info["output"]) == ("body", "residual", "tanh")
-    assert policy.needs_body and policy.residual is not None and policy.net.body[0].in_features == 30
+    assert policy.needs_body and policy.residual is not None and policy.forward.inputs == 30
     assert policy.decision_period == 20
     loop = ClosedLoop(Scenario.constant(1.0), policy)
     loop.run(2.0)

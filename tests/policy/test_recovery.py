@@ -14,6 +14,25 @@ from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.policies import controller_settings, make_policy, required_controller_settings
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig, StepMemory
 
+DEFAULT_SETTINGS = {"within_step_blend": 0.2, "within_step_until": 0.6, "blend_phase": 0.2}
+"""The controller's own gait timing (ControllerConfig's), as a spec names it."""
+
+
+def _overlay(config, period: int = 20):
+    """A RecoveryOverlay with the rule's constants as RecoveryConfig's and, for policy_blend,
+    the controller's default blend (a spec names both; these tests use the defaults)."""
+    from rabbit_hzd_controller.controller import ControllerConfig
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend
+    from rabbit_policy.runtime.classic import LibraryPolicy
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from rabbit_policy.runtime.recovery import RecoveryOverlay, RecoveryPolicy
+
+    rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=max(period, 1))
+    defaults = ControllerConfig()
+    blend = (AlphaBlend(defaults.within_step_blend, defaults.within_step_until, period * defaults.tick)
+             if config.policy_blend else None)
+    return RecoveryOverlay(config, period, rule, blend)
+
 
 @pytest.mark.unit
 def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
@@ -382,7 +401,9 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
         with pytest.raises(ValueError, match="OverlayConfig"):
             OverlayConfig(**bad)
     with pytest.raises(ValueError, match="within the step"):
-        RecoveryOverlay(decision_period=0)
+        _overlay(OverlayConfig(), period=0)
+    with pytest.raises(ValueError, match="policy_blend needs the blend"):
+        RecoveryOverlay(OverlayConfig(at_once=True, policy_blend=True), 20, _overlay(OverlayConfig()).rule, None)
     with pytest.raises(ValueError, match="recovery_overlay: .*unexpected keyword argument 'gate'"):
         OverlayConfig.from_dict({"gate": 0.1})
     assert OverlayConfig.from_dict({"at_once": True}).controller_settings == CONTROLLER_SETTINGS
@@ -454,7 +475,7 @@ def test_the_overlay_adds_the_offsets_holds_the_last_quiet_gait_and_stays_off_wh
     quiet, now = GaitCommand(tuple([0.1] * 24), 5.0), GaitCommand(tuple([0.3] * 24), 6.0)
 
     def overlay_after_steady_steps(**config) -> RecoveryOverlay:
-        overlay = RecoveryOverlay(OverlayConfig(**config))
+        overlay = _overlay(OverlayConfig(**config))
         for _ in range(5):  # five steps at the command's pace (the memory holds four)
             for tau in taus:
                 assert overlay.apply(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)), quiet) is quiet
@@ -490,7 +511,7 @@ def test_from_rise_until_the_rules_weight_may_fall_but_not_rise_until_the_touchd
     gait = GaitCommand(tuple([0.1] * 24), 5.0)
 
     def behind_late(rise_until: float) -> RecoveryOverlay:
-        overlay = RecoveryOverlay(OverlayConfig(rise_until=rise_until))
+        overlay = _overlay(OverlayConfig(rise_until=rise_until))
         for _ in range(5):
             for tau in taus:
                 overlay.apply(Observation(1.0, 1.0, 0.0, body=(0.0, 0.0, tau, 2.0, 1.0)), gait)
@@ -543,7 +564,7 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     overlaid, plain = _overlay_file(tmp_path)
     policy = make_policy("learned", policy_file=overlaid)
     assert policy.needs_body and policy.overlay is not None
-    assert controller_settings(policy) == {} == required_controller_settings("learned", overlaid)
+    assert controller_settings(policy) == DEFAULT_SETTINGS == required_controller_settings("learned", overlaid)
     info = policy.checkpoint.info
     assert rules_set_after_training(info)[0].endswith(" --recovery-overlay")
     assert "recovery rule on top" in rules_set_after_training(info)[1]
@@ -563,7 +584,7 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     assert "blended in by the policy itself" in " ".join(network_text(blending.checkpoint.info))
     assert "from 0.6 of phase to the touchdown its weight may fall, not rise" in " ".join(
         network_text(blending.checkpoint.info))
-    assert controller_settings(make_policy("learned", policy_file=plain)) == {}
+    assert controller_settings(make_policy("learned", policy_file=plain)) == DEFAULT_SETTINGS
     step_file = tmp_path / "per_step.pt"
     _zero_residual_on_recovery_file(step_file, base="classic")
     from rabbit_policy.runtime.network import PolicyCheckpoint
@@ -586,10 +607,10 @@ def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network
     A -14 N s push at 0.875 of a step at 1.0 m/s (the network's binding phase there; its margin
     is 10 N s): the network alone falls or stalls, with the rule on top it walks on."""
     from rabbit_policy.evaluation.robustness import phase_times
-    from rabbit_policy.runtime.policies import LearnedPolicy
+    from rabbit_policy.runtime.policies import checkpoint_policy
 
     overlaid, plain = _overlay_file(tmp_path)
-    with_rule, alone = make_policy("learned", policy_file=overlaid), LearnedPolicy(plain)
+    with_rule, alone = make_policy("learned", policy_file=overlaid), checkpoint_policy(plain)
     quiet = [walk(policy, Scenario.constant(1.0), 6.0) for policy in (with_rule, alone)]
     assert np.array_equal(quiet[0].hip_x, quiet[1].hip_x)
     time = phase_times(with_rule, 1.0, 3.0, [0.875])[0]
@@ -607,23 +628,23 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     too), run_stack's configuration gives the controller node the settings the checkpoint asks
     for, and every state is the ROS-free loop's."""
     from rabbit_policy.bringup.stack import StackConfig
-    from rabbit_policy.runtime.policies import LearnedPolicy
+    from rabbit_policy.runtime.policies import checkpoint_policy
     from test_stack_nodes import _reference
 
     at_once = mode != "blended"
     overlaid, plain = _overlay_file(tmp_path, at_once, mode == "policy_blend")
 
-    class Alone(LearnedPolicy):  # the network without the overlay, under the same controller settings
-        controller_settings = CONTROLLER_SETTINGS if at_once else {}
+    alone = checkpoint_policy(plain)  # the network without the overlay, under the same controller settings
+    alone.controller_settings = CONTROLLER_SETTINGS if at_once else DEFAULT_SETTINGS
 
     pushes = (Push(2.4, -120.0, 0.1),)
     scenario = Scenario.constant(1.0, pushes=pushes)
     reference = _reference(3.5, policy=make_policy("learned", policy_file=overlaid), scenario=scenario)
-    assert not np.array_equal(reference, _reference(3.5, policy=Alone(plain), scenario=scenario))
+    assert not np.array_equal(reference, _reference(3.5, policy=alone, scenario=scenario))
     config = StackConfig(duration=3.5, schedule=((0.0, 1.0),), controller="learned", policy_file=str(overlaid),
                          pushes=pushes)
     controller_parameters = config.node_parameters()["hzd_controller_node"]
-    assert controller_parameters.get("within_step_blend") == (0.0 if at_once else None)  # None: its own default
+    assert controller_parameters.get("within_step_blend") == (0.0 if at_once else 0.2)  # 0.2: its own default
     _assert_lockstep_is(config, reference)
 
 
@@ -636,17 +657,17 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     rule (policy blend) asks for gaits at once: the two once disagreed by a touchdown 2 ms late."""
     from rabbit_msgs_py.decision_ticks import DecisionTiming
     from rabbit_policy.bringup.stack import StackConfig
-    from rabbit_policy.runtime.policies import LearnedPolicy
+    from rabbit_policy.runtime.policies import checkpoint_policy
 
     overlaid, _ = _overlay_file(tmp_path)
-    per_step = LearnedPolicy(overlaid, decision_period=0)
+    per_step = checkpoint_policy(overlaid, decision_period=0)
     assert per_step.overlay is None and not per_step.needs_body
     assert per_step.name.endswith("(no recovery rule: once per step)")
-    assert LearnedPolicy(overlaid).overlay is not None
+    assert checkpoint_policy(overlaid).overlay is not None
     blending, _ = _overlay_file(tmp_path, at_once=True, policy_blend=True)
-    assert controller_settings(LearnedPolicy(blending, decision_period=0)) == {}
-    assert required_controller_settings("learned", blending, once_per_step=True) == {}
-    for timing, settings in (("step", {}), ("own", CONTROLLER_SETTINGS)):
+    assert controller_settings(checkpoint_policy(blending, decision_period=0)) == DEFAULT_SETTINGS
+    assert required_controller_settings("learned", blending, once_per_step=True) == DEFAULT_SETTINGS
+    for timing, settings in (("step", DEFAULT_SETTINGS), ("own", CONTROLLER_SETTINGS)):
         config = StackConfig(duration=1.0, schedule=((0.0, 1.0),), controller="learned", policy_file=str(blending),
                              decision=DecisionTiming.parse(timing))
         node = config.node_parameters()["hzd_controller_node"]

@@ -119,7 +119,7 @@ def test_sb3_trains_the_shipped_configuration_checkpoints_and_resumes(tmp_path):
     policy = make_policy("learned", policy_file=out / "policy.pt")
     info = policy.checkpoint.info
     assert (info["features"], info["action"], info["integral_gain"]) == ("memory", "residual", 0.2)
-    assert policy.residual is not None and policy.memory is not None and policy.net.body[0].in_features == 25
+    assert policy.residual is not None and policy.memory is not None and policy.forward.inputs == 25
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.scenario import Scenario
 

@@ -17,7 +17,7 @@ import yaml
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.policies import (LearnedPolicy, LibraryPolicy, PeriodicPolicy, PolicyUnavailable,
+from rabbit_policy.runtime.policies import (LibraryPolicy, PeriodicPolicy, PolicyUnavailable, checkpoint_policy,
                                             make_policy, packaged_policy_file, required_controller_settings)
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 from rabbit_policy.spec import SpecError, build, load_controller, load_packaged, load_spec, packaged_spec
@@ -43,7 +43,7 @@ def test_the_shipped_specs_walk_as_the_controllers_assembled_before_them_bit_for
     library = GaitLibrary.load()
     before = {"classic": PeriodicPolicy(LibraryPolicy(library, "interpolate"), 20),
               "recovery": RecoveryPolicy(LibraryPolicy(library, "interpolate"), decision_period=20),
-              "learned": LearnedPolicy(packaged_policy_file())}
+              "learned": checkpoint_policy(packaged_policy_file())}
     for kind in KINDS:
         spec_built = load_packaged(kind)
         assert np.array_equal(_trajectory(spec_built), _trajectory(before[kind])), kind
@@ -73,7 +73,7 @@ def test_no_code_default_moves_a_shipped_controller(monkeypatch):
     assert RecoveryConfig().offsets == (-0.3, 0.1, 0.2, -0.4) and ControllerConfig().within_step_blend == 0.5
     from_defaults = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), RecoveryConfig(), 20)
     assert not np.array_equal(_trajectory(from_defaults), shipped["recovery"])
-    assert not np.array_equal(_trajectory(LearnedPolicy(packaged_policy_file())), shipped["learned"])
+    assert not np.array_equal(_trajectory(checkpoint_policy(packaged_policy_file())), shipped["learned"])
     for kind in ("recovery", "learned"):
         assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), kind
 
@@ -101,6 +101,10 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["gait_library"].update(sha256="1" * 64), "the library changed since the spec was written"),
     (lambda d: d.update(spec_version=2), "spec_version 2 is not supported"),
     (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral: the speed integral's limit"),
+    (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),
+    (lambda d: d.update(overlay=None, blend=None, recovery_rule=None) or d["network"]["residual"].update(
+        base="recovery"), "a residual on base recovery needs the recovery_rule it adds to"),
+    (lambda d: d["controller"].update(within_step_blend=0.2), "blend: the network's gaits are blended by the overlay"),
 ])
 def test_a_spec_that_cannot_be_built_as_written_fails_with_one_line(tmp_path, edit, message):
     path, data = _spec_copy(tmp_path)
@@ -174,6 +178,41 @@ def test_the_runtime_has_no_import_circle():
 
     circles = sorted(m for m in graph if reaches(m, m, {m}))
     assert not circles, circles
+
+
+def test_build_is_the_only_place_a_controller_is_assembled():
+    """No module but rabbit_policy.spec.build constructs a network policy or an overlay: the
+    loops, the node, the envs, training, evaluation and shipping get theirs from ``build``
+    (a training checkpoint through its spec: ``checkpoint_policy``)."""
+    found = []
+    for path in sorted(SRC.rglob("*.py")):
+        if path.relative_to(SRC).as_posix() == "spec/build.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                    and node.func.id in ("NetworkPolicy", "RecoveryOverlay")):
+                found.append(f"{path.relative_to(SRC)}:{node.lineno} {node.func.id}")
+    assert not found, found
+
+
+def test_a_checkpoint_runs_as_its_spec_builds_it_a_residual_on_the_rule_included(tmp_path):
+    """A training checkpoint (``.pt``) is converted to its spec in memory and built; its spec,
+    written to a file, builds the same controller (the residual on the recovery rule, which a
+    spec now names, included)."""
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.spec import dump_spec
+    from rabbit_policy.spec.convert import learned_spec
+    from test_recovery import _zero_residual_on_recovery_file
+
+    for base in ("recovery", "recovery_gated"):
+        pt = tmp_path / f"{base}.pt"
+        _zero_residual_on_recovery_file(pt, base=base, scale_weights=0.3)
+        policy = checkpoint_policy(pt)
+        assert policy.spec.network.residual.base == base and policy.spec.recovery_rule is not None
+        spec = learned_spec(PolicyCheckpoint.load(pt), tmp_path, name=base)
+        dump_spec(spec, tmp_path / f"{base}.yaml")
+        written = load_controller(tmp_path / f"{base}.yaml")
+        assert np.array_equal(_trajectory(written), _trajectory(policy))
 
 
 def test_a_spec_round_trips_through_its_file(tmp_path):

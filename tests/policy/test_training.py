@@ -18,7 +18,7 @@ from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS
 from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
-from rabbit_policy.runtime.policies import LearnedPolicy, LibraryPolicy, make_policy, packaged_policy_file
+from rabbit_policy.runtime.policies import LibraryPolicy, checkpoint_policy, make_policy, packaged_policy_file
 from rabbit_policy.experiment.loop import walk, walk_gait
 from rabbit_policy.experiment.result import Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario
@@ -180,10 +180,10 @@ def test_a_learned_policy_is_shipped_with_a_model_card():
     path = packaged_policy_file()
     assert path.is_file()
     assert (path.parent / "MODEL_CARD.md").is_file()
-    policy = LearnedPolicy(path)  # the training checkpoint the shipped spec was written from
+    policy = checkpoint_policy(path)  # the training checkpoint the shipped spec was written from
     assert "hzd_rl_policy.pt" in make_policy("learned").spec.provenance["from"]
     info = policy.checkpoint.info
-    assert info["algorithm"] in ("es", "ppo") and info["parameters"] == parameter_count(policy.net)
+    assert info["algorithm"] in ("es", "ppo") and info["parameters"] == parameter_count(policy.checkpoint.network())
     card = (path.parent / "MODEL_CARD.md").read_text()
     inputs = INPUTS[info.get("features", "paper")]  # the card states the network the file holds
     assert f"({inputs} → 12 → 12 → 12 → 21, tanh hidden layers, {info['parameters']} parameters; " in card
@@ -231,7 +231,7 @@ def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy
     assert card.startswith("---\n")
     header = card.split("---\n")[1]
     stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["acceptance_1_6"]
-    info = LearnedPolicy(packaged_policy_file()).checkpoint.info
+    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
     assert "---\n" + header + "---\n\n" == "\n".join(card_header(info, list(stored.items()))) + "\n"
     meta = yaml.safe_load(header)
     assert meta["license"] == "apache-2.0" and "reinforcement-learning" in meta["tags"]
@@ -279,10 +279,10 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     trained.info["memory"].pop("feedforward", None)
     trained.info.pop("recovery_overlay", None)
     trained.save(source := tmp_path / "trained.pt")
-    original = LearnedPolicy(source)
-    banded = LearnedPolicy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))
-    gated = LearnedPolicy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
-    fed = LearnedPolicy(with_integral_rules(source, tmp_path / "fed.pt", windup_decay=(4.0, 0.5),
+    original = checkpoint_policy(source)
+    banded = checkpoint_policy(with_integral_rules(source, tmp_path / "banded.pt", band=0.1))
+    gated = checkpoint_policy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
+    fed = checkpoint_policy(with_integral_rules(source, tmp_path / "fed.pt", windup_decay=(4.0, 0.5),
                                             feedforward=(1.0, 1.2)))
     assert banded.memory.config == type(banded.memory.config)(**{**original.memory.config.to_dict(), "band": 0.1})
     assert gated.memory.config.windup_decay == WindupDecay(4.0, 0.5) and gated.memory.config.band is None
@@ -302,7 +302,7 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     assert flags.endswith(" --integral-feedforward") and "windup decay and feed-forward" in note
     assert "difference of its steady values for the old and the new v_d (a feed-forward table of 2 speeds" in " ".join(
         network_text(fed.checkpoint.info))
-    started = LearnedPolicy(with_integral_rules(source, tmp_path / "start.pt", feedforward=(1.0, 1.2),
+    started = checkpoint_policy(with_integral_rules(source, tmp_path / "start.pt", feedforward=(1.0, 1.2),
                                                 feedforward_start=True))
     assert started.memory.config.feedforward.start and not fed.memory.config.feedforward.start
     assert rules_set_after_training(started.checkpoint.info)[0] == " --integral-feedforward --integral-feedforward-start"
@@ -459,7 +459,7 @@ def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(t
     card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = {**NEWER_FIELDS, **LearnedPolicy(packaged_policy_file()).checkpoint.info["config"]}  # what trained it
+    trained = {**NEWER_FIELDS, **checkpoint_policy(packaged_policy_file()).checkpoint.info["config"]}  # what trained it
     assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])
@@ -505,6 +505,6 @@ def test_a_memory_run_ships_a_policy_that_keeps_its_memory_in_every_loop(tmp_pat
     assert result.returncode == 0, result.stderr
     policy = make_policy("learned", policy_file=out / "policy.pt")
     assert policy.checkpoint.info["features"] == "memory" and policy.memory is not None
-    assert policy.net.body[0].in_features == 25
+    assert policy.forward.inputs == 25
     walked = walk(policy, Scenario.constant(1.0), 3.0)
     assert not walked.failed and policy.memory.integral != 0.0

@@ -367,10 +367,10 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
     checkpoint.save(out)
     if feedforward is not None:
         from rabbit_policy.evaluation.steady_integral import steady_integrals
-        from rabbit_policy.runtime.policies import LearnedPolicy
+        from rabbit_policy.runtime.policies import checkpoint_policy
 
         try:
-            table = steady_integrals(LearnedPolicy(out), feedforward)
+            table = steady_integrals(checkpoint_policy(out), feedforward)
             memory = replace(memory, feedforward=replace(table, start=feedforward_start))
         except ValueError as exc:
             raise ValueError(f"--integral-feedforward: {exc}") from None
@@ -385,7 +385,8 @@ def warm_start_policy(checkpoint):
     import torch
 
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.runtime.policies import policy_of_checkpoint
     from rabbit_policy.learning.warm_start import WARM_STARTS, initial_network
 
     name = checkpoint.info.get("warm_start")
@@ -394,7 +395,8 @@ def warm_start_policy(checkpoint):
     torch.set_num_threads(1)  # as scripts/train.py
     net, _ = initial_network(checkpoint.low, checkpoint.high, GaitLibrary.load(),
                              int(checkpoint.info.get("seed", 0)), name)
-    return NetworkPolicy(net, f"warm start ({name})")
+    return policy_of_checkpoint(PolicyCheckpoint(net.state_dict(), checkpoint.low, checkpoint.high, {}),
+                                f"warm start ({name})", decision_period=0)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,7 +16,6 @@ import numpy as np
 
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.memory import SpeedMemory
 from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.speed_integral import IntegralFeedforward
 
@@ -63,7 +62,25 @@ def steady_integrals(policy: NetworkPolicy, speeds: tuple[float, ...], duration:
     constant command it stirs only on the slow oscillation's near-stall steps)."""
     if policy.memory is None:
         raise ValueError(f"{policy.name} keeps no speed integral (features 'paper')")
-    without = NetworkPolicy(policy.forward, policy.name, getattr(policy, "decision_period", 0),
-                            SpeedMemory(replace(policy.memory.config, feedforward=None)), policy.residual, policy.base)
+    without = network_alone(policy)
     return IntegralFeedforward(tuple(speeds), tuple(round(steady_integral(without, v, duration, settle), 4)
                                                     for v in speeds))
+
+
+def network_alone(policy: NetworkPolicy) -> NetworkPolicy:
+    """``policy``'s spec (:func:`rabbit_policy.spec.build` records it) built again with its
+    network's weights, without a feed-forward and without the overlay (the controller then
+    as the spec's kind runs without one: the classic spec's timing), a residual on the
+    recovery rule kept."""
+    from rabbit_policy.spec import build, load_spec, packaged_spec
+
+    spec = policy.spec
+    integral = replace(spec.speed_integral, feedforward=None)
+    if spec.overlay is not None:
+        classic = load_spec(packaged_spec("classic"))
+        on_rule = spec.network.residual is not None and spec.network.residual.base != "classic"
+        spec = replace(spec, overlay=None, blend=None, recovery_rule=spec.recovery_rule if on_rule else None,
+                       controller=spec.controller if on_rule else classic.controller)
+    forward = policy.forward
+    return build(replace(spec, speed_integral=integral), policy.spec_base,
+                 weights=(list(forward.weights), list(forward.biases)), source=policy.name)

@@ -145,7 +145,9 @@ from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import FEATURES, MemoryConfig, SpeedMemory, check_features
 from rabbit_policy.runtime.speed_integral import WindupDecay, check_gain
-from rabbit_policy.runtime.policies import GaitCommand, controller_settings, reset_policy, residual_base_policy
+from rabbit_policy.runtime.policies import DEFAULT_DECISION_WINDOW, GaitCommand, controller_settings, reset_policy
+from rabbit_policy.runtime.recovery import RecoveryConfig
+from rabbit_policy.spec.build import residual_base as rule_base
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
@@ -466,7 +468,8 @@ class RabbitHZDEnv(gym.Env):
         self.residual = (ResidualAction(self.library, residual_sum_bounds(self.library, residual_base, margin),
                                         integral_gain=integral_gain) if action == "residual" else None)
         self.residual_base = residual_base
-        self.base = residual_base_policy(residual_base, self.library, decision_period)  # None: the library's gait
+        self.base = (rule_base(residual_base, self.library, RecoveryConfig(), decision_period,  # the rule's
+                                   DEFAULT_DECISION_WINDOW) if residual_base != "classic" else None)  # as trained
         self._controller = ControllerConfig(**controller_settings(self.base))
         self.bounds = self.residual.bounds if self.residual is not None else direct
         self.action_space = gym.spaces.Box(-1.0, 1.0, (N_FREE + 1,), dtype=np.float32)

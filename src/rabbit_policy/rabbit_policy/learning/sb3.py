@@ -9,7 +9,7 @@ has (``log.csv``, ``eval.csv``, ``tb/`` under the same tags, ``policy.pt``, ``be
   configuration ``train.py`` trains: the paper's three inputs or the memory and body ones,
   the gait or a residual (on the library or on the recovery controller), so the shipped
   configuration (``config/train/sb3_shipped_ppo.yaml``) can be cross-checked; the checkpoint
-  carries what ``LearnedPolicy`` needs to run it (features, memory, residual, base).
+  carries what ``checkpoint_policy`` needs to run it (features, memory, residual, base).
 * :func:`export_actor` copies the actor into an :class:`HZDPolicyNet` (``output`` "clip" or
   "tanh"), a :class:`PolicyCheckpoint` that ``policy_node`` and ``walk.py --policy-file`` run
   without SB3 (tested: the same actions as SB3's ``predict(deterministic=True)``).
@@ -78,7 +78,7 @@ class SB3Config(EpisodeConfig):
         return {**super().env_kwargs(), "max_episode_steps": self.max_steps}
 
     def policy_info(self) -> dict:
-        """What a checkpoint of this run says so that ``LearnedPolicy`` rebuilds its inputs and
+        """What a checkpoint of this run says so that ``checkpoint_policy`` rebuilds its inputs and
         outputs (as ``train.py`` writes them)."""
         from rabbit_policy.runtime.actions import RESIDUAL_SCALE
         from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -191,7 +191,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     from rabbit_policy.parallel import BackendConfig, make_backend
     from rabbit_policy.runtime.actions import policy_bounds
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.policies import LearnedPolicy
+    from rabbit_policy.runtime.policies import checkpoint_policy
 
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
@@ -225,7 +225,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     def evaluate() -> None:
         checkpoint = export_actor(model, config.algo, bounds.low, bounds.high, info())
         checkpoint.save(out / "policy.pt")
-        result = acceptance(LearnedPolicy(out / "policy.pt"), map_fn=backend.map)
+        result = acceptance(checkpoint_policy(out / "policy.pt"), map_fn=backend.map)
         row = evaluation_row(state["iteration"], time.perf_counter() - start, int(model.num_timesteps), result)
         append_csv(out / "eval.csv", row)
         scalars.evaluation(row)

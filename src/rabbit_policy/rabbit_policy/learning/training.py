@@ -133,9 +133,9 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.parallel import BackendUnavailable, make_backend
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ResidualAction, policy_bounds, residual_sum_bounds
-    from rabbit_policy.runtime.memory import INPUTS, SpeedMemory
+    from rabbit_policy.runtime.memory import INPUTS
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
-    from rabbit_policy.runtime.policies import NetworkPolicy, residual_base_policy
+    from rabbit_policy.runtime.policies import policy_of_checkpoint
     from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
 
     if getattr(args.trainer, "spec", "") and args.algo != "es":
@@ -237,15 +237,15 @@ def train(args: TrainingConfig) -> int:
         nonlocal best, first_pass
         if spec_file:  # the deployed controller with the weights now
             from rabbit_policy.runtime.network import NetworkForward
-            from rabbit_policy.spec import load_controller
+            from rabbit_policy.spec import build, load_spec
 
-            policy = load_controller(spec_file)
-            policy.forward = NetworkForward.of(net)
+            forward = NetworkForward.of(net)
+            policy = build(load_spec(spec_file), Path(spec_file).resolve().parent,
+                           weights=(list(forward.weights), list(forward.biases)),
+                           source=f"{Path(spec_file).name}@{trainer.iteration}")
         else:
-            base = residual_base_policy(args.trainer.residual_base, library, args.trainer.decision_period)
-            policy = NetworkPolicy(net, decision_period=args.trainer.decision_period,
-                                   memory=SpeedMemory(memory) if memory is not None else None, residual=residual,
-                                   base=base)
+            policy = policy_of_checkpoint(PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()),
+                                          f"{out.name}@{trainer.iteration}")
         result = acceptance(policy, map_fn=backend.map, recovery=args.validate_recovery)
         row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
         append_csv(out / "eval.csv", row)

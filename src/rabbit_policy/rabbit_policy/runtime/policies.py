@@ -8,8 +8,9 @@ everywhere (CLI, parameters, results):
   given Westervelt's event-based speed integral (``speed_integral`` > 0, off by default:
   the paper's baseline has none), which commands the library the gait for v_d plus a
   bounded integral of the speed error (:mod:`.speed_integral`).
-* ``learned``: HZD-RL, the network (:mod:`.network`) from a checkpoint file (default: the
-  packaged ``rabbit_policy/trained/hzd_rl_policy.pt``).
+* ``learned``: HZD-RL, the network (:mod:`.forward`) and the rules its spec names (default:
+  the packaged ``rabbit_policy/controllers/learned.yaml``; a training checkpoint ``.pt`` is
+  built as its spec, :func:`checkpoint_policy`).
 * ``recovery``: the model-based push-recovery baseline (:mod:`.recovery`): classic HZD plus
   a hand-designed rule that bends the stance knee and swings the swing leg forward, at once,
   when the hip falls behind its gait. It reads the body state and runs the controller with
@@ -35,16 +36,15 @@ from rabbit_policy.runtime.classic import (CLASSIC_DECISION_PERIOD, DEFAULT_DECI
 from rabbit_policy.runtime.gait_command import (GaitCommand, Policy, PolicyUnavailable, controller_settings,
                                                 decision_period, first_command, reset_policy)
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, OverlayConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, check_gain
 from rabbit_policy.runtime.speed_window import Observation
 
 __all__ = ["CLASSIC_DECISION_PERIOD", "CONTROLLERS", "CONTROLLER_ALIASES", "CONTROLLER_CHOICES",
-           "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LearnedPolicy", "LibraryPolicy",
+           "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LibraryPolicy",
            "NetworkPolicy", "PeriodicPolicy", "Policy", "PolicyUnavailable", "RateLimitedPolicy", "controller_name",
-           "controller_settings", "copy_policy", "decision_period", "first_command", "make_policy",
-           "packaged_policy_file", "read_only_memo", "required_controller_settings", "reset_policy",
-           "residual_base_policy"]
+           "checkpoint_policy", "controller_settings", "copy_policy", "decision_period", "first_command",
+           "make_policy", "policy_of_checkpoint",
+           "packaged_policy_file", "read_only_memo", "required_controller_settings", "reset_policy"]
 
 CONTROLLERS = ("classic", "learned", "recovery")
 CONTROLLER_ALIASES = {"hzd": "classic", "library": "classic", "rl": "learned"}
@@ -90,22 +90,15 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
                                  once_per_step: bool = False) -> dict[str, float]:
     """The controller settings the controller named ``kind`` needs (the stack's
     configuration gives them to ``hzd_controller_node``): its spec's (:mod:`rabbit_policy.spec`;
-    every gait-timing field), or a training checkpoint's (``policy_file`` ``.pt``: the
-    recovery controller's for a residual on it or an overlay applied at once, read from its
-    ``info``; {} if there is none to read). ``once_per_step``: the policy decides once per
+    every gait-timing field), or a training checkpoint's (``policy_file`` ``.pt``, as its spec
+    builds it; {} if there is none to read). ``once_per_step``: the policy decides once per
     step, so a learned policy runs without its rule and asks for the classic settings."""
     kind = controller_name(kind)
     if kind == "learned" and policy_file and not is_spec_file(policy_file):
-        path = Path(policy_file)
-        if path.is_file():
-            from rabbit_policy.runtime.network import PolicyCheckpoint
-
-            info = PolicyCheckpoint.load(path).info
-            if info.get("residual_base", "classic") != "classic":
-                return dict(CONTROLLER_SETTINGS)
-            if info.get("recovery_overlay") is not None and not once_per_step:
-                return OverlayConfig.from_dict(info["recovery_overlay"]).controller_settings
-        return {}
+        try:
+            return controller_settings(checkpoint_policy(policy_file, 0 if once_per_step else None))
+        except Exception:  # noqa: BLE001 - the node says why when it builds the controller
+            return {}
     from dataclasses import asdict
 
     from rabbit_policy.spec import SpecError
@@ -117,21 +110,6 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
     except (SpecError, ValueError):
         return {}  # the node says why when it builds the controller
     return asdict(spec.controller)
-
-
-def residual_base_policy(base: str, library: GaitLibrary, decision_period: int) -> Policy | None:
-    """What a residual adds to (:data:`~.actions.RESIDUAL_BASES`): None for ``classic`` (the
-    library's gait, :class:`~.actions.ResidualAction` itself), the recovery controller on the
-    interpolated library deciding every ``decision_period`` ticks for ``recovery``."""
-    from rabbit_policy.runtime.actions import RESIDUAL_BASES
-
-    if base not in RESIDUAL_BASES:
-        raise ValueError(f"residual base must be one of {RESIDUAL_BASES}, got {base!r}")
-    if base == "classic":
-        return None
-    recovery = _recovery(LibraryPolicy(library, "interpolate"), decision_period)
-    recovery.gates_residual = base == "recovery_gated"
-    return recovery
 
 
 def packaged_policy_file() -> Path:
@@ -150,7 +128,7 @@ class NetworkPolicy:
     start of a walk; ``ClosedLoop`` and ``policy_node`` call it); with the body state it
     reads ``observation.body`` (``needs_body``). ``residual``: the network's output is a
     residual on the library (:class:`~.actions.ResidualAction`), not the gait itself;
-    ``base``: on that policy's decision instead (:func:`residual_base_policy`: the recovery
+    ``base``: on that policy's decision instead (:func:`rabbit_policy.spec.build.residual_base`: the recovery
     controller, whose body state and controller settings it then needs too). ``overlay``: the
     recovery rule on top of the network's gait (:class:`~.recovery.RecoveryOverlay`; it needs
     the body state, and the controller settings its configuration names)."""
@@ -254,46 +232,38 @@ class NetworkPolicy:
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
-class LearnedPolicy(NetworkPolicy):
-    """The HZD-RL network loaded from a checkpoint file (``info`` says how it was trained)."""
+def checkpoint_policy(path: str | Path, decision_period: int | None = None) -> NetworkPolicy:
+    """The HZD-RL network of a training checkpoint (``.pt``, read with torch) as its spec
+    builds it (:func:`rabbit_policy.spec.convert.checkpoint_spec` from the checkpoint's
+    ``info``, then :func:`rabbit_policy.spec.build`; nothing written). ``decision_period``:
+    None = as trained, 0 = once per step (an overlay then drops: the rule acts within the
+    step; the name says so), N = every N ticks. The policy's ``checkpoint`` is the file read."""
+    from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
 
-    def __init__(self, path: str | Path, decision_period: int | None = None) -> None:
-        """``decision_period``: None = as trained (the checkpoint's), 0 = once per step,
-        N = every N ticks. A checkpoint with a recovery overlay runs without it once per step
-        (the rule acts within the step), and its name says so."""
-        from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
+    checkpoint = PolicyCheckpoint.load(path)
+    if checkpoint.info.get("action") == "spec":
+        raise ValueError(f"a run of train.py --spec: its policy is {Path(path).with_suffix('.yaml').name}, the "
+                         "spec with these weights (this file records the run)")
+    return policy_of_checkpoint(checkpoint, Path(path).name, decision_period)
 
-        self.checkpoint = PolicyCheckpoint.load(path)
-        info = self.checkpoint.info
-        if info.get("action") == "spec":
-            raise ValueError(f"a run of train.py --spec: its policy is {Path(path).with_suffix('.yaml').name}, the "
-                             "spec with these weights (this file records the run)")
-        if decision_period is None:
-            decision_period = int(info.get("config", {}).get("decision_period", 0))
-        name = f"learned/{Path(path).name}" + (f"@{decision_period}ticks" if decision_period else "")
-        memory = None
-        if info.get("features", "paper") in ("memory", "body"):
-            from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
 
-            memory = SpeedMemory(MemoryConfig(**info["memory"]))
-        residual = None
-        if info.get("action", "direct") == "residual":
-            from rabbit_policy.runtime.actions import ResidualAction, residual_sum_bounds
+def policy_of_checkpoint(checkpoint, name: str, decision_period: int | None = None) -> NetworkPolicy:
+    """:func:`checkpoint_policy` of a ``PolicyCheckpoint`` in memory (a run being trained):
+    ``name`` names it."""
+    from rabbit_policy.spec.build import build
+    from rabbit_policy.spec.convert import checkpoint_spec, network_arrays
+    from rabbit_policy.spec.files import PACKAGED, weights_spec_of
+    from rabbit_policy.spec.schema import WeightsSpec
 
-            library = GaitLibrary.load()
-            residual = ResidualAction(library, residual_sum_bounds(library, info.get("residual_base", "classic")),
-                                      tuple(info["residual_scale"]), float(info.get("integral_gain", 0.0)))
-        base = None
-        if info.get("residual_base", "classic") != "classic":
-            base = residual_base_policy(info["residual_base"], residual.library, decision_period)
-        overlay = None
-        if info.get("recovery_overlay") is not None:
-            config = OverlayConfig.from_dict(info["recovery_overlay"])
-            if decision_period:
-                overlay = RecoveryOverlay(config, decision_period)
-            else:  # the rule acts within the step: deciding once per step, the network runs alone
-                name += " (no recovery rule: once per step)"
-        super().__init__(self.checkpoint.network(), name, decision_period, memory, residual, base, overlay)
+    info = checkpoint.info
+    weights, biases, buffers = network_arrays(checkpoint)
+    spec = checkpoint_spec(info, (weights, biases), buffers, WeightsSpec(*weights_spec_of(weights, biases)),
+                           Path(name).stem, PACKAGED, Path("."), decision_period, {"checkpoint": name})
+    dropped = info.get("recovery_overlay") is not None and spec.overlay is None
+    policy = build(spec, weights=(weights, biases),
+                   source=name + (" (no recovery rule: once per step)" if dropped else ""))
+    policy.checkpoint = checkpoint
+    return policy
 
 
 def controller_name(name: str) -> str:
@@ -313,7 +283,8 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     message a user can act on. Every controller is its spec (:mod:`rabbit_policy.spec`): the
     packaged one of ``kind``, or for ``learned`` the spec ``policy_file`` (``.yaml``), with
     the options below written into it, then built by :func:`rabbit_policy.spec.build`. A
-    training checkpoint (``policy_file`` ``.pt``) is read with torch (:class:`LearnedPolicy`).
+    training checkpoint (``policy_file`` ``.pt``) is read with torch and built as its spec
+    (:func:`checkpoint_policy`).
     ``max_command_step`` > 0 wraps it in a :class:`RateLimitedPolicy` (m/s per step; 0: no
     limit). ``decision``: the spec's own timing (classic every 20 ticks; learned as
     trained), once per step, or every N ticks. ``speed_integral`` > 0 (1/s, classic only):
@@ -335,7 +306,7 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     if mode not in LIBRARY_MODES:
         raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
     if kind == "learned" and policy_file and not is_spec_file(policy_file):
-        policy = _learned(policy_file, decision.ticks)  # a training checkpoint: it carries its decision period
+        policy = _checkpoint(policy_file, decision.ticks)  # a training checkpoint: it carries its decision period
     else:
         from rabbit_policy.spec import SpecError, build
         from rabbit_policy.spec.variants import controller_spec
@@ -356,14 +327,7 @@ def is_spec_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() in (".yaml", ".yml", ".json")
 
 
-def _recovery(classic: Policy, period: int) -> Policy:
-    """The recovery controller on ``classic`` (:mod:`.recovery`); it decides every ``period`` > 0 ticks."""
-    if period < 1:
-        raise ValueError("the recovery controller acts within the step: its decision period must be >= 1 tick")
-    return RecoveryPolicy(classic, decision_period=period)
-
-
-def _learned(policy_file: str | Path | None, decision_period: int | None) -> "LearnedPolicy":
+def _checkpoint(policy_file: str | Path | None, decision_period: int | None) -> NetworkPolicy:
     """The learned policy from ``policy_file`` (None: the packaged one)."""
     path = Path(policy_file) if policy_file else packaged_policy_file()
     if not path.is_file():
@@ -372,7 +336,7 @@ def _learned(policy_file: str | Path | None, decision_period: int | None) -> "Le
         raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=classic "
                                 "or give policy_file")
     try:
-        return LearnedPolicy(path, decision_period)
+        return checkpoint_policy(path, decision_period)
     except Exception as exc:  # noqa: BLE001 - any file that is not a checkpoint: torch raises many kinds
         raise PolicyUnavailable(f"cannot load policy file {path}: not a policy checkpoint "
                                 f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None

@@ -59,9 +59,8 @@ import numpy as np
 from rabbit_hzd_controller.alpha import N_FREE, N_OUTPUTS, expand_alpha, reduce_alpha
 from rabbit_policy.runtime.alpha_blend import AlphaBlend
 from rabbit_policy.runtime.body import touched_down
-from rabbit_policy.runtime.classic import LibraryPolicy, RateLimitedPolicy
+from rabbit_policy.runtime.classic import RateLimitedPolicy
 from rabbit_policy.runtime.gait_command import GaitCommand
-from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_window import Observation
 
 CONTROLLER_SETTINGS = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
@@ -338,22 +337,16 @@ class RecoveryOverlay:
     policy's own. What each choice measured: docs/learning.md, "2026-11-27 (eighth)" and
     "2026-11-28"; the shipped controller's figures: docs/results.md."""
 
-    def __init__(self, config: OverlayConfig = OverlayConfig(), decision_period: int = 20,
-                 rule: "RecoveryPolicy | None" = None, blend: AlphaBlend | None = None) -> None:
-        """``rule``: the recovery controller whose weight is used (None: its constants' defaults
-        on the packaged library); ``blend``: ``policy_blend``'s (None: the controller's default
-        blend). A controller spec gives both (:func:`rabbit_policy.spec.build`)."""
+    def __init__(self, config: OverlayConfig, decision_period: int, rule: "RecoveryPolicy",
+                 blend: AlphaBlend | None) -> None:
+        """``rule``: the recovery controller whose weight is used; ``blend``: ``policy_blend``'s
+        (None without it). A controller spec gives every one (:func:`rabbit_policy.spec.build`)."""
         if decision_period < 1:
             raise ValueError("the recovery overlay acts within the step: its policy must decide every N >= 1 ticks")
-        from rabbit_hzd_controller.controller import ControllerConfig
-
+        if config.policy_blend and blend is None:
+            raise ValueError("OverlayConfig.policy_blend needs the blend it blends the policy's gaits with")
         self.config = config
-        if rule is None:
-            rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=decision_period)
         self.rule = rule
-        if blend is None:
-            defaults = ControllerConfig()
-            blend = AlphaBlend(defaults.within_step_blend, defaults.within_step_until, decision_period * defaults.tick)
         self._blend = blend  # policy_blend: the policy's gaits blended in
         self._held = None
         self._cap: float | None = None  # rise_until: the weight w may not rise above until the touchdown
@@ -362,13 +355,15 @@ class RecoveryOverlay:
     def reset(self) -> None:
         self.rule.reset()
         self._held = None
-        self._blend.reset()
+        if self._blend is not None:
+            self._blend.reset()
         self._cap = None
         self.last_weight = 0.0
 
     def start(self, command) -> None:
         """The gait the walk starts on (``policy_blend`` blends from it)."""
-        self._blend.start(command.alpha, command.kd)
+        if self._blend is not None:
+            self._blend.start(command.alpha, command.kd)
 
     def blended(self, observation: Observation, command):
         """``policy_blend``: the policy's gait for the next decision period, as the controller's

@@ -63,7 +63,7 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
     except ValueError as exc:
         raise SpecError(f"{spec.kind} spec {source or spec.name}: {exc}") from None
     policy.controller_settings = asdict(spec.controller)
-    policy.spec = spec
+    policy.spec, policy.spec_base = spec, base
     return policy
 
 
@@ -87,6 +87,15 @@ def rule_config(spec: ControllerSpec) -> RecoveryConfig:
         return RecoveryConfig(**asdict(spec.recovery_rule))
     except ValueError as exc:
         raise SpecError(f"recovery_rule: {exc}") from None
+
+
+def residual_base(base: str, library: GaitLibrary, rule: RecoveryConfig, period: int, window: int) -> RecoveryPolicy:
+    """What a residual on ``base`` (``recovery``, ``recovery_gated``) adds to: the recovery
+    rule ``rule`` on the interpolated ``library``, deciding every ``period`` ticks; with
+    ``recovery_gated`` the residual is scaled by the rule's weight."""
+    policy = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule, period, window)
+    policy.gates_residual = base == "recovery_gated"
+    return policy
 
 
 def network_forward(spec: NetworkSpec, base: Path, weights: tuple[list, list] | None = None) -> NetworkForward:
@@ -130,23 +139,31 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
         memory = SpeedMemory(MemoryConfig(integral.dt, integral.limit, net.features == "body", integral.gain,
                                           integral.speed_range, integral.band, integral.clip, integral.windup_decay,
                                           integral.feedforward))
-    residual = None
+    residual = on_rule = None
     if net.residual is not None:
-        if net.residual.base != "classic":
-            raise SpecError(f"network.residual.base {net.residual.base!r}: a spec's residual adds to classic")
-        bounds = ActionBounds.from_library(library, net.residual.bounds_margin, net.residual.kd_bounds)
+        margin = net.residual.bounds_margin if net.residual.bounds_margin is not None else float("inf")
+        bounds = ActionBounds.from_library(library, margin, net.residual.kd_bounds)
         residual = ResidualAction(library, bounds, tuple(net.residual.scale),
                                   integral.gain if integral is not None else 0.0)
+        if net.residual.base != "classic":  # on the recovery rule's decision (the spec's rule)
+            if period < 1:
+                raise SpecError(f"a residual on base {net.residual.base} decides within the step: "
+                                "decision.period_ticks must be >= 1")
+            on_rule = residual_base(net.residual.base, library, rule_config(spec), period, window)
     overlay = None
     if spec.overlay is not None:
         at_once = spec.controller.within_step_blend == 0.0 and spec.controller.within_step_until == 1.0
-        config = OverlayConfig(spec.overlay.fast_gate, spec.overlay.hold, at_once=at_once, policy_blend=at_once,
-                               rise_until=spec.overlay.rise_until)
+        if spec.blend is not None and not at_once:
+            raise SpecError("blend: the network's gaits are blended by the overlay only when the controller applies "
+                            "gaits at once (controller.within_step_blend 0, within_step_until 1)")
+        config = OverlayConfig(spec.overlay.fast_gate, spec.overlay.hold, at_once=at_once,
+                               policy_blend=spec.blend is not None, rise_until=spec.overlay.rise_until)
         rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule_config(spec), period, window)
-        blend = AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
+        blend = (AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
+                 if spec.blend is not None else None)
         overlay = RecoveryOverlay(config, period, rule, blend)
     name = f"learned/{source or spec.name}" + (f"@{period}ticks" if period else "")
-    policy = NetworkPolicy(forward, name, period, memory, residual, None, overlay)
+    policy = NetworkPolicy(forward, name, period, memory, residual, on_rule, overlay)
     if period:
         policy.decision_window = window
     return policy

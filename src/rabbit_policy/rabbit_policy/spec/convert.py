@@ -18,7 +18,7 @@ from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
                                        FeedforwardSpec, IntegralSpec, LibrarySpec, NetworkSpec, OverlaySpec,
-                                       ResidualSpec, RuleSpec, SpecError, WeightsSpec, WindupDecaySpec)
+                                       ResidualSpec, RuleSpec, WeightsSpec, WindupDecaySpec)
 
 RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
@@ -81,24 +81,34 @@ def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict
 def learned_spec(checkpoint, out_dir: Path, name: str = "learned", source: str = PACKAGED,
                  decision_period: int | None = None, provenance: dict | None = None) -> ControllerSpec:
     """The spec of a learned policy from its checkpoint (``PolicyCheckpoint``), its weights
-    written beside it in ``out_dir``: the network and its memory as the checkpoint records
-    them, and as shipped since 2026-11-28 the recovery rule's constants, the policy blend's
-    (the controller's default blend) and the controller's at-once settings, read from the
-    code now and written down here. Only what the runtime's spec can say is converted: a
-    residual on classic, an overlay that blends the policy's gaits (``policy_blend``)."""
-    info = checkpoint.info
+    written beside it in ``out_dir`` (:func:`checkpoint_spec`)."""
     weights, biases, buffers = network_arrays(checkpoint)
     file, sha = save_weights(weights, biases, out_dir, name)
+    return checkpoint_spec(checkpoint.info, (weights, biases), buffers, WeightsSpec(file, sha), name, source, out_dir,
+                           decision_period, provenance)
+
+
+def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weights: WeightsSpec,
+                    name: str = "learned", source: str = PACKAGED, base: Path = Path("."),
+                    decision_period: int | None = None, provenance: dict | None = None) -> ControllerSpec:
+    """The spec of a network trained as a checkpoint's ``info`` records it (what
+    ``train.py`` and ``ship_policy.py`` write): its ``layers`` (weight matrices, bias
+    vectors) and ``buffers`` (offset, scale, low, high) with the memory, the residual and its
+    base as recorded. The constants a checkpoint does not record are today's code defaults,
+    written down here: the recovery rule's (``RecoveryConfig``) for a residual on it or an
+    overlay, the overlay's policy blend (the controller's default blend) and the controller's
+    at-once settings. ``decision_period``: None as trained, 0 once per step (an overlay then
+    drops: the rule acts within the step), N ticks. Nothing is written."""
+    weights_list, _ = layers
     residual = None
+    residual_base = info.get("residual_base", "classic")
     if info.get("action", "direct") == "residual":
-        if info.get("residual_base", "classic") != "classic":
-            raise SpecError(f"residual base {info['residual_base']!r}: a spec's residual adds to classic")
-        residual = ResidualSpec("classic", tuple(float(v) for v in info["residual_scale"]), RESIDUAL_BOUNDS_MARGIN,
-                                RESIDUAL_KD_BOUNDS)
-    network = NetworkSpec(info.get("features", "paper"), int(weights[0].shape[1]),
-                          tuple(int(w.shape[0]) for w in weights[:-1]), int(weights[-1].shape[0]),
+        residual = ResidualSpec(residual_base, tuple(float(v) for v in info["residual_scale"]),
+                                RESIDUAL_BOUNDS_MARGIN if residual_base == "classic" else None, RESIDUAL_KD_BOUNDS)
+    network = NetworkSpec(info.get("features", "paper"), int(weights_list[0].shape[1]),
+                          tuple(int(w.shape[0]) for w in weights_list[:-1]), int(weights_list[-1].shape[0]),
                           info.get("output", "sigmoid"), _floats(buffers["offset"]), _floats(buffers["scale"]),
-                          _floats(buffers["low"]), _floats(buffers["high"]), residual, WeightsSpec(file, sha))
+                          _floats(buffers["low"]), _floats(buffers["high"]), residual, weights)
     integral = None
     memory = info.get("memory")
     if memory is not None:
@@ -113,16 +123,17 @@ def learned_spec(checkpoint, out_dir: Path, name: str = "learned", source: str =
         decision_period = int(info.get("config", {}).get("decision_period", 0))
     overlay = blend = rule = None
     settings: dict = {}
+    if residual is not None and residual_base != "classic":
+        rule, settings = _rule(RecoveryConfig()), CONTROLLER_SETTINGS
     if info.get("recovery_overlay") is not None and decision_period:
         values = info["recovery_overlay"]
-        if not (values.get("at_once") and values.get("policy_blend")):
-            raise SpecError("an overlay that does not blend the policy's gaits itself (policy_blend) has no spec form")
-        overlay = OverlaySpec(float(values["fast_gate"]), float(values["hold"]), float(values["rise_until"]))
-        defaults = ControllerConfig()
-        blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)
+        overlay = OverlaySpec(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
+        if values.get("policy_blend"):
+            defaults = ControllerConfig()
+            blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)
         rule = _rule(RecoveryConfig())
-        settings = CONTROLLER_SETTINGS
-    return ControllerSpec(SPEC_VERSION, name, "learned", _library(source, out_dir),
+        settings = CONTROLLER_SETTINGS if values.get("at_once") else {}
+    return ControllerSpec(SPEC_VERSION, name, "learned", _library(source, base),
                           DecisionSpec(decision_period, DEFAULT_DECISION_WINDOW), integral, network, blend, rule,
                           overlay, _settings(settings), provenance or {})
 

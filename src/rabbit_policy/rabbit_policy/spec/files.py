@@ -67,11 +67,9 @@ def weights_name(sha256: str, stem: str = "weights") -> str:
     return f"{stem}-{sha256[:12]}.npz"
 
 
-def save_weights(weights: list[np.ndarray], biases: list[np.ndarray], directory: Path,
-                 stem: str = "weights") -> tuple[str, str]:
-    """Write the layers (``layers.K.weight`` / ``layers.K.bias``, float32) as an ``.npz`` in
-    ``directory``, named by its hash; returns (file name, sha256). The bytes depend on the
-    arrays only (no time stamps), so the same weights give the same file and hash."""
+def weights_bytes(weights: list[np.ndarray], biases: list[np.ndarray]) -> bytes:
+    """The layers (``layers.K.weight`` / ``layers.K.bias``, float32) as ``.npz`` bytes that
+    depend on the arrays only (no time stamps), so the same weights give the same hash."""
     import io
     import zipfile
 
@@ -83,7 +81,20 @@ def save_weights(weights: list[np.ndarray], biases: list[np.ndarray], directory:
                 np.lib.format.write_array(member, np.ascontiguousarray(array, dtype=np.float32), allow_pickle=False)
                 info = zipfile.ZipInfo(f"layers.{k}.{part}.npy", date_time=(1980, 1, 1, 0, 0, 0))
                 archive.writestr(info, member.getvalue())
-    data = buffer.getvalue()
+    return buffer.getvalue()
+
+
+def weights_spec_of(weights: list[np.ndarray], biases: list[np.ndarray], stem: str = "weights") -> tuple[str, str]:
+    """(file name, sha256) the layers would be saved under (:func:`save_weights`), nothing written."""
+    sha = hashlib.sha256(weights_bytes(weights, biases)).hexdigest()
+    return weights_name(sha, stem), sha
+
+
+def save_weights(weights: list[np.ndarray], biases: list[np.ndarray], directory: Path,
+                 stem: str = "weights") -> tuple[str, str]:
+    """Write the layers as an ``.npz`` (:func:`weights_bytes`) in ``directory``, named by its
+    hash; returns (file name, sha256)."""
+    data = weights_bytes(weights, biases)
     sha = hashlib.sha256(data).hexdigest()
     name = weights_name(sha, stem)
     (Path(directory) / name).write_bytes(data)

@@ -34,6 +34,8 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from rabbit_policy.runtime.actions import RESIDUAL_BASES
+
 SPEC_VERSION = 1
 KINDS = ("classic", "recovery", "learned")
 
@@ -101,15 +103,22 @@ class IntegralSpec:
 
 @dataclass(frozen=True)
 class ResidualSpec:
-    """The network's output is a residual on the library's gait for v_d + gain * I:
-    ``base`` (``classic``), ``scale`` (21 numbers: the residual's bound per output, rad and
-    N m s/rad), ``bounds_margin`` (rad: how far the sum's coefficients may leave the
-    library's range), ``kd_bounds`` (N m s/rad: the sum's Kd range)."""
+    """The network's output is a residual on a base gait: ``base`` (``classic``: the library's
+    gait for v_d + gain * I; ``recovery``: the recovery rule's decision on the library, the
+    spec's ``recovery_rule``; ``recovery_gated``: that, the residual scaled by the rule's
+    weight), ``scale`` (21 numbers: the residual's bound per output, rad and N m s/rad),
+    ``bounds_margin`` (rad: how far the sum's coefficients may leave the library's range;
+    null: up to the controller's coefficient limits), ``kd_bounds`` (N m s/rad: the sum's Kd
+    range)."""
 
     base: str
     scale: tuple[float, ...]
-    bounds_margin: float
+    bounds_margin: float | None
     kd_bounds: tuple[float, float]
+
+    def __post_init__(self) -> None:
+        if self.base not in RESIDUAL_BASES:
+            raise SpecError(f"network.residual.base must be one of {RESIDUAL_BASES}, got {self.base!r}")
 
 
 @dataclass(frozen=True)
@@ -170,8 +179,8 @@ class RuleSpec:
 @dataclass(frozen=True)
 class OverlaySpec:
     """How the rule sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`
-    with ``at_once``: the controller applies every gait at once, and ``policy_blend``: the
-    network's gaits blended by ``blend``)."""
+    with ``at_once`` when the spec's controller applies every gait at once, and
+    ``policy_blend`` when the spec has a ``blend``: the network's gaits blended by it)."""
 
     fast_gate: float
     hold: float
@@ -217,12 +226,16 @@ class ControllerSpec:
             raise SpecError("a learned spec has a network and only a learned one does")
         if (self.kind == "recovery") and self.recovery_rule is None:
             raise SpecError("a recovery spec needs its recovery_rule")
-        if self.overlay is not None and (self.network is None or self.recovery_rule is None or self.blend is None):
-            raise SpecError("an overlay sits on a network's gaits: it needs network, blend and recovery_rule")
-        if self.kind != "learned" and self.blend is not None:
-            raise SpecError("blend is a learned spec's (the network's gaits blended before the rule)")
-        if self.recovery_rule is not None and self.kind == "learned" and self.overlay is None:
-            raise SpecError("a learned spec with a recovery_rule needs its overlay")
+        if self.overlay is not None and (self.network is None or self.recovery_rule is None):
+            raise SpecError("an overlay sits on a network's gaits: it needs network and recovery_rule")
+        if self.blend is not None and self.overlay is None:
+            raise SpecError("blend is an overlay's (the network's gaits blended before the rule)")
+        residual = self.network.residual if self.network is not None else None
+        on_rule = residual is not None and residual.base != "classic"
+        if on_rule and self.recovery_rule is None:
+            raise SpecError(f"a residual on base {residual.base} needs the recovery_rule it adds to")
+        if self.recovery_rule is not None and self.kind == "learned" and self.overlay is None and not on_rule:
+            raise SpecError("a learned spec with a recovery_rule needs its overlay or a residual on the rule")
         if self.recovery_rule is not None and self.decision.period_ticks < 1:
             raise SpecError("the recovery rule acts within the step: decision.period_ticks must be >= 1")
 
