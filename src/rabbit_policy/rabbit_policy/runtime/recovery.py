@@ -1,7 +1,7 @@
 """The model-based push-recovery baseline, ``recovery``: classic HZD plus a hand-designed
 rule that acts within the step when the hip falls behind where it was a step ago.
 
-Why this rule (docs/learning.md, "Push recovery: the ceiling of each action family and a
+Why this rule (docs/learning.md, 2026-11-26 (later), "the ceiling of each action family and a
 model-based baseline"): classic HZD's backward failures end in the first stance after the
 push. The hip stops short of the stance foot, the phase stalls and the robot rocks back (a
 stall, not a fall), and a new gait queued for the next touchdown never lands. The ceiling

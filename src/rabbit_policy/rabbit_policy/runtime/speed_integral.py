@@ -8,7 +8,7 @@ error turns (with a ``band``, it also integrates only errors smaller than the ba
 the command decays once the hip has passed the new command). Where I offsets the library's
 gait (below), it is also held where that gait ``v_d + gain * I`` would leave the library's
 speeds (:class:`IntegralConfig`'s ``speed_range``): beyond them ``interpolate`` clamps, so
-anything integrated there is windup (docs/learning.md, "the range gate"). Its users:
+anything integrated there is windup (docs/learning.md, 2026-11-24 (night), "the range gate"). Its users:
 
 * :class:`~.memory.SpeedMemory`: the learned policy's memory input is I itself;
 * Westervelt's event-based integral (Westervelt, Grizzle, Koditschek, IEEE TAC 2003: an
