@@ -102,6 +102,8 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d.update(spec_version=2), "spec_version 2 is not supported"),
     (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral: the speed integral's limit"),
     (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),
+    (lambda d: d["decision"].update(period_ticks=-1), "decision.period_ticks must be a whole number of ticks >= 0"),
+    (lambda d: d["decision"].update(window_ticks=0), "decision.window_ticks must be a whole number of ticks >= 1"),
     (lambda d: d.update(overlay=None, blend=None, recovery_rule=None) or d["network"]["residual"].update(
         base="recovery"), "a residual on base recovery needs the recovery_rule it adds to"),
     (lambda d: d["controller"].update(within_step_blend=0.2), "blend: the network's gaits are blended by the overlay"),

@@ -68,6 +68,15 @@ class DecisionTiming:
         return "own" if self.ticks is None else "step" if self.ticks == 0 else str(self.ticks)
 
 
+def check_ticks(value: int, what: str = "the decision period", minimum: int = 1) -> int:
+    """``value`` back if it is a whole number of ticks >= ``minimum`` (0: once per step where
+    that is allowed), else ``ValueError`` naming ``what``: the one check of a tick count that
+    the periodic policy, the decision clock and this module's schedules share."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ValueError(f"{what} must be a whole number of ticks >= {minimum}, got {value!r}")
+    return value
+
+
 def decision_ticks(value: int) -> int:
     """A concrete timing in ticks, as a training environment and its episodes take it (0: one
     env step per walking step, N: every N ticks; not "own": an environment has no policy of
@@ -102,8 +111,7 @@ class PeriodicDecisions:
     """See the module docstring."""
 
     def __init__(self, period: int, tick: int = 1) -> None:
-        if not (isinstance(period, int) and period >= 1):
-            raise ValueError(f"the decision period must be a whole number of ticks >= 1, got {period!r}")
+        check_ticks(period)
         if not (isinstance(tick, int) and tick >= 1):
             raise ValueError(f"tick must be a whole number >= 1 stamp unit, got {tick!r}")
         self.period = period * tick  # in stamp units

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+from rabbit_msgs_py.decision_ticks import check_ticks
+
 from rabbit_policy.runtime.gait_command import GaitCommand, Policy, controller_settings, decision_period, reset_policy
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, IntegralConfig, SpeedIntegral, integral_limit
@@ -114,10 +116,8 @@ class PeriodicPolicy:
     policy's."""
 
     def __init__(self, policy: Policy, period: int, window: int = DEFAULT_DECISION_WINDOW) -> None:
-        if not (isinstance(period, int) and period >= 1):
-            raise ValueError(f"the decision period must be a whole number of ticks >= 1, got {period!r}")
-        if not (isinstance(window, int) and window >= 1):
-            raise ValueError(f"the decision window must be a whole number of ticks >= 1, got {window!r}")
+        check_ticks(period)
+        check_ticks(window, "the decision window")
         self.policy = policy
         self.decision_period = period
         self.decision_window = window

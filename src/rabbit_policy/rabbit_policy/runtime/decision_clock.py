@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from rabbit_msgs_py.decision_ticks import PeriodicDecisions
+from rabbit_msgs_py.decision_ticks import PeriodicDecisions, check_ticks
 from rabbit_policy.runtime.speed_window import Observation, SpeedWindow
 
 
@@ -30,8 +30,7 @@ class DecisionClock:
     """See the module docstring. ``window``: the longest average, in samples."""
 
     def __init__(self, period: int, window: int, tick: int = 1) -> None:
-        if not (isinstance(period, int) and period >= 0):
-            raise ValueError(f"the decision period must be a whole number of ticks >= 0, got {period!r}")
+        check_ticks(period, minimum=0)
         if not (isinstance(tick, int) and tick >= 1):
             raise ValueError(f"tick must be a whole number >= 1 stamp unit, got {tick!r}")
         self.period = period

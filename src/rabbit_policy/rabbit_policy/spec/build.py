@@ -45,9 +45,7 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
     built (a file whose hash differs, an architecture its weights do not have)."""
     base = Path(base) if base is not None else Path.cwd()
     library = GaitLibrary.load(checked_library_dir(spec.gait_library.source, spec.gait_library.sha256, base))
-    period, window = spec.decision.period_ticks, spec.decision.window_ticks
-    if period < 0 or window < 1:
-        raise SpecError(f"decision: period_ticks must be >= 0 and window_ticks >= 1, got {period}, {window}")
+    period, window = spec.decision.period_ticks, spec.decision.window_ticks  # checked by DecisionSpec
     integral = integral_config(spec.speed_integral)
     try:
         if spec.kind == "learned":

@@ -34,6 +34,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
 
 SPEC_VERSION = 1
@@ -62,6 +63,13 @@ class DecisionSpec:
 
     period_ticks: int
     window_ticks: int
+
+    def __post_init__(self) -> None:
+        try:
+            check_ticks(self.period_ticks, "decision.period_ticks", minimum=0)
+            check_ticks(self.window_ticks, "decision.window_ticks")
+        except ValueError as exc:
+            raise SpecError(str(exc)) from None
 
 
 @dataclass(frozen=True)
