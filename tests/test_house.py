@@ -104,7 +104,7 @@ def test_nodes_are_thin_and_scripts_are_shims():
 
 def test_shared_options_are_declared_once():
     """walk.py and run_stack.py take the walk's options from one declaration (the same types,
-    defaults and choices), and ``--workers`` is declared in one place."""
+    defaults and choices); ``--workers`` and ``--classic-integral`` are each declared in one place."""
     from rabbit_policy.commands import run_stack, walk
 
     def actions(parser):
@@ -114,6 +114,7 @@ def test_shared_options_are_declared_once():
     for dest in ("controller", "speed", "speed_schedule", "duration", "push", "model", "friction",
                  "torso_mass_scale", "torque_delay", "policy_file", "decision_period", "speed_integral"):
         assert fast[dest] == stack[dest], dest
-    declared = [name for name in tracked("src") if name.endswith(".py")
-                and 'add_argument("--workers"' in (ROOT / name).read_text()]
-    assert declared == ["src/rabbit_policy/rabbit_policy/parallel.py"], declared
+    for option, home in (("--workers", "parallel.py"), ("--classic-integral", "experiment/options.py")):
+        declared = [name for name in tracked("src") if name.endswith(".py")
+                    and f'add_argument("{option}"' in (ROOT / name).read_text()]
+        assert declared == [f"src/rabbit_policy/rabbit_policy/{home}"], (option, declared)

@@ -33,10 +33,11 @@ from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_back
 
 
 def main(argv: list[str] | None = None) -> int:
+    from rabbit_policy.experiment.options import add_classic_integral_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
-    parser.add_argument("--classic-integral", nargs="+", type=float, default=[], metavar="KI",
-                        help="also classic HZD with the event-based speed integral of this gain (1/s), one column each")
+    add_classic_integral_option(parser)
     parser.add_argument("--recovery", action="store_true",
                         help="also the recovery controller (the model-based push-recovery baseline), a column")
     parser.add_argument("--names", nargs="+", help="a column name per policy (default: the file paths)")

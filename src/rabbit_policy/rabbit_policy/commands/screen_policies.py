@@ -24,11 +24,12 @@ from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_back
 
 
 def main(argv: list[str] | None = None) -> int:
+    from rabbit_policy.experiment.options import add_classic_integral_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
     parser.add_argument("--classic", action="store_true", help="also classic HZD (the calibrated library)")
-    parser.add_argument("--classic-integral", nargs="+", type=float, default=[], metavar="KI",
-                        help="also classic HZD with the event-based speed integral of this gain (1/s)")
+    add_classic_integral_option(parser)
     parser.add_argument("--quick", action="store_true", help="a few walks per controller (a smoke test)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--out", type=Path, help="also append each controller's JSON line to this file")

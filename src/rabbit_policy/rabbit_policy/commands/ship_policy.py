@@ -400,15 +400,15 @@ def warm_start_policy(checkpoint):
 
 
 def main(argv: list[str] | None = None) -> int:
+    from rabbit_policy.experiment.options import add_classic_integral_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policy", type=Path)
     parser.add_argument("--compare", type=Path, nargs="*", default=[], help="more policy files for the table")
     parser.add_argument("--allow-failing", action="store_true")
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
-    parser.add_argument("--classic-integral", type=float, metavar="KI",
-                        help="also classic HZD with the event-based speed integral of this gain (1/s) in both "
-                             "tables (the base of a residual policy trained with --integral-gain KI)")
+    add_classic_integral_option(parser)
     parser.add_argument("--integral-band", type=float, metavar="B",
                         help="ship the policy with its speed integral held while |v_d - v| >= B m/s (conditional "
                              "integration, rabbit_policy.runtime.speed_integral; a memory policy only): the shipped "
@@ -493,9 +493,8 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     backend = open_backend(parser, args)
     map_fn = ProgressMap(backend, "acceptance walks", enabled=not args.no_progress)
     try:
-        integral = ([] if args.classic_integral is None else
-                    [(f"classic HZD + speed integral {args.classic_integral:g}",
-                      make_policy("classic", speed_integral=args.classic_integral))])
+        integral = [(f"classic HZD + speed integral {ki:g}", make_policy("classic", speed_integral=ki))
+                    for ki in args.classic_integral]
         measured = dict(broad_comparison([("learned", policy), *integral], args.quick, map_fn, log))
         broad = [(f"HZD-RL ({info.get('algorithm')})", measured["learned"]),
                  ("classic HZD (calibrated library, every 20 ticks)", measured["classic"]),

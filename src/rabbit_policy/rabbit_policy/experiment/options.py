@@ -83,3 +83,12 @@ def schedule_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], .
     for line in lines:
         print(f"warning: {line}", file=sys.stderr)
     return schedule
+
+
+def add_classic_integral_option(parser: argparse.ArgumentParser) -> None:
+    """``--classic-integral KI [KI ...]``: the comparisons' extra columns (screen, compare, ship),
+    classic HZD with Westervelt's event-based speed integral of each gain (1/s, >= 0), a list
+    (empty by default)."""
+    parser.add_argument("--classic-integral", nargs="+", type=non_negative, default=[], metavar="KI",
+                        help="also classic HZD with the event-based speed integral of this gain (1/s), one column "
+                             "each (the base of a residual trained with --integral-gain KI)")
