@@ -69,9 +69,10 @@ def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
         assert preset["screen"]["grid"] in ("quick", "full") and preset["screen"]["candidates"] >= 1
     shipped = load_preset("shipped")["train"]
     run = yaml.safe_load((ROOT / "config" / "train" / "shipped_es.yaml").read_text())
-    for key in ("pairs", "episodes", "max_steps", "iterations", "sigma", "lr", "weight_decay", "distribution",
-                "fall_penalty", "seed"):
+    for key in ("pairs", "episodes", "max_steps", "sigma", "lr", "weight_decay", "distribution", "fall_penalty",
+                "seed"):
         assert shipped[key] == run[key], key  # the shipped run's ES settings
+    assert shipped["iterations"] == 255  # as many generations as trained the shipped network
     assert train_arguments({"pairs": 2, "keep_evaluated": True, "resume": False}) == ["--pairs", "2",
                                                                                       "--keep-evaluated"]
     bad = tmp_path / "bad.yaml"

@@ -508,3 +508,26 @@ def test_a_memory_run_ships_a_policy_that_keeps_its_memory_in_every_loop(tmp_pat
     assert policy.forward.inputs == 25
     walked = walk(policy, Scenario.constant(1.0), 3.0)
     assert not walked.failed and policy.memory.integral != 0.0
+
+
+def test_ship_policy_ships_the_checkpoints_spec_and_a_regenerate_line_that_runs(tmp_path):
+    """What ship_policy writes runs: the spec beside the checkpoint (``write_spec``) builds the
+    controller the checkpoint ran as, bit for bit; the card's recipe trains as far as the files
+    its screen reads, and ships with ``--allow-failing`` when the card says the checks fail."""
+    from rabbit_policy.commands.ship_policy import screened_through, train_command, write_spec
+    from rabbit_policy.experiment.loop import walk
+    from rabbit_policy.spec import load_controller, load_spec
+
+    write_spec(packaged_policy_file(), tmp_path, "scripts/ship_policy.py X --out DIR")
+    spec = load_spec(tmp_path / "learned.yaml")
+    assert spec.provenance["written_by"] == "scripts/ship_policy.py X --out DIR"
+    scenario = Scenario.constant(1.0, pushes=(Push(2.4, -120.0, 0.1),))
+    shipped, checkpoint = (walk(p, scenario, 4.0, record_state=True) for p in
+                           (load_controller(tmp_path / "learned.yaml"), checkpoint_policy(packaged_policy_file())))
+    assert np.array_equal(shipped.qpos, checkpoint.qpos)
+    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
+    assert screened_through(info, "screen_policies.py runs/X/evaluated/{00190,00255,00320}.pt") == 320
+    assert screened_through(info, "") == info["iteration"] == 255
+    assert "--iterations 320 " in train_command(info, True, 320)
+    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    assert "--iterations 320 " in card and "--recovery-overlay-policy-blend --allow-failing`" in card

@@ -9,10 +9,13 @@ sequences, push margins against classic HZD's and three scenarios beyond them, m
 errors, Poincaré) on the policy and on classic HZD's best variant (the calibrated library,
 every 20 ticks) for comparison, and the 9-speed tracking table (``acceptance``) on the
 policy, each ``--compare`` file, the network the run started from (its warm start,
-rebuilt: what training added) and the classic library. Then copies the file to
-``src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt`` and writes ``MODEL_CARD.md``
-and ``evaluation.json`` (every figure) beside it: algorithm, seed, workers, training time
-and steps from the checkpoint's ``info``, the exact commands, the tables. Refuses a policy
+rebuilt: what training added) and the classic library. Then writes, in ``--out DIR`` (default:
+the package, ``rabbit_policy/trained`` for the record and ``rabbit_policy/controllers`` for the
+spec that runs): the checkpoint as ``hzd_rl_policy.pt``, ``MODEL_CARD.md`` and
+``evaluation.json`` (every figure: algorithm, seed, workers, training time and steps from the
+checkpoint's ``info``, the exact commands, the tables) and its spec ``learned.yaml`` with its
+weights (``rabbit_policy.spec.convert.learned_spec``: the controller that walk.py, run_stack
+and policy_node run, built as the checks ran it). Refuses a policy
 that fails checks 1-6 unless ``--allow-failing`` (the card then lists what fails).
 ``--dry-run`` prints the card without writing anything; ``--quick`` runs the fast subset
 (``RobustnessConfig.quick()`` and the policy's own tracking table, for a first look: never
@@ -38,6 +41,9 @@ from rabbit_policy.runtime.recovery import RecoveryConfig
 FEEDFORWARD_SPEEDS = tuple(round(0.7 + 0.025 * i, 3) for i in range(33))
 """``--integral-feedforward``'s table speeds (m/s): the library's range, every 0.025."""
 TARGET = Path(__file__).resolve().parents[1] / "trained"
+"""Where the shipped checkpoint, card and evaluation go without ``--out``."""
+SPEC_TARGET = Path(__file__).resolve().parents[1] / "controllers"
+"""Where the shipped spec and its weights go without ``--out`` (the packaged ``learned.yaml``)."""
 """Where ``--ship`` writes: the package's ``rabbit_policy/trained`` (editable in a clone)."""
 
 
@@ -69,14 +75,15 @@ def evaluation_table(results: list[tuple[str, dict]], criteria) -> list[str]:
     return lines
 
 
-def train_command(info: dict, keep_evaluated: bool = False) -> str:
+def train_command(info: dict, keep_evaluated: bool = False, iterations: int | None = None) -> str:
     """The ``scripts/train.py`` command line that reproduces a checkpoint (deterministic
     for the seed and worker count; ``best.pt`` also depends on ``--eval-every``);
-    ``keep_evaluated``: it keeps every evaluated policy (a screened file is one of them)."""
+    ``keep_evaluated``: it keeps every evaluated policy (a screened file is one of them);
+    ``iterations``: how far to train (default: the checkpoint's iteration)."""
     algo = info.get("algorithm")
     parts = ["scripts/train.py", "--algo", str(algo), "--seed", str(info.get("seed")), "--workers",
              str(info.get("workers")), "--warm-start", str(info.get("warm_start")), "--iterations",
-             str(info.get("iteration"))]
+             str(iterations if iterations is not None else info.get("iteration"))]
     if info.get("eval_every") is not None:
         parts += ["--eval-every", str(info["eval_every"])]
     if keep_evaluated:
@@ -92,6 +99,15 @@ def train_command(info: dict, keep_evaluated: bool = False) -> str:
         if field.metadata.get("cli", True) and field.name != "seed" and value is not None:
             parts += [config_flag(field), str(value)]
     return " ".join(parts + ["--out", "runs/X"])
+
+
+def screened_through(info: dict, screened: str) -> int:
+    """The last iteration a screen command names (its ``evaluated/NNNNN.pt`` files, brace lists
+    too), or the checkpoint's own: the run must train that far to write every file screened."""
+    import re
+
+    named = [int(n) for n in re.findall(r"(?<![0-9])([0-9]{5})(?![0-9])", screened)]
+    return max([int(info.get("iteration", 0)), *named])
 
 
 def distribution_text(name: str) -> str:
@@ -317,8 +333,10 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         + (f"{cfg['decision_period']} ticks" if cfg.get("decision_period") else "one walking step")
         + f"; reward −(v̄ − v_d)² per step, fall penalty {cfg.get('fall_penalty', -10.0):g}; episodes: "
         + distribution_text(cfg.get("distribution", "paper")) + ")",
-        f"- regenerate: `{train_command(info, bool(screened))}`, then `scripts/ship_policy.py {selected}"
-        + set_after + f"`{selection}" + set_after_note,
+        f"- regenerate: `{train_command(info, bool(screened), screened_through(info, screened))}`, then "
+        f"`scripts/ship_policy.py {selected}"
+        + set_after + (" --allow-failing" if broad and not broad[0][1]["passed"] else "") + f"`{selection}"
+        + set_after_note,
         f"- shipped with: `{command}`" if command else "",
         "", "## Acceptance 1-6 (the learning issue; ROS-free fast path, "
         "`rabbit_policy.evaluation.acceptance.broad_acceptance`)", "",
@@ -377,6 +395,19 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
         checkpoint.info["memory"] = memory.to_dict()
         checkpoint.save(out)
     return out
+
+
+def write_spec(checkpoint_file: Path, directory: Path, command: str) -> None:
+    """The shipped checkpoint's spec, ``directory/learned.yaml`` with its weights beside it
+    (:func:`rabbit_policy.spec.convert.learned_spec`), its provenance the command that shipped it."""
+    from rabbit_policy.runtime.network import PolicyCheckpoint
+    from rabbit_policy.spec import dump_spec
+    from rabbit_policy.spec.convert import code_commit, learned_spec
+
+    directory.mkdir(parents=True, exist_ok=True)
+    spec = learned_spec(PolicyCheckpoint.load(checkpoint_file), directory, provenance={
+        "written_by": command, "checkpoint": checkpoint_file.name, "code_commit": code_commit()})
+    dump_spec(spec, directory / "learned.yaml", f"learned, shipped by {command}")
 
 
 def warm_start_policy(checkpoint):
@@ -445,6 +476,9 @@ def main(argv: list[str] | None = None) -> int:
                              "blends the network's own gaits in itself, as the controller's defaults would (rabbit_policy."
                              "runtime.alpha_blend.AlphaBlend), so only the rule's offsets act at once "
                              "(OverlayConfig.policy_blend)")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="write the checkpoint, card, evaluation and spec here (default: into the package, "
+                             "replacing the shipped learned controller)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
@@ -526,12 +560,14 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
               "(--allow-failing to ship it anyway, the card saying so)", file=sys.stderr)
         return 1
     if not args.dry_run:
-        TARGET.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(source, TARGET / "hzd_rl_policy.pt")
-        (TARGET / "MODEL_CARD.md").write_text(card)
-        (TARGET / "evaluation.json").write_text(strict_json.dumps({"acceptance_1_6": dict(broad),
+        record, spec_dir = (args.out, args.out) if args.out is not None else (TARGET, SPEC_TARGET)
+        record.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, record / "hzd_rl_policy.pt")
+        (record / "MODEL_CARD.md").write_text(card)
+        (record / "evaluation.json").write_text(strict_json.dumps({"acceptance_1_6": dict(broad),
                                                                     "tracking": dict(results)}, indent=1) + "\n")
-        print(f"shipped to {TARGET / 'hzd_rl_policy.pt'}", file=sys.stderr)
+        write_spec(source, spec_dir, command)
+        print(f"shipped to {record / 'hzd_rl_policy.pt'} and {spec_dir / 'learned.yaml'}", file=sys.stderr)
     return 0
 
 
