@@ -86,3 +86,21 @@ def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and message in lines[-1] and "Traceback" not in out.stderr, out.stderr
     assert packaged_spec("learned").is_file()
+
+
+def test_the_screen_takes_the_candidates_the_training_ranks_best(tmp_path):
+    """``candidates``: the evaluated specs with the fewest failed checks, then the smallest summed
+    error (the start's row and files not kept left out); none evaluated: the run's last policy."""
+    from rabbit_policy.commands.reproduce import candidates
+
+    run = tmp_path / "run"
+    (run / "evaluated").mkdir(parents=True)
+    rows = [(0, 0, 1.0), (5, 1, 0.5), (10, 0, 1.4), (15, 0, 1.2), (20, 0, 1.1), (25, 2, 0.1)]
+    lines = ["iteration,wall_s,env_steps,passed,failures,total_error,worst_speed_error,falls,slowest_reach_s"]
+    lines += [f"{i},1.0,10,{f == 0},{f},{e},0.01,0,3.0" for i, f, e in rows]
+    (run / "eval.csv").write_text("\n".join(lines) + "\n")
+    for i, _, _ in rows:
+        if i not in (0, 20):  # generation 20 was evaluated but not kept
+            (run / "evaluated" / f"{i:05d}.yaml").write_text("")
+    assert [p.name for p in candidates(run, 3)] == ["00015.yaml", "00010.yaml", "00005.yaml"]
+    assert candidates(tmp_path / "empty", 2) == [tmp_path / "empty" / "policy.yaml"]
