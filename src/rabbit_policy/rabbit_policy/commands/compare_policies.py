@@ -36,7 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.options import add_classic_integral_option
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
+    parser.add_argument("policies", nargs="*", type=Path, help="learned controllers: spec files (.yaml) or training checkpoints (.pt)")
     add_classic_integral_option(parser)
     parser.add_argument("--recovery", action="store_true",
                         help="also the recovery controller (the model-based push-recovery baseline), a column")

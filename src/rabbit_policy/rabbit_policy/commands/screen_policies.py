@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.options import add_classic_integral_option
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("policies", nargs="*", type=Path, help="learned policy checkpoints (.pt)")
+    parser.add_argument("policies", nargs="*", type=Path, help="learned controllers: spec files (.yaml) or training checkpoints (.pt)")
     parser.add_argument("--classic", action="store_true", help="also classic HZD (the calibrated library)")
     add_classic_integral_option(parser)
     parser.add_argument("--quick", action="store_true", help="a few walks per controller (a smoke test)")
