@@ -128,7 +128,7 @@ def test_a_zero_residual_on_the_speed_integral_is_classic_with_that_integral_bit
         assert residual.memory.integral == integral.policy.integral.value
     assert integral.policy.integral.value == pytest.approx((1.5 - 1.45) / 0.3)  # v_d + 0.3 I = 1.5: held there
     env = RabbitHZDEnv(max_steps=20, decision_period=20, features="memory", action="residual", integral_gain=0.3)
-    assert env.memory.config.limit == pytest.approx(0.2 / 0.3)  # the offset's bound: 0.2 m/s
+    assert env.memory.config.integral.limit == pytest.approx(0.2 / 0.3)  # the offset's bound: 0.2 m/s
     assert env.observation_space.high[3] == pytest.approx(0.2 / 0.3, rel=1e-6)
 
 

@@ -301,8 +301,9 @@ def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_tr
 
 def test_memory_features_integrate_the_speed_error_with_anti_windup_and_carry_the_last_action():
     from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
+    from rabbit_policy.runtime.speed_integral import IntegralConfig
 
-    memory = SpeedMemory(MemoryConfig(dt=0.02, limit=0.2))
+    memory = SpeedMemory(MemoryConfig(IntegralConfig(limit=0.2, dt=0.02)))
     first = memory.inputs(np.array([1.0, 0.9, 0.1]))
     assert first.shape == (25,) and first[3] == pytest.approx(0.002) and not first[4:].any()
     memory.record(np.full(21, 0.5))
@@ -464,16 +465,18 @@ def test_the_integral_band_clip_and_windup_decay_reach_the_env_memory_and_bad_on
     config = ESConfig(max_steps=5, decision_period=20, features="memory", action="residual", integral_gain=0.2,
                       integral_band=0.1, integral_clip=0.05, integral_windup_decay=5.0)
     memory = RabbitHZDEnv(**config.env_kwargs()).memory.config
-    assert (memory.band, memory.clip, memory.gain, memory.windup_decay) == (0.1, 0.05, 0.2, WindupDecay(5.0))
+    assert (memory.integral.band, memory.integral.clip, memory.integral.gain, memory.integral.windup_decay) == (
+        0.1, 0.05, 0.2, WindupDecay(5.0))
     assert config.memory_config(GaitLibrary.load().speed_range) == memory
     off = RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0,
                                  integral_windup_decay=0.0).env_kwargs()).memory.config
-    assert (off.band, off.clip, off.windup_decay) == (None, None, None)
+    assert (off.integral.band, off.integral.clip, off.integral.windup_decay) == (None, None, None)
     # what a run with the shipped preset and the decay trains on; the feed-forward is a table measured on the trained
     # network (ship_policy --integral-feedforward), and the decay at a walk's start goes with its start
     # (--integral-windup-at-start): both are set on the shipped copy, not part of training
     shipped = make_policy("learned").memory.config
-    shipped = replace(shipped, feedforward=None, windup_decay=replace(shipped.windup_decay, at_start=False))
+    shipped = replace(shipped, integral=replace(shipped.integral, feedforward=None,
+                                                windup_decay=replace(shipped.integral.windup_decay, at_start=False)))
     assert RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0).env_kwargs()).memory.config == shipped
     for bad, message in (({"integral_band": -0.1}, "integral_band must be a finite number >= 0"),
                          ({"integral_clip": float("nan")}, "integral_clip must be a finite number >= 0"),

@@ -232,9 +232,9 @@ def test_the_speed_integral_is_held_where_the_gait_would_leave_the_library_range
     assert free.update(0.9, 1.5) == pytest.approx(0.9)
 
     memory = MemoryConfig.for_features("memory", 20, 0.3, (0.7, 1.5))  # a residual's base gait: held in range
-    assert memory.integral_config().speed_range == (0.7, 1.5)
-    assert MemoryConfig(**{**memory.to_dict(), "speed_range": [0.7, 1.5]}) == memory  # as a checkpoint holds it
-    assert MemoryConfig(dt=0.02, limit=0.5).integral_config().speed_range is None  # checkpoints from before the gate
+    assert memory.integral.speed_range == (0.7, 1.5)
+    assert MemoryConfig.from_dict({**memory.to_dict(), "speed_range": [0.7, 1.5]}) == memory  # as a checkpoint holds it
+    assert MemoryConfig.from_dict({"dt": 0.02, "limit": 0.5}).integral.speed_range is None  # checkpoints from before the gate
     with pytest.raises(ValueError, match="speed range"):
         MemoryConfig.for_features("memory", 20, 0.3)
     for bad in ({"speed_range": (1.5, 0.7), "gain": 0.5}, {"speed_range": (0.7, 1.5)},
@@ -264,11 +264,11 @@ def test_the_speed_integral_with_a_band_holds_on_large_errors_and_integrates_sma
         for bad in (0.0, -0.1, math.inf, math.nan):
             with pytest.raises(ValueError, match=name):
                 IntegralConfig(limit=1.0, dt=1.0, **{name: bad})
-    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), band=0.1, clip=0.05)
-    config = memory.integral_config()
-    assert (config.band, config.clip) == (0.1, 0.05) and MemoryConfig(**memory.to_dict()) == memory
+    memory = MemoryConfig(IntegralConfig(limit=1.0, dt=0.02, gain=0.2, speed_range=(0.7, 1.5), band=0.1, clip=0.05))
+    config = memory.integral
+    assert (config.band, config.clip) == (0.1, 0.05) and MemoryConfig.from_dict(memory.to_dict()) == memory
     older = {k: v for k, v in memory.to_dict().items() if k not in ("band", "clip")}  # a checkpoint from before
-    assert MemoryConfig(**older).integral_config() == IntegralConfig(1.0, 0.02, 0.2, (0.7, 1.5))
+    assert MemoryConfig.from_dict(older).integral == IntegralConfig(1.0, 0.02, 0.2, (0.7, 1.5))
 
 
 
@@ -323,15 +323,15 @@ def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_n
         IntegralConfig(limit=1.0, dt=1.0, windup_decay=WindupDecay(tau=0.5))
     with pytest.raises(ValueError, match="windup decay"):
         IntegralConfig(limit=1.0, dt=1.0, windup_decay={"seconds": 5.0})
-    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), windup_decay=WindupDecay())
+    memory = MemoryConfig(IntegralConfig(limit=1.0, dt=0.02, gain=0.2, speed_range=(0.7, 1.5), windup_decay=WindupDecay()))
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
     assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0, "at_start": False}
-    assert MemoryConfig(**{**recorded, "windup_decay": {"seconds": 5.0, "tau": 1.0}}) == memory  # a checkpoint from before
-    assert MemoryConfig(**recorded) == memory and memory.integral_config().windup_decay == WindupDecay()
+    assert MemoryConfig.from_dict({**recorded, "windup_decay": {"seconds": 5.0, "tau": 1.0}}) == memory  # a checkpoint from before
+    assert MemoryConfig.from_dict(recorded) == memory and memory.integral.windup_decay == WindupDecay()
     with pytest.raises(ValueError, match="windup decay"):
-        MemoryConfig(**{**recorded, "windup_decay": {"seconds": 5.0, "speed": 1.0}})
+        MemoryConfig.from_dict({**recorded, "windup_decay": {"seconds": 5.0, "speed": 1.0}})
     older = {k: v for k, v in recorded.items() if k != "windup_decay"}  # a checkpoint from before the rule
-    assert MemoryConfig(**older).integral_config().windup_decay is None
+    assert MemoryConfig.from_dict(older).integral.windup_decay is None
 
 
 def test_the_integral_feedforward_shifts_by_the_steady_values_difference_at_a_change_and_may_start_there():
@@ -376,16 +376,16 @@ def test_the_integral_feedforward_shifts_by_the_steady_values_difference_at_a_ch
         IntegralFeedforward((0.8, 1.0), (0.0, 0.1), start="yes")
     with pytest.raises(ValueError, match="feed-forward"):
         IntegralConfig(limit=1.0, dt=1.0, feedforward={"speeds": (0.8, 1.0), "values": (0.0, 0.1)})
-    memory = MemoryConfig(dt=0.02, limit=1.0, gain=0.2, speed_range=(0.7, 1.5), feedforward=table)
+    memory = MemoryConfig(IntegralConfig(limit=1.0, dt=0.02, gain=0.2, speed_range=(0.7, 1.5), feedforward=table))
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
     assert recorded["feedforward"] == {"speeds": (0.8, 1.0, 1.2), "values": (-0.2, 0.1, 0.3), "start": True}
-    assert MemoryConfig(**recorded) == memory and memory.integral_config().feedforward == table
-    assert MemoryConfig(**{**recorded, "feedforward": {"speeds": [0.8, 1.0], "values": [0, 1]}}).feedforward == (
+    assert MemoryConfig.from_dict(recorded) == memory and memory.integral.feedforward == table
+    assert MemoryConfig.from_dict({**recorded, "feedforward": {"speeds": [0.8, 1.0], "values": [0, 1]}}).integral.feedforward == (
         IntegralFeedforward((0.8, 1.0), (0.0, 1.0)))  # lists, as JSON would give them; no start: off
     with pytest.raises(ValueError, match="feedforward"):
-        MemoryConfig(**{**recorded, "feedforward": {"speeds": (0.8, 1.0)}})
+        MemoryConfig.from_dict({**recorded, "feedforward": {"speeds": (0.8, 1.0)}})
     older = {k: v for k, v in recorded.items() if k != "feedforward"}  # a checkpoint from before the table
-    assert MemoryConfig(**older).integral_config().feedforward is None
+    assert MemoryConfig.from_dict(older).integral.feedforward is None
 
 
 def test_learned_policy_checkpoint_round_trip(tmp_path):

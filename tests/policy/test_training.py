@@ -284,11 +284,11 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     gated = checkpoint_policy(with_integral_rules(source, tmp_path / "gated.pt", windup_decay=(4.0, 0.5)))
     fed = checkpoint_policy(with_integral_rules(source, tmp_path / "fed.pt", windup_decay=(4.0, 0.5),
                                             feedforward=(1.0, 1.2)))
-    assert banded.memory.config == type(banded.memory.config)(**{**original.memory.config.to_dict(), "band": 0.1})
-    assert gated.memory.config.windup_decay == WindupDecay(4.0, 0.5) and gated.memory.config.band is None
-    table = fed.memory.config.feedforward  # measured on the copy with the decay, as steady_integrals does
+    assert banded.memory.config == type(banded.memory.config).from_dict({**original.memory.config.to_dict(), "band": 0.1})
+    assert gated.memory.config.integral.windup_decay == WindupDecay(4.0, 0.5) and gated.memory.config.integral.band is None
+    table = fed.memory.config.integral.feedforward  # measured on the copy with the decay, as steady_integrals does
     assert table.speeds == (1.0, 1.2) and table.values == tuple(round(steady_integral(gated, v), 4) for v in (1.0, 1.2))
-    assert fed.memory.config.windup_decay == WindupDecay(4.0, 0.5)
+    assert fed.memory.config.integral.windup_decay == WindupDecay(4.0, 0.5)
     for copy in (banded, gated, fed):
         assert all(torch.equal(a, b) for a, b in zip(copy.checkpoint.state_dict.values(),
                                                       original.checkpoint.state_dict.values()))
@@ -304,7 +304,7 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
         network_text(fed.checkpoint.info))
     started = checkpoint_policy(with_integral_rules(source, tmp_path / "start.pt", feedforward=(1.0, 1.2),
                                                 feedforward_start=True))
-    assert started.memory.config.feedforward.start and not fed.memory.config.feedforward.start
+    assert started.memory.config.integral.feedforward.start and not fed.memory.config.integral.feedforward.start
     assert rules_set_after_training(started.checkpoint.info)[0] == " --integral-feedforward --integral-feedforward-start"
     assert "starts a walk at its steady value for v_d" in " ".join(network_text(started.checkpoint.info))
     assert rules_set_after_training(original.checkpoint.info) == ("", "")

@@ -354,11 +354,11 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
                         windup_decay: tuple[float, float] | tuple[float, float, bool] | None = None,
                         feedforward: tuple[float, ...] | None = None, feedforward_start: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` whose speed integral is held while the
-    speed error is ``band`` m/s or more (``MemoryConfig.band``) and whose windup after a
+    speed error is ``band`` m/s or more (``IntegralConfig.band``) and whose windup after a
     command change decays, ``windup_decay`` = (seconds, tau) in s and optionally at_start
-    (``MemoryConfig.windup_decay``);
+    (``IntegralConfig.windup_decay``);
     None: that rule as the checkpoint has it. ``feedforward``: also the integral's
-    feed-forward table (``MemoryConfig.feedforward``) at these speeds (m/s), measured on the
+    feed-forward table (``IntegralConfig.feedforward``) at these speeds (m/s), measured on the
     copy with those rules (:func:`~rabbit_policy.evaluation.steady_integral.steady_integrals`:
     a minute for its 33 speeds), acting at a walk's start too if ``feedforward_start``.
     ``ValueError`` naming the option for a policy without the memory inputs or a value that
@@ -373,12 +373,13 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
                   else "--integral-feedforward")
         raise ValueError(f"{option}: {policy} has no speed integral (features "
                          f"{checkpoint.info.get('features', 'paper')!r}; it needs memory or body)")
-    memory = MemoryConfig(**checkpoint.info["memory"])
+    memory = MemoryConfig.from_dict(checkpoint.info["memory"])
     for option, name, value in (("--integral-band", "band", band),
                                 ("--integral-windup-decay", "windup_decay", windup_decay)):
         if value is not None:
             try:
-                memory = replace(memory, **{name: WindupDecay(*value) if name == "windup_decay" else value})
+                memory = replace(memory, integral=replace(
+                    memory.integral, **{name: WindupDecay(*value) if name == "windup_decay" else value}))
             except ValueError as exc:
                 raise ValueError(f"{option}: {exc}") from None
     checkpoint.info["memory"] = memory.to_dict()
@@ -389,7 +390,8 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
 
         try:
             table = steady_integrals(checkpoint_policy(out), feedforward)
-            memory = replace(memory, feedforward=replace(table, start=feedforward_start))
+            memory = replace(memory, integral=replace(memory.integral,
+                                                      feedforward=replace(table, start=feedforward_start)))
         except ValueError as exc:
             raise ValueError(f"--integral-feedforward: {exc}") from None
         checkpoint.info["memory"] = memory.to_dict()

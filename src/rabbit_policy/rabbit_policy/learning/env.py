@@ -480,7 +480,7 @@ class RabbitHZDEnv(gym.Env):
         self.memory = SpeedMemory(memory) if memory is not None else None
         low, high = [speed_range[0], -3.0, -3.0], [speed_range[1], 3.0, 3.0]
         if self.memory is not None:
-            limit = self.memory.config.limit
+            limit = self.memory.config.integral.limit
             low, high = low + [-limit] + [-1.0] * (N_FREE + 1), high + [limit] + [1.0] * (N_FREE + 1)
             if memory.body:  # pitch, pitch rate, phase, phase rate, hip velocity
                 low, high = low + [-1.0, -20.0, 0.0, -20.0, -3.0], high + [1.0, 20.0, 1.0, 20.0, 3.0]

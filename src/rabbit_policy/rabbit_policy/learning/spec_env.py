@@ -73,7 +73,7 @@ class SpecEnv(RabbitHZDEnv):
         self.residual = None
         self._controller = ControllerConfig(**self.policy.controller_settings)
         inputs = self.policy.forward.inputs
-        limit = self.policy.memory.config.limit if self.policy.memory is not None else 3.0
+        limit = self.policy.memory.config.integral.limit if self.policy.memory is not None else 3.0
         low = [speed_range[0], -3.0, -3.0, -limit] + [-1.0] * (inputs - 4)
         high = [speed_range[1], 3.0, 3.0, limit] + [1.0] * (inputs - 4)
         self.observation_space = gym.spaces.Box(np.array(low[:inputs], dtype=np.float32),

@@ -180,7 +180,7 @@ def train(args: TrainingConfig) -> int:
         net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
                                    "none" if args.resume else args.warm_start)
         if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
-            net = widen_inputs(net, INPUTS[features], memory.limit)
+            net = widen_inputs(net, INPUTS[features], memory.integral.limit)
     state: dict = {}
     if args.resume:
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)

@@ -17,12 +17,12 @@ With ``body`` (features ``"body"``, the ablation's row c) the five body-state nu
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
 from rabbit_policy.runtime.body import N_BODY
-from rabbit_policy.runtime.speed_integral import (IntegralConfig, IntegralFeedforward, SpeedIntegral, WindupDecay,
+from rabbit_policy.runtime.speed_integral import (IntegralConfig, SpeedIntegral, WindupDecay,
                                                   decision_dt, integral_limit)
 
 N_ACTION = 21
@@ -46,52 +46,31 @@ def check_features(features: str, decision_period: int, integral_gain: float = 0
 
 @dataclass(frozen=True)
 class MemoryConfig:
-    """``dt``: s between decisions (the decision period; per step: a nominal step);
-    ``limit``: the anti-windup bound of the integral (m); ``body``: the body state follows;
-    ``gain`` (1/s) and ``speed_range`` (m/s): the integral also offsets a residual's base gait
-    by ``gain * I`` and is held where that gait stays within the library's speeds
-    (:class:`~.speed_integral.IntegralConfig`; None: not held, as in the policies trained
-    before the gate, whose checkpoints record none); ``band`` (m/s): the integral is held
-    while the speed error is as large as that, ``clip`` (m/s): the error it integrates is
-    clipped to +-clip (:class:`~.speed_integral.IntegralConfig`; None, the checkpoints
-    before 2026-11-27: neither); ``windup_decay``: after a change of the command, what the
-    integral wound up decays once the hip has passed the new command
-    (:class:`~.speed_integral.WindupDecay`, a checkpoint records its fields; None: no decay,
-    as in every checkpoint before it); ``feedforward``: the integral moves by the difference
-    of its steady values at a change of the command (and may start a walk at its steady value)
-    (:class:`~.speed_integral.IntegralFeedforward`, a checkpoint records its table; None: as
-    in every checkpoint before it)."""
+    """``integral``: the speed integral's configuration (the anti-windup bound, the seconds
+    between decisions, the gain and range gate, band, clip, windup decay and feed-forward:
+    :class:`~.speed_integral.IntegralConfig`); ``body``: the body state follows."""
 
-    dt: float
-    limit: float = DEFAULT_LIMIT
+    integral: IntegralConfig
     body: bool = False
-    gain: float = 0.0
-    speed_range: tuple[float, float] | None = None
-    band: float | None = None
-    clip: float | None = None
-    windup_decay: WindupDecay | None = None
-    feedforward: IntegralFeedforward | None = None
 
     def __post_init__(self) -> None:
-        for name, kind in (("windup_decay", WindupDecay), ("feedforward", IntegralFeedforward)):
-            if isinstance(getattr(self, name), dict):  # as a checkpoint's info holds it
-                try:
-                    object.__setattr__(self, name, kind(**getattr(self, name)))
-                except TypeError as exc:
-                    raise ValueError(f"the memory's {name.replace('_', ' ')}: {exc}") from None
-        if not (self.dt > 0.0 and self.limit > 0.0):
-            raise ValueError(f"memory dt and limit must be > 0, got {self.dt}, {self.limit}")
-        if self.speed_range is not None:  # a checkpoint's JSON-like info holds a list
-            object.__setattr__(self, "speed_range", tuple(float(v) for v in self.speed_range))
-        self.integral_config()  # raises for a bad gain or range
+        if not isinstance(self.integral, IntegralConfig):
+            raise ValueError(f"the memory's integral must be an IntegralConfig, got {self.integral!r}")
+        if not isinstance(self.body, bool):
+            raise ValueError(f"the memory's body must be True or False, got {self.body!r}")
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """One flat dict, as a checkpoint's ``memory`` stores it: the integral's fields and ``body``."""
+        return {**self.integral.to_dict(), "body": self.body}
 
-    def integral_config(self) -> IntegralConfig:
-        """The configuration of the memory's :class:`~.speed_integral.SpeedIntegral`."""
-        return IntegralConfig(self.limit, self.dt, gain=self.gain, speed_range=self.speed_range, band=self.band,
-                              clip=self.clip, windup_decay=self.windup_decay, feedforward=self.feedforward)
+    @classmethod
+    def from_dict(cls, info: dict) -> "MemoryConfig":
+        """The memory a checkpoint's ``memory`` records (:meth:`to_dict`; a checkpoint from
+        before a rule existed has no field for it: that rule is off); ``ValueError`` for a bad one."""
+        info = dict(info)
+        body = info.pop("body", False)
+        info.setdefault("limit", DEFAULT_LIMIT)
+        return cls(IntegralConfig.from_dict(info), body)
 
     @classmethod
     def for_period(cls, decision_period: int, limit: float = DEFAULT_LIMIT, body: bool = False,
@@ -99,7 +78,8 @@ class MemoryConfig:
                    windup_decay: WindupDecay | None = None) -> "MemoryConfig":
         """The memory of a policy deciding every ``decision_period`` ticks of 1 ms (0: once
         per walking step, about 0.6 s)."""
-        return cls(decision_dt(decision_period), limit, body, band=band, clip=clip, windup_decay=windup_decay)
+        return cls(IntegralConfig(limit, decision_dt(decision_period), band=band, clip=clip, windup_decay=windup_decay),
+                   body)
 
     @classmethod
     def for_features(cls, features: str, decision_period: int, integral_gain: float = 0.0,
@@ -122,8 +102,8 @@ class MemoryConfig:
             return cls.for_period(decision_period, DEFAULT_LIMIT, features == "body", band, clip, windup_decay)
         if speed_range is None:
             raise ValueError("a memory whose integral offsets the base gait needs the library's speed range")
-        return cls(decision_dt(decision_period), integral_limit(integral_gain), features == "body", integral_gain,
-                   speed_range, band, clip, windup_decay)
+        return cls(IntegralConfig(integral_limit(integral_gain), decision_dt(decision_period), integral_gain,
+                                  speed_range, band, clip, windup_decay), features == "body")
 
 
 class SpeedMemory:
@@ -132,12 +112,12 @@ class SpeedMemory:
 
     def __init__(self, config: MemoryConfig) -> None:
         self.config = config
-        self._integral = SpeedIntegral(config.integral_config())
+        self._integral = SpeedIntegral(config.integral)
         self.reset()
 
     @property
     def integral(self) -> float:
-        """The integral of the speed error so far (m), within +-``config.limit``."""
+        """The integral of the speed error so far (m), within +-``config.integral.limit``."""
         return self._integral.value
 
     def reset(self, last_action: np.ndarray | None = None) -> None:

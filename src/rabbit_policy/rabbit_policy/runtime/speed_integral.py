@@ -26,7 +26,7 @@ remove: it corrects only in proportion to the error it sees.
 from __future__ import annotations
 
 from bisect import bisect_right
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from math import isfinite
 
 NOMINAL_STEP_S = 0.6
@@ -198,6 +198,28 @@ class IntegralConfig:
             if not (isfinite(low) and isfinite(high) and low < high and isfinite(self.gain) and self.gain > 0.0):
                 raise ValueError(f"the speed integral's speed range needs low < high (m/s) and a gain > 0, got "
                                  f"{self.speed_range!r} and {self.gain!r}")
+
+    def to_dict(self) -> dict:
+        """The fields as plain data (the rules as dicts), as a checkpoint's ``memory`` stores them."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, info: dict) -> "IntegralConfig":
+        """The configuration :meth:`to_dict` wrote (a checkpoint's JSON-like info: the range a
+        list, the rules dicts); ``ValueError`` for a field it does not have or a bad value."""
+        info = dict(info)
+        for name, kind in (("windup_decay", WindupDecay), ("feedforward", IntegralFeedforward)):
+            if isinstance(info.get(name), dict):
+                try:
+                    info[name] = kind(**info[name])
+                except TypeError as exc:
+                    raise ValueError(f"the speed integral's {name.replace('_', ' ')}: {exc}") from None
+        if info.get("speed_range") is not None:
+            info["speed_range"] = tuple(float(v) for v in info["speed_range"])
+        try:
+            return cls(**info)
+        except TypeError as exc:
+            raise ValueError(f"the speed integral: {exc}") from None
 
 
 class SpeedIntegral:

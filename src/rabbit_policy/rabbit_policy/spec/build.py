@@ -22,7 +22,8 @@ from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
-from rabbit_policy.spec.schema import ControllerSpec, IntegralSpec, NetworkSpec, SpecError, load_spec
+from rabbit_policy.spec.schema import (ControllerSpec, FeedforwardSpec, IntegralSpec, NetworkSpec, SpecError,
+                                       WindupDecaySpec, load_spec)
 
 
 def load_controller(path: str | Path) -> Policy:
@@ -77,6 +78,14 @@ def integral_config(spec: IntegralSpec | None) -> IntegralConfig | None:
                               feedforward)
     except ValueError as exc:
         raise SpecError(f"speed_integral: {exc}") from None
+
+
+def integral_spec(config: IntegralConfig) -> IntegralSpec:
+    """The spec's ``speed_integral`` for ``config``: :func:`integral_config`'s inverse."""
+    decay, ff = config.windup_decay, config.feedforward
+    return IntegralSpec(config.gain, config.limit, config.dt, config.speed_range, config.band, config.clip,
+                        WindupDecaySpec(decay.seconds, decay.tau, decay.at_start) if decay is not None else None,
+                        FeedforwardSpec(ff.speeds, ff.values, ff.start) if ff is not None else None)
 
 
 def rule_config(spec: ControllerSpec) -> RecoveryConfig:
@@ -134,9 +143,7 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
     if net.features != "paper":
         if integral is None:
             raise SpecError(f"network.features {net.features!r} keep the speed integral: speed_integral is needed")
-        memory = SpeedMemory(MemoryConfig(integral.dt, integral.limit, net.features == "body", integral.gain,
-                                          integral.speed_range, integral.band, integral.clip, integral.windup_decay,
-                                          integral.feedforward))
+        memory = SpeedMemory(MemoryConfig(integral, net.features == "body"))
     residual = on_rule = None
     if net.residual is not None:
         margin = net.residual.bounds_margin if net.residual.bounds_margin is not None else float("inf")

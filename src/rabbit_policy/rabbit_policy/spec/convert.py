@@ -14,11 +14,12 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.runtime.classic import CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW
+from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
+from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
-                                       FeedforwardSpec, IntegralSpec, LibrarySpec, NetworkSpec, OverlaySpec,
-                                       ResidualSpec, RuleSpec, WeightsSpec, WindupDecaySpec)
+                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec)
 
 RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
@@ -112,13 +113,7 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
     integral = None
     memory = info.get("memory")
     if memory is not None:
-        decay, ff = memory.get("windup_decay"), memory.get("feedforward")
-        integral = IntegralSpec(float(memory.get("gain", 0.0)), float(memory["limit"]), float(memory["dt"]),
-                                tuple(memory["speed_range"]) if memory.get("speed_range") is not None else None,
-                                memory.get("band"), memory.get("clip"),
-                                WindupDecaySpec(**decay) if decay is not None else None,
-                                FeedforwardSpec(tuple(ff["speeds"]), tuple(ff["values"]), bool(ff["start"]))
-                                if ff is not None else None)
+        integral = integral_spec(MemoryConfig.from_dict(memory).integral)
     if decision_period is None:
         decision_period = int(info.get("config", {}).get("decision_period", 0))
     overlay = blend = rule = None
