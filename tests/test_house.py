@@ -118,3 +118,49 @@ def test_shared_options_are_declared_once():
         declared = [name for name in tracked("src") if name.endswith(".py")
                     and f'add_argument("{option}"' in (ROOT / name).read_text()]
         assert declared == [f"src/rabbit_policy/rabbit_policy/{home}"], (option, declared)
+
+
+# where a decision timing is named otherwise, and why
+OTHER_TIMING_NAMES = {
+    ("rabbit_policy.runtime.decision_clock", "DecisionClock.__init__", "period"): "the clock's own period",
+    ("rabbit_policy.spec.schema", "DecisionSpec.__init__", "period_ticks"): "the spec file's field",
+    ("rabbit_policy.spec.schema", "ControllerSpec.__init__", "decision"): "the spec file's section",
+    ("rabbit_policy.runtime.alpha_blend", "AlphaBlend.__init__", "period_s"): "a hold in s, not a timing",
+}
+
+
+def signatures(package):
+    """(module, qualified name, signature) of every function and method ``package`` defines."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    for info in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
+        module = importlib.import_module(info.name)
+        for name, obj in vars(module).items():
+            if getattr(obj, "__module__", None) != module.__name__:
+                continue
+            members = [(name, obj)] if inspect.isfunction(obj) else [
+                (f"{name}.{n}", getattr(f, "__func__", f)) for n, f in vars(obj).items()
+                if inspect.isfunction(getattr(f, "__func__", f))] if inspect.isclass(obj) else []
+            for qualname, function in members:
+                yield info.name, qualname, inspect.signature(function)
+
+
+def test_a_decision_timing_has_one_type_where_it_enters_and_one_name_once_resolved():
+    """A decision timing a user asks for (own, step, N ticks) is a ``decision: DecisionTiming``
+    wherever it enters (make_policy, a checkpoint's conversion, the stack's configuration); once
+    resolved it is ``decision_period: int`` (ticks, 0 once per step) through the policies, the
+    loops and the environments. No third spelling (period, ticks, None for own)."""
+    import rabbit_policy
+
+    timing = re.compile(r"^(decision|decision_(period|ticks|timing)|timing|period|period_(ticks|s)|ticks)$")
+    wrong = []
+    for module, qualname, signature in signatures(rabbit_policy):
+        for name, parameter in signature.parameters.items():
+            if not timing.match(name) or (module, qualname, name) in OTHER_TIMING_NAMES:
+                continue
+            expected = {"decision": "DecisionTiming", "decision_period": "int"}.get(name)
+            if str(parameter.annotation) != expected:
+                wrong.append(f"{module}.{qualname}({name}: {parameter.annotation})")
+    assert not wrong, wrong

@@ -660,12 +660,12 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     from rabbit_policy.runtime.policies import checkpoint_policy
 
     overlaid, _ = _overlay_file(tmp_path)
-    per_step = checkpoint_policy(overlaid, decision_period=0)
+    per_step = checkpoint_policy(overlaid, PER_STEP)
     assert per_step.overlay is None and not per_step.needs_body
     assert per_step.name.endswith("(no recovery rule: once per step)")
     assert checkpoint_policy(overlaid).overlay is not None
     blending, _ = _overlay_file(tmp_path, at_once=True, policy_blend=True)
-    assert controller_settings(checkpoint_policy(blending, decision_period=0)) == DEFAULT_SETTINGS
+    assert controller_settings(checkpoint_policy(blending, PER_STEP)) == DEFAULT_SETTINGS
     assert required_controller_settings("learned", blending, once_per_step=True) == DEFAULT_SETTINGS
     for timing, settings in (("step", DEFAULT_SETTINGS), ("own", CONTROLLER_SETTINGS)):
         config = StackConfig(duration=1.0, schedule=((0.0, 1.0),), controller="learned", policy_file=str(blending),

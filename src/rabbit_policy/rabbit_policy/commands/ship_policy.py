@@ -417,6 +417,7 @@ def warm_start_policy(checkpoint):
     seed and bounds; deterministic), or None if it started from random weights."""
     import torch
 
+    from rabbit_msgs_py.decision_ticks import PER_STEP
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.runtime.policies import policy_of_checkpoint
@@ -429,7 +430,7 @@ def warm_start_policy(checkpoint):
     net, _ = initial_network(checkpoint.low, checkpoint.high, GaitLibrary.load(),
                              int(checkpoint.info.get("seed", 0)), name)
     return policy_of_checkpoint(PolicyCheckpoint(net.state_dict(), checkpoint.low, checkpoint.high, {}),
-                                f"warm start ({name})", decision_period=0)
+                                f"warm start ({name})", PER_STEP)
 
 
 def main(argv: list[str] | None = None) -> int:

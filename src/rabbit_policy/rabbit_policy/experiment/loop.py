@@ -40,8 +40,8 @@ from rabbit_policy.experiment import ticks
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario, on_tick_grid, whole_ticks
 from rabbit_policy.runtime.body import body_state
-from rabbit_policy.runtime.policies import (GaitCommand, Policy, controller_settings, decision_period, first_command,
-                                            reset_policy)
+from rabbit_policy.runtime.policies import GaitCommand, Policy, controller_settings, first_command, reset_policy
+from rabbit_policy.runtime.policies import decision_period as policy_decision_period
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.speed_schedule import SpeedSchedule, stamp_of
 from rabbit_policy.runtime.speed_window import Observation
@@ -65,7 +65,7 @@ class ClosedLoop:
     a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
     keep the speed window without a policy (the learning environment), observed as a policy
-    deciding every ``observe_period`` ticks (0: once per step) would see it.
+    deciding every ``decision_period`` ticks (0: once per step) would see it.
     """
 
     def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
@@ -73,8 +73,8 @@ class ClosedLoop:
                  controller: ControllerConfig | None = None,
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
                  record_state: bool = False, observe_speed: bool = False,
-                 observe_period: int = 0, decide_outside: bool = False) -> None:
-        if decide_outside and (policy is not None or not observe_speed or not observe_period):
+                 decision_period: int = 0, decide_outside: bool = False) -> None:
+        if decide_outside and (policy is not None or not observe_speed or not decision_period):
             raise ValueError("decide_outside is for a loop without a policy, observing every N > 0 ticks")
         reset_policy(policy)  # a policy with memory starts each walk afresh
         if start is None:
@@ -102,7 +102,7 @@ class ClosedLoop:
         self._deciding = policy is not None or decide_outside
         self.decide_outside = decide_outside
         self.pending: Observation | None = None
-        self._period = decision_period(policy) if policy is not None else observe_period
+        self._period = policy_decision_period(policy) if policy is not None else decision_period
         window = policy.decision_window if (policy is not None and self._period) else scenario.window
         # when the policy decides and what it sees: the rule policy_node runs too (stamps: sim
         # time in ticks, a sample being the state after a step)

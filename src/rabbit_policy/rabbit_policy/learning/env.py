@@ -558,7 +558,7 @@ class RabbitHZDEnv(gym.Env):
                                                                                        load_model(scenario.model))
             self._loop = ClosedLoop(scenario, start=GaitCommand(gait.alpha, gait.kd), start_speed=gait.speed,
                                     kp=gait.kp, model=self._model, observe_speed=True,
-                                    observe_period=self.decision_period, controller=self._controller)
+                                    decision_period=self.decision_period, controller=self._controller)
             self._max_ticks = int(round((self.rules.stall_after + 1.0) / self._model.opt.timestep))
             fell, stalled = self._run_to_touchdown()  # start observing at a touchdown
             if not (fell or stalled):

@@ -129,7 +129,7 @@ class SpecEnv(RabbitHZDEnv):
         if self._loop is None:  # the start gait: the walk begins on it
             command = self.policy.start_from(self._start, physical)
             self._loop = ClosedLoop(self._scenario, start=command, controller=self._controller, model=self._model,
-                                    observe_speed=True, observe_period=self.decision_period, decide_outside=True)
+                                    observe_speed=True, decision_period=self.decision_period, decide_outside=True)
         else:
             observation, self._loop.pending = self._loop.pending, None
             command = self.policy.decide(observation, physical)

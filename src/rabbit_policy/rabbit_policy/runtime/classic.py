@@ -108,20 +108,20 @@ average spans the last step's duration (0.36-0.73 s), this only bounds it."""
 
 
 class PeriodicPolicy:
-    """A policy that decides every ``period`` control ticks (1 ms) instead of once per step,
+    """A policy that decides every ``decision_period`` control ticks (1 ms) instead of once per step,
     as the paper evaluates its network at every simulation step: its observation is the
     moving average over the last step's duration (at most ``window`` ticks), and its gait applies at once, blended in
     from the outputs in force (``HZDController.apply_now``: continuous outputs). The loop
     that runs it reads ``decision_period``/``decision_window``; ``act`` is the inner
     policy's."""
 
-    def __init__(self, policy: Policy, period: int, window: int = DEFAULT_DECISION_WINDOW) -> None:
-        check_ticks(period)
+    def __init__(self, policy: Policy, decision_period: int, window: int = DEFAULT_DECISION_WINDOW) -> None:
+        check_ticks(decision_period)
         check_ticks(window, "the decision window")
         self.policy = policy
-        self.decision_period = period
+        self.decision_period = decision_period
         self.decision_window = window
-        self.name = f"{policy.name}@{period}ticks"
+        self.name = f"{policy.name}@{decision_period}ticks"
         self.needs_body = getattr(policy, "needs_body", False)
         if self.needs_body:  # it starts on its own gait (no body state before the walk)
             self.start_command = policy.start_command

@@ -96,7 +96,7 @@ def required_controller_settings(kind: str, policy_file: str | Path | None = Non
     kind = controller_name(kind)
     if kind == "learned" and policy_file and not is_spec_file(policy_file):
         try:
-            return controller_settings(checkpoint_policy(policy_file, 0 if once_per_step else None))
+            return controller_settings(checkpoint_policy(policy_file, PER_STEP if once_per_step else OWN))
         except Exception:  # noqa: BLE001 - the node says why when it builds the controller
             return {}
     from dataclasses import asdict
@@ -232,22 +232,22 @@ class NetworkPolicy:
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
-def checkpoint_policy(path: str | Path, decision_period: int | None = None) -> NetworkPolicy:
+def checkpoint_policy(path: str | Path, decision: DecisionTiming = OWN) -> NetworkPolicy:
     """The HZD-RL network of a training checkpoint (``.pt``, read with torch) as its spec
     builds it (:func:`rabbit_policy.spec.convert.checkpoint_spec` from the checkpoint's
-    ``info``, then :func:`rabbit_policy.spec.build`; nothing written). ``decision_period``:
-    None = as trained, 0 = once per step (an overlay then drops: the rule acts within the
-    step; the name says so), N = every N ticks. The policy's ``checkpoint`` is the file read."""
+    ``info``, then :func:`rabbit_policy.spec.build`; nothing written). ``decision``: as
+    trained (own), once per step (an overlay then drops: the rule acts within the step; the
+    name says so) or every N ticks. The policy's ``checkpoint`` is the file read."""
     from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
 
     checkpoint = PolicyCheckpoint.load(path)
     if checkpoint.info.get("action") == "spec":
         raise ValueError(f"a run of train.py --spec: its policy is {Path(path).with_suffix('.yaml').name}, the "
                          "spec with these weights (this file records the run)")
-    return policy_of_checkpoint(checkpoint, Path(path).name, decision_period)
+    return policy_of_checkpoint(checkpoint, Path(path).name, decision)
 
 
-def policy_of_checkpoint(checkpoint, name: str, decision_period: int | None = None) -> NetworkPolicy:
+def policy_of_checkpoint(checkpoint, name: str, decision: DecisionTiming = OWN) -> NetworkPolicy:
     """:func:`checkpoint_policy` of a ``PolicyCheckpoint`` in memory (a run being trained):
     ``name`` names it."""
     from rabbit_policy.spec.build import build
@@ -258,7 +258,7 @@ def policy_of_checkpoint(checkpoint, name: str, decision_period: int | None = No
     info = checkpoint.info
     weights, biases, buffers = network_arrays(checkpoint)
     spec = checkpoint_spec(info, (weights, biases), buffers, WeightsSpec(*weights_spec_of(weights, biases)),
-                           Path(name).stem, PACKAGED, Path("."), decision_period, {"checkpoint": name})
+                           Path(name).stem, PACKAGED, Path("."), decision, {"checkpoint": name})
     dropped = info.get("recovery_overlay") is not None and spec.overlay is None
     policy = build(spec, weights=(weights, biases),
                    source=name + (" (no recovery rule: once per step)" if dropped else ""))
@@ -306,7 +306,7 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     if mode not in LIBRARY_MODES:
         raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
     if kind == "learned" and policy_file and not is_spec_file(policy_file):
-        policy = _checkpoint(policy_file, decision.ticks)  # a training checkpoint: it carries its decision period
+        policy = _checkpoint(policy_file, decision)  # a training checkpoint: it carries its decision period
     else:
         from rabbit_policy.spec import SpecError, build
         from rabbit_policy.spec.variants import controller_spec
@@ -327,7 +327,7 @@ def is_spec_file(path: str | Path) -> bool:
     return Path(path).suffix.lower() in (".yaml", ".yml", ".json")
 
 
-def _checkpoint(policy_file: str | Path | None, decision_period: int | None) -> NetworkPolicy:
+def _checkpoint(policy_file: str | Path | None, decision: DecisionTiming) -> NetworkPolicy:
     """The learned policy from ``policy_file`` (None: the packaged one)."""
     path = Path(policy_file) if policy_file else packaged_policy_file()
     if not path.is_file():
@@ -336,7 +336,7 @@ def _checkpoint(policy_file: str | Path | None, decision_period: int | None) -> 
         raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=classic "
                                 "or give policy_file")
     try:
-        return checkpoint_policy(path, decision_period)
+        return checkpoint_policy(path, decision)
     except Exception as exc:  # noqa: BLE001 - any file that is not a checkpoint: torch raises many kinds
         raise PolicyUnavailable(f"cannot load policy file {path}: not a policy checkpoint "
                                 f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None

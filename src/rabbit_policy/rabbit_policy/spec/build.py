@@ -96,11 +96,12 @@ def rule_config(spec: ControllerSpec) -> RecoveryConfig:
         raise SpecError(f"recovery_rule: {exc}") from None
 
 
-def residual_base(base: str, library: GaitLibrary, rule: RecoveryConfig, period: int, window: int) -> RecoveryPolicy:
+def residual_base(base: str, library: GaitLibrary, rule: RecoveryConfig, decision_period: int,
+                  window: int) -> RecoveryPolicy:
     """What a residual on ``base`` (``recovery``, ``recovery_gated``) adds to: the recovery
-    rule ``rule`` on the interpolated ``library``, deciding every ``period`` ticks; with
+    rule ``rule`` on the interpolated ``library``, deciding every ``decision_period`` ticks; with
     ``recovery_gated`` the residual is scaled by the rule's weight."""
-    policy = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule, period, window)
+    policy = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule, decision_period, window)
     policy.gates_residual = base == "recovery_gated"
     return policy
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.runtime.classic import CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
@@ -80,26 +81,27 @@ def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict
 
 
 def learned_spec(checkpoint, out_dir: Path, name: str = "learned", source: str = PACKAGED,
-                 decision_period: int | None = None, provenance: dict | None = None) -> ControllerSpec:
+                 decision: DecisionTiming = OWN, provenance: dict | None = None) -> ControllerSpec:
     """The spec of a learned policy from its checkpoint (``PolicyCheckpoint``), its weights
     written beside it in ``out_dir`` (:func:`checkpoint_spec`)."""
     weights, biases, buffers = network_arrays(checkpoint)
     file, sha = save_weights(weights, biases, out_dir, name)
     return checkpoint_spec(checkpoint.info, (weights, biases), buffers, WeightsSpec(file, sha), name, source, out_dir,
-                           decision_period, provenance)
+                           decision, provenance)
 
 
 def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weights: WeightsSpec,
                     name: str = "learned", source: str = PACKAGED, base: Path = Path("."),
-                    decision_period: int | None = None, provenance: dict | None = None) -> ControllerSpec:
+                    decision: DecisionTiming = OWN, provenance: dict | None = None) -> ControllerSpec:
     """The spec of a network trained as a checkpoint's ``info`` records it (what
     ``train.py`` and ``ship_policy.py`` write): its ``layers`` (weight matrices, bias
     vectors) and ``buffers`` (offset, scale, low, high) with the memory, the residual and its
     base as recorded. The constants a checkpoint does not record are today's code defaults,
     written down here: the recovery rule's (``RecoveryConfig``) for a residual on it or an
     overlay, the overlay's policy blend (the controller's default blend) and the controller's
-    at-once settings. ``decision_period``: None as trained, 0 once per step (an overlay then
-    drops: the rule acts within the step), N ticks. Nothing is written."""
+    at-once settings. ``decision``: as trained (own: the period the checkpoint's config
+    records), once per step (an overlay then drops: the rule acts within the step) or N
+    ticks. Nothing is written."""
     weights_list, _ = layers
     residual = None
     residual_base = info.get("residual_base", "classic")
@@ -114,8 +116,7 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
     memory = info.get("memory")
     if memory is not None:
         integral = integral_spec(MemoryConfig.from_dict(memory).integral)
-    if decision_period is None:
-        decision_period = int(info.get("config", {}).get("decision_period", 0))
+    decision_period = decision.resolve(int(info.get("config", {}).get("decision_period", 0)))
     overlay = blend = rule = None
     settings: dict = {}
     if residual is not None and residual_base != "classic":
