@@ -120,6 +120,61 @@ def test_shared_options_are_declared_once():
         assert declared == [f"src/rabbit_policy/rabbit_policy/{home}"], (option, declared)
 
 
+
+class _Parsed(Exception):
+    """Raised by the patched parser with the parser a command built."""
+
+    def __init__(self, parser) -> None:
+        self.parser = parser
+
+
+def command_parsers(monkeypatch) -> dict[str, object]:
+    """Every command's argument parser, as its ``main`` builds it (stopped where it would parse)."""
+    import argparse
+    import importlib
+    import inspect
+    import pkgutil
+
+    import rabbit_policy.commands
+    import rabbit_sim.commands
+
+    def stop(self, args=None, namespace=None):
+        raise _Parsed(self)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop)
+    monkeypatch.setattr("sys.argv", ["command"])
+    parsers = {}
+    for package in (rabbit_policy.commands, rabbit_sim.commands):
+        for info in pkgutil.iter_modules(package.__path__):
+            main = importlib.import_module(f"{package.__name__}.{info.name}").main
+            try:
+                main([]) if inspect.signature(main).parameters else main()
+            except _Parsed as parsed:
+                parsers[info.name] = parsed.parser
+    return parsers
+
+
+# options that parse differently in some commands, and why
+OPTIONS_OF_ONE_KIND = {
+    "--decision-period": "training's takes step or N ticks, not own: an environment has no timing of its own",
+}
+
+
+def test_an_option_means_one_kind_of_value_in_every_command(monkeypatch):
+    """An option spelled the same in two commands parses the same way (the same type and
+    action: ``--out`` is a path, ``--speed`` a number > 0, ``--gait-dir`` a directory or "",
+    ``--decision-period`` a timing), whatever each command writes there or defaults to."""
+    parsers = command_parsers(monkeypatch)
+    assert len(parsers) >= 25, sorted(parsers)
+    kinds: dict[str, set] = {}
+    for command, parser in parsers.items():
+        for action in parser._actions:
+            for flag in action.option_strings:
+                kind = getattr(action.type, "__name__", None) or "str"  # argparse's default type: the text
+                kinds.setdefault(flag, set()).add((kind, type(action).__name__))
+    mixed = {flag: kind for flag, kind in kinds.items() if len(kind) > 1 and flag not in OPTIONS_OF_ONE_KIND}
+    assert not mixed, mixed
+
 # where a decision timing is named otherwise, and why
 OTHER_TIMING_NAMES = {
     ("rabbit_policy.runtime.decision_clock", "DecisionClock.__init__", "period"): "the clock's own period",

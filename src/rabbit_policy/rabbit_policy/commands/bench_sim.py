@@ -24,17 +24,19 @@ import time
 import mujoco
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def main() -> None:
     ensure_localhost_discovery()
+    from rabbit_policy.experiment.options import add_model_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--speed", type=float, default=1.0)
-    parser.add_argument("--model", choices=("paper", "drives"), default="paper")
+    parser.add_argument("--speed", type=positive, default=1.0, help="the gait's speed (m/s)")
+    add_model_option(parser)
     args = parser.parse_args()
 
     from rabbit_hzd_controller.gait_state import state_on_gait

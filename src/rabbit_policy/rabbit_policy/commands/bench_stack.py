@@ -40,7 +40,7 @@ import tempfile
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
@@ -159,11 +159,11 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--duration", type=float, default=10.0, help="lockstep runs, sim s")
-    parser.add_argument("--realtime-duration", type=float, default=10.0, help="realtime runs, s")
-    parser.add_argument("--speed", type=float, default=1.0)
+    parser.add_argument("--duration", type=positive, default=10.0, help="lockstep runs, sim s")
+    parser.add_argument("--realtime-duration", type=positive, default=10.0, help="realtime runs, s")
+    parser.add_argument("--speed", type=positive, default=1.0, help="commanded speed (m/s)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--rtf", type=float, default=1.0, help="paced runs: target real-time factor")
+    parser.add_argument("--rtf", type=positive, default=1.0, help="paced runs: target real-time factor")
     parser.add_argument("--busy", type=int, default=0, metavar="N", help="busy loops beside every scenario")
     parser.add_argument("--only", choices=SCENARIOS, action="append",
                         help="run only this scenario (repeatable)")

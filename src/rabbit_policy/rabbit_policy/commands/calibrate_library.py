@@ -15,21 +15,23 @@ import sys
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_policy.parallel import add_backend_arguments, open_backend
 
 
 def main(argv: list[str] | None = None) -> int:
+    from rabbit_policy.experiment.options import add_gait_dir_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--gait-dir", type=Path, default=None, help="gait library directory (default: packaged)")
+    add_gait_dir_option(parser)
     parser.add_argument("--weights", type=int, default=11, help="blend weights per pair (>= 2)")
-    parser.add_argument("--duration", type=float, default=20.0, help="walk per blend, s of sim time")
+    parser.add_argument("--duration", type=positive, default=20.0, help="walk per blend, s of sim time")
     add_backend_arguments(parser)
     args = parser.parse_args(argv)
     from rabbit_policy.gait_design.calibration import CalibrationConfig, calibrate
     from rabbit_policy.runtime.gait_library import CALIBRATION_FILE, GaitLibrary, packaged_gait_dir
 
-    directory = args.gait_dir or packaged_gait_dir()
+    directory = Path(args.gait_dir) if args.gait_dir else packaged_gait_dir()
     try:
         config = CalibrationConfig(args.weights, args.duration)
         library = GaitLibrary.load(directory)

@@ -40,13 +40,15 @@ choose_headless_gl()
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.experiment.options import add_gait_dir_option, add_model_option, add_policy_file_option
+
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--out", default="evaluation", help="output directory (created; files replaced)")
+    parser.add_argument("--out", type=Path, default=Path("evaluation"), help="output directory (created; files replaced)")
     parser.add_argument("--quick", action="store_true", help="short version for tests")
     add_backend_arguments(parser, progress=True)
-    parser.add_argument("--model", choices=("paper", "drives"), default="paper")
-    parser.add_argument("--gait-dir", default=None, help="classic gait library (default: packaged)")
-    parser.add_argument("--policy-file", default=None, help="HZD-RL checkpoint (default: packaged)")
+    add_model_option(parser)
+    add_gait_dir_option(parser)
+    add_policy_file_option(parser)
     parser.add_argument("--no-video", action="store_true", help="skip the GIFs")
     parser.add_argument("--ablation", nargs="+", default=[], metavar="JSON",
                         help="scripts/compare_policies.py --out files: their checks 1-6 table joins the report")

@@ -16,10 +16,12 @@ def main() -> None:
     from rabbit_hzd_controller.gait import Gait
     from rabbit_policy.runtime.gait_library import packaged_gait_dir
 
+    from rabbit_policy.experiment.options import add_gait_dir_option
+
     parser = ArgumentParser(description=__doc__)
-    parser.add_argument("--gait-dir", type=Path, default=None)
+    add_gait_dir_option(parser)
     args = parser.parse_args()
-    directory = args.gait_dir or packaged_gait_dir()
+    directory = Path(args.gait_dir) if args.gait_dir else packaged_gait_dir()
     print("| design speed (m/s) | step length (m) | step period (s) | Kd (N m s/rad) | cost | "
           "60 s walk: mean speed (m/s) | peak torque (N m) | max friction ratio | passed |")
     print("|---|---|---|---|---|---|---|---|---|")

@@ -34,7 +34,7 @@ import sys
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
@@ -47,7 +47,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="lockstep: one torque per state, as fast as it goes (deterministic); paced: lockstep "
                              "held to the wall clock (--rtf), slower if the machine cannot keep up; realtime: "
                              "free-running 1 kHz wall clock (latency studies; halts if it falls behind)")
-    parser.add_argument("--rtf", type=float, default=1.0, help="--mode paced: target real-time factor (default 1)")
+    parser.add_argument("--rtf", type=positive, default=1.0, help="--mode paced: target real-time factor (default 1)")
     add_model_options(parser)
     parser.add_argument("--namespace", default="", metavar="NS",
                         help="ROS namespace of every node and topic (e.g. rabbit2: /rabbit2/joint_states, ...); "

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 
 from rabbit_msgs_py.cli import non_negative, positive
-from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
+from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming, decision_ticks
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
 
@@ -31,10 +31,26 @@ def add_walk_options(parser: argparse.ArgumentParser) -> None:
                         help='pushes on the torso, "3:-100:0.1" (s, N, s)')
 
 
-def add_model_options(parser: argparse.ArgumentParser) -> None:
-    """``--model``, ``--friction``, ``--torso-mass-scale``, ``--torque-delay``."""
+def add_model_option(parser: argparse.ArgumentParser) -> None:
+    """``--model``: the model variant (every command that walks the robot)."""
     parser.add_argument("--model", choices=MODEL_VARIANTS, default="paper",
                         help="model variant: paper (ideal joints) or drives (RABBIT's gears and joint friction)")
+
+
+def add_gait_dir_option(parser: argparse.ArgumentParser) -> None:
+    """``--gait-dir``: a classic gait library's directory ("" : the packaged one)."""
+    parser.add_argument("--gait-dir", default="", help="classic: gait library directory (default: packaged)")
+
+
+def add_policy_file_option(parser: argparse.ArgumentParser) -> None:
+    """``--policy-file``: the learned controller's spec or checkpoint ("": the packaged spec)."""
+    parser.add_argument("--policy-file", default="", help="learned: a controller spec (.yaml, docs/controller_spec.md) "
+                                                          "or a training checkpoint (.pt) (default: the packaged spec)")
+
+
+def add_model_options(parser: argparse.ArgumentParser) -> None:
+    """``--model``, ``--friction``, ``--torso-mass-scale``, ``--torque-delay``."""
+    add_model_option(parser)
     parser.add_argument("--friction", type=positive, default=None, help="foot friction coefficient (default 0.8)")
     parser.add_argument("--torso-mass-scale", type=positive, default=1.0, help="factor on the torso mass and inertia")
     parser.add_argument("--torque-delay", type=non_negative, default=0.0, help="torque delay (s, whole ms)")
@@ -53,14 +69,23 @@ def decision_timing(text: str) -> DecisionTiming:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def decision_ticks_option(text: str) -> int:
+    """An argparse type: ``step`` or N ticks as a training environment takes them (0 or N:
+    an environment has no timing of its own, so not ``own``)."""
+    try:
+        return decision_ticks(DecisionTiming.parse(text).ticks)  # own: ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"a training environment decides at step (0) or every N >= 1 ticks (it has "
+                                         f"no timing of its own), got {text!r}") from None
+
+
 def add_policy_options(parser: argparse.ArgumentParser) -> None:
     """``--library-mode``, ``--gait-dir``, ``--policy-file``, ``--decision-period``,
     ``--speed-integral`` (``make_policy``'s arguments; run_stack hands them to policy_node)."""
     parser.add_argument("--library-mode", choices=("nearest", "interpolate"), default="interpolate",
                         help="classic: the nearest gait or the blend of the two around the command")
-    parser.add_argument("--gait-dir", default="", help="classic: gait library directory (default: packaged)")
-    parser.add_argument("--policy-file", default="", help="learned: a controller spec (.yaml, docs/controller_spec.md) "
-                                                          "or a training checkpoint (.pt) (default: the packaged spec)")
+    add_gait_dir_option(parser)
+    add_policy_file_option(parser)
     parser.add_argument("--decision-period", type=decision_timing, default=OWN, metavar="own|step|TICKS",
                         help="when the policy decides: own = as it was made (classic every 20 ticks, learned as "
                              "trained; the default), step = once per step, N = every N ticks (1 ms), each gait "

@@ -138,6 +138,7 @@ from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.decision_ticks import decision_ticks
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.loop import ClosedLoop
+from rabbit_policy.experiment.options import decision_ticks_option
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.registration import MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds,  # noqa: F401  (ActionBounds re-exported)
@@ -271,8 +272,8 @@ class EpisodeConfig:
 
     max_steps: int = option(500, "env steps per training episode (each decision_period ticks; 0 ticks: one "
                                  "walking step)")
-    decision_period: int = option(20, "ticks (1 ms) per env step, the gait applied at once; 0: one env step per "
-                                      "walking step, the gait for the next step")
+    decision_period: int = option(20, "ticks (1 ms) per env step, the gait applied at once; step (or 0): one env "
+                                      "step per walking step, the gait for the next step", type=decision_ticks_option)
     distribution: str = option("broad", "episodes: paper (one command change), broad (commands every 2-5 s, "
                                         "pushes, model errors, torque delays), moderate (pushes up to 12 N s, delays up "
                                         "to 2 ms, noisy speeds), robust (pushes up to 20 N s, delays up to 4 ms, "

@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import option
+from rabbit_msgs_py.cli import option, positive_int
 from rabbit_policy.learning.env import EpisodeConfig
 from rabbit_policy.runtime.network import HZDPolicyNet, PolicyCheckpoint
 
@@ -55,7 +55,7 @@ class SB3Config(EpisodeConfig):
     log_every: int = option(2048, "env steps between log.csv rows")
     eval_every: int = option(20_000, "env steps between acceptance evaluations (and at the start and end; 0: "
                                      "at the end only)")
-    workers: int = option(2, "processes (or Ray CPUs) for the acceptance evaluations")
+    workers: int = option(2, "processes (or Ray CPUs) for the acceptance evaluations", type=positive_int)
     checkpoint_every: int = option(20_000, "env steps between sb3_checkpoint.zip saves (and at the end and on "
                                            "Ctrl-C), what --resume continues from")
 

@@ -47,7 +47,7 @@ from multiprocessing import active_children
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import option
+from rabbit_msgs_py.cli import option, positive_int
 from rabbit_policy.parallel import BackendConfig
 
 
@@ -60,7 +60,7 @@ class TrainingConfig:
     algo: str
     out: Path
     trainer: Any
-    workers: int = option(2, "processes (or Ray CPUs) for rollouts and evaluations")
+    workers: int = option(2, "processes (or Ray CPUs) for rollouts and evaluations", type=positive_int)
     iterations: int = option(30, "ES generations / PPO iterations in all, resumed ones included",
                              aliases=("--generations",))
     checkpoint_every: int = option(5, "write checkpoint.pt every N iterations (and on Ctrl-C/SIGTERM)")

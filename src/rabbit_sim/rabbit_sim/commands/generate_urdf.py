@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, positive
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -19,7 +19,7 @@ def main(argv: list[str] | None = None) -> int:
 
     parser = ArgumentParser(description=__doc__)
     parser.add_argument("--variant", choices=MODEL_VARIANTS, default="paper", help="the model variant")
-    parser.add_argument("--torso-mass-scale", type=float, default=1.0, help="torso mass factor")
+    parser.add_argument("--torso-mass-scale", type=positive, default=1.0, help="factor on the torso mass and inertia")
     parser.add_argument("--out", type=Path, default=PACKAGED_URDF, help="the file to write (default: the packaged one)")
     parser.add_argument("--check", action="store_true", help="compare with --out instead of writing it")
     args = parser.parse_args(argv)

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_msgs_py.environment import ensure_localhost_discovery
@@ -33,7 +34,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("output", help="bag directory to create (with --recover: the damaged bag)")
     parser.add_argument("--recover", action="store_true", help="rebuild a bag cut short (see above)")
-    parser.add_argument("--out", default=None, help="--recover: the new bag directory (default <bag>.recovered)")
+    parser.add_argument("--out", type=Path, default=None, help="--recover: the new bag directory (default <bag>.recovered)")
     parser.add_argument("--topics", nargs="+", default=[], help="topics to record (default: all stack topics)")
     parser.add_argument("--compression", choices=("none", "zstd"), default="none")
     parser.add_argument("--log-time", choices=("receive", "sim"), default="receive",
@@ -42,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     if args.recover:
-        return recover(args.output, args.out or args.output.rstrip("/") + ".recovered")
+        return recover(args.output, args.out or Path(args.output.rstrip("/") + ".recovered"))
     from rabbit_sim.recorder_node import main as recorder_main
 
     topics = "[" + ",".join(f"'{t}'" for t in args.topics) + "]" if args.topics else "['']"
@@ -52,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     return recorder_main(ros_args)
 
 
-def recover(damaged: str, output: str) -> int:
+def recover(damaged: str, output: Path) -> int:
     from rabbit_sim.bag import BagError, recover_bag
     from rabbit_sim.recorder_node import recorded_qos
 

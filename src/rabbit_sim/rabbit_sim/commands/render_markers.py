@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> int:
     group = parser.add_mutually_exclusive_group()
     group.add_argument("--time", type=float, default=0.0, help="sim time of the frame (s)")
     group.add_argument("--times", default=None, help="comma-separated sim times: one panel each")
-    parser.add_argument("--out", required=True, help="PNG to write")
+    parser.add_argument("--out", type=Path, required=True, help="PNG to write")
     args = parser.parse_args(argv)
     try:
         times = [float(t) for t in args.times.split(",")] if args.times else [args.time]
@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> int:
     except (BagError, OSError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    render_strip(frames, Path(args.out))
+    render_strip(frames, args.out)
     print(f"wrote {args.out} ({len(frames)} frame{'s' if len(frames) > 1 else ''})")
     return 0
 
