@@ -219,3 +219,25 @@ def test_a_decision_timing_has_one_type_where_it_enters_and_one_name_once_resolv
             if str(parameter.annotation) != expected:
                 wrong.append(f"{module}.{qualname}({name}: {parameter.annotation})")
     assert not wrong, wrong
+
+
+def test_the_node_loads_the_runtime_apart_from_learning_and_evaluation():
+    """policy_node with the three packaged controllers built loads runtime/, spec/ and the
+    schedule's parser, nothing of learning, evaluation, gait design, bring-up or the commands,
+    nor torch or Gymnasium (docs/architecture.md: why rabbit_policy stays one package)."""
+    import json
+    import sys
+
+    code = ("import json, sys; import rabbit_policy.policy_node; "
+            "from rabbit_policy.runtime.policies import make_policy; "
+            "[make_policy(kind) for kind in ('classic', 'learned', 'recovery')]; "
+            "print(json.dumps(sorted(sys.modules)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    loaded = json.loads(out.stdout)
+    ours = {name for name in loaded if name.startswith("rabbit_policy.")}
+    floors = {name.split(".")[1] for name in ours}
+    assert floors <= {"policy_node", "policy_driver", "registration", "runtime", "spec", "experiment"}, floors
+    assert {name for name in ours if name.startswith("rabbit_policy.experiment.")} <= {
+        "rabbit_policy.experiment.scenario"}
+    assert not {"torch", "gymnasium"} & set(loaded)

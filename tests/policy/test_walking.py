@@ -168,7 +168,6 @@ def test_the_windup_decay_leaves_a_constant_command_alone_and_takes_the_overshoo
     """The learned network's integral winds up on the lag behind a new command (0.8 -> 1.4 m/s:
     about 0.07 m/s too fast 5-10 s later without the windup decay); with it the overshoot is
     less than half that, and a walk at a constant command is the same walk bit for bit."""
-    from dataclasses import replace
 
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.runtime.memory import SpeedMemory
@@ -176,8 +175,8 @@ def test_the_windup_decay_leaves_a_constant_command_alone_and_takes_the_overshoo
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     plain, decaying = make_policy("learned"), make_policy("learned")
-    plain.memory = SpeedMemory(replace(plain.memory.config, windup_decay=None, feedforward=None))  # the network's own
-    decaying.memory = SpeedMemory(replace(decaying.memory.config, windup_decay=WindupDecay(), feedforward=None))
+    plain.memory = SpeedMemory(plain.memory.config.with_integral(windup_decay=None, feedforward=None))  # the network's own
+    decaying.memory = SpeedMemory(decaying.memory.config.with_integral(windup_decay=WindupDecay(), feedforward=None))
     constant = Scenario.constant(1.1)
     assert (walk(plain, constant, 8.0).hip_x == walk(decaying, constant, 8.0).hip_x).all()
     change = Scenario(schedule=((0.0, 0.8), (6.0, 1.4)))
@@ -201,10 +200,10 @@ def test_the_integral_feedforward_start_takes_the_start_transient_out():
     from rabbit_policy.runtime.policies import NetworkPolicy, make_policy
 
     plain, fed = make_policy("learned"), make_policy("learned")
-    plain.memory = SpeedMemory(replace(plain.memory.config, feedforward=None))
+    plain.memory = SpeedMemory(plain.memory.config.with_integral(feedforward=None))
     table = steady_integrals(plain, (0.95, 1.0, 1.05))
     assert table.values[1] < -0.15 and table.values == steady_integrals(fed, (0.95, 1.0, 1.05)).values
-    fed.memory = SpeedMemory(replace(fed.memory.config, feedforward=replace(table, start=True)))
+    fed.memory = SpeedMemory(fed.memory.config.with_integral(feedforward=replace(table, start=True)))
     early = [walk(policy, Scenario.constant(1.0), 6.0).mean_speed(3.0, 6.0) - 1.0 for policy in (plain, fed)]
     assert early[0] > 0.02 and abs(early[1]) < min(0.02, early[0] / 2), early
     with pytest.raises(ValueError, match="did not walk"):

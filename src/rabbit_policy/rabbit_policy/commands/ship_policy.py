@@ -378,8 +378,7 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
                                 ("--integral-windup-decay", "windup_decay", windup_decay)):
         if value is not None:
             try:
-                memory = replace(memory, integral=replace(
-                    memory.integral, **{name: WindupDecay(*value) if name == "windup_decay" else value}))
+                memory = memory.with_integral(**{name: WindupDecay(*value) if name == "windup_decay" else value})
             except ValueError as exc:
                 raise ValueError(f"{option}: {exc}") from None
     checkpoint.info["memory"] = memory.to_dict()
@@ -390,8 +389,7 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
 
         try:
             table = steady_integrals(checkpoint_policy(out), feedforward)
-            memory = replace(memory, integral=replace(memory.integral,
-                                                      feedforward=replace(table, start=feedforward_start)))
+            memory = memory.with_integral(feedforward=replace(table, start=feedforward_start))
         except ValueError as exc:
             raise ValueError(f"--integral-feedforward: {exc}") from None
         checkpoint.info["memory"] = memory.to_dict()

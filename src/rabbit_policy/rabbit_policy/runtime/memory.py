@@ -17,7 +17,7 @@ With ``body`` (features ``"body"``, the ablation's row c) the five body-state nu
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,6 +58,10 @@ class MemoryConfig:
             raise ValueError(f"the memory's integral must be an IntegralConfig, got {self.integral!r}")
         if not isinstance(self.body, bool):
             raise ValueError(f"the memory's body must be True or False, got {self.body!r}")
+
+    def with_integral(self, **changes) -> "MemoryConfig":
+        """This memory with the integral's fields ``changes`` replaced (checked again)."""
+        return replace(self, integral=replace(self.integral, **changes))
 
     def to_dict(self) -> dict:
         """One flat dict, as a checkpoint's ``memory`` stores it: the integral's fields and ``body``."""
