@@ -227,6 +227,19 @@ def test_a_spec_round_trips_through_its_file(tmp_path):
 
 
 @pytest.mark.slow
+def test_a_speed_integral_converts_between_its_spec_and_its_configuration_both_ways():
+    """The spec's ``speed_integral`` and the runtime's ``IntegralConfig`` carry the same
+    fields: the packaged learned one (every rule set) and one with none, there and back."""
+    from rabbit_policy.runtime.speed_integral import IntegralConfig
+    from rabbit_policy.spec.build import integral_config, integral_spec
+
+    shipped = load_spec(packaged_spec("learned")).speed_integral
+    assert shipped.windup_decay is not None and shipped.feedforward is not None
+    assert integral_spec(integral_config(shipped)) == shipped
+    plain = IntegralConfig(0.2, 0.02)
+    assert integral_config(integral_spec(plain)) == plain
+
+
 def test_the_learned_spec_env_is_the_deployed_loop_with_the_network_as_the_agent():
     """``RabbitHZD-Learned-v1``: an agent that gives the network's own outputs walks the
     deployed controller's walk bit for bit (the same scenario: a push the rule answers, a
