@@ -79,10 +79,8 @@ class ControllerConfig:
         tick, as the paper applies alpha (a jump in the desired outputs).
     within_step_until: a gait :meth:`HZDController.apply_now` receives at or after this
         phase waits for the next touchdown instead (and blends in there over
-        ``blend_phase``): changing the swing leg's path just before it lands made the
-        decelerations from 1.4-1.5 m/s commanded at 3/4 of a step fall (measured: 4 of 72
-        decelerations fell for the learned policy with 1.0, none with 0.6 and a 0.2
-        touchdown blend).
+        ``blend_phase``): changing the swing leg's path just before it lands can make a
+        fast deceleration fall (docs/controller.md, "A gait within the step", measures it).
     """
 
     kp: float = 3000.0

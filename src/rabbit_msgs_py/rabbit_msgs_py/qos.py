@@ -23,8 +23,7 @@
   sides (``SERVICE_QOS``). The server keeps every request; but a caller's responses land in
   its own client's history, and rclpy's default client keeps 10: a client that makes more
   than 10 calls before it takes their answers loses the rest, and no server can make up
-  for that (measured: 300 calls at once from one default client, all 300 served, 160 answers
-  reached the caller; with ``SERVICE_QOS`` 300 of 300). Make such clients with it.
+  for that (docs/faults.md measures it). Make such clients with it.
 * Clock: reliable, keep last 10 (a recorder in lockstep must get every one; the newest
   is the one that matters to anyone else).
 """

@@ -246,9 +246,9 @@ DISTRIBUTIONS = {
                                   max_impulse=20.0, observation_noise=0.02),
     # the push-recovery issue's training signal: a push in every episode at a phase of a step
     # (common random numbers in phase), 0.8-2.2x classic's margin at the speed in force (two
-    # thirds backward, where the margin binds), commands every 2-5 s, mild model errors (with
-    # the moderate ones, friction 0.5 and 3 ms delays, the recovery controller fell or stalled in
-    # 7 of 24 unpushed episodes and classic in 4: noise in the ranks that says nothing of pushes)
+    # thirds backward, where the margin binds), commands every 2-5 s, mild model errors (the
+    # moderate ones made unpushed episodes fall: noise in the ranks that says nothing of pushes;
+    # measured in commit d3e8074)
     "recovery": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
                                     relative_impulse=True, min_impulse=0.8, max_impulse=2.2, backward_fraction=2 / 3,
                                     frictions=(None, None, 0.6), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),

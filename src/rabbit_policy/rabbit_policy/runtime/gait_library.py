@@ -6,9 +6,9 @@ regenerates them. A policy picks the gait nearest to the commanded speed, or ble
 the two neighbouring gaits linearly (alpha and Kd both: the coefficients are joint
 waypoints).
 
-A blend of two gaits designed apart is not the gait for the speed in between: measured
-with the 0.1 m/s library, the 0.7/0.8 blends stalled at 0.73-0.77 m/s and the 1.2/1.3
-blends walked up to 0.2 m/s too fast. The library therefore carries a *calibration*
+A blend of two gaits designed apart is not the gait for the speed in between: it may
+stall or walk faster than either (docs/gait_library.md measures it). The library
+therefore carries a *calibration*
 (``interpolation.json``, :class:`Calibration`, made by ``scripts/calibrate_library.py``):
 the mean speed each blend weight actually walks at. :meth:`GaitLibrary.interpolate`
 picks, between the two gaits around the command, the blend whose *measured* speed is

@@ -2,7 +2,7 @@
 inputs, the integral of the speed error with anti-windup and the last action.
 
 A memoryless map from (v_d, v̄, v_d - v̄) to a gait can only correct a steady speed error in
-proportion to it (the ``drives`` model walks 0.06-0.18 m/s too slow); an integral removes it
+proportion to it (a model error such as the ``drives`` model's gear friction leaves one); an integral removes it
 (Westervelt et al., IEEE TAC 2003: an event-based PI controller on RABBIT), and the last
 action lets the policy change its gait smoothly. :class:`SpeedMemory` is the one
 implementation, run by the learning environment and by :class:`NetworkPolicy` (``walk.py``,
