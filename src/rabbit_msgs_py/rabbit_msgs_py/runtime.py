@@ -46,9 +46,8 @@ DEFAULT_SPIN_TIMEOUT = 0.1
 def spin_timeout_of(node: object) -> float:
     """How long one ``spin_once`` may wait for ``node`` (s): its ``spin_timeout`` attribute,
     else 0.1 s. A node with a thread of its own that must run on time (the realtime
-    simulator's physics thread) asks for a short one: measured here, a realtime run with a
-    0.05 s wait had 80-99 % late ticks in one process, with 1 ms 0.5 %, with 0.5 ms
-    0.1 %; the waiting executor delays the other thread."""
+    simulator's physics thread) asks for a short one: the waiting executor delays the other
+    thread (docs/benchmarks.md measures it)."""
     return float(getattr(node, "spin_timeout", DEFAULT_SPIN_TIMEOUT))
 
 
