@@ -262,6 +262,17 @@ def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(t
     assert missing.returncode == 2 and "does not exist" in missing.stderr
 
 
+def test_the_model_cards_network_paragraph_is_the_shipped_checkpoints():
+    """The card's inputs, outputs and rates are what ``network_text`` renders from the shipped
+    checkpoint's info (its speed integral parsed as the controller parses it)."""
+    from rabbit_policy.commands.ship_policy import network_text
+
+    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
+    lines = [line for line in network_text(info) if line]
+    assert len(lines) >= 3 and all(line in card for line in lines), [line for line in lines if line not in card]
+
+
 def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_says_so(tmp_path):
     """``--integral-band B``, ``--integral-windup-decay T --integral-windup-tau TAU`` and
     ``--integral-feedforward``: the copy ship_policy checks and ships holds its speed integral

@@ -135,6 +135,14 @@ def distribution_text(name: str) -> str:
     return f"the {name} distribution: " + "; ".join(parts)
 
 
+def recorded_integral(info: dict):
+    """The speed integral a checkpoint's ``info`` records (its ``memory``), parsed once:
+    an :class:`~rabbit_policy.runtime.speed_integral.IntegralConfig`."""
+    from rabbit_policy.runtime.memory import MemoryConfig
+
+    return MemoryConfig.from_dict(info["memory"]).integral
+
+
 def network_text(info: dict) -> list[str]:
     """The card's first paragraphs: the network's inputs, outputs and rates, from the
     checkpoint's ``info`` (what :class:`~rabbit_policy.runtime.policies.NetworkPolicy` runs)."""
@@ -143,7 +151,7 @@ def network_text(info: dict) -> list[str]:
 
     defaults = ControllerConfig()  # the blend a policy blend follows
     features, action = info.get("features", "paper"), info.get("action", "direct")
-    cfg, memory = info.get("config", {}), info.get("memory") or {}
+    cfg = info.get("config", {})
     period = cfg.get("decision_period")
     n_in = INPUTS.get(features, 3)
     output = info.get("output", "sigmoid")
@@ -152,21 +160,22 @@ def network_text(info: dict) -> list[str]:
                 "the last step's mean hip speed v and mean speed error v_d − v (m/s; touchdown to touchdown)")
     inputs = [f"the commanded speed v_d (m/s), {averaged}"]
     if features in ("memory", "body"):
-        inputs.append(f"the integral of the speed error (m, clamped to ±{memory.get('limit', 0.2):g}: anti-windup"
-                      + (f"; held where v_d + {memory['gain']:g} I would leave {memory['speed_range']} m/s"
-                         if memory.get("gain") and memory.get("speed_range") else "")
-                      + (f"; held while |v_d − v| ≥ {memory['band']:g} m/s, a transient" if memory.get("band") else "")
-                      + (f"; once the hip has passed a new v_d, within {memory['windup_decay']['seconds']:g} s of "
-                         f"the change, what I wound up since the change decays with time constant "
-                         f"{memory['windup_decay']['tau']:g} s until {memory['windup_decay']['seconds']:g} s after it"
-                         + (" (a walk's start counts as a change up to v_d)" if memory["windup_decay"].get("at_start")
-                            else "")
-                         if memory.get("windup_decay") else "")
+        integral = recorded_integral(info)
+        decay, table = integral.windup_decay, integral.feedforward
+        inputs.append(f"the integral of the speed error (m, clamped to ±{integral.limit:g}: anti-windup"
+                      + (f"; held where v_d + {integral.gain:g} I would leave {integral.speed_range} m/s"
+                         if integral.gain and integral.speed_range else "")
+                      + (f"; held while |v_d − v| ≥ {integral.band:g} m/s, a transient" if integral.band else "")
+                      + (f"; once the hip has passed a new v_d, within {decay.seconds:g} s of the change, what I "
+                         f"wound up since the change decays with time constant {decay.tau:g} s until "
+                         f"{decay.seconds:g} s after it"
+                         + (" (a walk's start counts as a change up to v_d)" if decay.at_start else "")
+                         if decay else "")
                       + ("; when v_d changes it moves by the difference of its steady values for the old and "
-                         + ("the new v_d, and it starts a walk at its steady value for v_d" if
-                            memory["feedforward"].get("start") else "the new v_d")
-                         + f" (a feed-forward table of {len(memory['feedforward']['speeds'])} speeds measured on "
-                         "this network)" if memory.get("feedforward") else "")
+                         + ("the new v_d, and it starts a walk at its steady value for v_d" if table.start
+                            else "the new v_d")
+                         + f" (a feed-forward table of {len(table.speeds)} speeds measured on this network)"
+                         if table else "")
                       + ")")
         inputs.append("the last action, normalised to [−1, 1] (21 numbers)")
     if features == "body":
@@ -257,15 +266,16 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
     """The ship_policy options that set the speed integral's rules the run trained without
     (``--integral-band``, ``--integral-windup-decay``, ``--integral-feedforward``), and the
     card's note saying so; empty strings if none."""
-    memory, config = info.get("memory") or {}, info.get("config", {})
-    band = None if config.get("integral_band") else memory.get("band")  # trained with it: not set after
-    decay = None if config.get("integral_windup_decay") else memory.get("windup_decay")
-    feedforward = memory.get("feedforward")  # never trained with
+    config = info.get("config", {})
+    integral = recorded_integral(info) if info.get("memory") else None
+    band = None if config.get("integral_band") or integral is None else integral.band  # trained with it: not set after
+    decay = None if config.get("integral_windup_decay") or integral is None else integral.windup_decay
+    feedforward = integral.feedforward if integral is not None else None  # never trained with
     overlay = info.get("recovery_overlay")  # never trained with
     flags = (f" --integral-band {band:g}" if band else "") + (
-        f" --integral-windup-decay {decay['seconds']:g} --integral-windup-tau {decay['tau']:g}"
-        + (" --integral-windup-at-start" if decay.get("at_start") else "") if decay else "") + (
-        (" --integral-feedforward --integral-feedforward-start" if feedforward.get("start") else " --integral-feedforward")
+        f" --integral-windup-decay {decay.seconds:g} --integral-windup-tau {decay.tau:g}"
+        + (" --integral-windup-at-start" if decay.at_start else "") if decay else "") + (
+        (" --integral-feedforward --integral-feedforward-start" if feedforward.start else " --integral-feedforward")
         if feedforward else "") + overlay_flags(overlay)
     names = " and ".join(["band"] * bool(band) + ["windup decay"] * bool(decay) + ["feed-forward"] * bool(feedforward))
     notes = ([f"the integral's {names}"] if names else []) + (
