@@ -35,8 +35,9 @@ def test_the_nodes_walk_with_use_sim_time_namespaced_in_every_mode(mode):
         assert all(node.get_parameter("use_sim_time").value for node in nodes)
         error = spin_until_done(executor, supervisor, stall_timeout=30.0)
         sim = nodes[2]
-        if mode == "realtime":  # (a busy machine may halt a realtime run: it must have run, not finished)
-            assert sim.sim.time > 0.1, error
+        if mode == "realtime":  # a busy machine may halt a realtime run at any time: it must have run, and
+            # either finished or halted for falling behind the wall clock (the one error realtime allows)
+            assert sim.sim.time > 0.0 and (error is None or "realtime mode halts" in error), error
             return
         assert error is None and supervisor.report(None, None).completed, error
         assert sim.sim.time >= 1.5 - 1e-9

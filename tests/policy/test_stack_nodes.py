@@ -958,6 +958,26 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
             node.destroy_node()
 
 
+def test_the_supervisor_counts_sim_time_in_the_stamps_integer_ns():
+    """A duration off the ms grid ends at its last whole tick, where sim_node stops
+    (``on_tick_grid``: 0.3004 s -> 0.300 s; the supervisor once waited for 0.3004 - 1e-9 s,
+    which never came); the result's times and touchdowns are the stamps' ns as seconds, on the
+    ns grid, equal to the fast path's (``round(n * 0.001, 9)``)."""
+    from rabbit_policy.bringup import supervisor as module
+
+    with ros_context() as (context, _executor):
+        supervisor = module.Supervisor(StackConfig(duration=0.3004, schedule=((0.0, 1.0),)), context=context)
+        for n in range(301):
+            supervisor._on_state(_state(n / 1000, n / 1000))
+            if n == 100:
+                supervisor._count_step(_step(0.099))
+            assert supervisor.done == (n == 300), n
+        result = supervisor.result()
+        assert list(result.times) == [round(n * 0.001, 9) for n in range(1, 301)]
+        assert [touchdown.time for touchdown in result.touchdowns] == [0.1]
+        supervisor.destroy_node()
+
+
 def test_policy_node_starts_a_memory_policy_afresh_when_the_robot_is_placed_again(tmp_path):
     from std_msgs.msg import UInt32
 

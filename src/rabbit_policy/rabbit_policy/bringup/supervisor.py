@@ -15,11 +15,11 @@ from std_msgs.msg import Bool, Float64, Header
 from std_srvs.srv import SetBool
 
 from rabbit_msgs_py import qos, topics
-from rabbit_msgs_py.conversions import stamp_to_seconds
+from rabbit_msgs_py.conversions import stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
-from rabbit_policy.experiment.scenario import on_tick_grid
+from rabbit_policy.experiment.scenario import on_tick_grid, whole_ticks
 
 from .config import StackConfig
 
@@ -87,19 +87,21 @@ class Supervisor(Node):
     def __init__(self, config: StackConfig, context=None) -> None:
         super().__init__("run_stack_supervisor", context=context, namespace=config.namespace or None)
         self.config = config
-        self._times: list[float] = []  # every distinct state's sim time (s) and hip x (m)
+        # sim times are integer ns of the stamps (seconds only in the result and the logs)
+        self._times: list[int] = []  # every distinct state's sim time (ns) and hip x (m)
         self._xs: list[float] = []
-        self._start: tuple[float, float] | None = None  # the placed state (t, x)
-        self._pending_step: float | None = None  # a touchdown stamp whose next state has not come yet
-        self._touchdown_times: list[float] = []
+        self._start: tuple[int, float] | None = None  # the placed state (ns, x)
+        self._pending_step: int | None = None  # a touchdown stamp (ns) whose next state has not come yet
+        self._touchdown_times: list[int] = []  # ns
         self.peak_torque = 0.0
         self.fell = False
         self.fall_time: float | None = None
         self.stalled = False
         self.stall_time: float | None = None
         self._suspected: tuple[float, float] | None = None  # (sim t, wall s): no touchdown seen for stall_after
-        self._last_step_time = 0.0
-        self.sim_time = 0.0
+        self._last_step_ns = 0
+        self._sim_ns = 0
+        self._end_ns = whole_ticks(config.duration) * TICK_NS  # the run's last state
         self.first_state_wall: float | None = None
         self.last_state_wall: float | None = None
         self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
@@ -108,17 +110,31 @@ class Supervisor(Node):
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
-        self.recorded_until = -1.0  # s, sim time of the newest state the recorder has written
+        self._recorded_ns = -1  # sim time (ns) of the newest state the recorder has written; -1: none yet
         if config.record:
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
 
     def _on_recorded(self, msg: Clock) -> None:
-        self.recorded_until = stamp_to_seconds(msg.clock)
+        self._recorded_ns = stamp_to_ns(msg.clock)
+
+    @property
+    def sim_time(self) -> float:
+        """The newest state's sim time (s)."""
+        return self._sim_ns / 1e9
+
+    @property
+    def recorded_until(self) -> float:
+        """The sim time (s) of the newest state the recorder has written (negative before its first)."""
+        return self._recorded_ns / 1e9
+
+    @property
+    def recorder_started(self) -> bool:
+        return self._recorded_ns >= 0
 
     @property
     def recording_complete(self) -> bool:
         """The recorder has written the last state this node saw (always true unrecorded)."""
-        return not self.config.record or self.recorded_until >= self.sim_time - 1e-9
+        return not self.config.record or self._recorded_ns >= self._sim_ns
 
     def connected(self) -> bool:
         """True once simulator, controller and policy are all visible to this node."""
@@ -149,7 +165,7 @@ class Supervisor(Node):
         """The run is over: it fell, stalled or reached its duration, with no stall suspected
         whose touchdown events may still be on their way (:data:`EVENT_GRACE`)."""
         self._settle()
-        return self._suspected is None and (self.fell or self.stalled or self.sim_time >= self.config.duration - 1e-9)
+        return self._suspected is None and (self.fell or self.stalled or self._sim_ns >= self._end_ns)
 
     def _settle(self, now: float | None = None) -> None:
         """A suspected stall that no late touchdown refuted within the grace is a stall, at the
@@ -166,12 +182,14 @@ class Supervisor(Node):
         self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
 
     def _count_step(self, msg: Header) -> None:
-        t = stamp_to_seconds(msg.stamp)  # the sim time of the state on which the stance switched
+        t = stamp_to_ns(msg.stamp)  # the sim time of the state on which the stance switched
         self._touchdown_times.append(t)
-        if t < self.sim_time:  # the state after it is here already: the touchdown's time (see result())
-            self._last_step_time = max(self._last_step_time, self._times[int(np.searchsorted(self._times, t + 1e-9))])
-            if self._suspected is not None and not self.config.rules.stalled(self._suspected[0], self._last_step_time):
-                self.get_logger().info(f"a late touchdown event (t = {t:.3f} s) arrived: not stalled at "
+        if t < self._sim_ns:  # the state after it is here already: the touchdown's time (see result())
+            after = self._times[int(np.searchsorted(self._times, t, side="right"))]
+            self._last_step_ns = max(self._last_step_ns, after)
+            if self._suspected is not None and not self.config.rules.stalled(self._suspected[0],
+                                                                             self._last_step_ns / 1e9):
+                self.get_logger().info(f"a late touchdown event (t = {t / 1e9:.3f} s) arrived: not stalled at "
                                        f"t = {self._suspected[0]:.2f} s")
                 self._suspected = None
         else:
@@ -187,11 +205,11 @@ class Supervisor(Node):
         if self.first_state_wall is None:
             self.first_state_wall = now
         self.last_state_wall = now
-        t = stamp_to_seconds(msg.header.stamp)
+        t = stamp_to_ns(msg.header.stamp)
         x = msg.position[0]
-        if t != self.sim_time or self.last_progress_wall is None:
+        if t != self._sim_ns or self.last_progress_wall is None:
             self.last_progress_wall = now
-        self.sim_time = t
+        self._sim_ns = t
         if self._start is None:
             self._start = (t, x)
         elif t > (self._times[-1] if self._times else self._start[0]):  # a state sent again is one state
@@ -199,11 +217,11 @@ class Supervisor(Node):
             self._xs.append(x)
             self.peak_torque = max(self.peak_torque, *(abs(e) for e in msg.effort[3:]))
         if self._pending_step is not None and t > self._pending_step:
-            self._last_step_time, self._pending_step = t, None
-        if not self.stalled and self._suspected is None and self.config.rules.stalled(t, self._last_step_time):
+            self._last_step_ns, self._pending_step = t, None
+        if not self.stalled and self._suspected is None and self.config.rules.stalled(t / 1e9, self._last_step_ns / 1e9):
             # a stall, unless a late touchdown event says otherwise (EVENT_GRACE), dated at the tick the rule
             # fired, not at the state this node happened to see first (it may miss states)
-            self._suspected = (self.config.rules.stall_time(self._last_step_time), now)
+            self._suspected = (self.config.rules.stall_time(self._last_step_ns / 1e9), now)
         self._settle(now)
 
     def result(self) -> WalkResult:
@@ -213,22 +231,23 @@ class Supervisor(Node):
         with that state's hip x; the foot's x is on no topic (NaN)."""
         config = self.config
         scenario = config.scenario()
-        t0, x0 = self._start or (0.0, 0.0)
-        times, xs = np.array(self._times), np.array(self._xs)
+        t0_ns, x0 = self._start or (0, 0.0)
+        t0 = t0_ns / 1e9
+        times, xs = np.array(self._times, dtype=np.int64), np.array(self._xs)
         if self.stalled:  # the walk ended at the stall, as the fast path's does (later states came in the grace)
-            keep = times <= self.stall_time + 1e-9
+            keep = times <= round(self.stall_time * 1e9)  # stall_time: on the ns grid
             times, xs = times[keep], xs[keep]
         touchdowns = []
         for stamp in sorted(self._touchdown_times):
             # at the state after the switch, one tick later (the fast path's time); its hip x
             # from the first state seen from then on (this subscriber may miss states)
-            i = int(np.searchsorted(times, stamp + 1e-9, side="right"))
+            i = int(np.searchsorted(times, stamp, side="right"))
             if i < len(times):  # (a switch on the last state: that tick was never simulated)
-                touchdowns.append(Touchdown(round(stamp + TICK_NS * 1e-9, 9), float("nan"), float(xs[i])))
+                touchdowns.append(Touchdown((stamp + TICK_NS) / 1e9, float("nan"), float(xs[i])))
         # the physics halts at the fall: the last state received (the newest always arrives) is the fall's
         fall_time = max(self.fall_time, self.sim_time) if self.fell and self.fall_time is not None else self.fall_time
         return WalkResult(scenario=scenario, fell=self.fell, fall_time=fall_time, stalled=self.stalled,
-                          stall_time=self.stall_time, start_time=t0, start_x=x0, times=times, hip_x=xs,
+                          stall_time=self.stall_time, start_time=t0, start_x=x0, times=times / 1e9, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,
                           planned_duration=round(on_tick_grid(config.duration) - t0, 9))  # t0: the first state seen
 
@@ -275,14 +294,14 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
             return f"the nodes did not connect within {stall_timeout:.0f} s"
         if running:
             waited = time.perf_counter() - max(supervisor.last_progress_wall or 0.0, running_since)
-            if supervisor.config.record and supervisor.recorded_until < supervisor.sim_time - 1e-9:
+            if not supervisor.recording_complete:
                 # a recorder that has written something and then stops fails the run within
                 # recorder_timeout; its first state (discovery on a busy machine) may take up
                 # to stall_timeout
-                if supervisor.recorded_until < 0.0 and waited > max(stall_timeout, supervisor.config.recorder_timeout):
+                if not supervisor.recorder_started and waited > max(stall_timeout, supervisor.config.recorder_timeout):
                     return (f"the recorder did not write the first state within {waited:.0f} s of the start: is it "
                             "subscribed to /joint_states (sim_node's log says what it waits for)?")
-                if supervisor.recorded_until >= 0.0 and waited > supervisor.config.recorder_timeout:
+                if supervisor.recorder_started and waited > supervisor.config.recorder_timeout:
                     return (f"the recorder stopped: it has written up to t = {supervisor.recorded_until:.3f} s and "
                             f"the simulation has waited for it at t = {supervisor.sim_time:.3f} s for {waited:.0f} s")
             if supervisor.config.mode == "realtime" and supervisor.sim_time > 0.0 and waited > REALTIME_HALT_TIMEOUT:
