@@ -106,6 +106,7 @@ Action = State | PushApplied | Fallen | Placed | Markers | Frame | Log
 
 
 def seconds_to_ns(seconds: float) -> int:
+    """Seconds (a float sum of timesteps, or a parameter) as the integer ns of a stamp."""
     return int(round(seconds * 1e9))
 
 
@@ -481,7 +482,7 @@ class SimDriver:
             self._log("warning", f"RABBIT fell at t = {sim.time:.3f} s (hip height {qpos[1]:.3f} m, torso pitch "
                                  f"{qpos[2]:.3f} rad); physics halted, call {self._topic(topics.RESET_SERVICE)} to "
                                  "start again")
-        elif self.settings.stop_time and sim.time >= self.settings.stop_time - 1e-9:
+        elif self.settings.stop_time and seconds_to_ns(sim.time) >= seconds_to_ns(self.settings.stop_time):
             self.halted = True
             self._log("info", f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
 
