@@ -129,6 +129,7 @@ class Supervisor(Node):
 
     @property
     def recorder_started(self) -> bool:
+        """The recorder has written a state (it says so on its progress topic)."""
         return self._recorded_ns >= 0
 
     @property
