@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from rabbit_msgs_py.cli import ArgumentParser
+from command_parsers import parser_of
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPTS = sorted(p.stem for p in (ROOT / "scripts").glob("*.py"))
@@ -30,27 +30,10 @@ INLINE = re.compile(r"`([^`]+)`")
 PLACEHOLDER = re.compile(r"\[|\.\.\.|…|\{")  # an optional part, "and so on", a choice: not one command line
 
 
-class _Parsed(Exception):
-    def __init__(self, parser: argparse.ArgumentParser) -> None:
-        self.parser = parser
-
-
 def script_parser(name: str) -> argparse.ArgumentParser:
-    """``scripts/<name>.py``'s parser, taken as the script builds it: its ``main`` runs
-    until it parses, and stops there."""
-    def capture(self, *_args, **_kwargs):
-        raise _Parsed(self)
-
-    saved = ArgumentParser.parse_args, ArgumentParser.parse_known_args, sys.argv
-    ArgumentParser.parse_args = ArgumentParser.parse_known_args = capture
-    sys.argv = [f"{name}.py"]
-    try:
-        runpy.run_path(str(ROOT / "scripts" / f"{name}.py"), run_name="__main__")
-    except _Parsed as parsed:
-        return parsed.parser
-    finally:
-        ArgumentParser.parse_args, ArgumentParser.parse_known_args, sys.argv = saved
-    raise AssertionError(f"scripts/{name}.py never parsed its command line")
+    """``scripts/<name>.py``'s parser, taken as the script builds it (:func:`parser_of`)."""
+    return parser_of(lambda: runpy.run_path(str(ROOT / "scripts" / f"{name}.py"), run_name="__main__"),
+                     f"scripts/{name}.py")
 
 
 def script_options(name: str) -> tuple[set[str], set[str]]:

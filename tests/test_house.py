@@ -12,6 +12,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from command_parsers import parser_of
 
 pytestmark = pytest.mark.unit
 
@@ -121,16 +122,8 @@ def test_shared_options_are_declared_once():
 
 
 
-class _Parsed(Exception):
-    """Raised by the patched parser with the parser a command built."""
-
-    def __init__(self, parser) -> None:
-        self.parser = parser
-
-
-def command_parsers(monkeypatch) -> dict[str, object]:
-    """Every command's argument parser, as its ``main`` builds it (stopped where it would parse)."""
-    import argparse
+def command_parsers() -> dict[str, object]:
+    """Every command's argument parser, as its ``main`` builds it (:func:`parser_of`)."""
     import importlib
     import inspect
     import pkgutil
@@ -138,19 +131,12 @@ def command_parsers(monkeypatch) -> dict[str, object]:
     import rabbit_policy.commands
     import rabbit_sim.commands
 
-    def stop(self, args=None, namespace=None):
-        raise _Parsed(self)
-
-    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", stop)
-    monkeypatch.setattr("sys.argv", ["command"])
     parsers = {}
     for package in (rabbit_policy.commands, rabbit_sim.commands):
         for info in pkgutil.iter_modules(package.__path__):
             main = importlib.import_module(f"{package.__name__}.{info.name}").main
-            try:
-                main([]) if inspect.signature(main).parameters else main()
-            except _Parsed as parsed:
-                parsers[info.name] = parsed.parser
+            parsers[info.name] = parser_of(lambda: main([]) if inspect.signature(main).parameters else main(),
+                                           info.name)
     return parsers
 
 
@@ -160,11 +146,11 @@ OPTIONS_OF_ONE_KIND = {
 }
 
 
-def test_an_option_means_one_kind_of_value_in_every_command(monkeypatch):
+def test_an_option_means_one_kind_of_value_in_every_command():
     """An option spelled the same in two commands parses the same way (the same type and
     action: ``--out`` is a path, ``--speed`` a number > 0, ``--gait-dir`` a directory or "",
     ``--decision-period`` a timing), whatever each command writes there or defaults to."""
-    parsers = command_parsers(monkeypatch)
+    parsers = command_parsers()
     assert len(parsers) >= 25, sorted(parsers)
     kinds: dict[str, set] = {}
     for command, parser in parsers.items():
