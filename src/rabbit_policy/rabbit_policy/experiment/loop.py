@@ -65,7 +65,8 @@ class ClosedLoop:
     a compiled model to reuse (must match ``scenario.model``). ``observer``: called every
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
     keep the speed window without a policy (the learning environment), observed as a policy
-    deciding every ``decision_period`` ticks (0: once per step) would see it.
+    deciding every ``decision_period`` ticks (0: once per step) would see it (with a policy,
+    the policy's own ``decision_period`` is used).
     """
 
     def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
