@@ -25,7 +25,7 @@ from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.log_lines import LogLine
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_policy.experiment.scenario import parse_schedule, validate_schedule
-from rabbit_policy.runtime import exact_sum
+from rabbit_policy.runtime import exact_sum, fixed_order
 from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.commands import clamp_message, clamp_speed
 from rabbit_policy.runtime.decision_clock import DecisionClock
@@ -112,6 +112,7 @@ class PolicyDriver:
         self.clock = DecisionClock(self.decision_period,
                                    settings.decision_window if self.decision_period else settings.window, tick=TICK_NS)
         exact_sum.warm()  # the window's compiled sum loaded now, not on the first decision
+        fixed_order.warm()  # and the network's forward pass
         self.initial_speed = self.desired_speed = settings.initial_speed
         self.schedule = speed_schedule(settings.speed_schedule, self.initial_speed)
         self.body: BodyStateBuffer | None = BodyStateBuffer(TICK_NS) if self.needs_body else None

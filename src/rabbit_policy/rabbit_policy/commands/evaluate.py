@@ -99,6 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation import figures
     from rabbit_policy.evaluation.report import load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness
+    from rabbit_policy.experiment.provenance import provenance
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
     from rabbit_sim.model import ModelOptions
 
@@ -142,6 +143,9 @@ def main(argv: list[str] | None = None) -> int:
         log("push scenarios")
         push, push_walks = evaluation.push_experiment(policies, config, model)
         figures.push_figure(push, out / "push.png")
+        if config.neighbourhood is not None:
+            log("push scenarios over their neighbourhoods")
+            push["neighbourhood"] = evaluation.scenario_rates(policies, config, model, map_fn)
         sweep = {}
         if config.sweep is not None:
             log("impulse sweep")
@@ -173,7 +177,7 @@ def main(argv: list[str] | None = None) -> int:
     command = ("scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
                + (" --ablation " + " ".join(args.ablation) if args.ablation else ""))
     results = {"meta": {"command": command, "model": model.to_dict(), "workers": args.workers,
-                        "wall_time_s": time.perf_counter() - start,
+                        "wall_time_s": time.perf_counter() - start, "provenance": provenance(),
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
                "push": push, "push_sweep": sweep, "repeated_pushes": repeated, "robustness": robust,

@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.acceptance import Criteria
     from rabbit_policy.evaluation.shipping import MarginGrid, screen_rank, verdict
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
-    from rabbit_policy.spec.convert import code_commit
+    from rabbit_policy.experiment.provenance import provenance as run_provenance
     from rabbit_policy.spec.files import library_dir, library_hash
 
     root = preset_dir().parents[1]
@@ -237,7 +237,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = json.loads((run / "summary.json").read_text())["info"]
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
-    provenance = {"code_commit": code_commit(root), "preset": preset["path"], "start": str(start),
+    provenance = {**run_provenance(root), "preset": preset["path"], "start": str(start),
                   "library_sha256": library_hash(library_dir(spec.gait_library.source, chosen.parent)),
                   "iterations": summary["iteration"], "env_steps": summary["env_steps"], "wall_s": summary["wall_s"],
                   "evaluation": preset["evaluation"], "screen_grid": preset["screen"]["grid"],

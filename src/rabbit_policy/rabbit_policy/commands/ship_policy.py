@@ -412,11 +412,12 @@ def write_spec(checkpoint_file: Path, directory: Path, command: str) -> None:
     (:func:`rabbit_policy.spec.convert.learned_spec`), its provenance the command that shipped it."""
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.spec import dump_spec
-    from rabbit_policy.spec.convert import code_commit, learned_spec
+    from rabbit_policy.experiment.provenance import provenance
+    from rabbit_policy.spec.convert import learned_spec
 
     directory.mkdir(parents=True, exist_ok=True)
     spec = learned_spec(PolicyCheckpoint.load(checkpoint_file), directory, provenance={
-        "written_by": command, "checkpoint": checkpoint_file.name, "code_commit": code_commit()})
+        "written_by": command, "checkpoint": checkpoint_file.name, **provenance()})
     dump_spec(spec, directory / "learned.yaml", f"learned, shipped by {command}")
 
 

@@ -28,8 +28,10 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
 
-from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, PushScenario, RepeatedConfig, SweepConfig,
-                                                    impulse_sweep, push_trial, repeated_pushes, scenario_table)
+from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, Neighbourhood, PushScenario, RepeatedConfig,
+                                                    SweepConfig, impulse_sweep, neighbourhood_outcomes, push_trial,
+                                                    repeated_pushes, scenario_table)
+from rabbit_policy.evaluation.statistics import mcnemar_exact, rate
 from rabbit_policy.evaluation.robustness import RobustnessConfig
 from rabbit_policy.evaluation.stability import STANCE_JOINTS, analyse_stability
 from rabbit_policy.experiment.loop import walk as run_walk
@@ -64,6 +66,7 @@ class EvaluationConfig:
     push_speed: float = 1.0
     push_duration: float = 10.0
     scenarios: tuple[PushScenario, ...] = PUSH_SCENARIOS
+    neighbourhood: Neighbourhood | None = field(default_factory=Neighbourhood)
     sweep: SweepConfig | None = field(default_factory=SweepConfig)
     repeated: RepeatedConfig | None = field(default_factory=RepeatedConfig)
     video_scenarios: tuple[str, ...] = ("small_backward", "large_backward")
@@ -78,6 +81,7 @@ class EvaluationConfig:
         return cls(tracking_schedule=((0.0, 0.9), (4.0, 1.2)), tracking_duration=8.0,
                    portrait_speeds=(1.0,), portrait_duration=4.0, poincare_speeds=(1.0,),
                    poincare_samples=30, push_duration=7.0,
+                   neighbourhood=Neighbourhood(shifts=(-0.05, 0.0, 0.05), speeds=(1.0,), duration=7.0),
                    sweep=SweepConfig(impulses=(3.0, 12.0), push_times=(3.0,), horizon=2.0),
                    repeated=RepeatedConfig(impulses=((1.0, (3.0, 40.0)),), first_times=(2.0,), count=2,
                                            horizon=5.0),
@@ -101,6 +105,7 @@ class EvaluationConfig:
                 "poincare_seeds": list(self.poincare_seeds),
                 "push_speed": self.push_speed, "push_duration_s": self.push_duration,
                 "scenarios": [s.to_dict() for s in self.scenarios],
+                "neighbourhood": None if self.neighbourhood is None else self.neighbourhood.to_dict(),
                 "sweep": None if self.sweep is None else {
                     "impulses_Ns": list(self.sweep.impulses), "push_duration_s": self.sweep.duration,
                     "push_times_s": list(self.sweep.push_times), "horizon_s": self.sweep.horizon},
@@ -291,6 +296,26 @@ def push_experiment(controllers: dict[str, Policy], config: EvaluationConfig, mo
     return {"speed": config.push_speed, "duration_s": config.push_duration,
             "scenarios": [s.to_dict() for s in config.scenarios],
             "table": scenario_table(walks, config.scenarios), "series": series}, walks
+
+
+def scenario_rates(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions(),
+                   map_fn: MapFn = map) -> dict:
+    """The push scenarios as rates over their neighbourhoods (:class:`~.push_recovery.Neighbourhood`):
+    per controller and scenario the trials walked (``k`` of ``n``, 95 % interval) and every
+    trial's outcome, and the learned controller against each other one on the same trials
+    (McNemar's exact test)."""
+    nb = config.neighbourhood
+    if nb is None:
+        return {}
+    outcomes = {name: {s.name: neighbourhood_outcomes(policy, s, nb, model, map_fn) for s in config.scenarios}
+                for name, policy in controllers.items()}
+    paired = {}
+    if "learned" in outcomes:
+        paired = {s.name: {other: mcnemar_exact(outcomes["learned"][s.name], outcomes[other][s.name])
+                           for other in outcomes if other != "learned"} for s in config.scenarios}
+    return {"config": nb.to_dict(), "trials": [[speed, shift] for speed in nb.speeds for shift in nb.shifts],
+            "rates": {name: {s: rate(o) for s, o in by.items()} for name, by in outcomes.items()},
+            "paired_with_learned": paired, "outcomes": outcomes}
 
 
 def repeated_push_table(controllers: dict[str, Policy], config: EvaluationConfig, model: ModelOptions = ModelOptions(),

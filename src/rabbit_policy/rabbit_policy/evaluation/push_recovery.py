@@ -202,3 +202,43 @@ def scenario_table(trials: dict[str, dict[str, WalkResult]], scenarios: Sequence
             row[controller] = walks[scenario.name].outcome()
         rows.append(row)
     return rows
+
+
+@dataclass(frozen=True)
+class Neighbourhood:
+    """The trials around one of the paper's push scenarios: its pushes shifted together by
+    each of ``shifts`` s (a span longer than one step, so the pushes land at every phase) at
+    each of ``speeds`` m/s; a trial walks when the walk neither falls nor stalls within
+    ``duration`` s. The scenario at the nominal speed and shift 0 is one of the trials."""
+
+    shifts: tuple[float, ...] = tuple(round(0.05 * k, 2) for k in range(-6, 7))
+    speeds: tuple[float, ...] = (0.9, 0.95, 1.0, 1.05, 1.1)
+    duration: float = 10.0
+
+    def __post_init__(self) -> None:
+        if not (self.shifts and self.speeds and all(s > 0.0 for s in self.speeds)):
+            raise ValueError("Neighbourhood: at least one shift and one speed, speeds > 0 m/s")
+
+    def trials(self, scenario: PushScenario) -> list[tuple[float, PushScenario]]:
+        """(speed, the scenario with its pushes shifted) for every trial, speeds outermost."""
+        shifted = [PushScenario(scenario.name, scenario.force_x, scenario.duration,
+                                tuple(round(t + shift, 9) for t in scenario.times)) for shift in self.shifts]
+        if any(min(s.times) <= 0.0 or max(s.times) + s.duration >= self.duration for s in shifted):
+            raise ValueError(f"Neighbourhood: {scenario.name}'s shifted pushes must fall inside (0, {self.duration}) s")
+        return [(speed, s) for speed in self.speeds for s in shifted]
+
+    def to_dict(self) -> dict:
+        return {"shifts_s": list(self.shifts), "speeds_mps": list(self.speeds), "duration_s": self.duration}
+
+
+def _walked_job(job: tuple) -> bool:
+    policy, speed, scenario, duration, model = job
+    return not push_trial(policy, speed, scenario, duration, model).failed
+
+
+def neighbourhood_outcomes(policy: Policy, scenario: PushScenario, config: Neighbourhood = Neighbourhood(),
+                           model: ModelOptions = ModelOptions(),
+                           map_fn: Callable[[Callable, Iterable], Iterable] = map) -> list[bool]:
+    """Whether each trial of ``config.trials(scenario)`` walked, in that order."""
+    jobs = [(policy, speed, shifted, config.duration, model) for speed, shifted in config.trials(scenario)]
+    return [bool(walked) for walked in map_fn(_walked_job, jobs)]

@@ -4,6 +4,7 @@ figures and videos (file names relative to the report)."""
 from __future__ import annotations
 
 from rabbit_policy.evaluation.figures import LABELS
+from rabbit_policy.evaluation.statistics import format_rate, rate
 
 
 def _fmt(value, spec: str = ".3f", none: str = "—") -> str:
@@ -171,6 +172,72 @@ def push_section(push: dict, sweep: dict, videos: list[dict]) -> list[str]:
     return lines + [""]
 
 
+def neighbourhood_section(rates: dict) -> list[str]:
+    """The push scenarios as rates over their neighbourhoods, with the paired tests."""
+    if not rates:
+        return []
+    config = rates["config"]
+    shifts, speeds = config["shifts_s"], config["speeds_mps"]
+    names = list(rates["rates"])
+    scenarios = list(rates["rates"][names[0]])
+    lines = ["### The scenarios over their neighbourhoods", "",
+             f"One point of a scenario is an anecdote: each is walked {len(shifts) * len(speeds)} times, its pushes "
+             f"shifted together by each of {', '.join(f'{s:+g}' for s in shifts)} s (a span of "
+             f"{max(shifts) - min(shifts):g} s, so the pushes land across a step) at {', '.join(f'{v:g}' for v in speeds)} m/s, "
+             f"each walk {config['duration_s']:g} s. Walked k of n, with the 95 % Wilson interval:", "",
+             "| scenario | " + " | ".join(_label(n) for n in names) + " |", "|---|" + "---|" * len(names)]
+    for scenario in scenarios:
+        lines.append(f"| {scenario} | " + " | ".join(format_rate(rates["rates"][n][scenario]) for n in names) + " |")
+    if rates.get("paired_with_learned"):
+        lines += ["", "Learned against each other controller on the same trials (McNemar's exact test: the trials "
+                  "only one of the two walked, and the two-sided p-value):", "",
+                  "| scenario | " + " | ".join(f"vs {_label(n)}" for n in names if n != "learned") + " |",
+                  "|---|" + "---|" * (len(names) - 1)]
+        for scenario, tests in rates["paired_with_learned"].items():
+            lines.append(f"| {scenario} | " + " | ".join(
+                f"learned only {t['only_a']}, {_label(n)} only {t['only_b']}, p = {t['p_value']:.2g}"
+                for n, t in tests.items()) + " |")
+    return lines + [""]
+
+
+def headline_rates(results: dict) -> dict[str, dict[str, dict]]:
+    """The headline claims as rates per claim and controller (:func:`.statistics.rate`): ordered
+    speed changes passed at every phase, random command sequences walked, and each push
+    scenario walked over its neighbourhood."""
+    claims: dict[str, dict[str, dict]] = {}
+    robustness = results.get("robustness") or {}
+    if robustness:
+        claims["ordered speed changes reached within the time limit at every phase"] = {
+            n: rate([p["passed"] for p in r["transitions"]["pairs"]]) for n, r in robustness.items()}
+        claims["random one-minute command sequences without a fall or stall"] = {
+            n: rate([row["outcome"] == "walked" for row in r["random_sequences"]["rows"]]) for n, r in robustness.items()}
+    neighbourhood = results["push"].get("neighbourhood") or {}
+    for name, by_scenario in neighbourhood.get("rates", {}).items():
+        for scenario, r in by_scenario.items():
+            claims.setdefault(f"the paper's `{scenario}` pushes walked, over their neighbourhood", {})[name] = r
+    return claims
+
+
+def headline_table(results: dict) -> list[str]:
+    """README's results table, rendered from ``results.json`` (a docs test holds README to it):
+    the headline rates with their 95 % intervals, then the push margins."""
+    claims = headline_rates(results)
+    names = list(results["meta"]["controllers"])
+    lines = ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for claim, by_name in claims.items():
+        lines.append(f"| {claim} | " + " | ".join(format_rate(by_name[n]) for n in names) + " |")
+    robustness = results.get("robustness") or {}
+    if robustness:
+        for direction in ("backward", "forward"):
+            margins = {n: {m["speed"]: m for m in r["push_margins"] if m["direction"] == direction}
+                       for n, r in robustness.items()}
+            speeds = sorted(margins[names[0]])
+            lines.append(f"| {direction} push margin at {' / '.join(f'{v:g}' for v in speeds)} m/s (N s) | " + " | ".join(
+                " / ".join(f"{margins[n][v]['largest_survived_Ns']:g}" + ("+" if margins[n][v]["capped"] else "")
+                           for v in speeds) for n in names) + " |")
+    return lines
+
+
 def summary_section(results: dict) -> list[str]:
     """Headline facts computed from the results (no hand-written numbers)."""
     lines = ["## Summary", ""]
@@ -193,11 +260,8 @@ def summary_section(results: dict) -> list[str]:
         stable = all(r.get("stable") for r in by_speed.values())
         lines.append(f"- {_label(name)}: walking cycle {'stable' if stable else 'NOT stable'} at every speed tested; "
                      "largest |λ| " + ", ".join(f"{_fmt(v, '.2f')} at {float(k):.1f} m/s" for k, v in largest.items()))
-    table = results["push"]["table"]
-    for name in [k for k in (table[0] if table else {}) if k != "scenario"]:
-        survived = [row["scenario"] for row in table if row[name]["outcome"] == "walked"]
-        lines.append(f"- {_label(name)}: walked on through {len(survived)} of {len(table)} push scenarios"
-                     + (f" ({', '.join(survived)})" if survived else ""))
+    for claim, by_name in headline_rates(results).items():
+        lines.append(f"- {claim}: " + ", ".join(f"{_label(n)} {format_rate(r)}" for n, r in by_name.items()))
     for name, sweep in results.get("push_sweep", {}).items():
         lines.append(f"- {_label(name)}: survives every push phase up to {sweep['backward']['largest_survived_Ns']:.0f} "
                      f"N s backward and {sweep['forward']['largest_survived_Ns']:.0f} N s forward")
@@ -328,6 +392,7 @@ def render_report(results: dict) -> str:
     lines += limit_cycle_section(results["limit_cycle"], results["config"])
     lines += poincare_section(results["poincare"])
     lines += push_section(results["push"], results.get("push_sweep", {}), results.get("videos", []))
+    lines += neighbourhood_section(results["push"].get("neighbourhood") or {})
     lines += repeated_section(results.get("repeated_pushes", {}), results["config"].get("repeated"))
     lines += robustness_section(results.get("robustness", {}))
     lines += acceptance_section(results.get("acceptance_1_6", {}))

@@ -403,7 +403,7 @@ def compile_kernels() -> float:
     from rabbit_msgs_py.pushes import Push
     from rabbit_sim.simulation import StopRules
 
-    from rabbit_policy.runtime import exact_sum
+    from rabbit_policy.runtime import exact_sum, fixed_order
     from rabbit_policy.runtime.gait_library import GaitLibrary
 
     start = perf_counter()
@@ -416,6 +416,7 @@ def compile_kernels() -> float:
     loop.sim.step([0.0] * 4)
     loop.sim.fallen()
     exact_sum.warm()
+    fixed_order.warm()
     return perf_counter() - start
 
 

@@ -27,6 +27,7 @@ import torch
 from rabbit_msgs_py.cli import option
 from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv, make_env
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
+from rabbit_policy.runtime.fixed_order import vecmat
 from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_network
 
 
@@ -210,7 +211,7 @@ class EvolutionStrategy:
         chosen = np.arange(cfg.pairs)
         if cfg.top:  # ARS V2-t: the directions whose better member did best
             chosen = np.argsort(-np.maximum(plus, minus), kind="stable")[: cfg.top]
-        grad = (plus[chosen] - minus[chosen]) @ eps[chosen] / (2 * len(chosen) * cfg.sigma)
+        grad = vecmat(plus[chosen] - minus[chosen], eps[chosen]) / (2 * len(chosen) * cfg.sigma)  # BLAS-free: same bits on every CPU
         grad -= cfg.weight_decay * self.theta
         self.theta = self.adam.step(self.theta, grad)
         set_flat(self.net, self.theta)

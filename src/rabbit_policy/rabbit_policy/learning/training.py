@@ -128,6 +128,7 @@ def train(args: TrainingConfig) -> int:
     import torch
     from tqdm import tqdm
 
+    from rabbit_policy.experiment.provenance import provenance
     from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
     from rabbit_policy.learning.scalars import TrainingScalars
     from rabbit_policy.parallel import BackendUnavailable, make_backend
@@ -196,6 +197,7 @@ def train(args: TrainingConfig) -> int:
     if state:
         trainer.load_state_dict(state["trainer"])
     elapsed_before = state.get("wall_s", 0.0)
+    ran_on = provenance()  # the code and the machine's numerics, recorded with every checkpoint
     best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
     warm_start_result: dict = state.get("warm_start", {})  # its acceptance at iteration 0, if evaluated
     first_pass = state.get("first_pass")
@@ -212,7 +214,7 @@ def train(args: TrainingConfig) -> int:
                 **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain,
                     "residual_base": args.trainer.residual_base} if residual is not None else {}),
                 **({"spec": str(Path(spec_file).resolve())} if spec_file else {}),
-                **(extra or {})}
+                "provenance": ran_on, **(extra or {})}
 
     def save_policy(name: str, extra: dict | None = None) -> None:
         """OUT/NAME.pt, and for a spec's run OUT/NAME.yaml: the spec with these weights."""

@@ -1,9 +1,10 @@
-"""The policy network's forward pass in numpy (no torch): what deciding needs, so
-``policy_node`` and the loops run a learned controller without importing torch. Training
-keeps the torch network (:mod:`.network`, :class:`~.network.HZDPolicyNet`); this is its
-arithmetic: tanh hidden layers, the last layer mapped onto the action bounds by
-``output`` (``sigmoid``: ours, ES and PPO; ``clip``: a Gaussian policy's mean clipped to
-[-1, 1], stable-baselines3's PPO; ``tanh``: a squashed Gaussian, SB3's SAC)."""
+"""The policy network's forward pass without torch: what deciding needs, so ``policy_node``
+and the loops run a learned controller without importing torch. Training keeps the torch
+network (:mod:`.network`, :class:`~.network.HZDPolicyNet`); this is its arithmetic: tanh
+hidden layers, the last layer mapped onto the action bounds by ``output`` (``sigmoid``:
+ours, ES and PPO; ``clip``: a Gaussian policy's mean clipped to [-1, 1], stable-baselines3's
+PPO; ``tanh``: a squashed Gaussian, SB3's SAC), computed in a fixed order in float64
+(:func:`.fixed_order.mlp`), so a decision has the same bits on every CPU."""
 
 from __future__ import annotations
 
@@ -11,9 +12,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rabbit_policy.runtime import fixed_order
 from rabbit_policy.runtime.speed_window import Observation
 
 OUTPUTS = ("sigmoid", "clip", "tanh")
+"""The output maps, in :mod:`.fixed_order`'s numbering (SIGMOID, CLIP, TANH)."""
 
 
 def _frozen(values) -> np.ndarray:
@@ -24,11 +27,11 @@ def _frozen(values) -> np.ndarray:
 
 @dataclass(frozen=True)
 class NetworkForward:
-    """A network's forward pass in numpy, for deciding (torch stays for training): the same
-    float32 arithmetic as :meth:`HZDPolicyNet.forward`, equal to it within float32 rounding
-    (tested to 1e-6 of each output's range), at about a third of torch's cost per decision
-    (``scripts/bench_train.py``'s ``forward_us``). A snapshot: build another after the
-    weights change (:meth:`of`)."""
+    """A network's forward pass, for deciding (torch stays for training): the arithmetic of
+    :meth:`HZDPolicyNet.forward` on the same float32 weights, summed in float64 in a fixed
+    order (:func:`.fixed_order.mlp`): equal to torch's float32 within its rounding (tested to
+    1e-6 of each output's range) and the same bits on every CPU. A snapshot: build another
+    after the weights change (:meth:`of`)."""
 
     weights: tuple[np.ndarray, ...]
     biases: tuple[np.ndarray, ...]
@@ -50,6 +53,10 @@ class NetworkForward:
             width = w.shape[0]
         if not (self.scale.shape == self.offset.shape and self.low.shape == self.high.shape == (width,)):
             raise ValueError("input offset/scale and action bounds must match the first and last layers")
+        params, shapes = fixed_order.pack_layers(self.weights, self.biases)
+        offset, scale, low, high = (np.asarray(a, dtype=np.float64) for a in (self.offset, self.scale, self.low, self.high))
+        object.__setattr__(self, "_network", (offset, scale, params, shapes, OUTPUTS.index(self.output)))
+        object.__setattr__(self, "_bounds", (low, high - low))
 
     @classmethod
     def from_arrays(cls, weights, biases, offset, scale, low, high, output: str) -> "NetworkForward":
@@ -68,31 +75,6 @@ class NetworkForward:
         return cls.from_arrays([array(m.weight) for m in layers], [array(m.bias) for m in layers], array(net.offset),
                                array(net.scale), array(net.low), array(net.high), net.output)
 
-    def normalised(self, x) -> np.ndarray:
-        """The action in [-1, 1] (float32) an agent in a [-1, 1] Box would give for this output:
-        :meth:`physical` of it is this network's output (bit for bit for ``tanh`` and ``clip``)."""
-        h = self._last_layer(x)
-        if self.output == "sigmoid":
-            return np.float32(2.0) / (np.float32(1.0) + np.exp(-h)) - np.float32(1.0)
-        return np.clip(h, -1.0, 1.0) if self.output == "clip" else np.tanh(h)
-
-    def physical(self, action) -> np.ndarray:
-        """A normalised action (in [-1, 1]) on the action bounds (physical units, float)."""
-        unit = (np.float32(1.0) + np.asarray(action, dtype=np.float32)) / np.float32(2.0)
-        return (self.low + (self.high - self.low) * unit).astype(float)
-
-    def _last_layer(self, x) -> np.ndarray:
-        """The last layer's output (float32) before it is mapped onto the bounds."""
-        if isinstance(x, Observation):
-            x = x.as_tuple()
-        h = (np.asarray(x, dtype=np.float32) - self.offset) / self.scale
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
-            h = w @ h + b
-            if i < last:
-                h = np.tanh(h)
-        return h
-
     @property
     def inputs(self) -> int:
         return int(self.offset.shape[0])
@@ -101,12 +83,21 @@ class NetworkForward:
     def hidden(self) -> tuple[int, ...]:
         return tuple(int(w.shape[0]) for w in self.weights[:-1])
 
+    def normalised(self, x: Observation | np.ndarray | tuple) -> np.ndarray:
+        """The action in [-1, 1] (float32, as an agent in a [-1, 1] Box gives it) for an
+        observation (or the network's whole input vector, taken as float32 as the network is
+        trained and an env observes it): :meth:`physical` of it is this network's output, bit for bit."""
+        if isinstance(x, Observation):
+            x = x.as_tuple()
+        return fixed_order.mlp(np.asarray(x, dtype=np.float32).astype(np.float64), *self._network).astype(np.float32)
+
+    def physical(self, action) -> np.ndarray:
+        """A normalised action (in [-1, 1], taken as float32) on the action bounds (physical
+        units, float64): ``low + (high - low) * (1 + a) / 2``, element by element."""
+        low, span = self._bounds
+        return low + span * ((1.0 + np.asarray(action, dtype=np.float32).astype(np.float64)) / 2.0)
+
     def __call__(self, x: Observation | np.ndarray | tuple) -> np.ndarray:
-        """One deterministic action (21 floats, physical units) for an observation (or the
-        network's whole input vector)."""
-        h = self._last_layer(x)
-        if self.output == "sigmoid":
-            unit = np.float32(1.0) / (np.float32(1.0) + np.exp(-h))
-        else:
-            unit = (np.float32(1.0) + (np.clip(h, -1.0, 1.0) if self.output == "clip" else np.tanh(h))) / np.float32(2.0)
-        return (self.low + (self.high - self.low) * unit).astype(float)
+        """One deterministic action (float64, physical units) for an observation (or the
+        network's whole input vector): :meth:`physical` of :meth:`normalised`."""
+        return self.physical(self.normalised(x))

@@ -6,7 +6,6 @@ specs are what ships, and a change of a code default moves nothing shipped."""
 
 from __future__ import annotations
 
-import subprocess
 from dataclasses import asdict, fields
 from pathlib import Path
 
@@ -14,6 +13,7 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
+from rabbit_policy.experiment.provenance import code_commit
 from rabbit_policy.runtime.classic import CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
@@ -26,19 +26,6 @@ RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
 RESIDUAL_KD_BOUNDS = (20.0, 150.0)
 """N m s/rad: ``actions.ActionBounds.from_library``' Kd range (what the checkpoints ran with)."""
-
-
-def code_commit(root: Path | None = None) -> str:
-    """The git commit of the code here ("unknown" outside a checkout), "+dirty" if changed."""
-    root = root or Path(__file__).resolve().parents[3]
-    try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
-                             timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-    return (sha + ("+dirty" if dirty else "")) if sha else "unknown"
 
 
 def _library(source: str, base: Path, mode: str = "interpolate") -> LibrarySpec:
