@@ -116,6 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
+    ran_on = provenance()  # the code and the machine, as the run starts
     log = lambda message: print(f"[{time.perf_counter() - start:6.1f} s] {message}", file=sys.stderr)  # noqa: E731
 
     backend = open_backend(build_parser(), args)
@@ -177,7 +178,7 @@ def main(argv: list[str] | None = None) -> int:
     command = ("scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
                + (" --ablation " + " ".join(args.ablation) if args.ablation else ""))
     results = {"meta": {"command": command, "model": model.to_dict(), "workers": args.workers,
-                        "wall_time_s": time.perf_counter() - start, "provenance": provenance(),
+                        "wall_time_s": time.perf_counter() - start, "provenance": ran_on,
                         "controllers": {n: p.name for n, p in policies.items()}},
                "config": config.to_dict(), "tracking": tracking, "limit_cycle": cycles, "poincare": poincare,
                "push": push, "push_sweep": sweep, "repeated_pushes": repeated, "robustness": robust,
