@@ -6,6 +6,8 @@ concurrent runs do not cross-talk; under pytest-xdist (``make test``: two worker
 takes the next domain ID after the session's random one. A domain where some process already
 runs a node (a stack left running by hand, another checkout's tests) is passed over, with a
 warning in the session's summary: worker k of N takes the first free one of k, k + N, k + 2N, ... after the random one.
+Each test process has a ROS home of its own (``ROS_HOME``, a fresh temporary directory: the
+nodes' per-user pairing key and ROS's logs go there, never into the user's ``~/.ros``).
 After every ros test the domain is probed again: if a node still runs there (a test's process
 that outlived it, or one from outside), the worker moves to its next free domain and a warning
 names the test and the nodes.
@@ -26,6 +28,7 @@ import os
 import random
 import shutil
 import subprocess
+import tempfile
 import warnings
 
 import pytest
@@ -39,6 +42,7 @@ _worker = int(os.environ.get("PYTEST_XDIST_WORKER", "gw0")[2:])  # pytest -n N: 
 _workers = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))
 _domain, _busy = free_domain((int(os.environ["ROS_DOMAIN_ID"]) - 1 + _worker) % 101 + 1, stride=_workers)
 os.environ["ROS_DOMAIN_ID"] = str(_domain)  # worker k takes k, k + N, k + 2N, ...: never another's
+os.environ["ROS_HOME"] = tempfile.mkdtemp(prefix="rabbit-hzd-ros-home-")  # the pairing key and logs, per process
 
 KINDS = ("unit", "sim", "ros")
 

@@ -291,3 +291,26 @@ def test_the_readme_lists_every_script_and_no_other():
     missing = {name for name in present - listed if not name.startswith("bench_")}
     assert not missing, f"README's scripts row omits {sorted(missing)}"
     assert "`bench_*.py`" in row
+
+
+HEADLINE_BEGIN = "<!-- headline table: rendered from docs/results/results.json"
+HEADLINE_END = "<!-- end of headline table -->"
+
+
+@pytest.mark.unit
+def test_every_quoted_results_table_is_the_one_rendered_from_the_committed_results():
+    """README's and results.md's results table is :func:`headline_table` of the committed
+    ``results.json`` (``evaluate.py`` writes it as ``headline.md``), to the character."""
+    import json
+
+    from rabbit_policy.evaluation.report import headline_table
+
+    results = json.loads((ROOT / "docs" / "results" / "results.json").read_text())
+    rendered = "\n".join(headline_table(results))
+    assert (ROOT / "docs" / "results" / "headline.md").read_text().strip() == rendered
+    quoting = [doc for doc in DOCS if HEADLINE_BEGIN in doc.read_text()]
+    assert {d.name for d in quoting} >= {"README.md", "results.md"}
+    for doc in quoting:
+        text = doc.read_text()
+        block = text.split(HEADLINE_BEGIN, 1)[1].split("-->", 1)[1].split(HEADLINE_END, 1)[0].strip()
+        assert block == rendered, f"{doc.name}'s results table differs from docs/results/headline.md"

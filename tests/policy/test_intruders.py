@@ -103,6 +103,34 @@ def test_no_other_node_ever_gets_the_robot_with_the_stacks_key(fault, rogue_from
         assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
 
 
+def test_nodes_started_by_hand_pair_by_the_users_key_and_a_rogue_copying_the_controller_moves_nothing():
+    """The three nodes started as ``ros2 run`` starts them, no ``pairing_key`` given: the
+    simulator and the controller pair by the user's key file (``$ROS_HOME``, the test's own), made
+    on first use. A rogue without the file copies the controller's ``frame_id`` onto
+    ``/joint_torques`` and answers every state: none of its torques is applied. (Before keys by
+    default, such a rogue had its 37 N m applied on a third of the states and RABBIT fell.)"""
+    import os
+    from pathlib import Path
+
+    with ros_context() as (ctx_s, ex_s), ros_context() as (ctx_p, ex_p), ros_context() as (ctx_c, ex_c), \
+            ros_context() as (ctx_r, ex_r):
+        rogue = Rogue(ctx_r, "copy")
+        ex_r.add_node(rogue.node)
+        efforts = _watch(ctx_s, ex_s)
+        sim = SimNode(context=ctx_s)
+        ex_s.add_node(sim)
+        ex_p.add_node(PolicyNode(context=ctx_p))
+        controller = HZDControllerNode(context=ctx_c)
+        ex_c.add_node(controller)
+        everyone = [ex_s, ex_p, ex_c, ex_r]
+        assert spin_until(everyone, lambda: sim.time >= 1.0 and rogue.sent > 50, timeout=90.0), f"at {sim.time}"
+        assert sim.torques_rejected > 0 and not sim.fallen
+        assert "#" in rogue.frame_id  # it copied the controller's signed id
+        assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
+    key_file = Path(os.environ["ROS_HOME"]) / "rabbit_hzd" / "pairing_key"
+    assert key_file.stat().st_mode & 0o077 == 0
+
+
 def test_a_rogue_publisher_does_not_keep_the_real_nodes_from_starting():
     """A rogue publishes on ``/joint_torques`` (answering every state) and a test tool holds a
     publisher of ``/hzd/alpha`` open before the stack starts: the controller (with the

@@ -573,20 +573,20 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
 
 @pytest.mark.slow
 def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
-    """Without a pairing key (nodes started by hand): the robot waits for its controller; a
+    """With no pairing key (``pairing_key:=none``, unsafe): the robot waits for its controller; a
     new controller is paired only after ``/sim/release_controller`` (an explicit act, never
-    silence). With the stack's key see test_intruders.py."""
+    silence). With a key (the stack's or the user's) see test_intruders.py."""
     # the controller lives in a context of its own, standing in for its own process
     with ros_context() as (context, executor):
         import rclpy
 
-        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1)
+        nodes = _start_sim_and_policy(context, executor, resend_timeout=0.1, pairing_key="none")
         sim = nodes["sim"]
         user = rclpy.create_node("user", context=context)
         executor.add_node(user)
         release = user.create_client(Trigger, topics.RELEASE_CONTROLLER_SERVICE)
         with ros_context() as (ctx_a, ex_a):
-            old = HZDControllerNode(context=ctx_a)
+            old = HZDControllerNode(context=ctx_a, pairing_key="none")
             ex_a.add_node(old)
             assert spin_until((executor, ex_a), lambda: sim.time >= 1.0)
             old_source = old.source
@@ -597,7 +597,7 @@ def test_controller_restart_mid_walk_lockstep_waits_and_resumes():
         assert sim.time == t_stopped  # lockstep: the physics waits for a torque
         assert sim.resends >= 2
         with ros_context() as (ctx_b, ex_b):
-            new = HZDControllerNode(context=ctx_b)
+            new = HZDControllerNode(context=ctx_b, pairing_key="none")
             ex_b.add_node(new)
             assert spin_until((executor, ex_b), lambda: new.torques_published > 0)
             spin_for((executor, ex_b), 0.5)

@@ -31,7 +31,10 @@ def initial_state() -> tuple[list[float], list[float]]:
 
 
 def _driver(initial_state, clock=None, **settings) -> SimDriver:
-    driver = SimDriver(SimSettings(**settings), Simulator(load_model("paper")), clock or FakeClock(), shapes=False)
+    """A driver on ``settings``, paired by ``pairing_key`` if given (else no key, as sim_node's ``none``)."""
+    key = PairingKey.parse(settings.get("pairing_key", ""))
+    driver = SimDriver(SimSettings(**settings), Simulator(load_model("paper")), clock or FakeClock(), shapes=False,
+                       key=key)
     driver.on_initial_state(*initial_state)
     return driver
 

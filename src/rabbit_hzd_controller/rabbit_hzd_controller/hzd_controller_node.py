@@ -46,7 +46,7 @@ from rabbit_msgs_py.conversions import (
 from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
-from rabbit_msgs_py.pairing import PairingKey
+from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -94,7 +94,8 @@ NODE_PARAMS = {
     "pairing_key": Param("", "sign every torque reply with this key, so that a simulator given the same key applies "
                              "this controller's torques and no other node's (16-64 characters; run_stack makes one "
                              "per stack; read once at start, then removed so ros2 param get cannot read it). '' = "
-                             "unsigned replies", dynamic=True),
+                             "the user's own key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); "
+                             "'none' = unsigned replies, UNSAFE", dynamic=True),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="controller"), range=(0.0, 60.0)),
 }
 GAITLESS_WARNING_AFTER = 2.0
@@ -118,7 +119,7 @@ class HZDControllerNode(Node):
             gait_timing = values.pop("gait_timing")
             decision_sync = bool(values.pop("decision_sync"))
             decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
-            self.pairing = PairingKey.parse(values.pop("pairing_key"))
+            self.pairing, self._key_source = resolve_key(values.pop("pairing_key"))
             solo_check = finite("solo_check", values.pop("solo_check"), 0.0)
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
@@ -152,6 +153,7 @@ class HZDControllerNode(Node):
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         wall_timer(self, 0.05, lambda: self._do(self.sync.check_held()))  # decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
+        (self.get_logger().info if self.pairing else self.get_logger().warning)(f"pairing: {self._key_source}")
 
     # ----------------------------------------------------------------- status
     controller = property(lambda self: self.sync.controller, doc="The HZDController (None before the first state).")

@@ -2,7 +2,11 @@
 
 A stack (run_stack) makes a random key and gives it to ``sim_node`` and
 ``hzd_controller_node`` (parameter ``pairing_key``; each node reads it once at start and then
-removes the parameter, so ``ros2 param get`` cannot read it). The controller signs every
+removes the parameter, so ``ros2 param get`` cannot read it). Nodes started by hand without
+one pair with the user's own key, ``$ROS_HOME/rabbit_hzd/pairing_key`` (``~/.ros`` without
+``ROS_HOME``), made on first use and readable by its owner only, as OpenSSH keeps a private
+key; ``pairing_key:=none`` pairs with no key (unsafe: any node on the graph can then drive the
+robot). The controller signs every
 torque reply: its ``header.frame_id`` is ``<instance id>#<tag>``, the tag a keyed BLAKE2b
 MAC (64 bits) of the stamp it answers (ns) and its four torques (N m, as float64). The
 simulator applies only replies whose tag checks with its key. A node without the key cannot
@@ -10,22 +14,30 @@ make a tag for a new stamp or new torques, even after seeing every earlier reply
 a seen reply repeats the real controller's torques for a stamp no longer due (ignored).
 
 This guards the robot against other nodes on the ROS graph (a second controller, a test
-script, a node that answers every state). It is not SROS2: a process of the same user can
-read the key from the command line of the nodes it was given to.
+script, a node that answers every state) that do not have the key: another user's process, or
+a node of this user's that does not read the key file. It is not SROS2: a process of the same
+user can read the key file, or the key from the command line of the nodes it was given to.
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
+import os
 import secrets
+import stat
 import struct
 from dataclasses import dataclass
-from typing import Sequence
+from pathlib import Path
+from typing import Mapping, Sequence
 
 TAG_SEPARATOR = "#"
 MIN_KEY_CHARS = 16
 MAX_KEY_BYTES = 64  # BLAKE2b's longest key
+NO_KEY = "none"
+"""``pairing_key:=none``: pair with no key (unsafe: any node on the graph can drive the robot)."""
+USER_KEY_FILE = Path("rabbit_hzd") / "pairing_key"
+"""The user's own key, under ROS's home directory (:func:`user_key_file`)."""
 
 
 def new_key() -> str:
@@ -73,3 +85,53 @@ class PairingKey:
 def source_of(frame_id: str) -> str:
     """The instance id a reply names, signed or not (for log lines)."""
     return frame_id.rpartition(TAG_SEPARATOR)[0] or frame_id
+
+
+def user_key_file(environ: Mapping[str, str] | None = None) -> Path:
+    """The user's key file: ``$ROS_HOME/rabbit_hzd/pairing_key``, ``~/.ros/...`` without
+    ``ROS_HOME`` (where rcl and ros2cli keep the user's ROS files)."""
+    environ = os.environ if environ is None else environ
+    home = environ.get("ROS_HOME") or str(Path.home() / ".ros")
+    return Path(home) / USER_KEY_FILE
+
+
+def user_key(path: Path) -> PairingKey:
+    """The key in ``path``, made on first use: the file created whole (written beside it,
+    then linked into place, so a node starting at the same moment reads it whole or makes
+    none), owner read/write only, in a directory of the owner's. ``ValueError`` for a file
+    another user owns or group or others may read or write, or one that is not a key."""
+    if not path.exists():
+        path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
+        fresh = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}")
+        fd = os.open(fresh, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        try:
+            with os.fdopen(fd, "w") as out:
+                out.write(new_key() + "\n")
+            try:
+                os.link(fresh, path)
+            except FileExistsError:
+                pass  # another node made it first: use theirs
+        finally:
+            fresh.unlink()
+    info = path.stat()
+    if info.st_uid != os.getuid():
+        raise ValueError(f"pairing key file {path} belongs to another user (uid {info.st_uid})")
+    if stat.S_IMODE(info.st_mode) & 0o077:
+        raise ValueError(f"pairing key file {path} is open to others (mode {stat.S_IMODE(info.st_mode):04o}): "
+                         f"chmod 600 {path}")
+    key = PairingKey.parse(path.read_text().strip())
+    if key is None:
+        raise ValueError(f"pairing key file {path} is empty: remove it and a node makes a new one")
+    return key
+
+
+def resolve_key(text: str, environ: Mapping[str, str] | None = None) -> tuple[PairingKey | None, str]:
+    """The key a node pairs with, from its ``pairing_key`` parameter, and where it came from
+    (for the start-up log): ``""`` the user's key (:func:`user_key`), ``none`` no key, else
+    the key given (:meth:`PairingKey.parse`). ``ValueError`` with one line otherwise."""
+    if text == NO_KEY:
+        return None, "NO pairing key (pairing_key:=none): any node on the graph can drive the robot"
+    if text:
+        return PairingKey.parse(text), "torques signed with the pairing key it was given"
+    path = user_key_file(environ)
+    return user_key(path), f"torques signed with the user's pairing key ({path})"

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rabbit_msgs_py.cli import option
-from rabbit_msgs_py.pairing import PairingKey
+from rabbit_msgs_py.pairing import NO_KEY, PairingKey
 from rabbit_msgs_py.solo import SOLO_CHECK_HELP
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
@@ -61,8 +61,10 @@ class SimSettings:
                                             "load (run_stack sets it when recording)")
     pairing_key: str = option("", "apply torques only from a controller that signs its replies with this key (16-64 "
                                   "characters; run_stack makes one per stack and gives it to the controller too; read "
-                                  "once at start, then removed so ros2 param get cannot read it). '' = the first "
-                                  "controller to answer, until /sim/release_controller", secret=True)
+                                  "once at start, then removed so ros2 param get cannot read it). '' = the user's own "
+                                  "key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); 'none' = no "
+                                  "key, UNSAFE: the first controller to answer, until /sim/release_controller, and "
+                                  "any node that copies its id", secret=True)
     solo_check: float = option(0.0, SOLO_CHECK_HELP.format(kind="simulator"), range=(0.0, 60.0))
     stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
     markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
@@ -92,7 +94,8 @@ class SimSettings:
             raise ValueError(f"max_late_fraction must be in (0, 1], got {self.max_late_fraction}")
         if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
             raise ValueError(f"stats_file {self.stats_file}: its directory does not exist")
-        PairingKey.parse(self.pairing_key)
+        if self.pairing_key != NO_KEY:
+            PairingKey.parse(self.pairing_key)
         try:
             pushes = parse_pushes(self.push_schedule)
         except ValueError as exc:
@@ -109,11 +112,6 @@ class SimSettings:
     def delay_ticks(self) -> int:
         """The torque delay in ticks (1 ms each)."""
         return int(round(self.torque_delay / TIMESTEP))
-
-    @property
-    def pairing(self) -> PairingKey | None:
-        """``pairing_key`` parsed (None: no key)."""
-        return PairingKey.parse(self.pairing_key)
 
     @property
     def pushes(self) -> tuple[Push, ...]:

@@ -36,6 +36,7 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 
@@ -66,8 +67,9 @@ class SimNode(Node):
         forget_secrets(self, SECRET_PARAMS)
         try:
             self.settings = SimSettings(**values)
+            key, self._key_source = resolve_key(self.settings.pairing_key)
             self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model_options)),
-                                    shapes=bool(self.settings.markers_rate), namespace=self.get_namespace())
+                                    shapes=bool(self.settings.markers_rate), namespace=self.get_namespace(), key=key)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"sim_node: {exc}") from exc
         self.sim = self.driver.sim
@@ -129,6 +131,7 @@ class SimNode(Node):
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
         self.get_logger().info(f"RABBIT simulation ({self.settings.describe()}) waiting for a state on "
                                f"{self.resolve_topic_name(topics.INITIAL_STATE)}")
+        (self.get_logger().info if self.driver.pairing.key else self.get_logger().warning)(f"pairing: {self._key_source}")
 
     # ----------------------------------------------------------------- status
     fallen = property(lambda self: self.driver.fallen)

@@ -9,13 +9,15 @@ Runs on the ROS-free fast path (the nodes' model and controller, no ROS):
   settling time per segment);
 * limit cycles: phase portraits at several speeds after a perturbation, and the
   Poincaré test (eigenvalues of the step-to-step return map's Jacobian);
-* push recovery: three push scenarios at 2, 4 and 6 s, who fell, speed plots, an
-  impulse sweep, repeated pushes (three equal pushes 2 s apart, broadly) and a GIF of each
-  controller under the pushes;
+* push recovery: three push scenarios at 2, 4 and 6 s, who fell, speed plots, each
+  scenario as a rate over its neighbourhood (the pushes shifted together, speeds around
+  1.0 m/s; Wilson intervals, McNemar's test against learned), an impulse sweep, repeated
+  pushes (three equal pushes 2 s apart, broadly) and a GIF of each controller under the pushes;
 
 with ``--ablation``, the checks 1-6 table of ``scripts/compare_policies.py --out`` files (the
-learning issue's ablation); and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures) and
-the PNG/GIF files. ``--quick`` is a short version (about 25 s) for tests. The
+learning issue's ablation); and writes ``DIR/report.md``, ``DIR/results.json`` (every number behind the figures,
+and the provenance: the code's commit and the machine), ``DIR/headline.md`` (README's results table) and
+the PNG/GIF files. ``--quick`` is a short version for tests. The
 committed report in ``docs/results/`` was made with ``scripts/evaluate.py --out docs/results``.
 Exit status: 0 written, 2 bad arguments or no policy.
 """
@@ -97,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures
-    from rabbit_policy.evaluation.report import load_comparisons, render_ablation, render_report
+    from rabbit_policy.evaluation.report import headline_table, load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness
     from rabbit_policy.experiment.provenance import provenance
     from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
@@ -186,6 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                "ablation": ablation}
     (out / "results.json").write_text(strict_json.dumps(results, indent=1))
     (out / "report.md").write_text(render_report(results))
+    (out / "headline.md").write_text("\n".join(headline_table(results)) + "\n")  # README's and results.md's table
     if ablation:
         (out / "ablation.md").write_text(render_ablation(results))
     log(f"wrote {out / 'report.md'}")

@@ -4,7 +4,7 @@ figures and videos (file names relative to the report)."""
 from __future__ import annotations
 
 from rabbit_policy.evaluation.figures import LABELS
-from rabbit_policy.evaluation.statistics import format_rate, rate
+from rabbit_policy.evaluation.statistics import format_rate, mcnemar_exact, rate
 
 
 def _fmt(value, spec: str = ".3f", none: str = "—") -> str:
@@ -200,22 +200,56 @@ def neighbourhood_section(rates: dict) -> list[str]:
     return lines + [""]
 
 
-def headline_rates(results: dict) -> dict[str, dict[str, dict]]:
-    """The headline claims as rates per claim and controller (:func:`.statistics.rate`): ordered
-    speed changes passed at every phase, random command sequences walked, and each push
-    scenario walked over its neighbourhood."""
-    claims: dict[str, dict[str, dict]] = {}
+def trial_outcomes(results: dict) -> dict[str, dict[str, list[bool]]]:
+    """Per headline claim and controller, every trial's outcome in one order for all
+    controllers (so they can be paired): ordered speed changes passed at every phase, random
+    command sequences walked, model cases walked, and each push scenario walked over its
+    neighbourhood."""
+    claims: dict[str, dict[str, list[bool]]] = {}
     robustness = results.get("robustness") or {}
     if robustness:
         claims["ordered speed changes reached within the time limit at every phase"] = {
-            n: rate([p["passed"] for p in r["transitions"]["pairs"]]) for n, r in robustness.items()}
+            n: [p["passed"] for p in r["transitions"]["pairs"]] for n, r in robustness.items()}
         claims["random one-minute command sequences without a fall or stall"] = {
-            n: rate([row["outcome"] == "walked" for row in r["random_sequences"]["rows"]]) for n, r in robustness.items()}
+            n: [row["outcome"] == "walked" for row in r["random_sequences"]["rows"]] for n, r in robustness.items()}
+        claims["model cases walked (each model error at each speed)"] = {
+            n: [row["outcome"] == "walked" for row in r["model_errors"]["rows"]] for n, r in robustness.items()}
     neighbourhood = results["push"].get("neighbourhood") or {}
-    for name, by_scenario in neighbourhood.get("rates", {}).items():
-        for scenario, r in by_scenario.items():
-            claims.setdefault(f"the paper's `{scenario}` pushes walked, over their neighbourhood", {})[name] = r
+    for name, by_scenario in neighbourhood.get("outcomes", {}).items():
+        for scenario, outcomes in by_scenario.items():
+            claims.setdefault(f"the paper's `{scenario}` pushes walked, over their neighbourhood", {})[name] = outcomes
     return claims
+
+
+def headline_rates(results: dict) -> dict[str, dict[str, dict]]:
+    """The headline claims as rates per claim and controller (:func:`.statistics.rate`): those
+    of :func:`trial_outcomes`, and repeated pushes survived (counted, not kept per trial)."""
+    claims = {claim: {n: rate(o) for n, o in by_name.items()} for claim, by_name in trial_outcomes(results).items()}
+    for name, repeated in (results.get("repeated_pushes") or {}).items():
+        claims.setdefault("repeated pushes survived (3 backward pushes 2 s apart)", {})[name] = rate(
+            [True] * repeated["survived"] + [False] * (repeated["trials"] - repeated["survived"]))
+    return claims
+
+
+def paired_section(results: dict) -> list[str]:
+    """The learned controller against each other one on the same trials of every claim
+    (McNemar's exact test)."""
+    claims = trial_outcomes(results)
+    names = [n for n in results["meta"]["controllers"] if n != "learned"]
+    if not claims or "learned" not in results["meta"]["controllers"]:
+        return []
+    lines = ["## Paired comparisons", "",
+             "The learned controller against each other one on the same trials: the trials only one of the two "
+             "passed, and McNemar's exact two-sided p-value (a difference is significant at the 5 % level when "
+             "p < 0.05).", "",
+             "| claim | " + " | ".join(f"learned vs {_label(n)}" for n in names) + " |", "|---|" + "---|" * len(names)]
+    for claim, by_name in claims.items():
+        cells = []
+        for n in names:
+            t = mcnemar_exact(by_name["learned"], by_name[n])
+            cells.append(f"{t['only_a']} vs {t['only_b']}, p = {t['p_value']:.2g}")
+        lines.append(f"| {claim} | " + " | ".join(cells) + " |")
+    return lines + [""]
 
 
 def headline_table(results: dict) -> list[str]:
@@ -388,6 +422,7 @@ def render_report(results: dict) -> str:
         lines.append(f"| {_label(name)} | {policy} |")
     lines.append("")
     lines += summary_section(results)
+    lines += paired_section(results)
     lines += tracking_section(results["tracking"], results["config"])
     lines += limit_cycle_section(results["limit_cycle"], results["config"])
     lines += poincare_section(results["poincare"])

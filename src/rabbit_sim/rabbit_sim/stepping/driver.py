@@ -22,6 +22,7 @@ from typing import Callable
 
 from rabbit_msgs_py import topics
 from rabbit_msgs_py.joints import N_ACTUATED
+from rabbit_msgs_py.pairing import PairingKey
 
 from .. import compiled
 from ..markers import RobotShapes, marker_period_ticks
@@ -115,7 +116,9 @@ class SimDriver:
     docstring. Not thread-safe: the node calls it under one lock."""
 
     def __init__(self, settings: SimSettings, sim: Simulator, clock: Callable[[], float] = time.perf_counter,
-                 shapes: bool = True, namespace: str = "/") -> None:
+                 shapes: bool = True, namespace: str = "/", key: PairingKey | None = None) -> None:
+        """``key``: the pairing key resolved from ``settings.pairing_key`` (the node resolves it:
+        :func:`rabbit_msgs_py.pairing.resolve_key`); None: no key."""
         compiled.warm()  # the compiled rules loaded now, not on the first step (half a second in real time)
         self.settings, self.sim, self.clock = settings, sim, clock
         self.namespace = namespace  # the node's: log lines name topics in full (_topic)
@@ -137,7 +140,7 @@ class SimDriver:
         self.pace_pending = False  # paced: the newest state waits for its wall time
         self.recorder = RecorderGate(settings.wait_for_recorder and self.by_replies, RECORDER_LAG,
                                      seconds_to_ns(sim.timestep))
-        self.pairing = ControllerPairing(settings.pairing)  # every mode: torques from one controller
+        self.pairing = ControllerPairing(key)  # every mode: torques from one controller
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
         self.realtime = RealtimeClock(sim.timestep, clock=clock)
