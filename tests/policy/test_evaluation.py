@@ -290,19 +290,32 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
         assert len(results["tracking"][name]["segments"]) == 2
     table = {row["scenario"]: row for row in results["push"]["table"]}
     assert set(table) == {"small_forward", "small_backward", "large_backward"}
-    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in CONTROLLERS)
-    assert set(results["push_sweep"]) == set(CONTROLLERS)
-    assert set(results["repeated_pushes"]) == set(CONTROLLERS)
+    evaluated = ["classic", "classic_integral", "recovery", "network_alone", "learned"]  # the learning's ablation too
+    assert list(results["meta"]["controllers"]) == evaluated
+    assert all(table[s][c]["outcome"] in ("walked", "fell", "stalled") for s in table for c in evaluated)
+    assert set(results["push_sweep"]) == set(evaluated)
+    assert set(results["repeated_pushes"]) == set(evaluated)
+    neighbourhood = results["push"]["neighbourhood"]  # each scenario as a rate over its trials, paired with learned
+    assert all(neighbourhood["rates"][c][s]["n"] == 3 for c in evaluated for s in table)
+    assert set(neighbourhood["paired_with_learned"]["large_backward"]) == set(evaluated) - {"learned"}
+    assert "### The scenarios over their neighbourhoods" in report and "## Paired comparisons" in report
+    headline = (tmp_path / "headline.md").read_text()
+    assert headline.startswith("| | classic | classic_integral | recovery | network_alone | learned |")
+    assert "push survived in 90 % of trials" in headline and "[" in headline
+    machine = results["meta"]["provenance"]["machine"]
+    assert {"cpu", "numpy_simd", "openblas_kernel", "openblas", "numpy", "mujoco", "numba"} <= set(machine)
     assert all(r["trials"] == 2 and r["by_speed"]["1.00"]["40"] == 0 for r in results["repeated_pushes"].values())
     assert "### Repeated pushes" in report and "| 1.0 m/s, 3 N s | 1.0 m/s, 40 N s | all |" in report
-    assert set(results["robustness"]) == set(CONTROLLERS)
-    for name in CONTROLLERS:
+    assert set(results["robustness"]) == set(evaluated)
+    for name in evaluated:
         robust = results["robustness"][name]
         assert robust["speed_grid"]["total"] == 2 and robust["transitions"]["total"] == 2
         assert robust["random_sequences"]["total"] == 2 and len(robust["push_margins"]) == 2
+        assert [c["direction"] for c in robust["survival"]] == ["backward", "forward"]
+        assert all(r["n"] == 2 for c in robust["survival"] for r in c["rates"])  # 1 speed x 2 phases per impulse
     assert "## Robustness" in report
     for figure in ("tracking", "limit_cycle_classic", "limit_cycle_learned", "limit_cycle_recovery", "convergence",
-                   "poincare", "push", "sweep", "transitions", "margins", "model_cases"):
+                   "poincare", "push", "sweep", "transitions", "margins", "survival", "model_cases"):
         assert (tmp_path / f"{figure}.png").stat().st_size > 5000
         assert f"({figure}.png)" in report
     assert {(v["controller"], v["scenario"]) for v in results["videos"]} == {

@@ -55,3 +55,15 @@ def test_a_neighbourhood_shifts_the_pushes_together_over_more_than_a_step_at_eve
     assert all(math.isclose(s.force_x, large.force_x) for _v, s in trials)
     with pytest.raises(ValueError, match="inside"):
         Neighbourhood(shifts=(4.0,)).trials(large)
+
+
+def test_the_impulse_at_90_percent_is_read_off_the_curve_with_its_interval():
+    from rabbit_policy.evaluation.robustness import impulse_at
+
+    impulses = [3.0, 6.0, 9.0, 12.0, 15.0]
+    rates = [rate([True] * k + [False] * (40 - k)) for k in (40, 40, 38, 33, 36)]
+    at = impulse_at(0.9, impulses, rates)
+    assert at["impulse_Ns"] == 9.0  # 38/40 = 0.95 passes, 33/40 does not, later recoveries do not count
+    assert at["low_Ns"] == 6.0  # 38/40's lower bound is under 0.9: only 40/40 is surely above it
+    assert at["high_Ns"] == 15.0  # 33/40's upper bound (0.91) still allows 90 %, as does 36/40's
+    assert impulse_at(0.9, impulses, [rate([False])] * 5)["impulse_Ns"] == 0.0

@@ -102,13 +102,21 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.report import headline_table, load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness
     from rabbit_policy.experiment.provenance import provenance
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.evaluation.steady_integral import network_alone
+    from rabbit_policy.runtime.policies import CONTROLLERS, NetworkPolicy, PolicyUnavailable, make_policy
     from rabbit_sim.model import ModelOptions
 
     try:
-        policies = {"classic": make_policy("classic", args.gait_dir),
-                    "learned": make_policy("learned", policy_file=args.policy_file),
-                    "recovery": make_policy("recovery", args.gait_dir)}
+        learned = make_policy("learned", policy_file=args.policy_file)
+        is_network = isinstance(learned, NetworkPolicy)
+        gain = learned.spec.speed_integral.gain if is_network and learned.spec.speed_integral else 0.0
+        policies = {"classic": make_policy("classic", args.gait_dir),  # the order of the report's columns
+                    # what the learning adds: classic with the learned spec's integral gain, the network alone
+                    "classic_integral": make_policy("classic", args.gait_dir, speed_integral=gain) if gain else None,
+                    "recovery": make_policy("recovery", args.gait_dir),
+                    "network_alone": network_alone(learned) if is_network else None,
+                    "learned": learned}
+        policies = {name: policy for name, policy in policies.items() if policy is not None}
         ablation = load_comparisons(args.ablation)
     except (PolicyUnavailable, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -139,8 +147,8 @@ def main(argv: list[str] | None = None) -> int:
         figures.convergence_figure(cycles, out / "convergence.png")
 
         log("Poincaré test")
-        feedback = {"classic": False, "learned": True, "recovery": True}  # decisions read the measured state
-        poincare = evaluation.poincare({n: (p, feedback[n]) for n, p in policies.items()}, config, model, map_fn)
+        # which decisions read the measured state (all but classic's: the integral, the rule, the network)
+        poincare = evaluation.poincare({n: (p, n != "classic") for n, p in policies.items()}, config, model, map_fn)
         figures.poincare_figure(poincare, out / "poincare.png")
 
         log("push scenarios")
@@ -164,6 +172,7 @@ def main(argv: list[str] | None = None) -> int:
                 robust[name] = robustness(policy, config.robustness, map_fn, log)
             figures.transitions_figure(robust, out / "transitions.png")
             figures.margins_figure(robust, out / "margins.png")
+            figures.survival_figure(robust, out / "survival.png")
             figures.model_cases_figure(robust, out / "model_cases.png")
             log("acceptance checks 1-6")
             verdicts = {name: judge_policy(policy, robust[name], robust["classic"]["push_margins"],
@@ -175,7 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     videos: list[dict] = []
     if not args.no_video:
         log("videos")
-        videos = render_videos(push_walks, config.video_scenarios, out, config, model)
+        videos = render_videos({n: w for n, w in push_walks.items() if n in CONTROLLERS}, config.video_scenarios, out,
+                               config, model)
 
     command = ("scripts/evaluate.py" + (" --quick" if args.quick else "") + f" --out {args.out}"
                + (" --ablation " + " ".join(args.ablation) if args.ablation else ""))

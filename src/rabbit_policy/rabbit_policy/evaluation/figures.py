@@ -16,8 +16,10 @@ import numpy as np  # noqa: E402
 
 from rabbit_policy.experiment.result import WalkResult  # noqa: E402
 
-COLORS = {"classic": "tab:blue", "learned": "tab:orange", "recovery": "tab:green"}
-LABELS = {"classic": "classic HZD", "learned": "HZD-RL (learned)", "recovery": "recovery (model-based)"}
+COLORS = {"classic": "tab:blue", "learned": "tab:orange", "recovery": "tab:green", "classic_integral": "tab:purple",
+          "network_alone": "tab:brown"}
+LABELS = {"classic": "classic HZD", "learned": "HZD-RL (learned)", "recovery": "recovery (model-based)",
+          "classic_integral": "classic + speed integral", "network_alone": "learned network without the rule"}
 JOINTS = {3: "left hip", 4: "left knee"}
 
 
@@ -196,6 +198,29 @@ def margins_figure(robustness: dict[str, dict], path: Path) -> Path:
         ax.grid(alpha=0.3, axis="y")
     axes[0].set_ylabel("margin (N s, every phase)")
     axes[0].legend(fontsize=7, loc="upper left")
+    return _save(fig, path)
+
+
+def survival_figure(robustness: dict[str, dict], path: Path) -> Path:
+    """Survival rate against impulse, backward and forward, per controller, with the 95 %
+    Wilson band; the dotted line is 90 %."""
+    names = list(robustness)
+    fig, axes = plt.subplots(1, 2, figsize=(8, 3.4), sharey=True)
+    for ax, direction in zip(axes, ("backward", "forward")):
+        for name in names:
+            curve = next(c for c in robustness[name]["survival"] if c["direction"] == direction)
+            x = curve["impulses_Ns"]
+            ax.plot(x, [r["rate"] for r in curve["rates"]], marker="o", ms=3, color=COLORS.get(name),
+                    label=_label(name))
+            ax.fill_between(x, [r["ci95"][0] for r in curve["rates"]], [r["ci95"][1] for r in curve["rates"]],
+                            color=COLORS.get(name), alpha=0.15)
+        ax.axhline(0.9, color="grey", ls=":", lw=1)
+        ax.set_xlabel("impulse (N s, one 0.1 s push)")
+        ax.set_title(f"{direction} pushes (every phase, {len(curve['speeds'])} speeds "
+                     f"{min(curve['speeds']):g}-{max(curve['speeds']):g} m/s)", fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("survived (rate, 95 % band)")
+    axes[0].legend(fontsize=7, loc="lower left")
     return _save(fig, path)
 
 

@@ -200,6 +200,10 @@ def neighbourhood_section(rates: dict) -> list[str]:
     return lines + [""]
 
 
+def _span(values: list[float]) -> str:
+    return f"{min(values):g}-{max(values):g}"
+
+
 def trial_outcomes(results: dict) -> dict[str, dict[str, list[bool]]]:
     """Per headline claim and controller, every trial's outcome in one order for all
     controllers (so they can be paired): ordered speed changes passed at every phase, random
@@ -214,6 +218,14 @@ def trial_outcomes(results: dict) -> dict[str, dict[str, list[bool]]]:
             n: [row["outcome"] == "walked" for row in r["random_sequences"]["rows"]] for n, r in robustness.items()}
         claims["model cases walked (each model error at each speed)"] = {
             n: [row["outcome"] == "walked" for row in r["model_errors"]["rows"]] for n, r in robustness.items()}
+        for direction in ("backward", "forward"):
+            curves = {n: next((c for c in r.get("survival", []) if c["direction"] == direction), None)
+                      for n, r in robustness.items()}
+            if all(curves.values()):
+                first = next(iter(curves.values()))
+                claims[f"{direction} pushes survived over the impulse grid ({_span(first['impulses_Ns'])} N s, "
+                       f"{_span(first['speeds'])} m/s, {len(first['phases'])} phases)"] = {
+                    n: [o for row in c["outcomes"] for o in row] for n, c in curves.items()}
     neighbourhood = results["push"].get("neighbourhood") or {}
     for name, by_scenario in neighbourhood.get("outcomes", {}).items():
         for scenario, outcomes in by_scenario.items():
@@ -261,6 +273,12 @@ def headline_table(results: dict) -> list[str]:
     for claim, by_name in claims.items():
         lines.append(f"| {claim} | " + " | ".join(format_rate(by_name[n]) for n in names) + " |")
     robustness = results.get("robustness") or {}
+    if robustness and all(r.get("survival") for r in robustness.values()):
+        for direction in ("backward", "forward"):
+            at = {n: next(c for c in r["survival"] if c["direction"] == direction)["at_90"] for n, r in robustness.items()}
+            lines.append(f"| {direction} push survived in 90 % of trials (N s, range from the 95 % intervals) | "
+                         + " | ".join(f"{at[n]['impulse_Ns']:g} [{at[n]['low_Ns']:g}-{at[n]['high_Ns']:g}]"
+                                      for n in names) + " |")
     if robustness:
         for direction in ("backward", "forward"):
             margins = {n: {m["speed"]: m for m in r["push_margins"] if m["direction"] == direction}
@@ -276,6 +294,9 @@ def summary_section(results: dict) -> list[str]:
     """Headline facts computed from the results (no hand-written numbers)."""
     lines = ["## Summary", ""]
     if results.get("robustness"):
+        if all(r.get("survival") for r in results["robustness"].values()):
+            lines += ["![survival against impulse: backward and forward pushes at every phase, 95 % bands]"
+                      "(survival.png)", ""]
         lines += ["![push margins per speed: backward and forward, every phase](margins.png)", "",
                   "![model errors: walked (green, the speed error), stalled (orange), fell (red)](model_cases.png)",
                   ""]

@@ -18,6 +18,11 @@ Definitions (times s, speeds m/s, impulses N s):
   the torso, whole N s steps) such that it and every smaller one are survived (no fall, no
   stall within ``push_horizon``) at every one of ``push_phases`` phases of the first step
   after ``push_settle``.
+* **survival against impulse** in a direction: one push of each ``curve_impulses`` impulse at
+  each of ``push_phases`` phases of the first step after ``push_settle`` at each of
+  ``curve_speeds``; the survival rate per impulse over those trials with its 95 % Wilson
+  interval, and the impulse survived in 90 % of them (:func:`impulse_at`), a margin defined
+  on the curve rather than on its weakest point.
 * **model errors**: the walk at each ``model_speeds`` command under each
   :data:`MODEL_ERRORS` case; passes when it neither falls nor stalls and |error| <= 0.05.
 
@@ -32,6 +37,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from rabbit_policy.evaluation.statistics import rate
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.result import REACH_TOLERANCE
 from rabbit_policy.experiment.scenario import Push, Scenario
@@ -90,6 +96,8 @@ class RobustnessConfig:
     push_settle: float = 3.0
     push_horizon: float = 5.0
     max_impulse: int = 40
+    curve_speeds: tuple[float, ...] = (0.7, 0.85, 1.0, 1.15, 1.3)
+    curve_impulses: tuple[float, ...] = tuple(float(i) for i in range(3, 40, 3))
     model_speeds: tuple[float, ...] = (0.7, 1.0, 1.3)
     model_duration: float = 30.0
     model_errors: tuple[ModelError, ...] = MODEL_ERRORS
@@ -101,6 +109,7 @@ class RobustnessConfig:
         return cls(grid_speeds=(0.75, 1.25), grid_duration=8.0, transition_speeds=(0.8, 1.4),
                    change_phases=(0.0, 0.5), transition_settle=3.0, random_episodes=2, random_duration=10.0,
                    push_speeds=(1.0,), push_phases=(0.0, 0.5), max_impulse=4, push_settle=2.0,
+                   curve_speeds=(1.0,), curve_impulses=(3.0, 30.0),
                    push_horizon=3.0, model_speeds=(1.0,),
                    model_duration=8.0, model_errors=(MODEL_ERRORS[1], MODEL_ERRORS[3], MODEL_ERRORS[9]))
 
@@ -242,6 +251,39 @@ def push_margins(policy: Policy, config: RobustnessConfig, map_fn: MapFn = map) 
     return [push_margin(policy, v, d, config, map_fn) for v in config.push_speeds for d in (1, -1)]
 
 
+def impulse_at(level: float, impulses: list[float], rates: list[dict]) -> dict:
+    """The impulse survived at ``level`` (a rate, e.g. 0.9) on a survival curve: the largest
+    grid impulse before the survival rate first falls below ``level`` (0 if the first does),
+    with the range the 95 % intervals allow: ``low``, before the interval's lower bound first
+    falls below ``level``; ``high``, before its upper bound first does (pointwise intervals)."""
+    def before(values: list[float]) -> float:
+        last = 0.0
+        for impulse, value in zip(impulses, values):
+            if value < level:
+                break
+            last = impulse
+        return last
+
+    return {"level": level, "impulse_Ns": before([r["rate"] for r in rates]),
+            "low_Ns": before([r["ci95"][0] for r in rates]), "high_Ns": before([r["ci95"][1] for r in rates])}
+
+
+def survival_curve(policy: Policy, direction: int, config: RobustnessConfig, map_fn: MapFn = map) -> dict:
+    """Survival against impulse pushing ``direction`` (+1 forward, -1 backward): every trial's
+    outcome per impulse (speeds outermost, then phases; a speed the policy does not walk
+    unpushed counts as failed), the rate per impulse and :func:`impulse_at` 90 %."""
+    times = {v: phase_times(policy, v, config.push_settle, config.push_phases) for v in config.curve_speeds}
+    trials = [(v, t) for v in config.curve_speeds for t in (times[v] or [None] * len(config.push_phases))]
+    jobs = [(policy, v, t, direction * impulse, config) for impulse in config.curve_impulses for v, t in trials
+            if t is not None]
+    walked = iter(map_fn(push_survived, jobs))
+    outcomes = [[t is not None and bool(next(walked)) for v, t in trials] for _impulse in config.curve_impulses]
+    rates = [rate(row) for row in outcomes]
+    return {"direction": "forward" if direction > 0 else "backward", "impulses_Ns": list(config.curve_impulses),
+            "speeds": list(config.curve_speeds), "phases": list(config.push_phases), "outcomes": outcomes,
+            "rates": rates, "at_90": impulse_at(0.9, list(config.curve_impulses), rates)}
+
+
 # ------------------------------------------------------------------ model errors
 def _model_job(job: tuple) -> dict:
     policy, case, speed, config = job
@@ -270,8 +312,10 @@ def robustness(policy: Policy, config: RobustnessConfig = RobustnessConfig(), ma
     sequences = random_sequences(policy, config, map_fn)
     log(f"{policy.name}: push margins")
     pushes = push_margins(policy, config, map_fn)
+    log(f"{policy.name}: survival against impulse")
+    curves = [survival_curve(policy, d, config, map_fn) for d in (-1, 1)]
     log(f"{policy.name}: model errors")
     models = model_errors(policy, config, map_fn)
     return {"policy": policy.name, "speed_grid": grid, "transitions": changes, "random_sequences": sequences,
-            "push_margins": pushes, "model_errors": models}
+            "push_margins": pushes, "survival": curves, "model_errors": models}
 
