@@ -96,10 +96,11 @@ def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
     )
     assert result.returncode == 1 and "policy file /nonexistent/p.pt does not exist" in result.stdout
     result = subprocess.run(
-        [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "-p", "min_speed:=2.0"],
+        [sys.executable, "-m", "rabbit_policy.policy_node", "--ros-args", "-p", "min_speed:=1.4", "-p",
+         "max_speed:=1.2"],
         capture_output=True, text=True, timeout=60,
     )
-    assert result.returncode == 1 and "min_speed (2.0) must not be above max_speed" in result.stdout
+    assert result.returncode == 1 and "min_speed (1.4) must not be above max_speed" in result.stdout
 
 
 def test_the_install_space_carries_the_package_data(install_space):

@@ -33,9 +33,9 @@ def test_coerce_accepts_an_integer_for_a_double_and_nothing_else_odd():
     (["rabbit_policy.policy_node", "-p", "policy:=learned", "-p", "policy_file:=/etc/passwd"],
      "not a policy checkpoint"),
     (["rabbit_policy.policy_node", "-p", "policy_file:=/etc/passwd"], "it is for the learned controller"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "parameter initial_speed must be in [0.1, 3], got inf"),
+    (["rabbit_policy.policy_node", "-p", "initial_speed:=inf"], "parameter initial_speed must be in [0.7, 1.5], got inf"),
     (["rabbit_policy.policy_node", "-p", "initial_speed:=2.0", "-p", "policy:=classic"], "in [0.7, 1.5]"),
-    (["rabbit_policy.policy_node", "-p", "initial_speed:=5.0"], "parameter initial_speed must be in [0.1, 3], got 5.0"),
+    (["rabbit_policy.policy_node", "-p", "min_speed:=0.1"], "parameter min_speed must be in [0.7, 1.5], got 0.1"),
     (["rabbit_sim.sim_node", "-p", "max_late_fraction:=1.5"], "parameter max_late_fraction must be in [0.001, 1]"),
     (["rabbit_sim.sim_node", "-p", "damping:=nan"], "parameter damping must be in [0, 10000], got nan"),
     (["rabbit_sim.sim_node", "-p", "stop_time:=nan"], "parameter stop_time must be in [0, 1e+09], got nan"),
@@ -156,6 +156,9 @@ def test_run_time_changes_are_validated_and_read_only_ones_refused():
         policy = PolicyNode(context=context, policy="classic")
         assert not policy.set_parameters([Parameter("policy", value="learned")])[0].successful
         assert not policy.set_parameters([Parameter("max_speed", value=0.5)])[0].successful  # below min_speed
+        for name, value in (("min_speed", 0.1), ("max_speed", 3.0)):  # beyond the speeds the library walks
+            assert not policy.set_parameters([Parameter(name, value=value)])[0].successful
+        assert (policy.min_speed, policy.max_speed) == (0.7, 1.5)
         assert policy.set_parameters([Parameter("max_speed", value=1.2)])[0].successful
         assert policy.max_speed == 1.2 and policy.desired_speed <= 1.2
         sim = SimNode(context=context)
@@ -264,9 +267,8 @@ def test_importing_a_node_sets_nothing_and_starting_ros_sets_the_discovery_defau
 
 
 # parameters whose accepted values also depend on another one: set so that the range's ends are reachable
-_COMPANIONS = {("policy_node", "initial_speed"): {"min_speed": 0.1, "max_speed": 3.0},
-               ("policy_node", "min_speed"): {"max_speed": 3.0, "initial_speed": 3.0},
-               ("policy_node", "max_speed"): {"min_speed": 0.1, "initial_speed": 0.1}}
+_COMPANIONS = {("policy_node", "min_speed"): {"initial_speed": 1.5},
+               ("policy_node", "max_speed"): {"initial_speed": 0.7}}
 
 
 def _starts(node_class, context, overrides: dict) -> bool:

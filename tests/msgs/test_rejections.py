@@ -18,9 +18,10 @@ def test_one_line_per_kind_per_period_and_the_unlogged_ones_said():
     now[0] = 0.5
     assert log.flush() == []  # within the period: nothing yet
     now[0] = 1.2
-    assert log.line("kd", "bad kd") == "bad kd (499 more like it in the last 1.2 s not logged)"
+    assert log.line("kd", "bad kd") == ("bad kd (and 499 more of kind 'kd' in the last 1.2 s, not logged: counted by "
+                                        "kind, their texts may differ)")
     log.line("kd", "bad kd")
     now[0] = 2.5
-    assert log.flush() == ["1 more kd rejections like the last one logged, in the last 1.3 s"]
+    assert log.flush() == ["1 more of kind 'kd' after the last one logged, in the last 1.3 s"]
     assert log.flush() == []
     assert log.counts == {"kd": 502, "alpha": 1}

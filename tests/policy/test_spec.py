@@ -151,6 +151,42 @@ def test_make_policy_builds_the_specs_and_their_variants():
                                                         "blend_phase": 0.0}
     with pytest.raises(PolicyUnavailable, match="is a classic controller, not learned"):
         make_policy("learned", policy_file=packaged_spec("classic"))
+    for kind in ("classic", "recovery"):  # a spec file of any kind runs as its kind
+        assert make_policy(kind, policy_file=packaged_spec(kind)).spec == load_spec(packaged_spec(kind))
+
+
+@pytest.mark.slow
+def test_walk_py_runs_a_spec_file_of_any_kind_names_it_and_an_edited_one_walks_its_own_way(tmp_path, capsys):
+    """``walk.py --spec FILE``: the controller is the file's kind; the JSON names the file and
+    its hash; an edited recovery spec (other offsets) walks differently from the packaged one;
+    a --controller that names another kind, or a file that is not a spec, is one line, exit 2."""
+    import json
+
+    from rabbit_policy.commands import walk as walk_command
+    from rabbit_policy.spec.files import file_sha256
+
+    def run(*args: str) -> tuple[int, dict | str]:
+        code = walk_command.main(["--speed", "1.0", "--duration", "4", "--push", "2:-130:0.1", "--json", *args])
+        out, err = capsys.readouterr()
+        return code, (json.loads(out) if out.strip() else err)
+
+    walks = {}
+    for kind in ("classic", "recovery", "learned"):
+        code, summary = run("--spec", str(packaged_spec(kind)))
+        assert summary["controller"] == kind and summary["spec"] == {
+            "file": str(packaged_spec(kind)), "sha256": file_sha256(packaged_spec(kind))}
+        walks[kind] = summary
+    text = packaged_spec("recovery").read_text().replace("offsets: [-0.11, 0.01, 0.08, -0.23]",
+                                                          "offsets: [-0.05, 0.01, 0.04, -0.12]")
+    edited = tmp_path / "recovery_edited.yaml"
+    edited.write_text(text)
+    code, summary = run("--spec", str(edited))
+    assert summary["controller"] == "recovery" and summary["spec"]["sha256"] == file_sha256(edited)
+    assert summary["touchdowns"] != walks["recovery"]["touchdowns"]  # the rule's offsets moved the walk
+    code, err = run("--spec", str(edited), "--controller", "classic")
+    assert code == 2 and "is a recovery controller, not classic" in err and len(err.strip().splitlines()) == 1
+    code, err = run("--spec", "/nonexistent.yaml")
+    assert code == 2 and "/nonexistent.yaml" in err and len(err.strip().splitlines()) == 1
 
 
 def test_a_spec_is_built_without_torch():

@@ -397,7 +397,7 @@ def test_a_burst_of_bad_input_is_counted_in_full_and_logged_at_most_once_a_secon
         lines = [line for line in err if pattern in line]
         assert 1 <= len(lines) <= allowed, (pattern, len(lines), allowed)
     for kind in ("kd", "alpha", "reject /cmd_speed", "clamp /cmd_speed"):  # the unlogged ones are said, counted
-        assert any(f"more {kind} rejections like the last one logged" in line or "more like it" in line
+        assert any(f"more of kind '{kind}'" in line
                    for line in err if kind.split()[-1].strip("/") in line), kind
 
 
@@ -569,6 +569,32 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
             assert controller.decisions_timed_out == 1 and not sim.fallen
         finally:  # ros_context destroys only the executor's nodes: one left alive outlives the test in
             policy.destroy_node()  # the domain, and a later run_stack there refuses to start beside it
+
+
+@pytest.mark.slow
+def test_a_killed_policy_is_named_by_the_controller_within_a_second_of_sim_time(capfd):
+    """Nodes started by hand (no decision_sync: the robot walks on the last gait): the policy's
+    process dies (its context shut down). The controller logs one warning that the policy is
+    silent, since when and on which gait it walks, within 1 s of sim time; nothing more while
+    it stays silent."""
+    with ros_context() as (context, executor), ros_context() as (ctx_p, ex_p):
+        sim = SimNode(context=context)
+        controller = HZDControllerNode(context=context)
+        for node in (sim, controller):
+            executor.add_node(node)
+        ex_p.add_node(PolicyNode(context=ctx_p))
+        assert spin_until((executor, ex_p), lambda: sim.time >= 0.5, timeout=60.0)
+        capfd.readouterr()
+        ctx_p.try_shutdown()  # kill -9: nothing more from it
+        killed = sim.time
+        lines: list[str] = []
+        while sim.time < killed + 1.0 and not sim.halted:
+            spin_for(executor, 0.05)
+            lines += [line for line in capfd.readouterr().err.splitlines() if "the policy is silent" in line]
+        assert len(lines) == 1, lines
+        assert "[hzd_controller_node]" in lines[0] and "walking on the last gait" in lines[0]
+        spin_until(executor, lambda: sim.time >= killed + 2.0, timeout=30.0)
+        assert "the policy is silent" not in capfd.readouterr().err  # once, not again
 
 
 @pytest.mark.slow

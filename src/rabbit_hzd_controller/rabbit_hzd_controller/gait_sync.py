@@ -23,6 +23,9 @@ messages, then publishes what comes back; the tests drive it with no rclpy, as
   again (:class:`Repeat`).
 * A controller that joins mid-run (restarted by the stack) answers its first state with the
   gait in force: a decision on that state went to the old instance.
+* A policy that goes silent (no gait part for :data:`SILENT_DECISIONS` of its decision periods
+  of sim time, or :data:`SILENT_PER_STEP` s when it decides once per step) is logged once, with
+  since when and the gait the robot walks on; its return is logged too.
 
 Stamps are ns of sim time; ``clock`` is wall time (s, ``time.monotonic``).
 """
@@ -58,6 +61,13 @@ class Repeat:
     """The state at ``stamp`` was sent again: publish the last reply again, unchanged."""
 
     stamp: int
+
+
+SILENT_DECISIONS = 5
+"""Decision periods without a gait part after which the policy counts as silent."""
+SILENT_PER_STEP = 2.0
+"""s of sim time without a gait part after which a policy deciding once per step counts as
+silent (a step lasts at most 0.75 s; the stall rule's 2 s)."""
 
 
 @dataclass(frozen=True)
@@ -98,6 +108,9 @@ class GaitSync:
         self._held: tuple[State, float] | None = None
         self._timing_unknown = decision_sync and self.follow_policy_timing  # the first state waits for it
         self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
+        self._period = 0  # the policy's decision period (ticks; 0: once per step)
+        self._gait_at: int | None = None  # stamp (ns) of the newest state when a gait part last came
+        self._silent_since: int | None = None  # the policy is silent (logged): since this stamp
         self.states_received = 0
         self.replies_repeated = 0
         self.decisions_waited = 0  # due states answered with their decision
@@ -125,6 +138,11 @@ class GaitSync:
         """A gait part that arrived, ``part`` ``alpha`` (24 rad, validated) or ``kd``
         (N m s/rad); ``value`` None: it was rejected (it still counts as a decision's part)."""
         self._out = []
+        if self._silent_since is not None:
+            self._log("info", f"the policy is back: a gait on /hzd/{part} at t = {max(self.last_stamp, 0) / 1e9:.3f} s, "
+                              f"after {(self.last_stamp - self._silent_since) / 1e9:.3f} s without one")
+            self._silent_since = None
+        self._gait_at = max(self.last_stamp, 0)
         if value is not None:
             setattr(self, part, list(value) if part == "alpha" else value)
         self._take(part, value)
@@ -152,6 +170,7 @@ class GaitSync:
         if timing != self.gait_timing:
             self._log("info", f"gaits apply {self._timing_words(timing)}")
         self.gait_timing = timing
+        self._period = period
         self._timing_unknown = False
         due = PeriodicDecisions(period, TICK_NS) if period and self.decision_sync else None
         if due is not None and self.last_stamp >= 0:
@@ -172,6 +191,8 @@ class GaitSync:
         if first:
             return self._out  # the count in force when this node started: nothing to restart
         self._restart = True
+        if self._gait_at is not None:
+            self._gait_at = 0  # the placed state's stamps start again from 0
         self._forget_gaits()
         self._held = None  # the placed state comes next; its answer is due, not this one's
         self._forget_last_state()
@@ -180,8 +201,21 @@ class GaitSync:
     def on_state(self, stamp: int, q: list[float], dq: list[float]) -> list[Action]:
         """A state (stamp ns; q, dq: the 7 joints)."""
         self._out = []
+        self._check_policy(stamp)
         self._state(stamp, q, dq)
         return self._out
+
+    def _check_policy(self, stamp: int) -> None:
+        """Log once when the policy has sent no gait part for longer than it may."""
+        if self._gait_at is None or self._silent_since is not None or stamp < self._gait_at:
+            return
+        limit = SILENT_DECISIONS * self._period * TICK_NS if self._period else int(SILENT_PER_STEP * 1e9)
+        if stamp - self._gait_at > limit:
+            self._silent_since = self._gait_at
+            every = f"every {self._period} ms" if self._period else "once per step"
+            self._log("warning", f"the policy is silent: no gait since t = {self._gait_at / 1e9:.3f} s (it decides "
+                                 f"{every}); walking on the last gait it sent (Kd {self.kd:.1f} N m s/rad, alpha "
+                                 f"{', '.join(f'{a:.3f}' for a in (self.alpha or [])[:4])}, ...)")
 
     def check_held(self) -> list[Action]:
         """Timer: a due decision that did not come within ``decision_timeout`` s."""

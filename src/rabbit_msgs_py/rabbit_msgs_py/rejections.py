@@ -34,8 +34,8 @@ class RejectionLog:
             return None
         skipped = self._unwritten.pop(kind, 0)
         self._last[kind] = now
-        return text + (f" ({skipped} more like it in the last {now - last:.1f} s not logged)"
-                       if skipped and last is not None else "")
+        return text + (f" (and {skipped} more of kind '{kind}' in the last {now - last:.1f} s, not logged: "
+                       "counted by kind, their texts may differ)" if skipped and last is not None else "")
 
     def flush(self) -> list[str]:
         """Lines for the kinds with rejections not logged and none logged for ``period`` s
@@ -43,7 +43,7 @@ class RejectionLog:
         now, lines = self.clock(), []
         for kind, skipped in list(self._unwritten.items()):
             if now - self._last[kind] >= self.period:
-                lines.append(f"{skipped} more {kind} rejections like the last one logged, in the last "
+                lines.append(f"{skipped} more of kind '{kind}' after the last one logged, in the last "
                              f"{now - self._last[kind]:.1f} s")
                 del self._unwritten[kind]
                 self._last[kind] = now

@@ -20,6 +20,8 @@ this node turns messages into its events and its actions into messages. Paramete
 * ``library_mode``: ``nearest`` gait or ``interpolate`` between the two around v_d.
 * ``gait_dir``: gait library directory ('' = the packaged one).
 * ``policy_file``: learned controller spec (.yaml) or training checkpoint (.pt) ('' = the packaged spec).
+* ``spec_file``: a controller spec of any kind (classic, recovery or learned): the controller
+  is the file's kind ('' = none: ``policy`` and ``policy_file`` say).
 * ``initial_speed``: v_d before the first ``/cmd_speed`` and the hip speed of the initial
   state (m/s).
 * ``speed_integral``: classic only, Westervelt's event-based speed integral, gain in 1/s
@@ -73,27 +75,34 @@ from rabbit_policy.runtime.policies import (
     LIBRARY_MODES,
     Policy,
     PolicyUnavailable,
+    controller_name,
     controller_settings,
     make_policy,
+    spec_kind,
 )
 
 
 POLICY_PARAMS = {
-    "policy": Param("classic", "classic (the HZD gait library; alias library), learned (the HZD-RL network) or "
-                               "recovery (classic plus the model-based push-recovery rule)", choices=CONTROLLER_CHOICES),
+    "policy": Param("classic", "classic (the HZD gait library; aliases library and hzd), learned (the HZD-RL "
+                               "network; alias rl) or recovery (classic plus the model-based push-recovery rule)",
+                    choices=CONTROLLER_CHOICES),
     "library_mode": Param("interpolate", "classic: interpolate (the calibrated blend that walks at the command) "
                                          "or nearest gait", choices=LIBRARY_MODES),
     "gait_dir": Param("", "classic: gait library directory ('' = the packaged one)"),
     "policy_file": Param("", "learned: controller spec (.yaml) or training checkpoint (.pt) ('' = the packaged "
                                  "spec, rabbit_policy/controllers/learned.yaml)"),
+    "spec_file": Param("", "a controller spec of any kind (classic, recovery or learned; docs/controller_spec.md): "
+                           "the controller is the file's kind ('' = none: policy and policy_file say)"),
     "initial_speed": Param(1.0, "command before the first /cmd_speed and hip speed of the initial state, m/s, "
-                                "within [min_speed, max_speed]", range=(0.1, 3.0)),
+                                "within [min_speed, max_speed]", range=COMMAND_RANGE),
     "speed_integral": Param(0.0, "classic: event-based speed integral gain, 1/s (0 = off): the gait for the command "
                                  "plus the bounded integral of the speed error", range=(0.0, 100.0)),
-    "min_speed": Param(COMMAND_RANGE[0], "lowest command, m/s, not above max_speed; /cmd_speed below is clamped", dynamic=True,
-                       range=(0.1, 3.0)),
-    "max_speed": Param(COMMAND_RANGE[1], "highest command, m/s, not below min_speed; /cmd_speed above is clamped", dynamic=True,
-                       range=(0.1, 3.0)),
+    "min_speed": Param(COMMAND_RANGE[0], "lowest command, m/s, not above max_speed; /cmd_speed below is clamped "
+                                         "with a warning (within the gait library's 0.7-1.5, the speeds the "
+                                         "controllers walk)", dynamic=True, range=COMMAND_RANGE),
+    "max_speed": Param(COMMAND_RANGE[1], "highest command, m/s, not below min_speed; /cmd_speed above is clamped "
+                                         "with a warning (within the gait library's 0.7-1.5)", dynamic=True,
+                       range=COMMAND_RANGE),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
@@ -110,6 +119,20 @@ POLICY_PARAMS = {
 
 
 
+def spec_choice(policy: str, policy_file: str, spec_file: str) -> tuple[str, str]:
+    """(controller kind, its file) from the ``policy``, ``policy_file`` and ``spec_file``
+    parameters: a ``spec_file`` is the controller its file says (``policy`` left at classic,
+    or the same kind; no ``policy_file`` beside it). ``ValueError`` with one line otherwise."""
+    if not spec_file:
+        return policy, policy_file
+    if policy_file:
+        raise ValueError("spec_file and policy_file both name the controller's file: give one")
+    kind = spec_kind(spec_file)
+    if controller_name(policy) not in ("classic", kind):
+        raise ValueError(f"spec_file {spec_file} is a {kind} controller, not {policy}: leave policy out")
+    return kind, spec_file
+
+
 class PolicyNode(Node):
     """The gait policy node: parameters, topics and timers around a :class:`PolicyDriver`."""
 
@@ -123,8 +146,9 @@ class PolicyNode(Node):
         try:
             low = finite("min_speed", values["min_speed"], *POLICY_PARAMS["min_speed"].range)
             high = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
+            kind, policy_file = spec_choice(values["policy"], values["policy_file"], values["spec_file"])
             policy = built_policy if built_policy is not None else make_policy(
-                values["policy"], values["gait_dir"] or None, values["library_mode"], values["policy_file"] or None,
+                kind, values["gait_dir"] or None, values["library_mode"], policy_file or None,
                 finite("max_command_step", values["max_command_step"], 0.0),
                 DecisionTiming.parse(values["decision_period"]), finite("speed_integral", values["speed_integral"], 0.0))
             self.core = PolicyDriver(policy, PolicySettings(

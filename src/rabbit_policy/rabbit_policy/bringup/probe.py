@@ -17,16 +17,20 @@ class AnotherStack(RuntimeError):
         self.found = found
 
 
-STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "recorder_node", "run_stack_supervisor")
+STACK_NODE_NAMES = ("sim_node", "hzd_controller_node", "policy_node", "run_stack_supervisor")
+"""The nodes that make a stack: a simulator, a controller or a policy of ours, or another run_stack.
+A recorder alone, a bag being replayed or any other publisher of our topics is not a stack."""
 
 
 def other_stack(wait: float = 3.0, namespace: str = "", stop: Callable[[], bool] = lambda: False) -> list[str]:
     """Nodes of another rabbit-hzd stack visible in ``namespace`` ("" = the root) of this ROS
     domain (after ``wait`` s of discovery; found ones end the wait early; 1.5 s missed a
-    running stack once on a loaded machine), or publishers of its topics there; empty if
-    none. Two stacks in one namespace cross-talk (one's cmd_speed moves the other), so a
-    launch refuses to start beside one; stacks in other namespaces do not count. ``stop()``
-    true (Ctrl-C) ends the wait early with what was found."""
+    running stack once on a loaded machine): a node named as one of ours
+    (:data:`STACK_NODE_NAMES`), or a simulator's release service there; empty if none. Two
+    stacks in one namespace cross-talk (one's cmd_speed moves the other), so a launch refuses
+    to start beside one; stacks in other namespaces do not count, nor does a lone publisher of
+    our topics (a test tool, ``play.py`` replaying a bag). ``stop()`` true (Ctrl-C) ends the
+    wait early with what was found."""
     import rclpy
 
     context = init_context()
@@ -39,9 +43,9 @@ def other_stack(wait: float = 3.0, namespace: str = "", stop: Callable[[], bool]
             time.sleep(0.1)
             found = sorted({name for name, ns in node.get_node_names_and_namespaces()
                             if name in STACK_NODE_NAMES and ns == full})
-            for topic in (topics.JOINT_STATES, topics.JOINT_TORQUES, topics.ALPHA):
-                if node.count_publishers(topic):
-                    found.append(f"a publisher of {topic}")
+            service = node.resolve_service_name(topics.RELEASE_CONTROLLER_SERVICE)
+            if any(name == service for name, _types in node.get_service_names_and_types()):
+                found.append(f"a simulator's {service} service")
         node.destroy_node()
         return found
     finally:

@@ -104,12 +104,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from rabbit_policy.runtime.policies import PolicyUnavailable
-    from rabbit_policy.experiment.options import schedule_from_args
+    from rabbit_policy.experiment.options import resolve_controller, schedule_from_args
     from rabbit_policy.experiment.scenario import parse_pushes
     from rabbit_policy.bringup.stack import AnotherStack, StackConfig, other_stack, run_in_process, run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
 
+    def refused(error: str) -> None:
+        """--json: the report of a run refused before it started (every exit prints one)."""
+        if args.json:
+            print(strict_json.dumps({**RunReport.not_started(config or StackConfig(controller=args.controller or
+                                                                                   "classic"), error).summary(),
+                                     "spec": None}))
+
+    config = None
     try:
+        resolve_controller(args)
         schedule = schedule_from_args(args)
         pushes = parse_pushes(args.push) if args.push else ()
         config = StackConfig(
@@ -132,6 +141,7 @@ def main(argv: list[str] | None = None) -> int:
                 require_display()
             except ViewerUnavailable as exc:
                 print(f"error: {exc}", file=sys.stderr)
+                refused(str(exc))
                 return 2
         if args.record and os.path.exists(args.record):
             from rabbit_sim.bag import is_bag_directory
@@ -143,9 +153,11 @@ def main(argv: list[str] | None = None) -> int:
         built = config.build_policy()  # once: a bad one is refused before any node starts
         policy = built.name
     except ValueError as exc:
+        refused(str(exc))
         parser.error(str(exc))
-    except PolicyUnavailable as exc:
+    except PolicyUnavailable as exc:  # (a --spec that is not one, a policy that cannot be built)
         print(f"error: {exc}", file=sys.stderr)
+        refused(str(exc))
         return 2
 
     if interrupted:
@@ -165,10 +177,11 @@ def main(argv: list[str] | None = None) -> int:
                                        probe=probe)
     except AnotherStack as present:
         domain = os.environ.get("ROS_DOMAIN_ID", "0")
-        print(f"error: another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} "
-              f"({present}); stop it, or start this one in another namespace (--namespace rabbit2) or "
+        found = f"another rabbit-hzd stack runs in namespace {config.namespace or '/'} of ROS_DOMAIN_ID={domain} ({present})"
+        print(f"error: {found}; stop it, or start this one in another namespace (--namespace rabbit2) or "
               f"domain (ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} scripts/run_stack.py ...)",
               file=sys.stderr)
+        refused(found)
         return 2
     return _report_and_exit(report, config, args.json)
 
@@ -177,7 +190,9 @@ def _report_and_exit(report, config, as_json: bool) -> int:
     """Print the report (JSON or text); the exit status: 1 fell or stalled, 3 not completed
     (interrupted, a node died), else 0."""
     if as_json:
-        print(strict_json.dumps(report.summary()))
+        from rabbit_policy.runtime.policies import spec_record
+
+        print(strict_json.dumps({**report.summary(), "spec": spec_record(config.controller, config.policy_file or None)}))
     else:
         print_report(report, config)
     if report.fell or report.stalled:

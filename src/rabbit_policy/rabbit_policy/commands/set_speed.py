@@ -1,7 +1,10 @@
 """Publish a desired walking speed on /cmd_speed (std_msgs/Float64), for users without the
-``ros2`` command line. Equivalent to
+``ros2`` command line, or who want it delivered: like
 
     ros2 topic pub --once /cmd_speed std_msgs/msg/Float64 "{data: 1.2}"
+
+but waiting for the subscriber first (``--once`` can publish before it is matched, and the
+command is lost).
 
 Usage: scripts/set_speed.py 1.2 [--wait 5] [--namespace rabbit2]
 Waits (up to ``--wait`` s) until a subscriber (the policy node) is connected, publishes

@@ -205,7 +205,8 @@ def network_text(info: dict) -> list[str]:
     return [
         f"`hzd_rl_policy.pt`: {paper} ({n_in} → 12 → 12 → 12 → 21, tanh hidden layers, "
         f"{info.get('parameters', 633)} parameters; features `{features}`, action `{action}`). "
-        "Loaded by default by `policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned`.", "",
+        "The training checkpoint; what runs is its spec (`learned.yaml` and its weights, which ship_policy writes), "
+        "which `policy_node` (`policy:=learned`) and `scripts/walk.py --controller learned` load by default.", "",
         "- inputs, in order: " + "; ".join(inputs) + ".",
         f"- outputs: {outputs}.",
         "- rates: " + (f"a decision every {period} ticks (every {period} ms of sim time), the gait "
@@ -350,6 +351,8 @@ def model_card(info: dict, results: list[tuple[str, dict]], broad: list[tuple[st
         f"- shipped with: `{command}`" if command else "",
         "", "## Acceptance 1-6 (the learning issue; ROS-free fast path, "
         "`rabbit_policy.evaluation.acceptance.broad_acceptance`)", "",
+        "Measured when it was shipped, on that machine's arithmetic; the committed report "
+        "(`scripts/evaluate.py`, docs/results in the repository) measures the controller as it runs now.", "",
         *(broad_table(broad) if broad else ["not run"]), "",
         ("**Passes all six.**" if broad and broad[0][1]["passed"] else
          f"**Fails {', '.join(broad[0][1]['failed'])}**: shipped with `--allow-failing` as the best policy "

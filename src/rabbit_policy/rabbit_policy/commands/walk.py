@@ -118,16 +118,21 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Scenario, parse_pushes
-    from rabbit_policy.experiment.options import model_options, schedule_from_args
-    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
+    from rabbit_policy.experiment.options import model_options, resolve_controller, schedule_from_args
+    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy, spec_record
 
+    try:
+        resolve_controller(args)
+    except (PolicyUnavailable, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     try:
         schedule = schedule_from_args(args)
         scenario = Scenario(schedule=schedule, pushes=parse_pushes(args.push), torque_delay=args.torque_delay,
                             model=model_options(args))
     except ValueError as exc:
         parser.error(str(exc))
-    controller = controller_name(args.controller)
+    controller = args.controller
     try:
         policy = make_policy(controller, args.gait_dir or None, args.library_mode, args.policy_file or None,
                              args.max_command_step, args.decision_period, args.speed_integral)
@@ -160,7 +165,8 @@ def main(argv: list[str] | None = None) -> int:
         if error:
             print(f"error: {error}", file=sys.stderr)
             return 2
-    summary = run_summary(controller, policy.name, result, wall, tolerance=args.tolerance)
+    summary = {**run_summary(controller, policy.name, result, wall, tolerance=args.tolerance),
+               "spec": spec_record(controller, args.policy_file or None)}
     if args.json:
         print(strict_json.dumps(summary))
     else:

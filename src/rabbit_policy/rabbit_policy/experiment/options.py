@@ -16,12 +16,16 @@ from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
 
 
 def add_walk_options(parser: argparse.ArgumentParser) -> None:
-    """``--controller``, ``--speed`` or ``--speed-schedule``, ``--duration``, ``--push``."""
+    """``--controller`` or ``--spec``, ``--speed`` or ``--speed-schedule``, ``--duration``,
+    ``--push`` (:func:`resolve_controller` settles the controller after parsing)."""
     from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
 
-    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default="classic",
-                        help="classic: the HZD gait library; learned: the HZD-RL policy; recovery: classic plus the "
-                             "model-based push-recovery rule (hzd, rl: aliases)")
+    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default=None,
+                        help="classic (the default): the HZD gait library; learned: the HZD-RL policy; recovery: "
+                             "classic plus the model-based push-recovery rule (hzd, library, rl: aliases)")
+    parser.add_argument("--spec", default="", metavar="FILE",
+                        help="a controller spec of any kind (classic, recovery or learned; docs/controller_spec.md), "
+                             "edited or written by reproduce.py: the controller is the file's kind")
     command = parser.add_mutually_exclusive_group()
     command.add_argument("--speed", type=positive, default=1.0, help="constant commanded speed (m/s)")
     command.add_argument("--speed-schedule", "--schedule", default=None, metavar="T:V,...",
@@ -91,6 +95,25 @@ def add_policy_options(parser: argparse.ArgumentParser) -> None:
                              "trained; the default), step = once per step, N = every N ticks (1 ms), each gait "
                              "applied at once, blended in (-1 and 0 are accepted for own and step)")
     parser.add_argument("--speed-integral", type=non_negative, default=0.0, metavar="KI", help=SPEED_INTEGRAL_HELP)
+
+
+def resolve_controller(args: argparse.Namespace) -> None:
+    """Settle ``args.controller`` (its canonical name) and ``args.policy_file`` after parsing:
+    ``--spec FILE`` is the controller its file says (``--controller`` may name the same kind,
+    ``--policy-file`` may not be given too); without it ``--controller`` or classic.
+    ``ValueError`` / ``PolicyUnavailable`` with one line otherwise."""
+    from rabbit_policy.runtime.policies import controller_name, spec_kind
+
+    named = controller_name(args.controller) if args.controller else None
+    if not args.spec:
+        args.controller = named or "classic"
+        return
+    if args.policy_file:
+        raise ValueError("--spec and --policy-file both name the controller's file: give one")
+    kind = spec_kind(args.spec)
+    if named is not None and named != kind:
+        raise ValueError(f"--spec {args.spec} is a {kind} controller, not {named}: leave --controller out")
+    args.controller, args.policy_file = kind, args.spec
 
 
 def schedule_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:

@@ -43,7 +43,7 @@ __all__ = ["CLASSIC_DECISION_PERIOD", "CONTROLLERS", "CONTROLLER_ALIASES", "CONT
            "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LibraryPolicy",
            "NetworkPolicy", "PeriodicPolicy", "Policy", "PolicyUnavailable", "RateLimitedPolicy", "controller_name",
            "checkpoint_policy", "controller_settings", "copy_policy", "decision_period", "first_command",
-           "make_policy", "policy_of_checkpoint",
+           "make_policy", "policy_of_checkpoint", "spec_kind", "spec_record",
            "packaged_policy_file", "read_only_memo", "required_controller_settings", "reset_policy"]
 
 CONTROLLERS = ("classic", "learned", "recovery")
@@ -281,10 +281,10 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
                 integral_offset_limit: float = DEFAULT_OFFSET_LIMIT) -> Policy:
     """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
     message a user can act on. Every controller is its spec (:mod:`rabbit_policy.spec`): the
-    packaged one of ``kind``, or for ``learned`` the spec ``policy_file`` (``.yaml``), with
-    the options below written into it, then built by :func:`rabbit_policy.spec.build`. A
-    training checkpoint (``policy_file`` ``.pt``) is read with torch and built as its spec
-    (:func:`checkpoint_policy`).
+    packaged one of ``kind``, or the spec ``policy_file`` (``.yaml``, of that kind:
+    :func:`spec_kind` says which), with the options below written into it, then built by
+    :func:`rabbit_policy.spec.build`. A training checkpoint (``policy_file`` ``.pt``, learned
+    only) is read with torch and built as its spec (:func:`checkpoint_policy`).
     ``max_command_step`` > 0 wraps it in a :class:`RateLimitedPolicy` (m/s per step; 0: no
     limit). ``decision``: the spec's own timing (classic every 20 ticks; learned as
     trained), once per step, or every N ticks. ``speed_integral`` > 0 (1/s, classic only):
@@ -297,8 +297,13 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
     if kind != "classic" and speed_integral:
         raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "
                          "policy with memory features carries its own")
-    if kind != "learned" and policy_file:
-        raise ValueError("a policy file is a learned policy's checkpoint or spec: it is for the learned controller "
+    if policy_file and is_spec_file(policy_file):
+        file_kind = spec_kind(policy_file)
+        if file_kind != kind:
+            raise PolicyUnavailable(f"controller spec {policy_file} is a {file_kind} controller, not {kind} (the kind "
+                                    "is the file's: --spec FILE, spec_file:=FILE)")
+    elif kind != "learned" and policy_file:
+        raise ValueError("a training checkpoint is a learned policy's: it is for the learned controller "
                          "(policy:=learned, --controller learned); the classic one uses gait_dir")
     if kind == "learned" and gait_dir:
         raise ValueError("a gait directory is the classic controller's library: the learned one takes a policy "
@@ -325,6 +330,26 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
 def is_spec_file(path: str | Path) -> bool:
     """A controller spec (YAML or JSON), not a training checkpoint."""
     return Path(path).suffix.lower() in (".yaml", ".yml", ".json")
+
+
+def spec_record(kind: str, policy_file: str | Path | None = None) -> dict[str, str]:
+    """The file a controller was built from, ``{"file", "sha256"}``: ``policy_file`` (a spec or
+    a checkpoint), else the packaged spec of ``kind`` (a run's JSON names what ran)."""
+    from rabbit_policy.spec.files import file_sha256, packaged_spec
+
+    path = Path(policy_file) if policy_file else packaged_spec(controller_name(kind))
+    return {"file": str(path.resolve()), "sha256": file_sha256(path)}
+
+
+def spec_kind(path: str | Path) -> str:
+    """The kind of controller the spec file ``path`` is (``classic``, ``recovery``,
+    ``learned``); :class:`PolicyUnavailable` with one line for a file that is not a spec."""
+    from rabbit_policy.spec import SpecError, load_spec
+
+    try:
+        return load_spec(Path(path)).kind
+    except SpecError as exc:
+        raise PolicyUnavailable(str(exc)) from None
 
 
 def _checkpoint(policy_file: str | Path | None, decision: DecisionTiming) -> NetworkPolicy:
