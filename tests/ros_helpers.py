@@ -178,3 +178,20 @@ def wait_until(condition: Callable[[], bool], timeout: float = 20.0) -> bool:
             return False
         time.sleep(0.01)
     return True
+
+
+class GaitSigner:
+    """Gaits as a policy started by hand signs them (the user's key, from this test process's
+    ``ROS_HOME``): ``alpha(values, kd)`` is the ``/hzd/alpha`` message of the next gait."""
+
+    def __init__(self, source: str = "test_policy/00000000") -> None:
+        from rabbit_msgs_py.pairing import resolve_key
+
+        self.key, _ = resolve_key("")
+        self.source, self.count = source, 0
+
+    def alpha(self, values, kd: float):
+        from rabbit_msgs_py.conversions import alpha_to_msg
+
+        self.count += 1
+        return alpha_to_msg(values, self.key.gait_signature(self.source, self.count, list(values), kd))

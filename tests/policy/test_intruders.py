@@ -77,7 +77,7 @@ def test_no_other_node_ever_gets_the_robot_with_the_stacks_key(fault, rogue_from
         efforts = _watch(ctx_s, ex_s)
         sim = SimNode(context=ctx_s, pairing_key=key, resend_timeout=0.05)
         ex_s.add_node(sim)
-        ex_p.add_node(PolicyNode(context=ctx_p))
+        ex_p.add_node(PolicyNode(context=ctx_p, pairing_key=key))
         controller = HZDControllerNode(context=ctx_c, pairing_key=key, decision_sync=True, decision_timeout=0.5)
         ex_c.add_node(controller)
         everyone = [ex_s, ex_p, ex_c, ex_r]
@@ -151,7 +151,7 @@ def test_a_rogue_publisher_does_not_keep_the_real_nodes_from_starting():
         spin_for(ex_r, 0.5)
         efforts = _watch(context, executor)
         sim = SimNode(context=context, pairing_key=key)
-        policy = PolicyNode(context=context, solo_check=0.5)
+        policy = PolicyNode(context=context, solo_check=0.5, pairing_key=key)
         controller = HZDControllerNode(context=context, pairing_key=key, solo_check=0.5)
         for node in (sim, policy, controller):
             executor.add_node(node)
@@ -172,7 +172,7 @@ def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_o
         efforts = _watch(context, executor)
         sim = SimNode(context=context, pairing_key=key, resend_timeout=0.05)
         executor.add_node(sim)
-        executor.add_node(PolicyNode(context=context))
+        executor.add_node(PolicyNode(context=context, pairing_key=key))
         rogue = Rogue(ctx_r, "echo")
         ex_r.add_node(rogue.node)
         with ros_context() as (ctx_a, ex_a):
@@ -196,7 +196,8 @@ def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_o
 def test_the_pairing_key_cannot_be_read_back_from_the_nodes():
     key = new_key()
     with ros_context() as (context, executor):
-        for node in (SimNode(context=context, pairing_key=key), HZDControllerNode(context=context, pairing_key=key)):
+        for node in (SimNode(context=context, pairing_key=key), HZDControllerNode(context=context, pairing_key=key),
+                     PolicyNode(context=context, pairing_key=key)):
             executor.add_node(node)
             assert not node.has_parameter("pairing_key")
             assert key not in repr(getattr(node, "settings", "")) and key not in repr(getattr(node, "config", ""))

@@ -312,11 +312,14 @@ def test_cmd_vel_commands_the_speed_as_teleop_tools_send_it(capfd):
 
 
 def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
+    """Without a pairing key (``pairing_key:=none``, gaits as anyone sends them): every
+    malformed alpha and Kd is rejected, the last good gait kept. (With the user's key, as nodes
+    started by hand have it, see the next test.)"""
     gait = GaitLibrary.load().nearest(1.0)
     with ros_context() as (context, executor):
         import rclpy
 
-        controller = HZDControllerNode(context=context)
+        controller = HZDControllerNode(context=context, pairing_key="none")
         user = rclpy.create_node("gait_sender", context=context)
         for node in (controller, user):
             executor.add_node(node)
@@ -349,6 +352,48 @@ def test_malformed_gaits_are_rejected_and_the_last_good_one_kept(capfd):
     assert 1 <= len(logged) <= 5 and all(len(line) < 300 for line in logged)  # at most one a second (below)
 
 
+def test_with_a_key_only_the_paired_policys_signed_gaits_are_taken_in_order(capfd):
+    """The controller started by hand (the user's key): a gait signed with the key is taken,
+    its Kd from its signature (``/hzd/kd`` alone moves nothing); an unsigned gait, one signed
+    with another key, one whose coefficients changed after signing, and a copy of a signed gait
+    sent again after a later one are refused, logged, and never counted as a decision's part."""
+    from rabbit_msgs_py.pairing import PairingKey, new_key
+
+    from ros_helpers import GaitSigner
+
+    library = GaitLibrary.load()
+    slow, fast = library.nearest(0.8), library.nearest(1.2)
+    signer = GaitSigner()
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)
+        user = rclpy.create_node("gait_sender", context=context)
+        for node in (controller, user):
+            executor.add_node(node)
+        alpha_pub = user.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        kd_pub = user.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
+        first = signer.alpha(slow.alpha, slow.kd)
+        alpha_pub.publish(first)
+        assert spin_until(executor, lambda: controller.gait is not None)
+        assert controller.gait == (list(slow.alpha), slow.kd)
+        kd_pub.publish(Float64(data=77.0))  # unsigned Kd: for observers only
+        other = PairingKey.parse(new_key())
+        tampered = signer.alpha(fast.alpha, fast.kd)
+        tampered.data[0] += 0.01
+        for bad in (alpha_to_msg(fast.alpha),
+                    alpha_to_msg(fast.alpha, other.gait_signature("rogue/1", 99, list(fast.alpha), fast.kd)),
+                    tampered, first):  # (first: a copy of gait 1, after gait 2 was signed)
+            alpha_pub.publish(bad)
+            spin_for(executor, 0.05)
+        assert spin_until(executor, lambda: controller.refused_gaits == 4)
+        assert controller.gait == (list(slow.alpha), slow.kd) and controller.rejected_gaits == 0
+        alpha_pub.publish(signer.alpha(fast.alpha, fast.kd))
+        assert spin_until(executor, lambda: controller.gait == (list(fast.alpha), fast.kd))
+    refused = [line for line in capfd.readouterr().err.splitlines() if "refused a gait on /hzd/alpha" in line]
+    assert 1 <= len(refused) <= 3 and "moves nothing" in refused[0]
+
+
 def test_a_burst_of_bad_input_is_counted_in_full_and_logged_at_most_once_a_second(capfd):
     """10,000-message bursts (issue 39: 848 error lines and a 0.2 s lockstep stall for 10k bad
     Kd): every rejection that arrives (the subscriptions' depth drops the rest, as QoS says)
@@ -359,7 +404,7 @@ def test_a_burst_of_bad_input_is_counted_in_full_and_logged_at_most_once_a_secon
     with ros_context() as (context, executor):
         import rclpy
 
-        controller = HZDControllerNode(context=context)
+        controller = HZDControllerNode(context=context, pairing_key="none")  # unsigned gaits are validated
         policy = PolicyNode(context=context)
         user = rclpy.create_node("flooder", context=context)
         for node in (controller, policy, user):
@@ -543,7 +588,8 @@ def test_a_rogue_that_starts_mid_run_never_gets_a_torque_applied(kind):
 
 
 def _start_sim_and_policy(context, executor, **sim_params):
-    nodes = {"policy": PolicyNode(context=context), "sim": SimNode(context=context, **sim_params)}
+    nodes = {"policy": PolicyNode(context=context, pairing_key=sim_params.get("pairing_key", "")),  # the stack's key
+             "sim": SimNode(context=context, **sim_params)}
     for node in nodes.values():
         executor.add_node(node)
     return nodes

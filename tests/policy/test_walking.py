@@ -113,7 +113,7 @@ def test_library_covers_the_required_speeds():
 
 WALK_KEYS = {"fell", "stalled", "fall_time", "stall_time", "duration", "steps", "mean_speed", "peak_torque",
              "rejected", "touchdowns", "segments", "controller", "policy", "scenario", "real_time_factor",
-             "wall_time", "completed", "error"}
+             "wall_time", "completed", "error", "spec"}
 
 
 def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:

@@ -35,6 +35,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import (
     MessageError,
     alpha_from_msg,
+    alpha_signature,
     controller_id,
     joint_state_vectors,
     phase_to_msg,
@@ -46,7 +47,7 @@ from rabbit_msgs_py.conversions import (
 from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
-from rabbit_msgs_py.pairing import resolve_key
+from rabbit_msgs_py.pairing import GaitOrder, resolve_key
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -129,6 +130,8 @@ class HZDControllerNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.torques_published = 0
         self.rejected_gaits = 0
+        self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
+        self._gait_order = GaitOrder()
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
@@ -209,22 +212,56 @@ class HZDControllerNode(Node):
             self.get_logger().error(line)
 
     def _on_alpha(self, msg: Float64MultiArray) -> None:
+        """A gait. With a pairing key only a signed one from the paired policy, new in its
+        order, is taken, its Kd from its signature (an unsigned or copied one moves nothing:
+        refused, logged at most once a second, not counted as a decision's part)."""
         try:
-            alpha = list(validate_alpha(alpha_from_msg(msg), self.config))
+            raw = alpha_from_msg(msg)
+        except MessageError as exc:
+            raw, problem = None, exc
+        if self.pairing is not None:
+            try:
+                source, count, kd = self.pairing.verify_gait(alpha_signature(msg), raw or [])
+            except ValueError as exc:
+                self._refuse_gait(exc if raw is not None else problem)
+                return
+            if not self._gait_order.take(source, count):
+                self._refuse_gait(ValueError(f"gait {count} of {source} came again after a later one"))
+                return
+        try:
+            if raw is None:
+                raise problem
+            alpha = list(validate_alpha(raw, self.config))
         except (MessageError, ValueError) as exc:
             self._reject("alpha", topics.ALPHA, exc, "the last good gait")
             alpha = None
         self._do(self.sync.on_gait_part("alpha", alpha))
+        if self.pairing is not None:
+            self._take_kd(kd)
 
     def _on_kd(self, msg: Float64) -> None:
+        """Kd alone: unsigned, so taken only without a pairing key (with one, a signed gait
+        carries its Kd: this topic is then for observers)."""
+        if self.pairing is None:
+            self._take_kd(msg.data)
+
+    def _take_kd(self, value: float) -> None:
         try:
-            if msg.data == 0.0:  # (the ROS-free core takes 0 as a probe of the desired outputs)
+            if value == 0.0:  # (the ROS-free core takes 0 as a probe of the desired outputs)
                 raise ValueError("Kd must be > 0 N m s/rad: 0 leaves the joints undamped, got 0.0")
-            kd = validate_kd(msg.data, self.config)
+            kd = validate_kd(value, self.config)
         except ValueError as exc:
             self._reject("kd", topics.KD, exc, "the last good value")
             kd = None
         self._do(self.sync.on_gait_part("kd", kd))
+
+    def _refuse_gait(self, why: Exception) -> None:
+        """A gait not from the paired policy: counted and logged, never applied."""
+        self.refused_gaits += 1
+        line = self._rejections.line("unsigned gait", f"refused a gait on {self.resolve_topic_name(topics.ALPHA)}: "
+                                                      f"{short(str(why), 200)}; it moves nothing")
+        if line is not None:
+            self.get_logger().error(line)
 
     def _on_gait_timing(self, msg: String) -> None:
         if not self.sync.follow_policy_timing:

@@ -37,18 +37,22 @@ class MessageError(ValueError):
     """A message that does not have the documented layout or contents."""
 
 
-def alpha_to_msg(alpha: Sequence[float]) -> Float64MultiArray:
-    """24 coefficients (core order, coefficient-major) -> Float64MultiArray, 4 x 6 layout."""
+SIGNATURE_LABEL = "signature "
+"""A signed gait's third layout dimension (size 1) is labelled with this, then the
+signature (``rabbit_msgs_py.pairing``: the policy instance, its gait count, Kd and the tag)."""
+
+
+def alpha_to_msg(alpha: Sequence[float], signature: str = "") -> Float64MultiArray:
+    """24 coefficients (core order, coefficient-major) -> Float64MultiArray, 4 x 6 layout;
+    with a ``signature`` a third dimension of size 1 carries it (4 x 6 x 1: the same data)."""
     values = [float(a) for a in alpha]
     if len(values) != ALPHA_SIZE:
         raise MessageError(f"alpha needs {ALPHA_SIZE} values, got {len(values)}")
-    layout = MultiArrayLayout(
-        dim=[
-            MultiArrayDimension(label=ALPHA_DIMENSIONS[0], size=ALPHA_OUTPUTS, stride=ALPHA_SIZE),
-            MultiArrayDimension(label=ALPHA_DIMENSIONS[1], size=ALPHA_COEFFICIENTS, stride=ALPHA_COEFFICIENTS),
-        ],
-        data_offset=0,
-    )
+    dims = [MultiArrayDimension(label=ALPHA_DIMENSIONS[0], size=ALPHA_OUTPUTS, stride=ALPHA_SIZE),
+            MultiArrayDimension(label=ALPHA_DIMENSIONS[1], size=ALPHA_COEFFICIENTS, stride=ALPHA_COEFFICIENTS)]
+    if signature:
+        dims.append(MultiArrayDimension(label=SIGNATURE_LABEL + signature, size=1, stride=1))
+    layout = MultiArrayLayout(dim=dims, data_offset=0)
     data = [values[ALPHA_OUTPUTS * k + j] for j in range(ALPHA_OUTPUTS) for k in range(ALPHA_COEFFICIENTS)]
     return Float64MultiArray(layout=layout, data=data)
 
@@ -59,6 +63,8 @@ def alpha_from_msg(msg: Float64MultiArray) -> list[float]:
     accepted if ``data`` has 24 values (then read as the documented 4 x 6 order)."""
     data = list(msg.data)
     dims = list(msg.layout.dim)
+    if len(dims) == 3 and dims[2].label.startswith(SIGNATURE_LABEL) and dims[2].size == 1:
+        dims = dims[:2]  # a signed gait (alpha_signature reads it)
     if dims:
         shape = [(d.label, d.size) for d in dims]
         expected = [(ALPHA_DIMENSIONS[0], ALPHA_OUTPUTS), (ALPHA_DIMENSIONS[1], ALPHA_COEFFICIENTS)]
@@ -71,6 +77,14 @@ def alpha_from_msg(msg: Float64MultiArray) -> list[float]:
     if not all(math.isfinite(v) for v in data):
         raise MessageError("alpha contains NaN or infinite values")
     return [data[ALPHA_COEFFICIENTS * j + k] for k in range(ALPHA_COEFFICIENTS) for j in range(ALPHA_OUTPUTS)]
+
+
+def alpha_signature(msg: Float64MultiArray) -> str:
+    """The signature a gait carries (:func:`alpha_to_msg`), '' if none."""
+    dims = list(msg.layout.dim)
+    if len(dims) == 3 and dims[2].label.startswith(SIGNATURE_LABEL):
+        return dims[2].label[len(SIGNATURE_LABEL):]
+    return ""
 
 
 def controller_id(node_name: str) -> str:

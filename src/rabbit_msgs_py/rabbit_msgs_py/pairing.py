@@ -73,6 +73,30 @@ class PairingKey:
         """The ``frame_id`` of a signed reply from controller instance ``source``."""
         return f"{source}{TAG_SEPARATOR}{self.tag(stamp, torques)}"
 
+    def gait_signature(self, source: str, count: int, alpha: Sequence[float], kd: float) -> str:
+        """A gait's signature, ``<source> <count> <kd> <tag>``: policy instance ``source``'s
+        ``count``-th gait (counting from 1), its Kd (N m s/rad, as Python writes the float)
+        and the MAC of all three with the 24 coefficients (rad)."""
+        return f"{source} {count} {float(kd)!r} {self._gait_tag(source, count, alpha, kd)}"
+
+    def verify_gait(self, signature: str, alpha: Sequence[float]) -> tuple[str, int, float]:
+        """(source, count, Kd) of a gait signed with this key; ``ValueError`` saying why not
+        (unsigned, malformed, another key, or alpha changed since it was signed)."""
+        if not signature:
+            raise ValueError("the gait is not signed (its policy runs without this stack's pairing key)")
+        parts = signature.split(" ")
+        try:
+            source, count, kd, tag = parts[0], int(parts[1]), float(parts[2]), parts[3]
+        except (IndexError, ValueError):
+            raise ValueError("the gait's signature is malformed") from None
+        if len(parts) != 4 or not hmac.compare_digest(tag, self._gait_tag(source, count, alpha, kd)):
+            raise ValueError(f"the gait from {source} is not signed with this stack's pairing key")
+        return source, count, kd
+
+    def _gait_tag(self, source: str, count: int, alpha: Sequence[float], kd: float) -> str:
+        payload = struct.pack(f"<q{len(alpha)}dd", count, *alpha, kd) + source.encode()
+        return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-gait").hexdigest()
+
     def verify(self, frame_id: str, stamp: int, torques: Sequence[float]) -> str | None:
         """The instance id of a reply signed with this key, else None (unsigned, another
         key, or torques or stamp changed since it was signed)."""
@@ -135,3 +159,18 @@ def resolve_key(text: str, environ: Mapping[str, str] | None = None) -> tuple[Pa
         return PairingKey.parse(text), "torques signed with the pairing key it was given"
     path = user_key_file(environ)
     return user_key(path), f"torques signed with the user's pairing key ({path})"
+
+
+class GaitOrder:
+    """Signed gaits in order: per policy instance (the signature's source) only a gait counted
+    after the last one taken, so a copy of a signed gait sent again later moves nothing."""
+
+    def __init__(self) -> None:
+        self._last: dict[str, int] = {}
+
+    def take(self, source: str, count: int) -> bool:
+        """Whether ``source``'s ``count``-th gait is new (and remember it if so)."""
+        if count <= self._last.get(source, 0):
+            return False
+        self._last[source] = count
+        return True

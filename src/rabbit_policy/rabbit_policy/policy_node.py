@@ -59,11 +59,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
 from rabbit_msgs_py import qos, topics
-from rabbit_msgs_py.conversions import MessageError, alpha_to_msg, joint_state_vectors, phase_from_msg, stamp_to_ns
+from rabbit_msgs_py.conversions import (MessageError, alpha_to_msg, controller_id, joint_state_vectors, phase_from_msg,
+                                        stamp_to_ns)
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite
+from rabbit_msgs_py.pairing import resolve_key
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
@@ -115,6 +117,11 @@ POLICY_PARAMS = {
                                 "applies them (a /cmd_speed in between holds until the next change); again after a "
                                 "reset. run_stack sets it: '' = none"),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="policy"), range=(0.0, 60.0)),
+    "pairing_key": Param("", "sign every gait with this key, so that a controller given the same key applies this "
+                             "policy's gaits and no other node's (16-64 characters; run_stack makes one per stack; "
+                             "read once at start, then removed so ros2 param get cannot read it). '' = the user's "
+                             "own key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); 'none' = "
+                             "unsigned gaits, UNSAFE", dynamic=True),
 }
 
 
@@ -133,6 +140,10 @@ def spec_choice(policy: str, policy_file: str, spec_file: str) -> tuple[str, str
     return kind, spec_file
 
 
+SECRET_PARAMS = ("pairing_key",)
+"""Read once at start and then removed (``rabbit_msgs_py.parameters.forget_secrets``)."""
+
+
 class PolicyNode(Node):
     """The gait policy node: parameters, topics and timers around a :class:`PolicyDriver`."""
 
@@ -143,7 +154,9 @@ class PolicyNode(Node):
         stack builds it once, to refuse a bad one before any node starts); None: built here."""
         super().__init__("policy_node", context=context, namespace=namespace)
         values = declare(self, POLICY_PARAMS, overrides)
+        forget_secrets(self, SECRET_PARAMS)
         try:
+            self.pairing, key_source = resolve_key(values["pairing_key"])
             low = finite("min_speed", values["min_speed"], *POLICY_PARAMS["min_speed"].range)
             high = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
             kind, policy_file = spec_choice(values["policy"], values["policy_file"], values["spec_file"])
@@ -165,6 +178,10 @@ class PolicyNode(Node):
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self._warned_planar = False
+        self.source = controller_id(self.get_name())  # this instance, in its gaits' signatures
+        self.gaits_published = 0
+        (self.get_logger().info if self.pairing else self.get_logger().warning)(
+            f"pairing: {key_source.replace('torques', 'gaits')}")
         self.solo = SoloStart(self, "policy", values["solo_check"], self._wire)
 
     # the core's state, for scripts and tests
@@ -264,8 +281,12 @@ class PolicyNode(Node):
     def _do(self, actions: list) -> None:
         for action in actions:
             if isinstance(action, Gait):
-                self._alpha_pub.publish(alpha_to_msg(action.command.alpha))
-                self._kd_pub.publish(Float64(data=float(action.command.kd)))
+                alpha, kd = action.command.alpha, float(action.command.kd)
+                self.gaits_published += 1
+                signature = (self.pairing.gait_signature(self.source, self.gaits_published, alpha, kd)
+                             if self.pairing is not None else "")
+                self._alpha_pub.publish(alpha_to_msg(alpha, signature))
+                self._kd_pub.publish(Float64(data=kd))
                 if action.initial_state is None:
                     self.get_logger().error(f"no initial state on the gait just published: {action.error}",
                                             throttle_duration_sec=5.0)

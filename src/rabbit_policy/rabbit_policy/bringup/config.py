@@ -60,7 +60,7 @@ class StackConfig:
     recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
     namespace: str = ""  # every node's ROS namespace ("" = the root); two stacks in two namespaces run side by side
-    pairing_key: str = field(default_factory=new_key, repr=False)  # sim and controller: rabbit_msgs_py.pairing
+    pairing_key: str = field(default_factory=new_key, repr=False)  # every node: rabbit_msgs_py.pairing
 
     def __post_init__(self) -> None:
         if not self.duration > 0.0:
@@ -107,6 +107,7 @@ class StackConfig:
                 "decision_period": self.decision.param,
                 "speed_integral": self.speed_integral,
                 "speed_schedule": format_schedule(self.schedule[1:]),
+                "pairing_key": self.pairing_key,
                 "solo_check": 0.0,
             },
             # lockstep/paced: the reply to a state the policy decides on waits for that decision

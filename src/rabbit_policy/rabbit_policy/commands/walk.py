@@ -27,8 +27,9 @@ null after a fall or stall), ``peak_torque`` (N m), ``rejected``, ``touchdowns``
 times, s), ``segments`` (``command``, ``start``, ``end``, ``mean_speed`` over the
 segment's second half, ``reach_time``: s from the change to the end of the first whole
 step within ``--tolerance`` of the command, or null), plus ``controller``, ``policy``,
-``scenario``, ``real_time_factor``, ``wall_time`` (s), ``completed`` and ``error``. No NaN:
-null instead.
+``scenario``, ``real_time_factor``, ``wall_time`` (s), ``completed``, ``error`` and ``spec``
+(``file``, ``sha256``: the spec or checkpoint the controller was built from). No NaN: null
+instead. ``--spec FILE``: a controller spec of any kind, run as the kind its file says.
 Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
 """
 
