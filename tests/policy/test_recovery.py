@@ -36,7 +36,7 @@ def _overlay(config, period: int = 20):
 
 @pytest.mark.unit
 def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
-    memory = StepMemory(bins=4, depth=2)
+    memory = StepMemory(bins=4, depth=2, max_dropped=2)
     for speeds in ([1.0, 1.1, 1.2, 1.3], [0.9, 1.2, 1.0, 1.4]):  # two whole steps at command 1 m/s
         for b, v in enumerate(speeds):
             assert memory.observe(0.125 + 0.25 * b, v, 1.0) is None  # not two whole steps yet
@@ -55,7 +55,7 @@ def test_step_memory_gives_the_slowest_of_the_previous_steps_at_the_phase():
 
 @pytest.mark.unit
 def test_a_forgotten_step_is_dropped_and_the_steps_before_stay_the_reference():
-    memory = StepMemory(bins=4, depth=2)
+    memory = StepMemory(bins=4, depth=2, max_dropped=2)
     for _ in range(2):  # two whole steps at the command's pace
         for b in range(4):
             memory.observe(0.125 + 0.25 * b, 1.0, 1.0)

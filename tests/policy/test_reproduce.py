@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from rabbit_policy.commands.reproduce import load_preset, train_arguments
+from rabbit_policy.experiment.provenance import DirtyTree, code_commit, shipping_provenance
 from rabbit_policy.spec import load_controller, load_spec, packaged_spec, packaged_spec_dir
 
 pytestmark = pytest.mark.sim
@@ -23,8 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wrote(tmp_path):
     packaged_before = sorted(p.name for p in packaged_spec_dir().iterdir())
     out = tmp_path / "tiny"
-    run = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out)], cwd=ROOT,
-                         capture_output=True, text=True, timeout=600)
+    dirty = ["--allow-dirty"] if code_commit().endswith("+dirty") else []  # (a fresh clone, as CI's, is clean)
+    run = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out), *dirty],
+                         cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
     assert sorted(p.name for p in packaged_spec_dir().iterdir()) == packaged_before  # nothing into the package
     spec = load_spec(out / "learned.yaml")
@@ -33,6 +35,7 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert provenance["commands"][0] == f"scripts/reproduce.py --preset tiny --out {out}"
     assert provenance["commands"][2].startswith("scripts/train.py --algo es --spec ")
     assert len(provenance["code_commit"]) >= 40 and len(provenance["library_sha256"]) == 64
+    assert ("dirty_diff_sha256" in provenance) == bool(dirty) and provenance["machine"]["numpy"]
     evaluation = json.loads((out / "evaluation.json").read_text())
     card = (out / "MODEL_CARD.md").read_text()
     assert f"scripts/reproduce.py --preset tiny --out {out}" in card  # its regenerate line is what ran
@@ -54,11 +57,11 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
                              str(out / "learned.yaml"), "--duration", "3", "--json"], cwd=ROOT, capture_output=True,
                             text=True, timeout=300)
     assert walked.returncode == 0 and json.loads(walked.stdout)["fell"] is False, walked.stderr[-2000:]
-    again = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out)], cwd=ROOT,
-                           capture_output=True, text=True, timeout=300)
+    again = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out), *dirty],
+                           cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert again.returncode == 2 and "is not empty" in again.stderr
     resumed = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out),
-                              "--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+                              "--resume", *dirty], cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert resumed.returncode == 0, resumed.stderr[-3000:]  # a finished training trains no further
     assert load_spec(out / "learned.yaml").network == spec.network
     assert load_spec(out / "learned.yaml").provenance["commands"][0].endswith(" --resume")
@@ -106,3 +109,25 @@ def test_the_screen_takes_the_candidates_the_training_ranks_best(tmp_path):
             (run / "evaluated" / f"{i:05d}.yaml").write_text("")
     assert [p.name for p in candidates(run, 3)] == ["00015.yaml", "00010.yaml", "00005.yaml"]
     assert candidates(tmp_path / "empty", 2) == [tmp_path / "empty" / "policy.yaml"]
+
+
+def test_what_ships_from_a_checkout_with_uncommitted_changes_is_refused_or_records_the_diff(tmp_path):
+    """shipping_provenance (reproduce.py, ship_policy.py): a clean checkout records its commit;
+    one with changes is refused unless --allow-dirty, which records the hash of its diff."""
+    def git(*args: str) -> None:
+        subprocess.run(["git", "-c", "user.email=t@t", "-c", "user.name=t", *args], cwd=tmp_path, check=True,
+                       capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "a.txt").write_text("one\n")
+    git("add", "a.txt")
+    git("commit", "-q", "-m", "one")
+    clean = shipping_provenance(False, tmp_path)
+    assert len(clean["code_commit"]) == 40 and "dirty_diff_sha256" not in clean and clean["machine"]["cpu"]
+    (tmp_path / "a.txt").write_text("two\n")
+    with pytest.raises(DirtyTree, match="--allow-dirty"):
+        shipping_provenance(False, tmp_path)
+    dirty = shipping_provenance(True, tmp_path)
+    assert dirty["code_commit"] == clean["code_commit"] + "+dirty" and len(dirty["dirty_diff_sha256"]) == 64
+    (tmp_path / "a.txt").write_text("three\n")
+    assert shipping_provenance(True, tmp_path)["dirty_diff_sha256"] != dirty["dirty_diff_sha256"]

@@ -78,6 +78,44 @@ def test_no_code_default_moves_a_shipped_controller(monkeypatch):
         assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), kind
 
 
+def _perturbed(value):
+    """Another value of a default's kind (a float, a whole number, a tuple of floats)."""
+    if isinstance(value, bool):
+        return not value
+    if isinstance(value, int):
+        return value + 1
+    if isinstance(value, float):
+        return value * 1.5 + 0.01
+    return tuple(v * 1.5 + 0.01 for v in value)
+
+
+@pytest.mark.slow
+def test_no_recovery_rule_or_overlay_default_moves_a_shipped_controller_one_at_a_time(monkeypatch):
+    """Every default of the recovery rule (RecoveryConfig: the offsets, the memory's depth and
+    the ramp's floor too) and of the overlay (OverlayConfig), changed one at a time in the code:
+    the shipped recovery and learned walks do not move (their specs name every one)."""
+    from rabbit_policy.runtime.recovery import OverlayConfig
+
+    shipped = {kind: _trajectory(load_packaged(kind)) for kind in ("recovery", "learned")}
+    checked = []
+    for cls in (RecoveryConfig, OverlayConfig):
+        names = [f for f, spec in cls.__dataclass_fields__.items() if spec.init]
+        defaults = cls.__init__.__defaults__
+        first = len(names) - len(defaults)
+        for index, value in enumerate(defaults):
+            if isinstance(value, bool):
+                continue  # at_once / policy_blend: set by the spec's controller and blend, not defaults
+            changed = list(defaults)
+            changed[index] = _perturbed(value)
+            with monkeypatch.context() as patch:
+                patch.setattr(cls.__init__, "__defaults__", tuple(changed))
+                for kind in ("recovery", "learned"):
+                    assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), (cls.__name__,
+                                                                                             names[first + index])
+            checked.append(names[first + index])
+    assert {"offsets", "memory_steps", "ramp_floor", "forget_after", "fast_gate", "rise_until"} <= set(checked)
+
+
 def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     """The packaged spec and its weights copied into ``tmp_path``; (path, parsed document)."""
     source = packaged_spec(kind)
@@ -100,7 +138,19 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["network"]["weights"].update(sha256="0" * 64), "the spec names 0000000000000000"),
     (lambda d: d["gait_library"].update(sha256="1" * 64), "the library changed since the spec was written"),
     (lambda d: d.update(spec_version=2), "spec_version 2 is not supported"),
-    (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral: the speed integral's limit"),
+    (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral.limit must be a finite number > 0, got -1.0"),
+    # values checked by meaning, each refusal naming its field
+    (lambda d: d["network"]["low"].__setitem__(0, 5.0), "network.low[0] (5.0) must be below network.high[0]"),
+    (lambda d: d["network"]["residual"].update(kd_bounds=[150.0, 20.0]),
+     "network.residual.kd_bounds must be ordered low < high, got [150.0, 20.0]"),
+    (lambda d: d["network"]["input_scale"].__setitem__(1, 0.0), "network.input_scale[1] must be a finite number > 0"),
+    (lambda d: d["network"].update(input_offset=[0.0]), "network.input_offset needs 25 numbers (network.inputs), got 1"),
+    (lambda d: d["speed_integral"].update(dt=0.5), "speed_integral.dt (0.5 s) must be the time between decisions, "
+                                                   "0.02 s (decision.period_ticks 20)"),
+    (lambda d: d["speed_integral"].update(speed_range=[1.5, 0.7]), "speed_integral.speed_range must be ordered"),
+    (lambda d: d["controller"].update(within_step_until=1.5), "controller.within_step_until must be a finite number "
+                                                              ">= 0 and <= 1, got 1.5"),
+    (lambda d: d["blend"].update(length=-0.1), "blend.length must be a finite number >= 0 and <= 1"),
     (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),
     (lambda d: d["decision"].update(period_ticks=-1), "decision.period_ticks must be a whole number of ticks >= 0"),
     (lambda d: d["decision"].update(window_ticks=0), "decision.window_ticks must be a whole number of ticks >= 1"),

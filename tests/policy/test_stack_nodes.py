@@ -618,6 +618,34 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
 
 
 @pytest.mark.slow
+def test_a_controller_started_by_hand_runs_with_the_settings_its_policys_spec_needs(capfd):
+    """The three nodes started as ``ros2 run`` starts them, ``policy:=learned``: the policy
+    announces its spec's controller settings on /hzd/gait_timing and the controller runs with
+    them (the learned spec applies gaits at once); a controller started with one of them given
+    otherwise takes none of them and says which in one line."""
+    from rabbit_hzd_controller.controller import ControllerConfig
+    from rabbit_policy.runtime.policies import controller_settings
+
+    wanted = controller_settings(make_policy("learned"))
+    assert wanted["within_step_blend"] == 0.0  # not the controller's default (0.2)
+    for given in ({}, {"within_step_blend": 0.2}):
+        with ros_context() as (context, executor):
+            sim = SimNode(context=context)
+            controller = HZDControllerNode(context=context, **given)
+            for node in (sim, controller, PolicyNode(context=context, policy="learned")):
+                executor.add_node(node)
+            assert spin_until(executor, lambda: sim.time >= 0.3, timeout=60.0)
+            running = {k: getattr(controller.config, k) for k in wanted}
+        err = capfd.readouterr().err
+        if not given:
+            assert running == wanted and "running with the policy's controller settings" in err
+        else:
+            assert running == {**{k: getattr(ControllerConfig(), k) for k in wanted}, **given}
+            line = next(line for line in err.splitlines() if "the policy needs" in line)
+            assert "within_step_blend:=0" in line and "was started with within_step_blend:=0.2" in line
+
+
+@pytest.mark.slow
 def test_a_killed_policy_is_named_by_the_controller_within_a_second_of_sim_time(capfd):
     """Nodes started by hand (no decision_sync: the robot walks on the last gait): the policy's
     process dies (its context shut down). The controller logs one warning that the policy is

@@ -529,9 +529,10 @@ def test_ship_policy_ships_the_checkpoints_spec_and_a_regenerate_line_that_runs(
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.spec import load_controller, load_spec
 
-    write_spec(packaged_policy_file(), tmp_path, "scripts/ship_policy.py X --out DIR")
+    write_spec(packaged_policy_file(), tmp_path, "scripts/ship_policy.py X --out DIR", {"code_commit": "abc"})
     spec = load_spec(tmp_path / "learned.yaml")
     assert spec.provenance["written_by"] == "scripts/ship_policy.py X --out DIR"
+    assert spec.provenance["code_commit"] == "abc"
     scenario = Scenario.constant(1.0, pushes=(Push(2.4, -120.0, 0.1),))
     shipped, checkpoint = (walk(p, scenario, 4.0, record_state=True) for p in
                            (load_controller(tmp_path / "learned.yaml"), checkpoint_policy(packaged_policy_file())))

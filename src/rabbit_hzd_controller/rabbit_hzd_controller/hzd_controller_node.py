@@ -44,9 +44,9 @@ from rabbit_msgs_py.conversions import (
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing
+from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing, timing_settings
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
-from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
+from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
 from rabbit_msgs_py.pairing import GaitOrder, resolve_key
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
@@ -131,6 +131,8 @@ class HZDControllerNode(Node):
         self.torques_published = 0
         self.rejected_gaits = 0
         self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
+        self._given = set(overrides) | set(overrides_given(self))  # parameters set at start: a policy's wish yields
+        self._announced: dict[str, float] = {}
         self._gait_order = GaitOrder()
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
@@ -264,10 +266,11 @@ class HZDControllerNode(Node):
             self.get_logger().error(line)
 
     def _on_gait_timing(self, msg: String) -> None:
-        if not self.sync.follow_policy_timing:
-            return
+        """The policy's gait timing (followed unless ``gait_timing`` is fixed) and the
+        controller settings its spec needs (taken either way, :meth:`_adopt`)."""
         try:
             timing, period = parse_gait_timing(msg.data)
+            settings = timing_settings(msg.data)
         except ValueError as exc:
             line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
                                                         f"{short(repr(msg.data), 60)}: {exc}; keeping "
@@ -275,7 +278,32 @@ class HZDControllerNode(Node):
             if line is not None:
                 self.get_logger().error(line)
             return
-        self._do(self.sync.on_gait_timing(timing, period))
+        self._adopt(settings)
+        if self.sync.follow_policy_timing:
+            self._do(self.sync.on_gait_timing(timing, period))
+
+    def _adopt(self, settings: dict[str, float]) -> None:
+        """The controller settings the policy announces (its spec's), taken before its gaits
+        unless a parameter given at start says otherwise: then none is taken (a mix of the two
+        is neither controller), and one line says which conflict."""
+        if not settings or settings == self._announced:
+            return
+        self._announced = settings
+        conflicts = {k: v for k, v in settings.items() if k in self._given and getattr(self.config, k) != v}
+        if conflicts:
+            self.get_logger().error(
+                "the policy needs " + " ".join(f"{k}:={v:g}" for k, v in conflicts.items()) + ", but this controller "
+                "was started with " + " ".join(f"{k}:={getattr(self.config, k):g}" for k in conflicts)
+                + ": keeping this controller's settings (start it without those parameters to run the policy's spec)")
+            return
+        changed = {k: v for k, v in settings.items() if getattr(self.config, k) != v}
+        if changed:
+            config = replace(self.config, **changed)
+            self.sync.config = config
+            if self.controller is not None:
+                self.controller.config = config
+            self.get_logger().info("running with the policy's controller settings: "
+                                   + " ".join(f"{k}:={v:g}" for k, v in changed.items()))
 
     def _on_resets(self, msg: UInt32) -> None:
         self._do(self.sync.on_resets(msg.data))

@@ -20,6 +20,7 @@ seen again (a state re-sent) is not due a second time.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 TICK_NS = 1_000_000
@@ -91,17 +92,40 @@ OWN = DecisionTiming(None)
 PER_STEP = DecisionTiming(0)
 
 
-def gait_timing(period: int) -> str:
+TIMING_SETTINGS = ("within_step_blend", "within_step_until", "blend_phase")
+"""The controller's gait-timing settings a policy may announce on ``/hzd/gait_timing`` (phase, [0, 1])."""
+
+
+def gait_timing(period: int, settings: dict[str, float] | None = None) -> str:
     """``/hzd/gait_timing`` for a policy deciding every ``period`` ticks (0: once per step):
     ``next_step``, or ``at_once:N``, which also tells a controller holding its reply for a
-    due decision (``decision_sync``) which states are due."""
-    return f"at_once:{period}" if period else "next_step"
+    due decision (``decision_sync``) which states are due; then the controller settings the
+    policy needs (its spec's), ``name=value`` each (:data:`TIMING_SETTINGS`)."""
+    text = f"at_once:{period}" if period else "next_step"
+    return text + "".join(f" {name}={float(value)!r}" for name, value in (settings or {}).items())
+
+
+def timing_settings(text: str) -> dict[str, float]:
+    """The controller settings a ``/hzd/gait_timing`` announces ({} if none); ``ValueError``
+    for a name not in :data:`TIMING_SETTINGS` or a value outside [0, 1]."""
+    settings = {}
+    for part in text.split()[1:]:
+        name, _, value = part.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if name not in TIMING_SETTINGS or not 0.0 <= number <= 1.0:
+            raise ValueError(f"a setting is one of {TIMING_SETTINGS}=V with V in [0, 1], got {part!r}")
+        settings[name] = number
+    return settings
 
 
 def parse_gait_timing(text: str) -> tuple[str, int]:
     """``/hzd/gait_timing``: ``next_step`` -> ("next_step", 0), ``at_once:N`` -> ("at_once", N)
-    (``at_once`` alone: 0, no period); ``ValueError`` for anything else."""
-    timing, _, period = text.partition(":")
+    (``at_once`` alone: 0, no period), settings after it aside (:func:`timing_settings`);
+    ``ValueError`` for anything else."""
+    timing, _, period = (text.split() or [""])[0].partition(":")
     if timing not in GAIT_TIMINGS or (period and (timing != "at_once" or not period.isdigit() or int(period) < 1)):
         raise ValueError(f"not one of {GAIT_TIMINGS}, or at_once:N with N >= 1 ticks")
     return timing, int(period) if period else 0

@@ -170,10 +170,7 @@ class PolicyNode(Node):
                 self.resolve_topic_name(topics.PHASE)))
         except (PolicyUnavailable, ValueError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from None
-        settings = controller_settings(policy)
-        if settings:  # the controller is a node of its own: say what it must run with
-            self.get_logger().info(f"{policy.name} needs hzd_controller_node to run with "
-                                   + " ".join(f"{k}:={v}" for k, v in settings.items()) + " (run_stack sets them)")
+        self._settings = controller_settings(policy)  # announced on /hzd/gait_timing: the controller takes them
         self.add_on_set_parameters_callback(self._on_set_parameters)
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
@@ -205,7 +202,7 @@ class PolicyNode(Node):
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
         self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
-        self._timing_pub.publish(String(data=gait_timing(self.core.decision_period)))
+        self._timing_pub.publish(String(data=gait_timing(self.core.decision_period, self._settings)))
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)  # scheduled commands
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)

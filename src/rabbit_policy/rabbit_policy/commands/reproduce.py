@@ -165,17 +165,21 @@ def measure_candidate(path: Path, criteria, grid, map_fn) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     from rabbit_msgs_py.cli import ArgumentParser
+    from rabbit_policy.experiment.options import add_allow_dirty_option
+    from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
     from rabbit_policy.parallel import add_backend_arguments, open_backend
 
     parser = ArgumentParser(description=__doc__)
     parser.add_argument("--preset", required=True, help="config/reproduce/NAME.yaml (tiny, shipped) or a .yaml file")
     parser.add_argument("--out", type=Path, required=True, help="a new directory for everything it writes")
     parser.add_argument("--resume", action="store_true", help="continue the run in --out and screen it again")
+    add_allow_dirty_option(parser)
     add_backend_arguments(parser, progress=False, workers=True)
     args = parser.parse_args(argv)
     try:
         preset = load_preset(args.preset)
-    except ValueError as exc:
+        ran_on = shipping_provenance(args.allow_dirty, preset_dir().parents[1])  # before the training, not after
+    except (ValueError, DirtyTree) as exc:
         parser.error(str(exc))
     out: Path = args.out
     if out.exists() and any(out.iterdir()) and not args.resume:
@@ -192,7 +196,6 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.acceptance import Criteria
     from rabbit_policy.evaluation.shipping import MarginGrid, screen_rank, verdict
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
-    from rabbit_policy.experiment.provenance import provenance as run_provenance
     from rabbit_policy.spec.files import library_dir, library_hash
 
     root = preset_dir().parents[1]
@@ -237,7 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     summary = json.loads((run / "summary.json").read_text())["info"]
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
-    provenance = {**run_provenance(root), "preset": preset["path"], "start": str(start),
+    provenance = {**ran_on, "preset": preset["path"], "start": str(start),
                   "library_sha256": library_hash(library_dir(spec.gait_library.source, chosen.parent)),
                   "iterations": summary["iteration"], "env_steps": summary["env_steps"], "wall_s": summary["wall_s"],
                   "evaluation": preset["evaluation"], "screen_grid": preset["screen"]["grid"],

@@ -410,17 +410,16 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
     return out
 
 
-def write_spec(checkpoint_file: Path, directory: Path, command: str) -> None:
+def write_spec(checkpoint_file: Path, directory: Path, command: str, ran_on: dict) -> None:
     """The shipped checkpoint's spec, ``directory/learned.yaml`` with its weights beside it
     (:func:`rabbit_policy.spec.convert.learned_spec`), its provenance the command that shipped it."""
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.spec import dump_spec
-    from rabbit_policy.experiment.provenance import provenance
     from rabbit_policy.spec.convert import learned_spec
 
     directory.mkdir(parents=True, exist_ok=True)
     spec = learned_spec(PolicyCheckpoint.load(checkpoint_file), directory, provenance={
-        "written_by": command, "checkpoint": checkpoint_file.name, **provenance()})
+        "written_by": command, "checkpoint": checkpoint_file.name, **ran_on})
     dump_spec(spec, directory / "learned.yaml", f"learned, shipped by {command}")
 
 
@@ -446,7 +445,7 @@ def warm_start_policy(checkpoint):
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rabbit_policy.experiment.options import add_classic_integral_option
+    from rabbit_policy.experiment.options import add_allow_dirty_option, add_classic_integral_option
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("policy", type=Path)
@@ -454,6 +453,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--allow-failing", action="store_true")
     parser.add_argument("--dry-run", action="store_true")
     parser.add_argument("--quick", action="store_true", help="the fast subset of checks 1-6 (a first look)")
+    add_allow_dirty_option(parser)
     add_classic_integral_option(parser)
     parser.add_argument("--integral-band", type=float, metavar="B",
                         help="ship the policy with its speed integral held while |v_d - v| >= B m/s (conditional "
@@ -499,6 +499,15 @@ def main(argv: list[str] | None = None) -> int:
                              "policies (train.py --keep-evaluated), for the card")
     add_backend_arguments(parser, progress=True)
     args = parser.parse_args(argv)
+    ran_on: dict = {}
+    if not args.dry_run:  # before the measurements: a refused tree costs nothing
+        from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
+
+        try:
+            ran_on = shipping_provenance(args.allow_dirty)
+        except DirtyTree as exc:
+            parser.error(str(exc))
+    args.provenance = ran_on
     if args.integral_feedforward_start and not args.integral_feedforward:
         parser.error("--integral-feedforward-start needs --integral-feedforward")
     if args.integral_windup_at_start and args.integral_windup_decay is None:
@@ -581,7 +590,7 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
         (record / "MODEL_CARD.md").write_text(card)
         (record / "evaluation.json").write_text(strict_json.dumps({"acceptance_1_6": dict(broad),
                                                                     "tracking": dict(results)}, indent=1) + "\n")
-        write_spec(source, spec_dir, command)
+        write_spec(source, spec_dir, command, args.provenance)
         print(f"shipped to {record / 'hzd_rl_policy.pt'} and {spec_dir / 'learned.yaml'}", file=sys.stderr)
     return 0
 

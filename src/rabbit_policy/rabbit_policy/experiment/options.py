@@ -52,6 +52,13 @@ def add_policy_file_option(parser: argparse.ArgumentParser) -> None:
                                                           "or a training checkpoint (.pt) (default: the packaged spec)")
 
 
+def add_allow_dirty_option(parser: argparse.ArgumentParser) -> None:
+    """``--allow-dirty``: ship from a checkout with uncommitted changes (recorded with the diff's hash)."""
+    parser.add_argument("--allow-dirty", action="store_true",
+                        help="write what ships although the checkout has uncommitted changes (the provenance then "
+                             "records the hash of git diff HEAD); without it such a checkout is refused")
+
+
 def add_model_options(parser: argparse.ArgumentParser) -> None:
     """``--model``, ``--friction``, ``--torso-mass-scale``, ``--torque-delay``."""
     add_model_option(parser)

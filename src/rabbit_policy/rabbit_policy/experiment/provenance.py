@@ -7,6 +7,7 @@ the machine should not move a result; the record is there to show it."""
 from __future__ import annotations
 
 import ctypes
+import hashlib
 import platform
 import subprocess
 import sys
@@ -31,6 +32,25 @@ def code_commit(root: Path | None = None) -> str:
     except (OSError, subprocess.SubprocessError):
         return "unknown"
     return (sha + ("+dirty" if dirty else "")) if sha else "unknown"
+
+
+class DirtyTree(RuntimeError):
+    """What ships is written from a checkout with changes no commit holds."""
+
+
+def shipping_provenance(allow_dirty: bool, root: Path | None = None) -> dict:
+    """The provenance of something that ships (a spec, a card): :func:`provenance`, refused
+    with :class:`DirtyTree` when the checkout has uncommitted changes unless ``allow_dirty``,
+    then recorded with ``dirty_diff_sha256`` (the SHA-256 of ``git diff HEAD``)."""
+    record = provenance(root)
+    if not record["code_commit"].endswith("+dirty"):
+        return record
+    if not allow_dirty:
+        raise DirtyTree("the checkout has uncommitted changes, so no commit says what made this: commit them, or "
+                        "pass --allow-dirty (the diff's hash is then recorded)")
+    root = root or Path(__file__).resolve().parents[3]
+    diff = subprocess.run(["git", "diff", "HEAD"], cwd=root, capture_output=True, timeout=30).stdout
+    return {**record, "dirty_diff_sha256": hashlib.sha256(diff).hexdigest()}
 
 
 def cpu_model() -> str:

@@ -352,14 +352,11 @@ def spec_kind(path: str | Path) -> str:
         raise PolicyUnavailable(str(exc)) from None
 
 
-def _checkpoint(policy_file: str | Path | None, decision: DecisionTiming) -> NetworkPolicy:
-    """The learned policy from ``policy_file`` (None: the packaged one)."""
-    path = Path(policy_file) if policy_file else packaged_policy_file()
+def _checkpoint(policy_file: str | Path, decision: DecisionTiming) -> NetworkPolicy:
+    """The learned policy from the training checkpoint ``policy_file``."""
+    path = Path(policy_file)
     if not path.is_file():
-        if policy_file:
-            raise PolicyUnavailable(f"policy file {path} does not exist")
-        raise PolicyUnavailable("no learned HZD-RL policy is shipped yet; use policy:=classic "
-                                "or give policy_file")
+        raise PolicyUnavailable(f"policy file {path} does not exist")
     try:
         return checkpoint_policy(path, decision)
     except Exception as exc:  # noqa: BLE001 - any file that is not a checkpoint: torch raises many kinds

@@ -91,6 +91,10 @@ class RecoveryConfig:
         command (the walk's start is not one): accelerating from the slow end, the rule
         catches the stall it runs into step after step, and those steps are how the robot
         walks while it speeds up; left out, the memory goes stale.
+    memory_steps: the steps before the one now that the step memory keeps (its reference is
+        the slowest of them at each phase).
+    ramp_floor: m/s, the lowest ramped command the hip velocity is divided by (a command
+        ramping up from a standstill is not divided by zero).
     """
 
     offsets: tuple[float, float, float, float] = (-0.11, 0.01, 0.08, -0.23)
@@ -102,6 +106,8 @@ class RecoveryConfig:
     forget_weight: float = 0.9
     forget_steps: int = 2
     forget_after: float = 4.0
+    memory_steps: int = 4
+    ramp_floor: float = 0.1
 
     def __post_init__(self) -> None:
         if len(self.offsets) != N_OUTPUTS or not all(np.isfinite(self.offsets)):
@@ -120,6 +126,10 @@ class RecoveryConfig:
             raise ValueError(f"RecoveryConfig.forget_steps must be a whole number >= 0, got {self.forget_steps!r}")
         if not (np.isfinite(self.forget_after) and self.forget_after >= 0.0):
             raise ValueError(f"RecoveryConfig.forget_after must be finite and >= 0 s, got {self.forget_after}")
+        if not (isinstance(self.memory_steps, int) and self.memory_steps >= 1):
+            raise ValueError(f"RecoveryConfig.memory_steps must be a whole number >= 1, got {self.memory_steps!r}")
+        if not (np.isfinite(self.ramp_floor) and self.ramp_floor > 0.0):
+            raise ValueError(f"RecoveryConfig.ramp_floor must be finite and > 0 m/s, got {self.ramp_floor}")
 
 
 class StepMemory:
@@ -132,7 +142,7 @@ class StepMemory:
     before the push are slower than those after it), nor a commanded speed change in either
     direction (the module docstring)."""
 
-    def __init__(self, bins: int, depth: int = 4, max_dropped: int = 2) -> None:
+    def __init__(self, bins: int, depth: int, max_dropped: int) -> None:
         self.bins = bins
         self.depth = depth
         self.max_dropped = max_dropped
@@ -192,7 +202,7 @@ class RecoveryPolicy:
         self.classic = classic
         self.config = config
         self._base = RateLimitedPolicy(classic, config.command_rate)
-        self.memory = StepMemory(config.bins, max_dropped=config.forget_steps)
+        self.memory = StepMemory(config.bins, config.memory_steps, config.forget_steps)
         self.decision_period = decision_period
         self.decision_window = decision_window
         self.name = f"recovery@{decision_period}ticks"
@@ -236,7 +246,7 @@ class RecoveryPolicy:
         if tau < self.config.hold_from or self._held is None:
             self._held = self._base.act(observation)  # the ramp advances early in the step only
         command = self._held
-        ramped = max(self._base.command, 0.1)  # the command the base gait is for (m/s), ramping to v_d
+        ramped = max(self._base.command, self.config.ramp_floor)  # the command the base gait is for (m/s), ramping to v_d
         reference = self.memory.observe(tau, hip_velocity, ramped)
         slowing = self._base.command > observation.desired_speed + 1e-9  # a commanded deceleration
         w = 0.0 if slowing else self.weight(tau, hip_velocity / ramped, reference)

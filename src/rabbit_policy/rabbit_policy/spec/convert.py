@@ -1,12 +1,12 @@
-"""Controller specs written from what the code and a checkpoint hold today: classic's and the
-recovery controller's from their constants, a learned one from a training checkpoint
-(``.pt``, which needs torch to read) and the constants of the rules it is shipped with.
-``write_packaged`` wrote the three specs in ``rabbit_policy/controllers``; from then on the
-specs are what ships, and a change of a code default moves nothing shipped."""
+"""Controller specs written from a training checkpoint (``.pt``, which needs torch to read)
+and the constants of the rules it is shipped with. The three packaged specs in
+``rabbit_policy/controllers`` are what ships (classic's and the recovery controller's were
+written once from their constants; see git history): a change of a code default moves nothing
+shipped."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, fields
+from dataclasses import asdict, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +14,10 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.experiment.provenance import code_commit
-from rabbit_policy.runtime.classic import CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW
+from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
+from rabbit_policy.runtime.speed_integral import decision_dt
 from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
@@ -40,21 +41,6 @@ def _settings(values: dict) -> ControllerSettingsSpec:
 
 def _rule(config: RecoveryConfig) -> RuleSpec:
     return RuleSpec(**asdict(config))
-
-
-def classic_spec(source: str = PACKAGED, base: Path = Path("."), provenance: dict | None = None) -> ControllerSpec:
-    """Classic HZD as shipped: the calibrated library interpolated, deciding every 20 ticks,
-    no speed integral (the paper's baseline), the controller's gait timing as it is now."""
-    return ControllerSpec(SPEC_VERSION, "classic", "classic", _library(source, base),
-                          DecisionSpec(CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW), None, None, None, None, None,
-                          _settings({}), provenance or {})
-
-
-def recovery_spec(source: str = PACKAGED, base: Path = Path("."), provenance: dict | None = None) -> ControllerSpec:
-    """The recovery controller as shipped: classic plus the rule's constants, gaits at once."""
-    return ControllerSpec(SPEC_VERSION, "recovery", "recovery", _library(source, base),
-                          DecisionSpec(CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW), None, None, None,
-                          _rule(RecoveryConfig()), None, _settings(CONTROLLER_SETTINGS), provenance or {})
 
 
 def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, np.ndarray]]:
@@ -101,9 +87,9 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
                           _floats(buffers["low"]), _floats(buffers["high"]), residual, weights)
     integral = None
     memory = info.get("memory")
-    if memory is not None:
-        integral = integral_spec(MemoryConfig.from_dict(memory).integral)
     decision_period = decision.resolve(int(info.get("config", {}).get("decision_period", 0)))
+    if memory is not None:  # its dt is the time between decisions, at the timing asked for
+        integral = replace(integral_spec(MemoryConfig.from_dict(memory).integral), dt=decision_dt(decision_period))
     overlay = blend = rule = None
     settings: dict = {}
     if residual is not None and residual_base != "classic":

@@ -36,6 +36,8 @@ from typing import Any
 
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
+from rabbit_policy.runtime.forward import OUTPUTS
+from rabbit_policy.runtime.speed_integral import decision_dt
 
 SPEC_VERSION = 1
 KINDS = ("classic", "recovery", "learned")
@@ -43,6 +45,25 @@ KINDS = ("classic", "recovery", "learned")
 
 class SpecError(ValueError):
     """A controller spec that cannot be built as written: one line saying where and why."""
+
+
+def _number(value: float, name: str, low: float | None = None, high: float | None = None,
+            above: bool = False) -> None:
+    """``value`` finite and within [low, high] (``above``: strictly above ``low``), else a SpecError naming ``name``."""
+    ok = math.isfinite(value) and (low is None or (value > low if above else value >= low)) and (
+        high is None or value <= high)
+    if not ok:
+        where = (f"> {low:g}" if above else f">= {low:g}") if low is not None else ""
+        where += (" and " if where and high is not None else "") + (f"<= {high:g}" if high is not None else "")
+        raise SpecError(f"{name} must be a finite number{' ' + where if where else ''}, got {value!r}")
+
+
+def _ordered(pair: tuple[float, float], name: str, low: float | None = None) -> None:
+    """A (low, high) range: both finite (above ``low`` if given) and low < high."""
+    for i, v in enumerate(pair):
+        _number(v, f"{name}[{i}]", low, above=low is not None)
+    if not pair[0] < pair[1]:
+        raise SpecError(f"{name} must be ordered low < high, got {list(pair)}")
 
 
 @dataclass(frozen=True)
@@ -108,6 +129,16 @@ class IntegralSpec:
     windup_decay: WindupDecaySpec | None
     feedforward: FeedforwardSpec | None
 
+    def __post_init__(self) -> None:
+        _number(self.gain, "speed_integral.gain", 0.0)
+        _number(self.limit, "speed_integral.limit", 0.0, above=True)
+        _number(self.dt, "speed_integral.dt", 0.0, above=True)
+        if self.speed_range is not None:
+            _ordered(self.speed_range, "speed_integral.speed_range", 0.0)
+        for name in ("band", "clip"):
+            if getattr(self, name) is not None:
+                _number(getattr(self, name), f"speed_integral.{name}", 0.0, above=True)
+
 
 @dataclass(frozen=True)
 class ResidualSpec:
@@ -127,6 +158,11 @@ class ResidualSpec:
     def __post_init__(self) -> None:
         if self.base not in RESIDUAL_BASES:
             raise SpecError(f"network.residual.base must be one of {RESIDUAL_BASES}, got {self.base!r}")
+        for i, v in enumerate(self.scale):
+            _number(v, f"network.residual.scale[{i}]", 0.0)
+        if self.bounds_margin is not None:
+            _number(self.bounds_margin, "network.residual.bounds_margin", 0.0)
+        _ordered(self.kd_bounds, "network.residual.kd_bounds", 0.0)
 
 
 @dataclass(frozen=True)
@@ -159,6 +195,28 @@ class NetworkSpec:
     residual: ResidualSpec | None
     weights: WeightsSpec
 
+    def __post_init__(self) -> None:
+        if self.output not in OUTPUTS:
+            raise SpecError(f"network.output must be one of {OUTPUTS}, got {self.output!r}")
+        if self.inputs < 1 or self.outputs < 1 or not self.hidden or min(self.hidden) < 1:
+            raise SpecError(f"network.inputs, outputs and hidden widths must be >= 1, got {self.inputs}, "
+                            f"{self.outputs}, {list(self.hidden)}")
+        for name, values, size in (("input_offset", self.input_offset, self.inputs),
+                                   ("input_scale", self.input_scale, self.inputs),
+                                   ("low", self.low, self.outputs), ("high", self.high, self.outputs)):
+            if len(values) != size:
+                raise SpecError(f"network.{name} needs {size} numbers (network.{'inputs' if size == self.inputs else 'outputs'}), "
+                                f"got {len(values)}")
+        for i, v in enumerate(self.input_offset):
+            _number(v, f"network.input_offset[{i}]")
+        for i, v in enumerate(self.input_scale):
+            _number(v, f"network.input_scale[{i}]", 0.0, above=True)
+        for i, (lo, hi) in enumerate(zip(self.low, self.high)):
+            _number(lo, f"network.low[{i}]")
+            _number(hi, f"network.high[{i}]")
+            if not lo < hi:
+                raise SpecError(f"network.low[{i}] ({lo!r}) must be below network.high[{i}] ({hi!r})")
+
 
 @dataclass(frozen=True)
 class BlendSpec:
@@ -167,6 +225,10 @@ class BlendSpec:
 
     length: float
     until: float
+
+    def __post_init__(self) -> None:
+        _number(self.length, "blend.length", 0.0, 1.0)
+        _number(self.until, "blend.until", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -182,6 +244,8 @@ class RuleSpec:
     forget_weight: float
     forget_steps: int
     forget_after: float
+    memory_steps: int
+    ramp_floor: float
 
 
 @dataclass(frozen=True)
@@ -206,6 +270,10 @@ class ControllerSettingsSpec:
     within_step_blend: float
     within_step_until: float
     blend_phase: float
+
+    def __post_init__(self) -> None:
+        for name in ("within_step_blend", "within_step_until", "blend_phase"):
+            _number(getattr(self, name), f"controller.{name}", 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -246,6 +314,11 @@ class ControllerSpec:
             raise SpecError("a learned spec with a recovery_rule needs its overlay or a residual on the rule")
         if self.recovery_rule is not None and self.decision.period_ticks < 1:
             raise SpecError("the recovery rule acts within the step: decision.period_ticks must be >= 1")
+        if self.speed_integral is not None:
+            expected = decision_dt(self.decision.period_ticks)
+            if abs(self.speed_integral.dt - expected) > 1e-12:
+                raise SpecError(f"speed_integral.dt ({self.speed_integral.dt!r} s) must be the time between decisions, "
+                                f"{expected!r} s (decision.period_ticks {self.decision.period_ticks})")
 
     def to_dict(self) -> dict:
         """As written in the file (tuples as lists)."""
