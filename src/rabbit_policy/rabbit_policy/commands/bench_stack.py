@@ -26,6 +26,11 @@
   "simulation running" log line (its ROS timestamp), the median of 3 launches, and
   ``startup_warnings``: WARN/ERROR lines those launches logged (0 on a normal start).
 
+* ``stop_after_sigint_s``: per node (sim_node, hzd_controller_node, policy_node,
+  recorder_node, each ``python -m`` in a process group of its own, as a terminal starts it), wall
+  s from SIGINT to the group to the process's exit, once it has started (the recorder with
+  its bag closed), the median of 3.
+
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
 """
@@ -44,7 +49,7 @@ from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("startup", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+SCENARIOS = ("startup", "stop", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
              "realtime_multi_process", "realtime_in_process", "realtime_recording")
 
 
@@ -79,6 +84,43 @@ def startup(launches: int = 3) -> dict[str, object]:
     return {"startup_to_physics_s": round(statistics.median(delays), 2), "startup_warnings": warnings}
 
 
+STOPPED_NODES = {"sim_node": ("rabbit_sim.sim_node", "waiting for a state"),
+                 "hzd_controller_node": ("rabbit_hzd_controller.hzd_controller_node", "waiting for a gait"),
+                 "policy_node": ("rabbit_policy.policy_node", "send speeds on"),
+                 "recorder_node": ("rabbit_sim.recorder_node", "recording")}
+"""Each node's module and the log line that says it has started."""
+
+
+def stop_times(repeats: int = 3) -> dict[str, object]:
+    """Wall s from SIGINT (to the node's process group, as Ctrl-C in a terminal sends it) to
+    each node's exit, median of ``repeats``; the recorder's bag must be closed by then."""
+    import os
+    import signal
+    import statistics
+    import time
+
+    times: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, (module, started) in STOPPED_NODES.items():
+            runs = []
+            for k in range(repeats):
+                args = ["--ros-args", "-p", f"output:={tmp}/bag{k}"] if name == "recorder_node" else []
+                node = subprocess.Popen([sys.executable, "-m", module, *args], stdout=subprocess.PIPE,
+                                        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+                for line in node.stdout:
+                    if started in line:
+                        break
+                time.sleep(0.5)
+                sent = time.monotonic()
+                os.killpg(node.pid, signal.SIGINT)
+                tail = node.communicate(timeout=60)[0]
+                runs.append(time.monotonic() - sent)
+                if node.returncode not in (0, -signal.SIGINT) or (name == "recorder_node" and "closed" not in tail):
+                    raise RuntimeError(f"{name} did not stop cleanly (status {node.returncode}): {tail[-500:]}")
+            times[name] = round(statistics.median(runs), 3)
+    return {"stop_after_sigint_s": times}
+
+
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
                  rtf: float = 1.0) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
@@ -86,6 +128,8 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
 
     if name == "startup":
         return startup()
+    if name == "stop":
+        return stop_times()
     schedule = ((0.0, speed),)
     if name in ("paced_multi_process", "paced_recording"):
         prefix = "paced" if name == "paced_multi_process" else "paced_recording"
