@@ -41,6 +41,31 @@ def test_multi_process_run_reports_json():
     assert report["real_time_factor"] > 0.0  # a number; how fast depends on the machine (scripts/bench_stack.py)
     assert report["segments"][0]["command"] == 1.0
     assert abs(report["segments"][0]["mean_speed"] - 1.0) < 0.1
+    assert report["rejected"] == 0  # the controller process's own count (its stats file), not null
+
+
+def test_a_lone_publisher_of_our_topics_does_not_stop_a_start():
+    """A node that only publishes /joint_torques (a test tool; play.py replaying a bag) is not
+    a stack: run_stack starts beside it and walks."""
+    tool = subprocess.Popen([sys.executable, "-c", (
+        "import rclpy, time\n"
+        "from rabbit_msgs_py.runtime import init_context\n"
+        "from sensor_msgs.msg import JointState\n"
+        "context = init_context()\n"
+        "node = rclpy.create_node('torque_tool', context=context)\n"
+        "node.create_publisher(JointState, '/joint_torques', 10)\n"
+        "print('up', flush=True)\n"
+        "time.sleep(120)\n")], stdout=subprocess.PIPE, text=True)
+    try:
+        assert tool.stdout.readline().strip() == "up"
+        time.sleep(1.0)  # discovered
+        run = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "2", "--json"],
+                             capture_output=True, text=True, timeout=120)
+    finally:
+        tool.kill()
+        tool.wait()
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert json.loads(run.stdout)["completed"] is True
 
 
 def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
@@ -130,6 +155,8 @@ def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace
         assert clash.returncode == 2, clash.stderr[-2000:]
         lines = clash.stderr.strip().splitlines()
         assert len(lines) == 1 and "another rabbit-hzd stack runs in namespace /rabbit1 of ROS_DOMAIN_ID=" in lines[0]
+        refused = json.loads(clash.stdout)  # --json: every exit prints the report
+        assert refused["completed"] is False and "another rabbit-hzd stack runs" in refused["error"]
         beside = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.3", "--duration", "6", "--json",
                                  "--namespace", "rabbit2"], capture_output=True, text=True, timeout=180)
         assert beside.returncode == 0, beside.stderr[-2000:]

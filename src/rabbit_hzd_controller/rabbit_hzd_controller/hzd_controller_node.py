@@ -25,13 +25,14 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
-from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
     MessageError,
     alpha_from_msg,
@@ -98,6 +99,8 @@ NODE_PARAMS = {
                              "the user's own key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); "
                              "'none' = unsigned replies, UNSAFE", dynamic=True),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="controller"), range=(0.0, 60.0)),
+    "stats_file": Param("", "write the controller's counts (gaits rejected and refused, torques published, "
+                            "decisions waited for and given up) as JSON here when the node closes ('' = don't)"),
 }
 GAITLESS_WARNING_AFTER = 2.0
 """wall s: states held for want of a gait are warned about after this long (before, a start)."""
@@ -122,6 +125,7 @@ class HZDControllerNode(Node):
             decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
             self.pairing, self._key_source = resolve_key(values.pop("pairing_key"))
             solo_check = finite("solo_check", values.pop("solo_check"), 0.0)
+            self.stats_file = values.pop("stats_file")
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
             self.sync = GaitSync(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout)
@@ -178,6 +182,20 @@ class HZDControllerNode(Node):
         if self.sync.alpha is None or self.sync.kd is None:
             return None
         return list(self.sync.alpha), self.sync.kd
+
+    def statistics(self) -> dict[str, int]:
+        """The controller's counts (run_stack reports ``rejected`` from them)."""
+        return {"rejected_gaits": self.rejected_gaits, "refused_gaits": self.refused_gaits,
+                "torques_published": self.torques_published, "decisions_waited": self.sync.decisions_waited,
+                "decisions_timed_out": self.sync.decisions_timed_out}
+
+    def close(self) -> None:
+        """Write the statistics file (``stats_file``); called before the node is destroyed."""
+        if self.stats_file:
+            try:
+                Path(self.stats_file).write_text(strict_json.dumps(self.statistics()) + "\n")
+            except OSError as exc:
+                self.get_logger().error(f"cannot write stats_file {self.stats_file}: {exc}")
 
     def _flush_rejections(self) -> None:
         for line in self._rejections.flush():

@@ -54,6 +54,7 @@ class StackConfig:
     record_compression: str = "none"
     record_overwrite: bool = False
     record_stats_file: str = ""
+    controller_stats_file: str = ""  # where hzd_controller_node writes its counts on close ('' = not)
     markers_rate: float = 30.0
     reference_rate: float = 0.0  # /hzd/reference and /hzd/tracking_error per s of sim time (0 = off)
     viewer: bool = False
@@ -113,6 +114,7 @@ class StackConfig:
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
                                     "pairing_key": self.pairing_key, "solo_check": 0.0,
+                                    "stats_file": self.controller_stats_file,
                                     **required_controller_settings(self.controller, self.policy_file or None,
                                                                    once_per_step=self.decision.param == 0)},
             "sim_node": {

@@ -107,6 +107,8 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
     with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
         if config.record and not config.record_stats_file:  # where the recorder says how it ended
             config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
+        if not config.controller_stats_file:  # where the controller counts the gaits it rejected
+            config = replace(config, controller_stats_file=os.path.join(scratch, "controller.json"))
         procs = NodeProcesses(config, log=log, hold=probe is not None)
         if probe is not None:
             try:
@@ -133,7 +135,18 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
                 rclpy.shutdown(context=context)
         if config.record:  # a failed recording is the cause whatever else it led to
             error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
-        return supervisor.report(error, policy or policy_name(config))
+        report = supervisor.report(error, policy or policy_name(config))
+        report.rejected = controller_rejections(config.controller_stats_file)
+        return report
+
+
+def controller_rejections(stats_file: str) -> int | None:
+    """The gaits the controller process rejected, from the counts it wrote on close (None if
+    it wrote none: it was killed, or never started)."""
+    try:
+        return int(json.loads(Path(stats_file).read_text())["rejected_gaits"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def recording_error(exit_status: int, stats_file: str) -> str | None:

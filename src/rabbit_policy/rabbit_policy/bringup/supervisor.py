@@ -38,7 +38,7 @@ class RunReport:
     wall_time: float
     completed: bool = True
     error: str | None = None
-    rejected: int | None = None  # gaits the controller rejected (None: not known, its process is apart)
+    rejected: int | None = None  # gaits the controller rejected (None: not known: it wrote no counts, killed or never started)
 
     fell = property(lambda self: self.result.fell)
     fall_time = property(lambda self: self.result.fall_time)
