@@ -230,6 +230,8 @@ def test_the_readme_running_it_commands_run(tmp_path):
     import os
     import subprocess
 
+    from rabbit_policy.experiment.provenance import code_commit
+
     text = (ROOT / "README.md").read_text()
     block = FENCED.search(text, text.index("## Running it")).group(1)
     ran = []
@@ -244,6 +246,8 @@ def test_the_readme_running_it_commands_run(tmp_path):
                 command[command.index(flag) + 1] = value
         if "--loop" in command:  # play.py: once through, not for ever
             command.remove("--loop")
+        if command[1] == "scripts/reproduce.py" and code_commit().endswith("+dirty"):
+            command.append("--allow-dirty")  # a checkout being edited (CI's fresh clone is clean)
         out = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=180,
                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
         assert out.returncode == 0, f"{line}\n{out.stderr[-2000:]}"

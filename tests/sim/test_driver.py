@@ -84,6 +84,9 @@ def test_with_a_pairing_key_only_signed_torques_move_the_robot_in_every_mode(ini
             assert _states(actions) == [MS]
         ok, message, _ = driver.on_release_controller()
         assert not ok and "pairing key" in message and driver.controller == C
+        if mode == "lockstep":  # a copy of the paired controller's id is named as such, not as the controller
+            copied = driver.on_torques(MS, signer.sign(C, 0, ZERO), [37.0] * 4, clock.now + 10.0)
+            assert _states(copied) == [] and f"a node that copied the paired controller's id {C}" in copied[-1].text
 
 
 def test_release_controller_pairs_the_next_to_answer_and_says_so(initial_state):

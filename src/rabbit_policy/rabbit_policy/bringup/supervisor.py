@@ -60,13 +60,13 @@ class RunReport:
     @classmethod
     def not_started(cls, config: StackConfig, error: str) -> "RunReport":
         """The report of a run that ended before any node started (``error``: why, e.g.
-        ``interrupted``): nothing simulated, not completed."""
+        ``interrupted``): nothing simulated, not completed, no gait rejected."""
         scenario = config.scenario()
         empty = WalkResult(scenario=scenario, fell=False, fall_time=None, stalled=False, stall_time=None,
                            start_time=0.0, start_x=0.0, times=np.array([]), hip_x=np.array([]), touchdowns=[],
                            peak_torque=0.0, planned_duration=on_tick_grid(config.duration))
         return cls(controller=config.controller, policy=None, result=empty, wall_time=0.0, completed=False,
-                   error=error)
+                   error=error, rejected=0)
 
     def summary(self) -> dict[str, object]:
         return {**run_summary(self.controller, self.policy, self.result, self.wall_time, self.completed, self.error),

@@ -58,11 +58,10 @@ def _learned_timing(spec: ControllerSpec, decision: DecisionTiming) -> Controlle
     period = decision.resolve(spec.decision.period_ticks)
     if period == spec.decision.period_ticks:
         return spec
-    decision = replace(spec.decision, period_ticks=period)
+    changes: dict = {"decision": replace(spec.decision, period_ticks=period)}
     if spec.speed_integral is not None:  # its dt is the time between decisions
-        spec = replace(spec, speed_integral=replace(spec.speed_integral, dt=decision_dt(period)))
+        changes["speed_integral"] = replace(spec.speed_integral, dt=decision_dt(period))
     if period == 0 and spec.overlay is not None:
         classic = load_spec(packaged_spec("classic"))
-        return replace(spec, decision=decision, overlay=None, blend=None, recovery_rule=None,
-                       controller=classic.controller)
-    return replace(spec, decision=decision)
+        changes.update(overlay=None, blend=None, recovery_rule=None, controller=classic.controller)
+    return replace(spec, **changes)

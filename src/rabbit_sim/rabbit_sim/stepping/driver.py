@@ -386,8 +386,12 @@ class SimDriver:
                    else f"this simulator takes them from {self.pairing.controller} only ('ros2 service call "
                         f"{self._topic(topics.RELEASE_CONTROLLER_SERVICE)} std_srvs/srv/Trigger' pairs the next "
                         "to answer)")
-            self._log("error", f"ignoring torques from {source or 'an unnamed publisher'} on "
-                               f"{self._topic(topics.JOINT_TORQUES)}: {why}", 5.0, "refused")
+            if self.pairing.key is not None and source and source == self.pairing.controller:
+                who = f"a node that copied the paired controller's id {source}"  # the real one signs
+            else:
+                who = f"a node naming itself {source}" if source else "an unnamed publisher"
+            self._log("error", f"ignoring torques from {who} on {self._topic(topics.JOINT_TORQUES)}: {why}", 5.0,
+                      "refused")
             return False
         self._unpaired = None
         if verdict is Admit.PAIR:
