@@ -118,11 +118,7 @@ def network_forward(spec: NetworkSpec, base: Path, weights: tuple[list, list] | 
         if np.shape(w) != (widths[k + 1], widths[k]) or np.shape(b) != (widths[k + 1],):
             raise SpecError(f"network layer {k} is {np.shape(w)}, the spec's architecture "
                             f"{' -> '.join(map(str, widths))} needs {(widths[k + 1], widths[k])}")
-    for name, values, size in (("input_offset", spec.input_offset, spec.inputs),
-                               ("input_scale", spec.input_scale, spec.inputs),
-                               ("low", spec.low, spec.outputs), ("high", spec.high, spec.outputs)):
-        if len(values) != size:
-            raise SpecError(f"network.{name} holds {len(values)} numbers, the architecture needs {size}")
+    # (the arrays' lengths against the architecture: NetworkSpec checks them where the spec is read)
     try:
         return NetworkForward.from_arrays(matrices, biases, spec.input_offset, spec.input_scale, spec.low, spec.high,
                                           spec.output)
