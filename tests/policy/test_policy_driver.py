@@ -80,8 +80,27 @@ def test_a_body_state_decision_waits_for_its_phase_and_is_given_up_with_a_line()
 
 
 @pytest.mark.parametrize("settings, word", [({"min_speed": 1.2, "max_speed": 1.0}, "min_speed"),
-                                            ({"window": 0}, "window"), ({"decision_window": 0}, "decision_window"),
+                                            ({"window": 0}, "window"), ({"decision_window": -1}, "decision_window"),
                                             ({"speed_schedule": "2:1.2,2.05:1.3"}, "speed_schedule")])
 def test_settings_it_cannot_run_with_are_one_line(settings, word):
     with pytest.raises(ValueError, match=word):
         driver(**settings)
+
+
+def test_the_decision_window_is_the_spec_s_unless_the_node_is_given_one(tmp_path):
+    """The ROS path honours the spec's ``decision.window_ticks`` as walk.py does (the node's
+    ``decision_window`` 0, the default); a window given to the node (> 0) overrides it."""
+    import yaml
+
+    from rabbit_policy.spec import packaged_spec
+
+    data = yaml.safe_load(packaged_spec("recovery").read_text())
+    data["decision"]["window_ticks"] = 300
+    edited = tmp_path / "recovery.yaml"
+    edited.write_text(yaml.safe_dump(data, sort_keys=False))
+    policy = make_policy("recovery", policy_file=edited)
+    values = dict(min_speed=0.7, max_speed=1.5, initial_speed=1.0, window=1000, speed_schedule="")
+    for given, window in ((0, 300), (500, 500)):
+        core = PolicyDriver(policy, PolicySettings(**values, decision_window=given))
+        assert core.clock.window.size == window, (given, window)
+

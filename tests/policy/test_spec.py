@@ -151,6 +151,7 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["controller"].update(within_step_until=1.5), "controller.within_step_until must be a finite number "
                                                               ">= 0 and <= 1, got 1.5"),
     (lambda d: d["blend"].update(length=-0.1), "blend.length must be a finite number >= 0 and <= 1"),
+    (lambda d: d["gait_library"].update(mode="nearest"), "gait_library.mode 'nearest': a learned controller's gaits"),
     (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),
     (lambda d: d["decision"].update(period_ticks=-1), "decision.period_ticks must be a whole number of ticks >= 0"),
     (lambda d: d["decision"].update(window_ticks=0), "decision.window_ticks must be a whole number of ticks >= 1"),
@@ -201,6 +202,8 @@ def test_make_policy_builds_the_specs_and_their_variants():
                                                         "blend_phase": 0.0}
     with pytest.raises(PolicyUnavailable, match="is a classic controller, not learned"):
         make_policy("learned", policy_file=packaged_spec("classic"))
+    with pytest.raises(ValueError, match="the library mode is classic's"):
+        make_policy("learned", mode="nearest")  # refused, not ignored
     for kind in ("classic", "recovery"):  # a spec file of any kind runs as its kind
         assert make_policy(kind, policy_file=packaged_spec(kind)).spec == load_spec(packaged_spec(kind))
 

@@ -30,7 +30,7 @@ from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.commands import clamp_message, clamp_speed
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.gait_command import GaitCommand, Policy
-from rabbit_policy.runtime.policies import decision_period, first_command, reset_policy
+from rabbit_policy.runtime.policies import DEFAULT_DECISION_WINDOW, decision_period, first_command, reset_policy
 from rabbit_policy.runtime.speed_schedule import SpeedSchedule
 from rabbit_policy.runtime.speed_window import Observation
 
@@ -90,6 +90,13 @@ def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
     return SpeedSchedule(changes)
 
 
+def decision_window(policy: Policy, settings: PolicySettings) -> int:
+    """The moving-average window (ticks) of a policy deciding every N ticks: the node's
+    ``decision_window`` if given (> 0), else the policy's own (its spec's ``window_ticks``, as
+    the ROS-free loop takes it)."""
+    return settings.decision_window or int(getattr(policy, "decision_window", DEFAULT_DECISION_WINDOW))
+
+
 class PolicyDriver:
     """``policy`` deciding on the events of a walk; see the module docstring. ``ValueError``
     (one line) for settings it cannot run with."""
@@ -99,9 +106,10 @@ class PolicyDriver:
         if not math.isfinite(settings.initial_speed) or not self.min_speed <= settings.initial_speed <= self.max_speed:
             raise ValueError(f"initial_speed must be a finite number in [{self.min_speed}, {self.max_speed}], "
                              f"got {settings.initial_speed}")
-        for name in ("window", "decision_window"):
-            if getattr(settings, name) < 1:
-                raise ValueError(f"{name} must be >= 1 tick, got {getattr(settings, name)}")
+        if settings.window < 1:
+            raise ValueError(f"window must be >= 1 tick, got {settings.window}")
+        if settings.decision_window < 0:
+            raise ValueError(f"decision_window must be >= 0 ticks (0: the policy's own), got {settings.decision_window}")
         self.policy = policy
         self.settings = settings
         self.decision_period = decision_period(policy)
@@ -109,8 +117,8 @@ class PolicyDriver:
         if self.needs_body and not self.decision_period:
             raise ValueError("this policy reads the body state inside the step and decides every N ticks; "
                              "decision_period 0 (once per step) cannot run it")
-        self.clock = DecisionClock(self.decision_period,
-                                   settings.decision_window if self.decision_period else settings.window, tick=TICK_NS)
+        self.clock = DecisionClock(self.decision_period, decision_window(policy, settings) if self.decision_period
+                                   else settings.window, tick=TICK_NS)
         exact_sum.warm()  # the window's compiled sum loaded now, not on the first decision
         fixed_order.warm()  # and the network's forward pass
         self.initial_speed = self.desired_speed = settings.initial_speed

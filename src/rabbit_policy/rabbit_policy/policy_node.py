@@ -73,7 +73,6 @@ from rabbit_policy.policy_driver import Gait, Log, PolicyDriver, PolicySettings,
 from rabbit_policy.runtime.commands import COMMAND_RANGE
 from rabbit_policy.runtime.policies import (
     CONTROLLER_CHOICES,
-    DEFAULT_DECISION_WINDOW,
     LIBRARY_MODES,
     Policy,
     PolicyUnavailable,
@@ -110,8 +109,8 @@ POLICY_PARAMS = {
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
                                  "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied "
                                  "at once", range=(-1, 100000)),
-    "decision_window": Param(DEFAULT_DECISION_WINDOW, "decision_period > 0: moving-average window, ticks, >= 1",
-                             range=(1, 100000)),
+    "decision_window": Param(0, "decision_period > 0: moving-average window, ticks (0 = the policy's own: its "
+                                "spec's decision.window_ticks)", range=(0, 100000)),
     "speed_schedule": Param("", "speed changes at exact sim times after the start, 'T:V,...' (s, m/s; T > 0, at "
                                 "least 0.1 s apart), applied at the first state at or after T as walk.py --schedule "
                                 "applies them (a /cmd_speed in between holds until the next change); again after a "

@@ -44,7 +44,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         names = [controller_name(c) for c in args.controller]
-        policies = {name: make_policy(name, args.gait_dir if name != "learned" else None, args.library_mode,
+        policies = {name: make_policy(name, args.gait_dir if name != "learned" else None,
+                                      args.library_mode if name != "learned" else "interpolate",
                                       args.policy_file if name == "learned" else None, args.max_command_step,
                                       args.decision_period, args.speed_integral if name == "classic" else 0.0)
                     for name in names}

@@ -310,6 +310,9 @@ def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode:
                          "file (policy_file, --policy-file)")
     if mode not in LIBRARY_MODES:
         raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
+    if kind == "learned" and mode != "interpolate":
+        raise ValueError("the library mode is classic's (and recovery's): a learned controller's gaits are the "
+                         "calibrated blend with its residual")
     if kind == "learned" and policy_file and not is_spec_file(policy_file):
         policy = _checkpoint(policy_file, decision)  # a training checkpoint: it carries its decision period
     else:

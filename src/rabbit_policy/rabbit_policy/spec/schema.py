@@ -300,6 +300,9 @@ class ControllerSpec:
             raise SpecError(f"kind must be one of {KINDS}, got {self.kind!r}")
         if (self.kind == "learned") != (self.network is not None):
             raise SpecError("a learned spec has a network and only a learned one does")
+        if self.kind == "learned" and self.gait_library.mode != "interpolate":
+            raise SpecError(f"gait_library.mode {self.gait_library.mode!r}: a learned controller's gaits are the "
+                            "calibrated blend (interpolate) with its residual; nearest is classic's")
         if (self.kind == "recovery") and self.recovery_rule is None:
             raise SpecError("a recovery spec needs its recovery_rule")
         if self.overlay is not None and (self.network is None or self.recovery_rule is None):
