@@ -147,27 +147,34 @@ def test_the_timing_log_says_how_gaits_apply_under_the_controllers_settings():
 
 
 def test_a_policy_gone_silent_is_logged_once_with_since_when_and_its_return_too(gaits):
-    """No gait part for five decision periods of sim time: one warning (since when, the gait
-    the robot walks on); later silent states say nothing more; the next gait part: one line."""
+    """No gait part for five decision periods of sim time and a second of wall time: one
+    warning (since when, the gait the robot walks on); later silent states say nothing more;
+    the next gait part: one line. A policy only behind the simulation (sim time runs on, but
+    its gaits keep coming in wall time) is not silent."""
     slow, fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig())
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), clock=clock)
     sync.on_gait_timing("at_once", 20)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
-    for tick in range(0, 101):  # the gait came at t = 0: 100 ms = five periods is still within
+    clock.now += 0.9  # 900 ms of wall time: a lagging policy, not a lost one
+    for tick in range(0, 300):
         assert not [a for a in sync.on_state(tick * MS, q, dq) if isinstance(a, Log)]
-    (warning,) = [a for a in sync.on_state(101 * MS, q, dq) if isinstance(a, Log)]
+    clock.now += 0.2
+    (warning,) = [a for a in sync.on_state(300 * MS, q, dq) if isinstance(a, Log)]
     assert warning.level == "warning" and "the policy is silent: no gait since t = 0.000 s" in warning.text
     assert "every 20 ms" in warning.text and "Kd 50.0" in warning.text
-    assert not [a for t in range(102, 400) for a in sync.on_state(t * MS, q, dq) if isinstance(a, Log)]
+    assert not [a for t in range(301, 400) for a in sync.on_state(t * MS, q, dq) if isinstance(a, Log)]
     (back,) = [a for a in sync.on_gait_part("alpha", fast) if isinstance(a, Log)]
     assert back.level == "info" and "the policy is back" in back.text and "after 0.399 s" in back.text
 
 
 def test_a_policy_deciding_once_per_step_is_silent_after_two_seconds(gaits):
     slow, _fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig())
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), clock=clock)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
+    clock.now += 2.0
     logs = [a for t in range(0, 2002) for a in sync.on_state(t * MS, q, dq) if isinstance(a, Log)]
     assert len(logs) == 1 and "since t = 0.000 s" in logs[0].text and "once per step" in logs[0].text

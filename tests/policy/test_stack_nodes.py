@@ -646,11 +646,12 @@ def test_a_controller_started_by_hand_runs_with_the_settings_its_policys_spec_ne
 
 
 @pytest.mark.slow
-def test_a_killed_policy_is_named_by_the_controller_within_a_second_of_sim_time(capfd):
+def test_a_killed_policy_is_named_by_the_controller_within_two_seconds(capfd):
     """Nodes started by hand (no decision_sync: the robot walks on the last gait): the policy's
     process dies (its context shut down). The controller logs one warning that the policy is
-    silent, since when and on which gait it walks, within 1 s of sim time; nothing more while
-    it stays silent."""
+    silent, since when and on which gait it walks, within 2 s of wall time (five decisions of
+    sim time and a second of wall time without a gait); nothing more while it stays silent. A
+    policy that is only behind the simulation is not reported (tests/hzd_controller)."""
     with ros_context() as (context, executor), ros_context() as (ctx_p, ex_p):
         sim = SimNode(context=context)
         controller = HZDControllerNode(context=context)
@@ -660,14 +661,14 @@ def test_a_killed_policy_is_named_by_the_controller_within_a_second_of_sim_time(
         assert spin_until((executor, ex_p), lambda: sim.time >= 0.5, timeout=60.0)
         capfd.readouterr()
         ctx_p.try_shutdown()  # kill -9: nothing more from it
-        killed = sim.time
+        killed = time.monotonic()
         lines: list[str] = []
-        while sim.time < killed + 1.0 and not sim.halted:
+        while time.monotonic() < killed + 2.0 and not lines and not sim.halted:
             spin_for(executor, 0.05)
             lines += [line for line in capfd.readouterr().err.splitlines() if "the policy is silent" in line]
         assert len(lines) == 1, lines
         assert "[hzd_controller_node]" in lines[0] and "walking on the last gait" in lines[0]
-        spin_until(executor, lambda: sim.time >= killed + 2.0, timeout=30.0)
+        spin_for(executor, 1.5)
         assert "the policy is silent" not in capfd.readouterr().err  # once, not again
 
 

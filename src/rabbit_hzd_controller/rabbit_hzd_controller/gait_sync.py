@@ -24,8 +24,10 @@ messages, then publishes what comes back; the tests drive it with no rclpy, as
 * A controller that joins mid-run (restarted by the stack) answers its first state with the
   gait in force: a decision on that state went to the old instance.
 * A policy that goes silent (no gait part for :data:`SILENT_DECISIONS` of its decision periods
-  of sim time, or :data:`SILENT_PER_STEP` s when it decides once per step) is logged once, with
-  since when and the gait the robot walks on; its return is logged too.
+  of sim time, or :data:`SILENT_PER_STEP` s when it decides once per step, and for
+  :data:`SILENT_WALL` s of wall time: a policy in a process of its own may lag the simulation
+  without being gone) is logged once, with since when and the gait the robot walks on; its
+  return is logged too.
 
 Stamps are ns of sim time; ``clock`` is wall time (s, ``time.monotonic``).
 """
@@ -68,6 +70,10 @@ SILENT_DECISIONS = 5
 SILENT_PER_STEP = 2.0
 """s of sim time without a gait part after which a policy deciding once per step counts as
 silent (a step lasts at most 0.75 s; the stall rule's 2 s)."""
+SILENT_WALL = 1.0
+"""s of wall time without a gait part, besides the sim time above, before the policy counts as
+silent: a live policy behind the simulation (hand-started nodes run without decision_sync)
+still sends a gait every few ms of wall time."""
 
 
 @dataclass(frozen=True)
@@ -110,6 +116,7 @@ class GaitSync:
         self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
         self._period = 0  # the policy's decision period (ticks; 0: once per step)
         self._gait_at: int | None = None  # stamp (ns) of the newest state when a gait part last came
+        self._gait_wall = 0.0  # wall s (clock) when a gait part last came
         self._silent_since: int | None = None  # the policy is silent (logged): since this stamp
         self.states_received = 0
         self.replies_repeated = 0
@@ -143,6 +150,7 @@ class GaitSync:
                               f"after {(self.last_stamp - self._silent_since) / 1e9:.3f} s without one")
             self._silent_since = None
         self._gait_at = max(self.last_stamp, 0)
+        self._gait_wall = self.clock()
         if value is not None:
             setattr(self, part, list(value) if part == "alpha" else value)
         self._take(part, value)
@@ -210,7 +218,7 @@ class GaitSync:
         if self._gait_at is None or self._silent_since is not None or stamp < self._gait_at:
             return
         limit = SILENT_DECISIONS * self._period * TICK_NS if self._period else int(SILENT_PER_STEP * 1e9)
-        if stamp - self._gait_at > limit:
+        if stamp - self._gait_at > limit and self.clock() - self._gait_wall > SILENT_WALL:
             self._silent_since = self._gait_at
             every = f"every {self._period} ms" if self._period else "once per step"
             self._log("warning", f"the policy is silent: no gait since t = {self._gait_at / 1e9:.3f} s (it decides "
