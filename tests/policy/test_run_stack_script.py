@@ -44,6 +44,20 @@ def test_multi_process_run_reports_json():
     assert report["rejected"] == 0  # the controller process's own count (its stats file), not null
 
 
+def test_bad_arguments_with_json_print_the_report_too():
+    result = subprocess.run([sys.executable, str(SCRIPT), "--speed", "fast", "--json"], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 2 and "--speed" in result.stderr
+    report = json.loads(result.stdout)
+    assert report["completed"] is False and report["error"].startswith("bad arguments") and report["rejected"] == 0
+    for args, error in ((["--speed-schedule", "0:1.0,1:x"], "speed"), (["--spec", "/nonexistent.yaml"], "nonexistent")):
+        result = subprocess.run([sys.executable, str(SCRIPT), *args, "--json"], capture_output=True, text=True,
+                                timeout=120)
+        assert result.returncode == 2, result.stderr[-2000:]
+        report = json.loads(result.stdout)
+        assert report["completed"] is False and error in report["error"], report["error"]
+
+
 def test_a_lone_publisher_of_our_topics_does_not_stop_a_start():
     """A node that only publishes /joint_torques (a test tool; play.py replaying a bag) is not
     a stack: run_stack starts beside it and walks."""

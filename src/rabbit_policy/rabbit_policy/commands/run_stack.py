@@ -101,7 +101,17 @@ def main(argv: list[str] | None = None) -> int:
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda signum, _frame: interrupted.append(signum))
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # bad arguments: with --json the report too (every exit prints one)
+        if exc.code == 2 and "--json" in (sys.argv[1:] if argv is None else argv):
+            from rabbit_policy.bringup.stack import StackConfig
+            from rabbit_policy.bringup.supervisor import RunReport
+
+            unparsed = StackConfig(duration=parser.get_default("duration"), schedule=((0.0, parser.get_default("speed")),))
+            print(strict_json.dumps({**RunReport.not_started(unparsed, "bad arguments (the error line says which)")
+                                     .summary(), "spec": None}))
+        raise
 
     from rabbit_policy.runtime.policies import PolicyUnavailable
     from rabbit_policy.experiment.options import resolve_controller, schedule_from_args
@@ -112,9 +122,9 @@ def main(argv: list[str] | None = None) -> int:
     def refused(error: str) -> None:
         """--json: the report of a run refused before it started (every exit prints one)."""
         if args.json:
-            print(strict_json.dumps({**RunReport.not_started(config or StackConfig(controller=args.controller or
-                                                                                   "classic"), error).summary(),
-                                     "spec": None}))
+            asked = config or StackConfig(duration=args.duration, schedule=((0.0, args.speed),),
+                                          controller=args.controller or "classic")
+            print(strict_json.dumps({**RunReport.not_started(asked, error).summary(), "spec": None}))
 
     config = None
     try:
