@@ -356,7 +356,8 @@ def test_with_a_key_only_the_paired_policys_signed_gaits_are_taken_in_order(capf
     """The controller started by hand (the user's key): a gait signed with the key is taken,
     its Kd from its signature (``/hzd/kd`` alone moves nothing); an unsigned gait, one signed
     with another key, one whose coefficients changed after signing, and a copy of a signed gait
-    sent again after a later one are refused, logged, and never counted as a decision's part."""
+    sent again after a later one are refused, logged, and never counted as a decision's part, as
+    are gaits of another policy instance with the same key while this one is alive."""
     from rabbit_msgs_py.pairing import PairingKey, new_key
 
     from ros_helpers import GaitSigner
@@ -390,6 +391,15 @@ def test_with_a_key_only_the_paired_policys_signed_gaits_are_taken_in_order(capf
         assert controller.gait == (list(slow.alpha), slow.kd) and controller.rejected_gaits == 0
         alpha_pub.publish(signer.alpha(fast.alpha, fast.kd))
         assert spin_until(executor, lambda: controller.gait == (list(fast.alpha), fast.kd))
+        # another policy instance with the same key (a replayed bag's gaits): refused while this one is alive,
+        # taken once it has been silent for a second (a restarted policy)
+        replay = GaitSigner(source="earlier_policy/11111111")
+        alpha_pub.publish(replay.alpha(slow.alpha, slow.kd))
+        assert spin_until(executor, lambda: controller.refused_gaits == 5)
+        assert controller.gait == (list(fast.alpha), fast.kd)
+        spin_for(executor, 1.2)
+        alpha_pub.publish(replay.alpha(slow.alpha, slow.kd))
+        assert spin_until(executor, lambda: controller.gait == (list(slow.alpha), slow.kd))
     refused = [line for line in capfd.readouterr().err.splitlines() if "refused a gait on /hzd/alpha" in line]
     assert 1 <= len(refused) <= 3 and "moves nothing" in refused[0]
 

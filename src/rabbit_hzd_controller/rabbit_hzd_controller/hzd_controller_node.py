@@ -55,7 +55,7 @@ from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 
 from .controller import ControllerConfig, Leg, validate_alpha, validate_kd
-from .gait_sync import Answer, GaitSync, Repeat
+from .gait_sync import SILENT_WALL, Answer, GaitSync, Repeat
 
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
@@ -138,6 +138,8 @@ class HZDControllerNode(Node):
         self._given = set(overrides) | set(overrides_given(self))  # parameters set at start: a policy's wish yields
         self._announced: dict[str, float] = {}
         self._gait_order = GaitOrder()
+        self._policy: str | None = None  # the policy instance whose signed gaits are taken
+        self._policy_wall = 0.0  # wall s (monotonic) of its last gait: another is taken once it is silent
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
@@ -245,9 +247,19 @@ class HZDControllerNode(Node):
             except ValueError as exc:
                 self._refuse_gait(exc if raw is not None else problem)
                 return
+            now = time.monotonic()
+            if self._policy is not None and source != self._policy and now - self._policy_wall <= SILENT_WALL:
+                self._refuse_gait(ValueError(f"it is from policy {source} while {self._policy} is alive (a replayed "
+                                             "bag, or a second policy)"))
+                return
             if not self._gait_order.take(source, count):
                 self._refuse_gait(ValueError(f"gait {count} of {source} came again after a later one"))
                 return
+            if source != self._policy:
+                if self._policy is not None:
+                    self.get_logger().info(f"gaits now from policy {source}: {self._policy} was silent")
+                self._policy = source
+            self._policy_wall = now
         try:
             if raw is None:
                 raise problem
