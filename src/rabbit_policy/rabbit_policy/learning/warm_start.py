@@ -143,13 +143,26 @@ def initial_network(low: np.ndarray, high: np.ndarray, library: GaitLibrary, see
 
 def zero_residual_network(low: np.ndarray, high: np.ndarray, inputs: int, seed: int) -> HZDPolicyNet:
     """The network a residual policy (``action="residual"``) starts from: random hidden
-    layers (after ``torch.manual_seed(seed)``), a zero last layer and a tanh output on
-    symmetric bounds, so its residual is exactly 0 — the classic controller — for any input."""
+    layers (:func:`restart_network`) and a zero last layer with a tanh output on symmetric
+    bounds, so its residual is exactly 0 — the classic controller — for any input."""
     if not np.allclose(np.asarray(low), -np.asarray(high)):
         raise ValueError("a residual's bounds are symmetric about 0")
-    torch.manual_seed(seed)
-    net = HZDPolicyNet(low, high, output="tanh", inputs=inputs)
+    return restart_network(HZDPolicyNet(low, high, output="tanh", inputs=inputs), seed)
+
+
+def restart_network(net: HZDPolicyNet, seed: int) -> HZDPolicyNet:
+    """``net`` with its hidden layers drawn afresh and its last layer zero (weights and bias),
+    in place: each hidden layer's weights and bias uniform in +-1/sqrt(fan-in) (PyTorch's
+    default range) from NumPy's ``default_rng(seed)``, in layer order, rounded to float32.
+    NumPy's generator gives the same bits on every CPU (torch's CPU kernels are compiled per
+    instruction set), so a run that starts here is the same run everywhere."""
+    rng = np.random.default_rng(seed)
+    layers = [m for m in net.body if isinstance(m, torch.nn.Linear)]
     with torch.no_grad():
-        net.body[-1].weight.zero_()
-        net.body[-1].bias.zero_()
+        for layer in layers[:-1]:
+            bound = 1.0 / np.sqrt(layer.in_features)
+            layer.weight.copy_(torch.from_numpy(rng.uniform(-bound, bound, tuple(layer.weight.shape)).astype(np.float32)))
+            layer.bias.copy_(torch.from_numpy(rng.uniform(-bound, bound, tuple(layer.bias.shape)).astype(np.float32)))
+        layers[-1].weight.zero_()
+        layers[-1].bias.zero_()
     return net

@@ -113,6 +113,23 @@ def _floats(values) -> tuple[float, ...]:
     return tuple(float(str(v)) for v in np.asarray(values, dtype=np.float32))
 
 
+def restarted_spec(spec_file: str | Path, seed: int, path: Path) -> ControllerSpec:
+    """Write the learned spec ``spec_file`` with its network restarted as ``path``: the same
+    stages and constants, fresh hidden layers drawn from ``seed`` and a zero last layer
+    (:func:`rabbit_policy.learning.warm_start.restart_network`). A residual spec's network
+    then adds exactly 0: the spec's rules acting on the library alone, a documented start
+    for training (``reproduce.py``'s ``start: zero``)."""
+    from rabbit_policy.learning.warm_start import restart_network
+    from rabbit_policy.runtime.network import spec_network
+    from rabbit_policy.spec.build import load_controller
+
+    source = Path(spec_file).resolve()
+    net = restart_network(spec_network(load_controller(source).forward), seed)
+    return trained_spec(source, net, path, {"written_by": "rabbit_policy.spec.convert.restarted_spec",
+                                            "from": f"{source.name} with its network restarted (seed {seed}: fresh "
+                                                    "hidden layers, a zero last layer)"})
+
+
 def trained_spec(spec_file: str | Path, net, path: Path, provenance: dict) -> ControllerSpec:
     """Write the spec ``spec_file`` with ``net``'s weights (a torch ``HZDPolicyNet`` trained
     from it) as ``path``, its weights file beside it; the gait library by an absolute path
