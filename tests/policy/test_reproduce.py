@@ -33,7 +33,9 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert (out / spec.network.weights.file).is_file()
     provenance = spec.provenance
     assert provenance["commands"][0] == f"scripts/reproduce.py --preset tiny --out {out}"
-    assert provenance["commands"][2].startswith("scripts/train.py --algo es --spec ")
+    assert [c.split(" --seed ")[1].split()[0] for c in provenance["commands"][2:]] == ["0", "1"]  # a run per seed
+    assert all(c.startswith("scripts/train.py --algo es --spec ") for c in provenance["commands"][2:])
+    assert [r["seed"] for r in provenance["runs"]] == [0, 1] and (out / "curves.png").stat().st_size > 10_000
     assert len(provenance["code_commit"]) >= 40 and len(provenance["library_sha256"]) == 64
     assert ("dirty_diff_sha256" in provenance) == bool(dirty) and provenance["machine"]["numpy"]
     evaluation = json.loads((out / "evaluation.json").read_text())
@@ -43,16 +45,18 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert f"| {first['speed']:.2f} | {first['mean_speed_last']:.3f} | {first['error']:+.3f} |" in card
     assert load_controller(out / "learned.yaml").spec == spec
     screen = json.loads((out / "screen.json").read_text())
-    assert [c["candidate"] for c in screen["candidates"]] == ["start", "run/policy.yaml"]
-    for row in screen["candidates"]:  # the paper's scenarios as evaluate.py walks them, and the push grid
-        assert sorted(row["scenarios"]) == ["large_backward", "small_backward", "small_forward"]
-        assert row["margin_grid"]["of"] == {"forward": 2, "backward": 2}
-    report = json.loads((ROOT / "docs" / "results" / "results.json").read_text())
-    nominal = next(row["learned"]["outcome"] for row in report["push"]["table"] if row["scenario"] == "large_backward")
-    assert screen["candidates"][0]["scenarios"]["large_backward"]["outcome"] == nominal  # the packaged one, as reported
-    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"]}
-    assert f"| start | 0 | walked | walked | {nominal} |" in card and "Beats the start" in card
-    assert evaluation["margin_grid"] == screen["candidates"][1]["margin_grid"]
+    assert [c["candidate"] for c in screen["candidates"]] == ["start", "packaged", "seed-0/run/evaluated/00001.yaml",
+                                                              "seed-1/run/evaluated/00001.yaml"]
+    for row in screen["candidates"]:  # every candidate on the same paired trials
+        assert {k: len(v) for k, v in row["outcomes"].items()} == {"forward": 2, "backward": 2, "changes": 2}
+    assert screen["level"] == 0.05 / 2  # the best of two seeds' candidates
+    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025}
+    assert provenance["shipped"] == screen["shipped"] == (screen["best"] if screen["beats_start"] else "start")
+    shipped_row = next(r for r in screen["candidates"] if r["candidate"] == screen["shipped"])
+    assert evaluation["rates"] == shipped_row["rates"] and "Significantly better than the start" in card
+    if screen["shipped"] == "start":  # not better: the start ships, its network a zero residual
+        start = load_controller(out / "seed-0" / "start.yaml")
+        assert spec.network.weights == start.spec.network.weights
     walked = subprocess.run([sys.executable, "scripts/walk.py", "--controller", "learned", "--policy-file",
                              str(out / "learned.yaml"), "--duration", "3", "--json"], cwd=ROOT, capture_output=True,
                             text=True, timeout=300)
@@ -70,22 +74,29 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
 def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
     for name in ("tiny", "shipped"):
         preset = load_preset(name)
-        assert preset["start"] == "packaged" and preset["evaluation"] in ("quick", "full")
-        assert preset["screen"]["grid"] in ("quick", "full") and preset["screen"]["candidates"] >= 1
-    shipped = load_preset("shipped")["train"]
+        assert preset["start"] == "zero" and preset["evaluation"] in ("quick", "full")
+        assert preset["screen"]["trials"] in ("quick", "full") and preset["screen"]["candidates"] >= 1
+    shipped = load_preset("shipped")
     run = yaml.safe_load((ROOT / "config" / "train" / "shipped_es.yaml").read_text())
-    for key in ("pairs", "episodes", "max_steps", "sigma", "lr", "weight_decay", "distribution", "fall_penalty",
-                "seed"):
-        assert shipped[key] == run[key], key  # the shipped run's ES settings
-    assert shipped["iterations"] == 255  # as many generations as trained the shipped network
+    for key in ("pairs", "episodes", "max_steps", "sigma", "lr", "weight_decay", "distribution", "fall_penalty"):
+        assert shipped["train"][key] == run[key], key  # the shipped run's ES settings
+    assert len(shipped["seeds"]) >= 3 and shipped["train"]["eval_every"] > 0  # seeds, each with a held-out curve
     assert train_arguments({"pairs": 2, "keep_evaluated": True, "resume": False}) == ["--pairs", "2",
                                                                                       "--keep-evaluated"]
     bad = tmp_path / "bad.yaml"
     bad.write_text("start: packaged\ntrain: {}\n")
-    bad_screen = tmp_path / "bad_screen.yaml"
-    bad_screen.write_text("start: packaged\ntrain: {}\nscreen: {candidates: 0, grid: full}\nevaluation: quick\n")
-    for preset, message in (("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys"),
-                            (str(bad_screen), "screen is {candidates: a whole number >= 1")):
+    good = "start: zero\nseeds: [0]\ntrain: {}\nscreen: {candidates: 1, trials: full}\nevaluation: quick\n"
+    cases = {"screen: {candidates: 0, trials: full}": "screen is {candidates: a whole number >= 1",
+             "seeds: [0, 0]": "seeds is a list of distinct whole numbers", "seeds: []": "seeds is a list",
+             "train: {seed: 3}": "the seeds are the preset's seeds", "start: scratch": "start is one of"}
+    presets = [("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys")]
+    for k, (line, message) in enumerate(cases.items()):
+        key = line.split(":")[0]
+        path = tmp_path / f"bad{k}.yaml"
+        path.write_text("".join(row if not row.startswith(key + ":") else line + "\n"
+                                for row in good.splitlines(keepends=True)))
+        presets.append((str(path), message))
+    for preset, message in presets:
         out = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", preset, "--out",
                               str(tmp_path / "x")], cwd=ROOT, capture_output=True, text=True, timeout=120)
         lines = out.stderr.strip().splitlines()

@@ -1,59 +1,76 @@
-"""evaluation/shipping.py: the screen that says whether a retrained learned controller beats
-the one it was trained from (the paper's push scenarios, the push grid, the verdict)."""
+"""evaluation/shipping.py: the paired screen that says whether a retrained learned controller
+ships (its trials, the per-trial outcomes, the significance rule)."""
 
 from __future__ import annotations
 
 import pytest
 
 from rabbit_policy.evaluation.push_recovery import classic_margin
-from rabbit_policy.evaluation.robustness import RobustnessConfig, phase_times, push_survived
-from rabbit_policy.evaluation.shipping import MarginGrid, margin_grid, screen_rank, verdict
+from rabbit_policy.evaluation.robustness import RobustnessConfig, phase_times, push_survived, transition_outcome
+from rabbit_policy.evaluation.shipping import ScreenTrials, measure, screen_rank, verdict
+from rabbit_policy.evaluation.statistics import rate
 from rabbit_policy.spec import load_packaged
 
 
-def measured(failures=0, large="walked", forward=100, backward=100, small="walked") -> dict:
-    outcome = {name: {"outcome": o} for name, o in
-               (("small_forward", small), ("small_backward", "walked"), ("large_backward", large))}
-    return {"failures": failures, "scenarios": outcome,
-            "margin_grid": {"forward": forward, "backward": backward, "of": {"forward": 160, "backward": 160}}}
+def measured(forward: list[bool], backward: list[bool], changes: list[bool], failures: int = 0) -> dict:
+    outcomes = {"forward": forward, "backward": backward, "changes": changes}
+    flat = forward + backward + changes
+    return {"failures": failures, "outcomes": outcomes, "rates": {k: rate(v) for k, v in outcomes.items()},
+            "passed": sum(flat), "of": len(flat)}
 
 
 @pytest.mark.unit
-def test_the_verdict_needs_the_checks_large_backward_more_forward_and_as_many_backward_pushes():
-    start = measured(large="fell", forward=122, backward=153)
-    assert verdict(measured(forward=123, backward=153), start) == (True, [])
-    for candidate, reason in ((measured(failures=1, forward=130, backward=160), "fails 1 acceptance checks"),
-                              (measured(large="fell", forward=130, backward=160), "large_backward: fell"),
-                              (measured(small="stalled", forward=130, backward=160), "small_forward: stalled"),
-                              (measured(forward=122, backward=160), "forward pushes 122 of 160, the start 122"),
-                              (measured(forward=130, backward=152), "backward pushes 152 of 160, the start 153")):
-        ships, why = verdict(candidate, start)
-        assert not ships and len(why) == 1 and why[0].startswith(reason), why
-    ranked = sorted([measured(forward=120), measured(large="fell", forward=150), measured(forward=125),
-                     measured(failures=1, forward=160)], key=screen_rank)
-    assert [(m["failures"], m["margin_grid"]["forward"]) for m in ranked] == [(0, 125), (0, 120), (0, 150), (1, 160)]
+def test_a_candidate_ships_only_when_significantly_better_after_the_bonferroni_division():
+    start = measured([False] * 200, [True] * 200, [True] * 50)
+    # 20 more forward pushes, nothing lost: McNemar p = 2 * 2**-20, significant at 0.05 / 3
+    better = measured([True] * 20 + [False] * 180, [True] * 200, [True] * 50)
+    ships, why, tests = verdict(better, start, screened=3)
+    assert ships and why == [] and tests["all"] == {"only_a": 20, "only_b": 0, "p_value": 2 * 0.5 ** 20}
+    # 8 more and 2 fewer: p = 0.109 > 0.05, not significant
+    slightly = measured([True] * 8 + [False] * 192, [False] * 2 + [True] * 198, [True] * 50)
+    ships, why, _ = verdict(slightly, start, screened=1)
+    assert not ships and why[0].startswith("not significantly better in all")
+    # 7 more (p = 0.0156) passes alone but not as the best of three (needs < 0.0167: it does), of four it does not
+    seven = measured([True] * 7 + [False] * 193, [True] * 200, [True] * 50)
+    assert verdict(seven, start, screened=3)[0] and not verdict(seven, start, screened=4)[0]
+    # better in all, yet one family significantly worse: refused, naming the family
+    traded = measured([True] * 60 + [False] * 140, [True] * 200, [False] * 10 + [True] * 40)
+    ships, why, tests = verdict(traded, start, screened=1)
+    assert not ships and len(why) == 1 and why[0].startswith("changes significantly worse: 40 against 50 of 50")
+    assert tests["changes"]["only_b"] == 10
+    ships, why, _ = verdict(measured([True] * 20 + [False] * 180, [True] * 200, [True] * 50, failures=1), start)
+    assert not ships and why == ["fails 1 acceptance checks, the start 0"]
+    ranked = sorted([measured([True], [True], [False], failures=0), measured([True], [True], [True], failures=1),
+                     measured([True], [True], [True], failures=0)], key=screen_rank)
+    assert [(m["passed"], m["failures"]) for m in ranked] == [(3, 0), (3, 1), (2, 0)]
 
 
 @pytest.mark.unit
-def test_the_grid_scales_its_pushes_to_classics_margin():
-    grid = MarginGrid()
-    assert grid.impulses(1.0, "forward") == [round(1.1 * 16), round(1.4 * 16)]
-    assert grid.impulses(1.0, "backward") == [-round(1.5 * 9), -round(2.0 * 9)]
-    assert grid.impulses(1.05, "forward") == [round(1.1 * classic_margin(1.05, 1)), round(1.4 * classic_margin(1.05, 1))]
-    assert grid.pushes_per_direction("forward") == 5 * 2 * 16
-    with pytest.raises(ValueError):
-        MarginGrid(phases=0)
+def test_the_trials_scale_their_pushes_to_classics_margin_and_count_700():
+    trials = ScreenTrials()
+    assert trials.impulses(1.0, "forward") == [round(1.0 * 16), round(1.3 * 16)]
+    assert trials.impulses(1.0, "backward") == [-round(1.5 * 9), -round(2.0 * 9)]
+    assert trials.impulses(1.05, "forward") == [round(classic_margin(1.05, 1)), round(1.3 * classic_margin(1.05, 1))]
+    assert (trials.count("forward"), trials.count("backward"), trials.count("changes")) == (320, 320, 60)
+    for bad in ({"phases": 0}, {"change_speeds": (1.0,)}, {"horizon": 0.0}):
+        with pytest.raises(ValueError):
+            ScreenTrials(**bad)
 
 
 @pytest.mark.sim
-def test_the_grid_counts_each_push_as_the_margins_rule_judges_it():
-    grid = MarginGrid(speeds=(1.05,), forward=(1.1, 2.0), backward=(1.5,), phases=2, horizon=2.0)
+def test_each_trial_is_judged_by_the_margins_and_the_evaluations_rules_in_a_fixed_order():
+    trials = ScreenTrials(speeds=(1.05,), forward=(1.0, 2.0), backward=(1.5,), phases=2, horizon=2.0,
+                          change_speeds=(0.85, 1.25), change_phases=(0.125,), change_settle=3.0, change_horizon=4.0)
     policy = load_packaged("classic")
-    counted = margin_grid(policy, grid)
-    config = RobustnessConfig(push_duration=grid.push_duration, push_horizon=grid.horizon)
-    times = phase_times(policy, 1.05, grid.settle, [0.0, 0.5])
-    expected = {d: sum(push_survived((policy, 1.05, t, i, config)) for i in grid.impulses(1.05, d) for t in times)
+    counted = measure(policy, trials)
+    config = RobustnessConfig(push_duration=trials.push_duration, push_horizon=trials.horizon,
+                              transition_horizon=trials.change_horizon, reach_within=trials.reach_within)
+    times = phase_times(policy, 1.05, trials.settle, [0.0, 0.5])
+    expected = {d: [push_survived((policy, 1.05, t, i, config)) for i in trials.impulses(1.05, d) for t in times]
                 for d in ("forward", "backward")}
-    assert {d: counted[d] for d in expected} == expected
-    assert counted["of"] == {"forward": 4, "backward": 2}
-    assert counted["per_speed"] == [{"speed": 1.05, **expected}]
+    starts = {a: phase_times(policy, a, trials.change_settle, trials.change_phases)[0] for a in (0.85, 1.25)}
+    expected["changes"] = [transition_outcome(policy, a, b, starts[a], config)["passed"]
+                           for a, b in ((0.85, 1.25), (1.25, 0.85))]
+    assert counted["outcomes"] == expected
+    assert counted["of"] == 4 + 2 + 2 and counted["passed"] == sum(map(sum, expected.values()))
+    assert not all(expected["forward"])  # twice classic's margin is too much: the outcomes differ

@@ -1,6 +1,6 @@
 """Learning curves of one or more training runs (``train.py`` or ``train_sb3.py`` OUT
-directories) to one PNG: episode return, fall fraction, mean speed error and failed
-acceptance checks, against env steps (top row) and wall time (bottom row).
+directories) to one PNG: episode return, fall fraction, mean speed error, and the held-out
+acceptance checks' failures and summed speed error, against env steps (top row) and wall time (bottom row).
 
     scripts/plot_training.py runs/es0 runs/ppo0 runs/sb3_ppo --out docs/images/learning.png
     scripts/plot_training.py runs/es0 --label "ES, sigma 0.02" --out es0.png
@@ -18,7 +18,8 @@ from pathlib import Path
 from rabbit_msgs_py.cli import ArgumentParser
 
 PANELS = (("episode_return", "log", "episode return"), ("fall_fraction", "log", "fall fraction"),
-          ("mean_abs_error", "log", "mean |v̄ - v_d| (m/s)"), ("failures", "eval", "failed acceptance checks"))
+          ("mean_abs_error", "log", "mean |v̄ - v_d| (m/s)"), ("failures", "eval", "failed acceptance checks"),
+          ("total_error", "eval", "acceptance: summed speed error (m/s)"))
 
 
 def read_rows(path: Path) -> list[dict[str, float]]:

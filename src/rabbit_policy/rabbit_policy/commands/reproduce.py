@@ -1,26 +1,32 @@
 """``scripts/reproduce.py --preset NAME --out DIR``: one command from a preset to a shipped
 learned controller, everything under ``DIR`` (never into the package):
 
-1. **train**: ``scripts/train.py --algo es --spec START`` with the preset's options: ES on the
-   start spec's network in its deployed loop (``DIR/run``);
-2. **screen**: the start spec and the run's candidates (the ``screen.candidates`` evaluated
-   ones the training's acceptance ranks best, else its last ``policy.yaml``), each measured on
-   the acceptance checks (``evaluation``: ``quick`` or ``full``), the paper's three push
-   scenarios as ``evaluate.py`` walks them and the push grid scaled to classic's margins
-   (:mod:`rabbit_policy.evaluation.shipping`; ``screen.grid``: ``quick`` or ``full``),
-   ``DIR/screen.json``; the best candidate by :func:`~rabbit_policy.evaluation.shipping.screen_rank`
-   is chosen, and the verdict says whether it beats the start (the bar for shipping it in
-   the package);
-3. **ship**: that spec and its weights as ``DIR/learned.yaml``, with its provenance (the code's
-   commit, the gait library's hash, the preset, the verdict and the commands that ran);
+1. **train**, once per seed of the preset's ``seeds``: ``scripts/train.py --algo es --spec
+   START --seed N`` with the preset's options: ES on the start spec's network in its deployed
+   loop (``DIR/seed-N/run``). ``start: zero`` is the packaged learned spec with its network
+   restarted from the seed (fresh hidden layers, a zero last layer: its rules on the library
+   alone; ``DIR/seed-N/start.yaml``), ``packaged`` the packaged spec, else a spec file. Each
+   run evaluates the acceptance checks every ``eval_every`` generations: its held-out
+   learning curve (``DIR/curves.png``, every seed);
+2. **screen**: the start, the packaged learned controller (when it is not the start) and each
+   seed's ``screen.candidates`` evaluated specs its acceptance ranks best (else its last
+   ``policy.yaml``), each on the acceptance checks (``evaluation``: ``quick`` or ``full``) and
+   the paired screen trials (:mod:`rabbit_policy.evaluation.shipping`; ``screen.trials``:
+   ``quick`` or ``full``), ``DIR/screen.json``; the candidate with most trials passed is
+   chosen, and it ships only on a significant improvement over the start (McNemar's exact
+   test, Bonferroni over the candidates screened: :func:`~rabbit_policy.evaluation.shipping.verdict`);
+3. **ship**: the chosen candidate if it ships, else the start, as ``DIR/learned.yaml``, with
+   its provenance (the code's commit, the gait library's hash, the preset, the verdict and
+   the commands that ran);
 4. **evaluate**: its measurements (``DIR/evaluation.json``);
 5. **model card**: ``DIR/MODEL_CARD.md``, from the spec and its evaluation; its regenerate
    line is the command that ran.
 
-Presets are data (``config/reproduce/NAME.yaml``: ``start``, ``train``, ``screen``,
-``evaluation``, every key required). ``--resume`` continues an interrupted run in ``DIR``
-(``train.py --resume``: a finished training trains no further) and screens it again. ``walk.py --controller learned --policy-file DIR/learned.yaml`` walks the
-result; ``run_stack.py`` and ``policy_node`` run it the same way."""
+Presets are data (``config/reproduce/NAME.yaml``: ``start``, ``seeds``, ``train``,
+``screen``, ``evaluation``, every key required; the seed is ``seeds``', not ``train``'s).
+``--resume`` continues an interrupted run in ``DIR`` (``train.py --resume`` per seed: a
+finished training trains no further) and screens it again. ``walk.py --spec
+DIR/learned.yaml`` walks the result; ``run_stack.py`` and ``policy_node`` run it the same way."""
 
 from __future__ import annotations
 
@@ -30,9 +36,12 @@ import shutil
 import sys
 from pathlib import Path
 
-PRESET_KEYS = ("start", "train", "screen", "evaluation")
-SCREEN_KEYS = ("candidates", "grid")
+from rabbit_policy.evaluation.statistics import format_rate
+
+PRESET_KEYS = ("start", "seeds", "train", "screen", "evaluation")
+SCREEN_KEYS = ("candidates", "trials")
 EVALUATIONS = ("quick", "full")
+STARTS = ("zero", "packaged")
 
 
 def preset_dir() -> Path:
@@ -53,11 +62,20 @@ def load_preset(name: str) -> dict:
         raise ValueError(f"preset {path} must have exactly the keys {', '.join(PRESET_KEYS)}")
     if not isinstance(data["train"], dict) or data["evaluation"] not in EVALUATIONS:
         raise ValueError(f"preset {path}: train is a mapping of train.py options, evaluation one of {EVALUATIONS}")
+    if "seed" in data["train"]:
+        raise ValueError(f"preset {path}: the seeds are the preset's seeds, not train's seed")
+    seeds = data["seeds"]
+    if (not isinstance(seeds, list) or not seeds or len(set(seeds)) != len(seeds)
+            or any(not isinstance(s, int) or isinstance(s, bool) or s < 0 for s in seeds)):
+        raise ValueError(f"preset {path}: seeds is a list of distinct whole numbers >= 0")
+    if not isinstance(data["start"], str) or not (data["start"] in STARTS or data["start"].endswith((".yaml", ".yml"))):
+        raise ValueError(f"preset {path}: start is one of {STARTS} or a spec file (.yaml)")
     screen = data["screen"]
-    if (not isinstance(screen, dict) or set(screen) != set(SCREEN_KEYS) or screen["grid"] not in EVALUATIONS
+    if (not isinstance(screen, dict) or set(screen) != set(SCREEN_KEYS) or screen["trials"] not in EVALUATIONS
             or not isinstance(screen["candidates"], int) or isinstance(screen["candidates"], bool)
             or screen["candidates"] < 1):
-        raise ValueError(f"preset {path}: screen is {{candidates: a whole number >= 1, grid: one of {EVALUATIONS}}}")
+        raise ValueError(f"preset {path}: screen is {{candidates: a whole number >= 1 per seed, trials: one of "
+                         f"{EVALUATIONS}}}")
     return {**data, "path": str(path)}
 
 
@@ -101,17 +119,16 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
     if spec.overlay is not None:
         stages.append(f"the recovery rule on top (offsets {list(spec.recovery_rule.offsets)} rad), the network's "
                       f"gaits blended over {spec.blend.length:g} of phase")
-    names = list(evaluation["scenarios"])
-    grid = evaluation["margin_grid"]
+    families = ("forward", "backward", "changes")
     screened = "\n".join(f"| {row['candidate']} | {row['failures']} | "
-                         + " | ".join(row["scenarios"][n]["outcome"] for n in names)
-                         + f" | {row['margin_grid']['forward']} | {row['margin_grid']['backward']} |" for row in screen)
+                         + " | ".join(format_rate(row["rates"][f]) for f in families)
+                         + f" | {row['passed']}/{row['of']} | " + _test_cell(row.get("against_start")) + " |"
+                         for row in screen)
     verdict = provenance["verdict"]
     return "\n".join([
         f"# Model card: {spec.name} (reproduced)", "",
         "A learned HZD-RL controller written by `scripts/reproduce.py` (docs/controller_spec.md): the spec "
-        "`learned.yaml` beside this card names every stage and constant; `walk.py --controller learned "
-        "--policy-file learned.yaml` walks it.", "",
+        "`learned.yaml` beside this card names every stage and constant; `walk.py --spec learned.yaml` walks it.", "",
         "## Stages", "", *[f"- {s}" for s in stages],
         f"- the 1 kHz controller: {', '.join(f'{k} {v:g}' for k, v in vars(spec.controller).items())}", "",
         f"## Acceptance ({provenance['evaluation']} criteria): {'passed' if accepted['passed'] else 'failed'}, "
@@ -119,21 +136,31 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
         "| command (m/s) | mean speed | error | passed |", "|---|---|---|---|", rows, "",
         "| segment command (m/s) | reached in (s) | passed |", "|---|---|---|", segments, "",
         "## Screen", "",
-        f"Pushes: the paper's three scenarios as `evaluate.py` walks them, and a grid of single pushes scaled to "
-        f"classic's margins ({provenance['screen_grid']}: {grid['of']['forward']} per direction; "
-        "`rabbit_policy.evaluation.shipping`). `start` is the spec training started from.", "",
-        "| candidate | failed checks | " + " | ".join(names) + " | forward pushes | backward pushes |",
-        "|---|---|" + "---|" * len(names) + "---|---|", screened, "",
-        f"Chosen: `{provenance['screened']}`. Beats the start (fails no more checks, walks every scenario the start "
-        f"walks and large_backward, more forward pushes, no fewer backward): **{'yes' if verdict['ships'] else 'no'}**"
-        + ("" if verdict["ships"] else "; " + "; ".join(verdict["why"])), "",
+        f"Paired trials ({provenance['screen_trials']}; `rabbit_policy.evaluation.shipping`): pushes scaled to "
+        "classic's margins forward and backward, and command changes between speeds off the library's grid; "
+        "every candidate walks the same trials. `start` is the spec training started from; McNemar's exact test "
+        "against it, on all trials.", "",
+        "| candidate | failed checks | forward pushes | backward pushes | changes | all | against the start |",
+        "|---|---|---|---|---|---|---|", screened, "",
+        f"Chosen: `{provenance['screened']}`. Significantly better than the start (p below "
+        f"{verdict['level']:.3g}, no family significantly worse, no more failed checks): "
+        f"**{'yes' if verdict['ships'] else 'no'}**"
+        + ("" if verdict["ships"] else "; " + "; ".join(verdict["why"]) + f". Shipped: `{provenance['shipped']}`."),
+        "",
         "## Provenance", "",
         f"- code commit: {provenance['code_commit']}",
         f"- gait library sha256: {provenance['library_sha256']}",
         f"- preset: `{provenance['preset']}`; started from `{provenance['start']}`",
-        f"- trained: ES, {provenance['iterations']} generation(s), {provenance['env_steps']} env steps, "
-        f"{provenance['wall_s']} s", "",
+        f"- trained: ES, seeds {', '.join(str(r['seed']) for r in provenance['runs'])}: "
+        + "; ".join(f"seed {r['seed']} {r['iterations']} generation(s), {r['env_steps']} env steps, {r['wall_s']} s"
+                    for r in provenance["runs"]), "",
         "## Regenerate", "", "```", *provenance["commands"], "```", ""])
+
+
+def _test_cell(test: dict | None) -> str:
+    if test is None:
+        return ""
+    return f"+{test['only_a']} / -{test['only_b']}, p = {test['p_value']:.3g}"
 
 
 def candidates(run: Path, count: int) -> list[Path]:
@@ -152,15 +179,15 @@ def candidates(run: Path, count: int) -> list[Path]:
     return chosen or [run / "policy.yaml"]
 
 
-def measure_candidate(path: Path, criteria, grid, map_fn) -> dict:
-    """A spec's acceptance checks and pushes (:func:`rabbit_policy.evaluation.shipping.measure`)."""
+def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
+    """A spec's acceptance checks and screen trials (:func:`rabbit_policy.evaluation.shipping.measure`)."""
     from rabbit_policy.evaluation.acceptance import acceptance
     from rabbit_policy.evaluation.shipping import measure
     from rabbit_policy.spec import load_controller
 
     policy = load_controller(path)
     accepted = acceptance(policy, criteria, map_fn=map_fn)
-    return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, grid, map_fn)}
+    return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, trials, map_fn)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -172,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__)
     parser.add_argument("--preset", required=True, help="config/reproduce/NAME.yaml (tiny, shipped) or a .yaml file")
     parser.add_argument("--out", type=Path, required=True, help="a new directory for everything it writes")
-    parser.add_argument("--resume", action="store_true", help="continue the run in --out and screen it again")
+    parser.add_argument("--resume", action="store_true", help="continue the runs in --out and screen them again")
     add_allow_dirty_option(parser)
     add_backend_arguments(parser, progress=False, workers=True)
     args = parser.parse_args(argv)
@@ -185,77 +212,103 @@ def main(argv: list[str] | None = None) -> int:
     if out.exists() and any(out.iterdir()) and not args.resume:
         print(f"error: {out} is not empty: give a new --out, or --resume", file=sys.stderr)
         return 2
-    if args.resume and not (out / "run" / "checkpoint.pt").is_file():
-        print(f"error: --resume: {out / 'run'} holds no training to continue", file=sys.stderr)
+    if args.resume and not any((out / f"seed-{s}" / "run" / "checkpoint.pt").is_file() for s in preset["seeds"]):
+        print(f"error: --resume: {out} holds no training to continue", file=sys.stderr)
         return 2
 
     import subprocess
     from dataclasses import replace
 
     from rabbit_msgs_py import strict_json
+    from rabbit_policy.commands.plot_training import plot
     from rabbit_policy.evaluation.acceptance import Criteria
-    from rabbit_policy.evaluation.shipping import MarginGrid, screen_rank, verdict
+    from rabbit_policy.evaluation.shipping import ScreenTrials, pooled, screen_rank, verdict
+    from rabbit_policy.evaluation.statistics import mcnemar_exact
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
+    from rabbit_policy.spec.convert import restarted_spec
     from rabbit_policy.spec.files import library_dir, library_hash
 
     root = preset_dir().parents[1]
-    start = packaged_spec("learned") if preset["start"] == "packaged" else Path(preset["start"]).resolve()
-    run = out / "run"
-    train_argv = ["--algo", "es", "--spec", str(start), "--out", str(run), "--no-progress",
-                  *train_arguments(preset["train"]), *(["--resume"] if args.resume else [])]
     reproduce_line = (f"scripts/reproduce.py --preset {shlex.quote(args.preset)} --out {shlex.quote(str(out))}"
                       + (f" --workers {args.workers}" if args.workers != 2 else "")
                       + (" --resume" if args.resume else ""))
-    train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
-    print(f"[1/5] train: {train_line}", flush=True)
-    trained = subprocess.run([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
-    if trained.returncode != 0:
-        print(f"error: training failed with status {trained.returncode} (its output is above; {run} holds the run)",
-              file=sys.stderr)
-        return 1
+    commands, runs, starts = [reproduce_line, "# which ran:"], [], []
+    for index, seed in enumerate(preset["seeds"]):
+        seed_dir = out / f"seed-{seed}"
+        seed_dir.mkdir(parents=True, exist_ok=True)
+        if preset["start"] == "zero":
+            start = seed_dir / "start.yaml"
+            if not start.is_file():
+                restarted_spec(packaged_spec("learned"), seed, start)
+        else:
+            start = packaged_spec("learned") if preset["start"] == "packaged" else Path(preset["start"]).resolve()
+        starts.append(start)
+        run = seed_dir / "run"
+        train_argv = ["--algo", "es", "--spec", str(start), "--out", str(run), "--no-progress", "--seed", str(seed),
+                      *train_arguments(preset["train"]),
+                      *(["--resume"] if args.resume and (run / "checkpoint.pt").is_file() else [])]
+        train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
+        commands.append(train_line)
+        print(f"[1/5] train, seed {seed} ({index + 1} of {len(preset['seeds'])}): {train_line}", flush=True)
+        trained = subprocess.run([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
+        if trained.returncode != 0:
+            print(f"error: training seed {seed} failed with status {trained.returncode} (its output is above; {run} "
+                  "holds the run)", file=sys.stderr)
+            return 1
+        info = json.loads((run / "summary.json").read_text())["info"]
+        runs.append({"seed": seed, "run": run, "iterations": info["iteration"], "env_steps": info["env_steps"],
+                     "wall_s": info["wall_s"]})
+    plot([(f"seed {r['seed']}", r["run"]) for r in runs], out / "curves.png")
     criteria = Criteria.quick() if preset["evaluation"] == "quick" else Criteria()
-    grid = MarginGrid.quick() if preset["screen"]["grid"] == "quick" else MarginGrid()
-    screened = [("start", start), *((str(p.relative_to(out)), p)
-                                    for p in candidates(run, preset["screen"]["candidates"]))]
-    print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance, the paper's push scenarios, "
-          f"the {preset['screen']['grid']} push grid)", flush=True)
+    trials = ScreenTrials.quick() if preset["screen"]["trials"] == "quick" else ScreenTrials()
+    screened = [("start", starts[0])]
+    if preset["start"] != "packaged":
+        screened.append(("packaged", packaged_spec("learned")))
+    screened += [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], preset["screen"]["candidates"])]
+    print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance and {trials.count('forward')} + "
+          f"{trials.count('backward')} pushes and {trials.count('changes')} changes, paired)", flush=True)
     rows = []
     backend = open_backend(parser, args)
     try:
         for name, path in screened:
-            rows.append({"candidate": name, **measure_candidate(path, criteria, grid, backend.map)})
+            rows.append({"candidate": name, **measure_candidate(path, criteria, trials, backend.map)})
             row = rows[-1]
-            print(f"  {name}: {row['failures']} failed checks, scenarios "
-                  f"{', '.join(o['outcome'] for o in row['scenarios'].values())}, pushes forward "
-                  f"{row['margin_grid']['forward']} backward {row['margin_grid']['backward']} of "
-                  f"{row['margin_grid']['of']['forward']}", flush=True)
+            if name != "start":
+                row["against_start"] = mcnemar_exact(pooled(row), pooled(rows[0]))
+            print(f"  {name}: {row['failures']} failed checks, " + ", ".join(
+                f"{f} {format_rate(r)}" for f, r in row["rates"].items()) + f", all {row['passed']}/{row['of']}",
+                flush=True)
     finally:
         backend.close()
-    best = min(rows[1:], key=screen_rank)
-    ships, why = verdict(best, rows[0])
-    chosen = dict(screened)[best["candidate"]]
-    (out / "screen.json").write_text(strict_json.dumps({"candidates": rows, "chosen": best["candidate"],
-                                                        "beats_start": ships, "why_not": why}, indent=2) + "\n")
+    trained_rows = [r for r in rows if r["candidate"] not in ("start", "packaged")]
+    best = min(trained_rows, key=screen_rank)
+    ships, why, tests = verdict(best, rows[0], screened=len(trained_rows))
+    chosen_name = best["candidate"] if ships else "start"
+    chosen = dict(screened)[chosen_name]
+    level = 0.05 / len(trained_rows)
+    (out / "screen.json").write_text(strict_json.dumps({
+        "candidates": rows, "best": best["candidate"], "beats_start": ships, "why_not": why, "tests": tests,
+        "level": level, "shipped": chosen_name}, indent=2) + "\n")
     spec = load_spec(chosen)
-    summary = json.loads((run / "summary.json").read_text())["info"]
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
-    provenance = {**ran_on, "preset": preset["path"], "start": str(start),
+    provenance = {**ran_on, "preset": preset["path"], "start": preset["start"],
                   "library_sha256": library_hash(library_dir(spec.gait_library.source, chosen.parent)),
-                  "iterations": summary["iteration"], "env_steps": summary["env_steps"], "wall_s": summary["wall_s"],
-                  "evaluation": preset["evaluation"], "screen_grid": preset["screen"]["grid"],
-                  "screened": best["candidate"], "verdict": {"ships": ships, "why": why},
-                  "commands": [reproduce_line, "# which ran:", train_line]}
+                  "runs": [{k: v for k, v in r.items() if k != "run"} for r in runs],
+                  "evaluation": preset["evaluation"], "screen_trials": preset["screen"]["trials"],
+                  "screened": best["candidate"], "shipped": chosen_name,
+                  "verdict": {"ships": ships, "why": why, "level": level}, "commands": commands}
     shipped = replace(spec, provenance=provenance)
     dump_spec(shipped, out / "learned.yaml", f"{spec.name}, reproduced by {reproduce_line}")
-    print(f"[3/5] ship: {out / 'learned.yaml'} ({best['candidate']}; beats the start: {'yes' if ships else 'no'}"
-          + ("" if ships else f": {'; '.join(why)}") + ")", flush=True)
-    evaluation = {k: best[k] for k in ("acceptance", "scenarios", "margin_grid")}
+    print(f"[3/5] ship: {out / 'learned.yaml'} ({chosen_name}; {best['candidate']} significantly better than the "
+          f"start: {'yes' if ships else 'no'}" + ("" if ships else f": {'; '.join(why)}") + ")", flush=True)
+    shipped_row = next(r for r in rows if r["candidate"] == chosen_name)
+    evaluation = {k: shipped_row[k] for k in ("acceptance", "rates", "passed", "of")}
     (out / "evaluation.json").write_text(strict_json.dumps(evaluation, indent=2) + "\n")
     print(f"[4/5] evaluate: {out / 'evaluation.json'}", flush=True)
     (out / "MODEL_CARD.md").write_text(model_card(shipped, evaluation, rows, provenance))
     print(f"[5/5] model card: {out / 'MODEL_CARD.md'}", flush=True)
-    print(strict_json.dumps({"out": str(out), "spec": str(out / "learned.yaml"),
-                             "passed": best["acceptance"]["passed"], "failures": best["failures"],
+    print(strict_json.dumps({"out": str(out), "spec": str(out / "learned.yaml"), "shipped": chosen_name,
+                             "passed": shipped_row["acceptance"]["passed"], "failures": shipped_row["failures"],
                              "beats_start": ships}))
     return 0

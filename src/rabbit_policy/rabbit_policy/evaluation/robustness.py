@@ -157,13 +157,20 @@ def speed_grid(policy: Policy, config: RobustnessConfig, map_fn: MapFn = map) ->
 
 
 # ------------------------------------------------------------------ transitions
-def _transition_job(job: tuple) -> dict:
-    policy, a, b, change, phase, config = job
+def transition_outcome(policy: Policy, a: float, b: float, change: float, config: RobustnessConfig) -> dict:
+    """A command change from ``a`` to ``b`` m/s at ``change`` s, walked ``config.transition_horizon``
+    s on: passed when it neither falls nor stalls and the hip reaches ``b`` (within
+    ``REACH_TOLERANCE``) within ``config.reach_within`` s of the change."""
     result = walk(policy, Scenario(schedule=((0.0, a), (change, b))), change + config.transition_horizon)
     reach = result.reach_time(change, result.end_time, b, REACH_TOLERANCE)
     ok = not result.failed and reach is not None and reach <= config.reach_within
-    return {"from": a, "to": b, "phase": phase, "change_time": change, "outcome": _outcome(result),
-            "reach_time": reach, "passed": ok}
+    return {"from": a, "to": b, "change_time": change, "outcome": _outcome(result), "reach_time": reach, "passed": ok}
+
+
+def _transition_job(job: tuple) -> dict:
+    policy, a, b, change, phase, config = job
+    row = transition_outcome(policy, a, b, change, config)
+    return {"from": a, "to": b, "phase": phase, **row}
 
 
 def transitions(policy: Policy, config: RobustnessConfig, map_fn: MapFn = map) -> dict:

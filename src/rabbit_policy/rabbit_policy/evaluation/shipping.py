@@ -1,131 +1,165 @@
-"""Whether a retrained learned controller ships over the one it was trained from.
+"""Whether a retrained learned controller ships: a paired screen on its own trials.
 
-The bar (the controller-spec issue): at least the start's acceptance checks, and better on
-forward pushes and on the paper's ``large_backward`` scenario, while keeping its backward
-pushes. Two measurements serve it:
+Every candidate and the start walk the same trials (:class:`ScreenTrials`), each trial a pass
+or a fail, in three families:
 
-* :func:`paper_scenarios`: the paper's three push scenarios as ``scripts/evaluate.py`` runs
-  them (:data:`~.push_recovery.PUSH_SCENARIOS` at ``EvaluationConfig.push_speed`` for
-  ``push_duration`` s): one outcome each.
-* :func:`margin_grid`: single pushes scaled to classic HZD's own margin
+* ``forward`` and ``backward``: single pushes scaled to classic HZD's own margin
   (:func:`~.push_recovery.classic_margin`) at speeds between the ones the margins were measured
-  at, at evenly spaced phases of one step: forward ``forward`` x classic's forward margin,
-  backward ``backward`` x its backward margin. A push is survived when the walk neither falls
-  nor stalls within ``horizon`` s after it (:func:`~.robustness.push_survived`, the margin's
-  rule). Far beyond the margin, survival flips with small changes of the gait, so the grid
-  counts many pushes rather than judging a few.
+  at, at evenly spaced phases of one step; a push is survived when the walk neither falls nor
+  stalls within ``horizon`` s after it (:func:`~.robustness.push_survived`, the margin's rule);
+* ``changes``: a command change between two speeds off the library's grid at a phase of the
+  step, passed when the hip reaches the new speed within ``reach_within`` s without a fall or a
+  stall (:func:`~.robustness.transition_outcome`, the evaluation's rule).
 
-:func:`verdict` compares a candidate's measurements with the start's, one reason per
-line; :func:`screen_rank` orders candidates (eligible first, then forward, then backward).
+The trials are not the report's (``evaluate.py`` walks other speeds, impulses and changes), so
+what is chosen here is measured afresh there.
+
+:func:`verdict` ships a candidate only on a significant improvement over the start: more trials
+passed in all, by McNemar's exact test (:func:`~.statistics.mcnemar_exact`) at ``alpha``
+divided by the number of candidates screened (Bonferroni: the best of several is chosen on
+these trials), no family significantly worse at ``alpha``, and no more failed acceptance
+checks. :func:`screen_rank` orders candidates (most trials passed, then fewest failed checks).
 """
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
-from rabbit_policy.evaluation.experiments import EvaluationConfig
-from rabbit_policy.evaluation.push_recovery import classic_margin, push_trial
-from rabbit_policy.evaluation.robustness import MapFn, RobustnessConfig, phase_times, push_survived
+from rabbit_policy.evaluation.push_recovery import classic_margin
+from rabbit_policy.evaluation.robustness import (MapFn, RobustnessConfig, phase_times, push_survived,
+                                                 transition_outcome)
+from rabbit_policy.evaluation.statistics import mcnemar_exact, rate
 from rabbit_policy.runtime.gait_command import Policy
 
 DIRECTIONS = {"forward": 1, "backward": -1}
+FAMILIES = ("forward", "backward", "changes")
+ALPHA = 0.05
+"""The screen's significance level, before the division by the candidates screened."""
 
 
 @dataclass(frozen=True)
-class MarginGrid:
-    """The push grid: ``speeds`` (m/s), multiples of classic's margin per direction,
-    ``phases`` evenly spaced push phases of the first step after ``settle`` s, each push
-    ``push_duration`` s long, survived when no fall or stall follows within ``horizon`` s."""
+class ScreenTrials:
+    """The screen's trials. Pushes: at ``speeds`` (m/s), ``forward``/``backward`` multiples of
+    classic's margin, ``phases`` evenly spaced phases of the first step after ``settle`` s, each
+    push ``push_duration`` s long, survived when no fall or stall follows within ``horizon`` s.
+    Changes: every ordered pair of ``change_speeds`` (m/s) at each of ``change_phases`` of the
+    step after ``change_settle`` s, passed when reached within ``reach_within`` s."""
 
     speeds: tuple[float, ...] = (0.75, 0.95, 1.05, 1.25, 1.35)
-    forward: tuple[float, ...] = (1.1, 1.4)
+    forward: tuple[float, ...] = (1.0, 1.3)
     backward: tuple[float, ...] = (1.5, 2.0)
-    phases: int = 16
+    phases: int = 32
     settle: float = 3.0
     horizon: float = 5.0
     push_duration: float = 0.1
+    change_speeds: tuple[float, ...] = (0.75, 0.85, 0.95, 1.15, 1.25, 1.45)
+    change_phases: tuple[float, ...] = (0.125, 0.625)
+    change_settle: float = 6.0
+    change_horizon: float = 6.0
+    reach_within: float = 4.0
 
     def __post_init__(self) -> None:
-        if not self.speeds or self.phases < 1 or self.horizon <= 0 or self.push_duration <= 0:
-            raise ValueError("a margin grid needs speeds, >= 1 phase and a positive horizon and push duration")
+        if (not self.speeds or self.phases < 1 or self.horizon <= 0 or self.push_duration <= 0
+                or len(self.change_speeds) == 1 or self.reach_within <= 0):
+            raise ValueError("screen trials need speeds, >= 1 phase, positive durations and no single change speed")
 
     @classmethod
-    def quick(cls) -> MarginGrid:
-        """One speed, one multiple per direction, two phases (tests, the tiny preset)."""
-        return cls(speeds=(1.05,), forward=(1.1,), backward=(1.5,), phases=2, horizon=2.0)
+    def quick(cls) -> ScreenTrials:
+        """One speed, one multiple per direction, two phases, two changes (tests, the tiny preset)."""
+        return cls(speeds=(1.05,), forward=(1.0,), backward=(1.5,), phases=2, horizon=2.0,
+                   change_speeds=(0.85, 1.15), change_phases=(0.125,), change_settle=3.0, change_horizon=4.0)
 
     def impulses(self, speed: float, direction: str) -> list[int]:
-        """The grid's impulses (N s, signed, whole) at ``speed`` in ``direction``."""
+        """The pushes' impulses (N s, signed, whole) at ``speed`` in ``direction``."""
         sign = DIRECTIONS[direction]
         return [sign * round(factor * classic_margin(speed, sign)) for factor in getattr(self, direction)]
 
-    def pushes_per_direction(self, direction: str) -> int:
-        return len(self.speeds) * len(getattr(self, direction)) * self.phases
+    def count(self, family: str) -> int:
+        if family == "changes":
+            n = len(self.change_speeds)
+            return n * (n - 1) * len(self.change_phases)
+        return len(self.speeds) * len(getattr(self, family)) * self.phases
 
 
-def margin_grid(policy: Policy, grid: MarginGrid = MarginGrid(), map_fn: MapFn = map) -> dict:
-    """Pushes survived on ``grid`` per direction, in all and per speed (a speed the policy
-    does not walk unpushed counts every push there as lost)."""
-    config = RobustnessConfig(push_duration=grid.push_duration, push_horizon=grid.horizon)
-    phases = [k / grid.phases for k in range(grid.phases)]
-    jobs, keys = [], []
-    for speed in grid.speeds:
-        times = phase_times(policy, speed, grid.settle, phases)
+def screen_outcomes(policy: Policy, trials: ScreenTrials = ScreenTrials(), map_fn: MapFn = map) -> dict[str, list[bool]]:
+    """Each family's trial outcomes (True: passed), in the trials' fixed order; a speed the
+    policy does not walk unpushed counts every trial that starts there as failed."""
+    config = RobustnessConfig(push_duration=trials.push_duration, push_horizon=trials.horizon,
+                              transition_horizon=trials.change_horizon, reach_within=trials.reach_within)
+    phases = [k / trials.phases for k in range(trials.phases)]
+    jobs, slots = [], []
+    outcomes: dict[str, list[bool]] = {family: [False] * trials.count(family) for family in FAMILIES}
+    index = dict.fromkeys(FAMILIES, 0)
+    for speed in trials.speeds:
+        times = phase_times(policy, speed, trials.settle, phases)
         for direction in DIRECTIONS:
-            for impulse in grid.impulses(speed, direction):
-                for time in times or ():
-                    jobs.append((policy, speed, time, impulse, config))
-                    keys.append((speed, direction))
-    survived = {(speed, direction): 0 for speed in grid.speeds for direction in DIRECTIONS}
-    for key, ok in zip(keys, map_fn(push_survived, jobs)):
-        survived[key] += int(ok)
-    per_speed = [{"speed": speed, **{d: survived[(speed, d)] for d in DIRECTIONS}} for speed in grid.speeds]
-    return {**{d: sum(row[d] for row in per_speed) for d in DIRECTIONS},
-            "of": {d: grid.pushes_per_direction(d) for d in DIRECTIONS}, "per_speed": per_speed,
-            "grid": asdict(grid)}
+            for impulse in trials.impulses(speed, direction):
+                for k in range(trials.phases):
+                    if times is not None:
+                        jobs.append((push_survived, (policy, speed, times[k], impulse, config)))
+                        slots.append((direction, index[direction]))
+                    index[direction] += 1
+    for a in trials.change_speeds:
+        times = phase_times(policy, a, trials.change_settle, trials.change_phases)
+        for b in trials.change_speeds:
+            if a == b:
+                continue
+            for k in range(len(trials.change_phases)):
+                if times is not None:
+                    jobs.append((_passed_change, (policy, a, b, times[k], config)))
+                    slots.append(("changes", index["changes"]))
+                index["changes"] += 1
+    for (family, i), ok in zip(slots, map_fn(_run, jobs)):
+        outcomes[family][i] = bool(ok)
+    return outcomes
 
 
-def paper_scenarios(policy: Policy, config: EvaluationConfig = EvaluationConfig()) -> dict[str, dict]:
-    """Each of the paper's push scenarios' outcome (``WalkResult.outcome()``), walked as
-    ``scripts/evaluate.py`` walks it."""
-    return {s.name: push_trial(policy, config.push_speed, s, config.push_duration).outcome()
-            for s in config.scenarios}
+def _run(job: tuple) -> bool:
+    function, arguments = job
+    return function(arguments)
 
 
-def measure(policy: Policy, grid: MarginGrid = MarginGrid(), map_fn: MapFn = map) -> dict:
-    """A candidate's pushes: the paper's scenarios and the margin grid."""
-    return {"scenarios": paper_scenarios(policy), "margin_grid": margin_grid(policy, grid, map_fn)}
+def _passed_change(job: tuple) -> bool:
+    policy, a, b, change, config = job
+    return transition_outcome(policy, a, b, change, config)["passed"]
 
 
-def walks_every_scenario(measured: dict) -> bool:
-    return all(o["outcome"] == "walked" for o in measured["scenarios"].values())
+def measure(policy: Policy, trials: ScreenTrials = ScreenTrials(), map_fn: MapFn = map) -> dict:
+    """A candidate's screen: per family its outcomes and rate, and the total passed."""
+    outcomes = screen_outcomes(policy, trials, map_fn)
+    return {"outcomes": outcomes, "rates": {f: rate(outcomes[f]) for f in FAMILIES},
+            "passed": sum(sum(o) for o in outcomes.values()), "of": sum(len(o) for o in outcomes.values()),
+            "trials": asdict(trials)}
 
 
-def verdict(candidate: dict, start: dict) -> tuple[bool, list[str]]:
-    """(ships, why): ``candidate`` and ``start`` each ``{"failures": acceptance checks
-    failed, **measure(...)}``. Ships when it fails no more checks, walks every scenario the
-    start walks and ``large_backward`` (the scenario today's learned controller falls in),
-    survives more forward pushes and at least as many
-    backward ones on the grid."""
+def pooled(measured: dict) -> list[bool]:
+    return [ok for family in FAMILIES for ok in measured["outcomes"][family]]
+
+
+def verdict(candidate: dict, start: dict, screened: int = 1, alpha: float = ALPHA) -> tuple[bool, list[str], dict]:
+    """(ships, why not, tests): ``candidate`` and ``start`` each ``{"failures": acceptance
+    checks failed, **measure(...)}`` on the same trials; ``screened`` candidates were compared
+    with the start. Ships on a significant improvement (the module docstring); ``tests`` holds
+    McNemar's test in all and per family."""
+    tests = {"all": mcnemar_exact(pooled(candidate), pooled(start)),
+             **{f: mcnemar_exact(candidate["outcomes"][f], start["outcomes"][f]) for f in FAMILIES}}
+    level = alpha / max(1, screened)
     reasons = []
     if candidate["failures"] > start["failures"]:
         reasons.append(f"fails {candidate['failures']} acceptance checks, the start {start['failures']}")
-    for name, outcome in candidate["scenarios"].items():
-        if outcome["outcome"] != "walked" and (start["scenarios"][name]["outcome"] == "walked"
-                                               or name == "large_backward"):
-            reasons.append(f"{name}: {outcome['outcome']}")
-    mine, theirs = candidate["margin_grid"], start["margin_grid"]
-    if mine["forward"] <= theirs["forward"]:
-        reasons.append(f"forward pushes {mine['forward']} of {mine['of']['forward']}, the start "
-                       f"{theirs['forward']} (not more)")
-    if mine["backward"] < theirs["backward"]:
-        reasons.append(f"backward pushes {mine['backward']} of {mine['of']['backward']}, the start "
-                       f"{theirs['backward']} (fewer)")
-    return not reasons, reasons
+    overall = tests["all"]
+    if not (overall["only_a"] > overall["only_b"] and overall["p_value"] < level):
+        reasons.append(f"not significantly better in all: {candidate['passed']} of {candidate['of']} against the "
+                       f"start's {start['passed']} (p = {overall['p_value']:.3g}, needs < {level:.3g})")
+    for family in FAMILIES:
+        test = tests[family]
+        if test["only_b"] > test["only_a"] and test["p_value"] < alpha:
+            reasons.append(f"{family} significantly worse: {sum(candidate['outcomes'][family])} against "
+                           f"{sum(start['outcomes'][family])} of {len(start['outcomes'][family])} "
+                           f"(p = {test['p_value']:.3g})")
+    return not reasons, reasons, tests
 
 
 def screen_rank(measured: dict) -> tuple:
-    """Sort key, lower is better: fewest failed acceptance checks, every scenario walked,
-    then most forward pushes, then most backward pushes."""
-    return (measured["failures"], not walks_every_scenario(measured), -measured["margin_grid"]["forward"],
-            -measured["margin_grid"]["backward"])
+    """Sort key, lower is better: most screen trials passed, then fewest failed acceptance checks."""
+    return (-measured["passed"], measured["failures"])
