@@ -195,3 +195,12 @@ class GaitSigner:
 
         self.count += 1
         return alpha_to_msg(values, self.key.gait_signature(self.source, self.count, list(values), kd))
+
+    def announcement(self, period: int = 0, settings: dict | None = None):
+        """The ``/hzd/gait_timing`` message this policy signs (a keyed controller takes none of
+        its gaits before it): ``period`` and ``settings`` as ``decision_ticks.gait_timing``."""
+        from std_msgs.msg import String
+
+        from rabbit_msgs_py.decision_ticks import gait_timing
+
+        return String(data=self.key.sign_settings(self.source, gait_timing(period, settings)))

@@ -215,7 +215,7 @@ def test_the_node_loads_the_runtime_apart_from_learning_and_evaluation():
     import sys
 
     code = ("import json, sys; import rabbit_policy.policy_node; "
-            "from rabbit_policy.runtime.policies import make_policy; "
+            "from rabbit_policy.spec.make import make_policy; "
             "[make_policy(kind) for kind in ('classic', 'learned', 'recovery')]; "
             "print(json.dumps(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)

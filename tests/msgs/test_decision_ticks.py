@@ -57,11 +57,16 @@ def test_a_training_env_and_its_episodes_take_a_timing_in_ticks_through_the_one_
 def test_gait_timing_carries_the_controller_settings_a_policy_needs():
     from rabbit_msgs_py.decision_ticks import gait_timing, parse_gait_timing, timing_settings
 
-    settings = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
+    settings = {"within_step_blend": 0.0, "within_step_until": 1.0, "kp": 3000.0,
+                "hip_coefficient_range": (-1.6, 1.6)}
     text = gait_timing(20, settings)
-    assert text == "at_once:20 within_step_blend=0.0 within_step_until=1.0 blend_phase=0.0"
+    assert text == "at_once:20 within_step_blend=0.0 within_step_until=1.0 kp=3000.0 hip_coefficient_range=-1.6,1.6"
     assert parse_gait_timing(text) == ("at_once", 20) and timing_settings(text) == settings
+    assert timing_settings(text + " signed=policy_node/0a1b2c3d:0123456789abcdef") == settings  # the signature aside
     assert gait_timing(0) == "next_step" and timing_settings("next_step") == {}
-    for bad in ("at_once:20 kp=1.0", "at_once:20 blend_phase=2", "at_once:20 blend_phase=x"):
+    for bad in ("at_once:20 gain=1.0", "at_once:20 kp=nan", "at_once:20 blend_phase=x", "at_once:20 kp=inf"):
         with pytest.raises(ValueError, match="a setting is one of"):
+            timing_settings(bad)
+    for bad in ("at_once:20 kp=1,2", "at_once:20 hip_coefficient_range=1.0"):
+        with pytest.raises(ValueError, match="is (one number|a range)"):
             timing_settings(bad)

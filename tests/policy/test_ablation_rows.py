@@ -20,7 +20,8 @@ from rabbit_policy.runtime.actions import ActionBounds, ResidualAction, policy_b
 from rabbit_policy.runtime.body import BodyStateBuffer
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
-from rabbit_policy.runtime.policies import NetworkPolicy, RateLimitedPolicy, make_policy
+from rabbit_policy.runtime.policies import NetworkPolicy, RateLimitedPolicy
+from rabbit_policy.spec.make import make_policy
 
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -11,7 +11,7 @@ from rabbit_policy.evaluation.ceiling import (FAMILIES, CeilingConfig, clone_loo
 from rabbit_policy.evaluation.robustness import phase_times
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 pytestmark = pytest.mark.sim
 

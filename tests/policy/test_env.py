@@ -459,7 +459,7 @@ def test_the_integral_band_clip_and_windup_decay_reach_the_env_memory_and_bad_on
     among them), so a run trains on what ship_policy ships; a negative or non-finite value, or
     one without the integral (the paper's features), is refused in one line."""
     from rabbit_policy.learning.es import ESConfig
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     config = ESConfig(max_steps=5, decision_period=20, features="memory", action="residual", integral_gain=0.2,

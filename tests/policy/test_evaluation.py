@@ -14,7 +14,8 @@ import pytest
 
 from rabbit_policy.evaluation.experiments import convergence, filtered_speed, settling_time
 from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
-from rabbit_policy.runtime.policies import CONTROLLERS, make_policy
+from rabbit_policy.runtime.policies import CONTROLLERS
+from rabbit_policy.spec.make import make_policy
 from rabbit_policy.evaluation.push_recovery import (PUSH_SCENARIOS, RepeatedConfig, SweepConfig, impulse_sweep,
                                                     push_trial, repeated_pushes, survives)
 

@@ -199,7 +199,8 @@ def test_mean_speed_is_displacement_over_time_and_matches_the_hip_speed_samples(
 
 
 def test_a_periodic_policy_decides_every_n_ticks_on_a_one_step_moving_average():
-    from rabbit_policy.runtime.policies import PeriodicPolicy, make_policy
+    from rabbit_policy.runtime.policies import PeriodicPolicy
+    from rabbit_policy.spec.make import make_policy
     from rabbit_policy.runtime.speed_window import Observation
 
     seen: list[Observation] = []
@@ -256,7 +257,7 @@ def test_the_compiled_runs_of_ticks_are_the_loop_ticked_one_at_a_time(controller
     (rabbit_policy.experiment.ticks); ticked one at a time (the observer's path) it must walk
     the same to the last bit: decisions, touchdowns, a phase push, a command change between
     two decisions, a torque delay, a stall by time included."""
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     scenario = Scenario(schedule=((0.0, 0.8), (1.2345, 1.3)), pushes=(Push(2.0, -90.0, 0.1),),
                         phase_pushes=(PhasePush(3.0, 0.4, 120.0, 0.1),), torque_delay=0.001)

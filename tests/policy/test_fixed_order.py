@@ -64,7 +64,7 @@ from rabbit_msgs_py.pushes import Push
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.provenance import machine_record
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 demo = Scenario(schedule=((0.0, 0.8), (6.0, 1.4), (13.0, 0.9), (18.0, 1.2)), pushes=(Push(20.0, -60.0, 0.1),))
 large_backward = Scenario.constant(1.0, pushes=tuple(Push(t, -150.0, 0.1) for t in (2.0, 4.0, 6.0)))

@@ -229,7 +229,7 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
     from rabbit_policy.bringup.stack import StackConfig, run_in_process
     from rabbit_policy.experiment.loop import ClosedLoop
     from rabbit_policy.experiment.scenario import Scenario
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     node_class = {"simulator": SimNode, "controller": HZDControllerNode, "policy": PolicyNode}[kind]
     states: list = []

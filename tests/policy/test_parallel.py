@@ -192,7 +192,7 @@ def test_ppo_iteration_on_ray_actors_equals_local(cluster):
 @pytest.mark.slow
 def test_an_evaluation_sweep_is_the_same_on_ray_and_local(cluster):
     from rabbit_policy.evaluation.robustness import MODEL_ERRORS, RobustnessConfig, robustness
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     config = RobustnessConfig(grid_speeds=(0.8, 1.2), grid_duration=4.0, transition_speeds=(0.8, 1.2),
                               change_phases=(0.5,), transition_settle=2.0, transition_horizon=3.0,

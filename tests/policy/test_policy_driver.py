@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rabbit_policy.policy_driver import Gait, Log, PolicyDriver, PolicySettings, Scheduled
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 pytestmark = pytest.mark.sim
 

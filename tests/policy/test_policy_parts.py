@@ -13,7 +13,8 @@ from rabbit_msgs_py.decision_ticks import PER_STEP
 from rabbit_hzd_controller.controller import HZDController, Leg, infer_stance
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.policies import LibraryPolicy, PolicyUnavailable, make_policy
+from rabbit_policy.runtime.policies import LibraryPolicy, PolicyUnavailable
+from rabbit_policy.spec.make import make_policy
 from rabbit_policy.runtime.commands import clamp_speed
 from rabbit_policy.runtime.speed_window import SpeedWindow
 from rabbit_policy.experiment.scenario import Push, Scenario, parse_pushes, parse_schedule

@@ -11,11 +11,18 @@ from rabbit_msgs_py.decision_ticks import PER_STEP
 
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.runtime.policies import controller_settings, make_policy, required_controller_settings
+from rabbit_policy.runtime.policies import controller_settings
+from rabbit_policy.spec.make import make_policy
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig, StepMemory
 
 DEFAULT_SETTINGS = {"within_step_blend": 0.2, "within_step_until": 0.6, "blend_phase": 0.2}
 """The controller's own gait timing (ControllerConfig's), as a spec names it."""
+
+
+def timing(policy) -> dict:
+    """The gait-timing part of the controller settings ``policy`` runs with (its spec's)."""
+    settings = controller_settings(policy)
+    return {k: settings[k] for k in CONTROLLER_SETTINGS}
 
 
 def _overlay(config, period: int = 20):
@@ -221,10 +228,9 @@ def test_an_acceleration_from_0_7_to_1_3_m_s_at_a_touchdown_walks():
 def test_make_policy_gives_the_recovery_controller_and_the_settings_it_needs():
     policy = make_policy("recovery")
     assert policy.needs_body and policy.decision_period == 20
-    assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("recovery")
+    assert timing(policy) == CONTROLLER_SETTINGS
     # classic's spec writes down the controller's gait timing (its defaults when it was written)
-    classic = {"within_step_blend": 0.2, "within_step_until": 0.6, "blend_phase": 0.2}
-    assert required_controller_settings("classic") == classic == controller_settings(make_policy("classic"))
+    assert timing(make_policy("classic")) == DEFAULT_SETTINGS
     with pytest.raises(ValueError, match="decision period"):
         make_policy("recovery", decision=PER_STEP)
     with pytest.raises(ValueError, match="speed integral"):
@@ -258,17 +264,18 @@ def test_it_survives_a_backward_push_classic_hzd_stalls_on():
 @pytest.mark.ros
 @pytest.mark.slow
 def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
-    """Through a push that makes the rule act: policy_node builds the body state, run_stack's
-    configuration gives the controller node the at-once settings, and every state is the
-    ROS-free loop's."""
+    """Through a push that makes the rule act: policy_node builds the body state, the
+    controller node (started plain) takes the at-once settings the policy announces, and every
+    state is the ROS-free loop's."""
     from rabbit_policy.bringup.stack import StackConfig
     from test_stack_nodes import _reference
 
     pushes = (Push(1.2, -90.0, 0.1),)
     reference = _reference(2.5, policy=make_policy("recovery"), scenario=Scenario.constant(1.0, pushes=pushes))
     config = StackConfig(duration=2.5, schedule=((0.0, 1.0),), controller="recovery", pushes=pushes)
-    assert config.node_parameters()["hzd_controller_node"]["within_step_blend"] == 0.0
-    _assert_lockstep_is(config, reference)
+    assert "within_step_blend" not in config.node_parameters()["hzd_controller_node"]
+    nodes = _assert_lockstep_is(config, reference)
+    assert nodes["hzd_controller_node"].config.within_step_blend == 0.0
 
 
 def _assert_lockstep_is(config, reference: np.ndarray) -> None:
@@ -283,6 +290,7 @@ def _assert_lockstep_is(config, reference: np.ndarray) -> None:
     unique = np.array([row for i, row in enumerate(states) if i == 0 or row != states[i - 1]])
     assert unique.shape == reference.shape and np.array_equal(unique, reference)
     assert nodes["policy_node"].decisions_given_up == 0
+    return nodes
 
 
 @pytest.mark.sim
@@ -338,7 +346,7 @@ def test_a_zero_residual_on_the_recovery_base_is_the_recovery_controller_bit_for
     _zero_residual_on_recovery_file(path)
     learned = make_policy("learned", policy_file=path)
     assert learned.needs_body and learned.decision_period == 20
-    assert controller_settings(learned) == CONTROLLER_SETTINGS == required_controller_settings("learned", path)
+    assert timing(learned) == CONTROLLER_SETTINGS
     scenario = Scenario(schedule=((0.0, 1.0), (2.0, 1.2)), pushes=(Push(3.0, -110.0, 0.1),))
     final = []
     for policy in (learned, make_policy("recovery")):
@@ -363,7 +371,7 @@ def test_a_gated_residual_walks_the_recovery_controller_until_the_hip_falls_behi
         path = tmp_path / f"{base}.pt"
         _zero_residual_on_recovery_file(path, base, scale_weights=0.3)
         policy = make_policy("learned", policy_file=path)
-        assert controller_settings(policy) == CONTROLLER_SETTINGS
+        assert timing(policy) == CONTROLLER_SETTINGS
         for name, sc in (("walk", scenario), ("pushed", pushed)):
             loop = ClosedLoop(sc, policy)
             loop.run(5.0, stop_on_fall=False)
@@ -564,7 +572,7 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     overlaid, plain = _overlay_file(tmp_path)
     policy = make_policy("learned", policy_file=overlaid)
     assert policy.needs_body and policy.overlay is not None
-    assert controller_settings(policy) == DEFAULT_SETTINGS == required_controller_settings("learned", overlaid)
+    assert timing(policy) == DEFAULT_SETTINGS
     info = policy.checkpoint.info
     assert rules_set_after_training(info)[0].endswith(" --recovery-overlay")
     assert "recovery rule on top" in rules_set_after_training(info)[1]
@@ -572,19 +580,19 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
     assert "RecoveryOverlay" in text and "blended in" in text
     at_once, _ = _overlay_file(tmp_path, at_once=True)
     policy = make_policy("learned", policy_file=at_once)
-    assert controller_settings(policy) == CONTROLLER_SETTINGS == required_controller_settings("learned", at_once)
+    assert timing(policy) == CONTROLLER_SETTINGS
     assert rules_set_after_training(policy.checkpoint.info)[0].endswith(
         " --recovery-overlay --recovery-overlay-at-once")
     assert "no blend, no queue" in " ".join(network_text(policy.checkpoint.info))
     blending = make_policy("learned", policy_file=with_recovery_overlay(plain, tmp_path / "pb.pt", policy_blend=True))
     assert blending.overlay.config == OverlayConfig(at_once=True, policy_blend=True, rise_until=0.6)
-    assert controller_settings(blending) == CONTROLLER_SETTINGS
+    assert timing(blending) == CONTROLLER_SETTINGS
     assert rules_set_after_training(blending.checkpoint.info)[0].endswith(
         " --recovery-overlay --recovery-overlay-policy-blend")
     assert "blended in by the policy itself" in " ".join(network_text(blending.checkpoint.info))
     assert "from 0.6 of phase to the touchdown its weight may fall, not rise" in " ".join(
         network_text(blending.checkpoint.info))
-    assert controller_settings(make_policy("learned", policy_file=plain)) == DEFAULT_SETTINGS
+    assert timing(make_policy("learned", policy_file=plain)) == DEFAULT_SETTINGS
     step_file = tmp_path / "per_step.pt"
     _zero_residual_on_recovery_file(step_file, base="classic")
     from rabbit_policy.runtime.network import PolicyCheckpoint
@@ -607,7 +615,7 @@ def test_the_overlay_walks_the_network_until_a_push_and_survives_one_the_network
     A -14 N s push at 0.875 of a step at 1.0 m/s (the network's binding phase there; its margin
     is 10 N s): the network alone falls or stalls, with the rule on top it walks on."""
     from rabbit_policy.evaluation.robustness import phase_times
-    from rabbit_policy.runtime.policies import checkpoint_policy
+    from rabbit_policy.spec.make import checkpoint_policy
 
     overlaid, plain = _overlay_file(tmp_path)
     with_rule, alone = make_policy("learned", policy_file=overlaid), checkpoint_policy(plain)
@@ -628,7 +636,7 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     too), run_stack's configuration gives the controller node the settings the checkpoint asks
     for, and every state is the ROS-free loop's."""
     from rabbit_policy.bringup.stack import StackConfig
-    from rabbit_policy.runtime.policies import checkpoint_policy
+    from rabbit_policy.spec.make import checkpoint_policy
     from test_stack_nodes import _reference
 
     at_once = mode != "blended"
@@ -643,9 +651,9 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     assert not np.array_equal(reference, _reference(3.5, policy=alone, scenario=scenario))
     config = StackConfig(duration=3.5, schedule=((0.0, 1.0),), controller="learned", policy_file=str(overlaid),
                          pushes=pushes)
-    controller_parameters = config.node_parameters()["hzd_controller_node"]
-    assert controller_parameters.get("within_step_blend") == (0.0 if at_once else 0.2)  # 0.2: its own default
-    _assert_lockstep_is(config, reference)
+    assert "within_step_blend" not in config.node_parameters()["hzd_controller_node"]  # started plain
+    nodes = _assert_lockstep_is(config, reference)
+    assert nodes["hzd_controller_node"].config.within_step_blend == (0.0 if at_once else 0.2)  # as announced
 
 
 @pytest.mark.unit
@@ -657,7 +665,7 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     rule (policy blend) asks for gaits at once: the two once disagreed by a touchdown 2 ms late."""
     from rabbit_msgs_py.decision_ticks import DecisionTiming
     from rabbit_policy.bringup.stack import StackConfig
-    from rabbit_policy.runtime.policies import checkpoint_policy
+    from rabbit_policy.spec.make import checkpoint_policy
 
     overlaid, _ = _overlay_file(tmp_path)
     per_step = checkpoint_policy(overlaid, PER_STEP)
@@ -665,10 +673,9 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     assert per_step.name.endswith("(no recovery rule: once per step)")
     assert checkpoint_policy(overlaid).overlay is not None
     blending, _ = _overlay_file(tmp_path, at_once=True, policy_blend=True)
-    assert controller_settings(checkpoint_policy(blending, PER_STEP)) == DEFAULT_SETTINGS
-    assert required_controller_settings("learned", blending, once_per_step=True) == DEFAULT_SETTINGS
-    for timing, settings in (("step", DEFAULT_SETTINGS), ("own", CONTROLLER_SETTINGS)):
+    assert timing(checkpoint_policy(blending, PER_STEP)) == DEFAULT_SETTINGS
+    for decision in ("step", "own"):  # the stack starts the controller plain: it takes the policy's announced ones
         config = StackConfig(duration=1.0, schedule=((0.0, 1.0),), controller="learned", policy_file=str(blending),
-                             decision=DecisionTiming.parse(timing))
+                             decision=DecisionTiming.parse(decision))
         node = config.node_parameters()["hzd_controller_node"]
-        assert {k: node[k] for k in CONTROLLER_SETTINGS if k in node} == settings, timing
+        assert not set(node) & set(controller_settings(checkpoint_policy(blending))), decision

@@ -20,7 +20,7 @@ from rabbit_policy.learning.env import ActionBounds
 from rabbit_policy.learning.sb3 import SB3Config, build_model, export_actor, warm_start_actor
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.network import PolicyCheckpoint
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 pytestmark = pytest.mark.sim
 

@@ -17,8 +17,8 @@ import yaml
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.policies import (LibraryPolicy, PeriodicPolicy, PolicyUnavailable, checkpoint_policy,
-                                            make_policy, packaged_policy_file, required_controller_settings)
+from rabbit_policy.runtime.policies import LibraryPolicy, PeriodicPolicy, PolicyUnavailable, packaged_policy_file
+from rabbit_policy.spec.make import checkpoint_policy, make_policy
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 from rabbit_policy.spec import SpecError, build, load_controller, load_packaged, load_spec, packaged_spec
 from rabbit_policy.spec.schema import KINDS
@@ -47,8 +47,7 @@ def test_the_shipped_specs_walk_as_the_controllers_assembled_before_them_bit_for
     for kind in KINDS:
         spec_built = load_packaged(kind)
         assert np.array_equal(_trajectory(spec_built), _trajectory(before[kind])), kind
-        assert spec_built.controller_settings == {f: getattr(spec_built.spec.controller, f)
-                                                  for f in ("within_step_blend", "within_step_until", "blend_phase")}
+        assert spec_built.controller_settings == spec_built.spec.controller.settings()
 
 
 @pytest.mark.slow
@@ -89,31 +88,74 @@ def _perturbed(value):
     return tuple(v * 1.5 + 0.01 for v in value)
 
 
-@pytest.mark.slow
-def test_no_recovery_rule_or_overlay_default_moves_a_shipped_controller_one_at_a_time(monkeypatch):
-    """Every default of the recovery rule (RecoveryConfig: the offsets, the memory's depth and
-    the ramp's floor too) and of the overlay (OverlayConfig), changed one at a time in the code:
-    the shipped recovery and learned walks do not move (their specs name every one)."""
-    from rabbit_policy.runtime.recovery import OverlayConfig
+MODEL_OWNED = {"LegGeometry.femur", "LegGeometry.tibia", "ControllerConfig.tick"}
+"""Defaults that are the robot model's, not the controller's: a spec names the model by hash
+(``controller.model_sha256``) and is refused on another."""
+NOT_PERTURBED = {"GaitLibrary.calibration", "IntegralConfig.band", "IntegralConfig.clip", "IntegralConfig.windup_decay",
+                 "IntegralConfig.feedforward", "IntegralConfig.speed_range", "DecisionTiming.ticks", "Observation.body"}
+"""Defaults of no number's kind (None: a stage off, or a record's empty slot), which build
+gives explicitly from the spec (``integral_config``, ``MemoryConfig(integral, body)``)."""
 
-    shipped = {kind: _trajectory(load_packaged(kind)) for kind in ("recovery", "learned")}
-    checked = []
-    for cls in (RecoveryConfig, OverlayConfig):
-        names = [f for f, spec in cls.__dataclass_fields__.items() if spec.init]
-        defaults = cls.__init__.__defaults__
-        first = len(names) - len(defaults)
-        for index, value in enumerate(defaults):
-            if isinstance(value, bool):
-                continue  # at_once / policy_blend: set by the spec's controller and blend, not defaults
-            changed = list(defaults)
-            changed[index] = _perturbed(value)
-            with monkeypatch.context() as patch:
-                patch.setattr(cls.__init__, "__defaults__", tuple(changed))
-                for kind in ("recovery", "learned"):
-                    assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), (cls.__name__,
-                                                                                             names[first + index])
-            checked.append(names[first + index])
-    assert {"offsets", "memory_steps", "ramp_floor", "forget_after", "fast_gate", "rise_until"} <= set(checked)
+
+def reachable_defaults() -> list[tuple[type, str, int]]:
+    """Every (dataclass, field, index in ``__init__.__defaults__``) whose default a shipped walk
+    could read: the dataclasses of the runtime, the spec, the 1 kHz law and the decision rule."""
+    import dataclasses
+    import inspect
+
+    import rabbit_policy.experiment.loop  # noqa: F401 - the loop that walks them, and what it imports
+    import rabbit_policy.spec.build  # noqa: F401
+
+    found = []
+    prefixes = ("rabbit_policy.runtime", "rabbit_policy.spec", "rabbit_hzd_controller", "rabbit_msgs_py.decision_ticks")
+    for name in sorted(m for m in sys.modules if m.startswith(prefixes)):
+        for cls in vars(sys.modules[name]).values():
+            if not (inspect.isclass(cls) and dataclasses.is_dataclass(cls) and cls.__module__ == name):
+                continue
+            names = [f.name for f in dataclasses.fields(cls) if f.init and not f.kw_only]
+            defaults = cls.__init__.__defaults__ or ()
+            for index, value in enumerate(defaults):
+                if type(value).__name__ != "_HAS_DEFAULT_FACTORY_CLASS":
+                    found.append((cls, names[len(names) - len(defaults) + index], index))
+    return found
+
+
+@pytest.mark.slow
+def test_no_code_default_reachable_from_build_or_the_law_moves_a_shipped_walk_one_at_a_time(monkeypatch):
+    """Every dataclass default the three shipped controllers could read (the runtime's, the
+    spec's, the 1 kHz law's: ``ControllerConfig``'s gains, limits, touchdown rule, coefficient
+    ranges and Kd bound included), changed one at a time in the code: the shipped classic,
+    recovery and learned walks do not move (their specs name every value). The model's own
+    (leg geometry, the tick) do move it: the harness sees a change, and a spec names that model
+    by hash."""
+    from rabbit_hzd_controller.kinematics import LegGeometry
+
+    shipped = {kind: _trajectory(load_packaged(kind)) for kind in KINDS}
+    checked, skipped = [], []
+    for cls, name, index in reachable_defaults():
+        key = f"{cls.__name__}.{name}"
+        value = cls.__init__.__defaults__[index]
+        if key in MODEL_OWNED or not isinstance(value, (bool, int, float, tuple)) or (
+                isinstance(value, tuple) and not all(isinstance(v, (int, float)) for v in value)):
+            skipped.append(key)
+            continue
+        changed = list(cls.__init__.__defaults__)
+        changed[index] = _perturbed(value)
+        with monkeypatch.context() as patch:
+            patch.setattr(cls.__init__, "__defaults__", tuple(changed))
+            for kind in KINDS:
+                assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), (key, kind)
+        checked.append(key)
+    assert set(skipped) == MODEL_OWNED | NOT_PERTURBED, set(skipped) ^ (MODEL_OWNED | NOT_PERTURBED)
+    controller = {f"ControllerConfig.{n}" for n in ("kp", "torque_limit", "touchdown_min_phase", "touchdown_height",
+                                                    "min_step_length", "hip_coefficient_range",
+                                                    "knee_coefficient_range", "max_kd", "min_phase_rate")}
+    rule = {"RecoveryConfig.memory_steps", "RecoveryConfig.ramp_floor", "RecoveryConfig.offsets",
+            "OverlayConfig.fast_gate"}
+    assert controller | rule <= set(checked)
+    with monkeypatch.context() as patch:
+        patch.setattr(LegGeometry.__init__, "__defaults__", (0.41, 0.4))
+        assert not np.array_equal(_trajectory(load_packaged("classic")), shipped["classic"])
 
 
 def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
@@ -179,14 +221,23 @@ def test_a_weights_file_that_changed_is_refused(tmp_path):
         load_controller(path)
 
 
-def test_the_shipped_specs_name_every_constant_of_the_recovery_rule():
+def test_the_shipped_specs_name_every_constant_of_the_recovery_rule_and_the_controller():
+    """The rule's every field, and the 1 kHz controller's: every ``ControllerConfig`` field but
+    the model's geometry and tick, which the model's hash stands for (the names a policy
+    announces, ``decision_ticks.CONTROLLER_SETTINGS``)."""
+    from rabbit_hzd_controller.controller import ControllerConfig
+    from rabbit_msgs_py.decision_ticks import CONTROLLER_SETTINGS
+    from rabbit_sim.model import model_sha256
+
     rule = load_spec(packaged_spec("learned")).recovery_rule
     assert {f for f in RecoveryConfig.__dataclass_fields__} == set(vars(rule))
     assert load_spec(packaged_spec("recovery")).recovery_rule == rule
+    controller = set(ControllerConfig.__dataclass_fields__) - {"geometry", "tick"}
+    assert set(CONTROLLER_SETTINGS) == controller
     for kind in KINDS:
         spec = load_spec(packaged_spec(kind))
-        assert spec.kind == kind and set(vars(spec.controller)) == {"within_step_blend", "within_step_until",
-                                                                   "blend_phase"}
+        assert spec.kind == kind and set(spec.controller.settings()) == controller
+        assert spec.controller.model_sha256 == model_sha256()
 
 
 def test_make_policy_builds_the_specs_and_their_variants():
@@ -198,8 +249,9 @@ def test_make_policy_builds_the_specs_and_their_variants():
     variant = make_policy("classic", mode="nearest", speed_integral=0.3)
     assert variant.spec.gait_library.mode == "nearest" and variant.spec.speed_integral.gain == 0.3
     assert variant.name == "classic/nearest+integral0.3@20ticks"
-    assert required_controller_settings("recovery") == {"within_step_blend": 0.0, "within_step_until": 1.0,
-                                                        "blend_phase": 0.0}
+    recovery = make_policy("recovery").controller_settings
+    assert {k: recovery[k] for k in ("within_step_blend", "within_step_until", "blend_phase")} == {
+        "within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}
     with pytest.raises(PolicyUnavailable, match="is a classic controller, not learned"):
         make_policy("learned", policy_file=packaged_spec("classic"))
     with pytest.raises(ValueError, match="the library mode is classic's"):
@@ -245,7 +297,7 @@ def test_walk_py_runs_a_spec_file_of_any_kind_names_it_and_an_edited_one_walks_i
 def test_a_spec_is_built_without_torch():
     """policy_node and the loops run a learned spec on numpy alone."""
     code = ("import sys; from rabbit_policy.spec import load_packaged; import rabbit_policy.policy_node; "
-            "from rabbit_policy.runtime.policies import make_policy; p = make_policy('learned'); "
+            "from rabbit_policy.spec.make import make_policy; p = make_policy('learned'); "
             "from rabbit_policy.runtime.speed_window import Observation; "
             "p.act(Observation(1.0, 1.0, 0.0, (0.0, 0.0, 0.5, 1.0, 1.0))); "
             "print('torch' in sys.modules)")

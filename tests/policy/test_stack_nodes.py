@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64, Float64MultiArray, Header
+from std_msgs.msg import Float64, Float64MultiArray, Header, String
 from std_srvs.srv import Trigger
 
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
@@ -23,7 +23,7 @@ from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 from rabbit_sim.sim_node import SimNode
 
 from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
@@ -374,8 +374,12 @@ def test_with_a_key_only_the_paired_policys_signed_gaits_are_taken_in_order(capf
             executor.add_node(node)
         alpha_pub = user.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
         kd_pub = user.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
+        timing_pub = user.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
         first = signer.alpha(slow.alpha, slow.kd)
-        alpha_pub.publish(first)
+        alpha_pub.publish(first)  # before its policy's signed settings: held, neither taken nor refused
+        spin_for(executor, 0.2)
+        assert controller.gait is None and controller.refused_gaits == 0
+        timing_pub.publish(signer.announcement())
         assert spin_until(executor, lambda: controller.gait is not None)
         assert controller.gait == (list(slow.alpha), slow.kd)
         kd_pub.publish(Float64(data=77.0))  # unsigned Kd: for observers only
@@ -398,6 +402,7 @@ def test_with_a_key_only_the_paired_policys_signed_gaits_are_taken_in_order(capf
         assert spin_until(executor, lambda: controller.refused_gaits == 5)
         assert controller.gait == (list(fast.alpha), fast.kd)
         spin_for(executor, 1.2)
+        timing_pub.publish(replay.announcement())
         alpha_pub.publish(replay.alpha(slow.alpha, slow.kd))
         assert spin_until(executor, lambda: controller.gait == (list(slow.alpha), slow.kd))
     refused = [line for line in capfd.readouterr().err.splitlines() if "refused a gait on /hzd/alpha" in line]
@@ -628,27 +633,39 @@ def test_a_policy_that_stops_deciding_never_wedges_decision_sync():
 
 
 @pytest.mark.slow
-def test_a_controller_started_by_hand_runs_with_the_settings_its_policys_spec_needs(capfd):
-    """The three nodes started as ``ros2 run`` starts them, ``policy:=learned``: the policy
-    announces its spec's controller settings on /hzd/gait_timing and the controller runs with
-    them (the learned spec applies gaits at once); a controller started with one of them given
+def test_nodes_started_by_hand_run_the_learned_spec_bit_for_bit_as_walk_py(capfd):
+    """The three nodes started as ``ros2 run`` starts them, ``policy:=learned`` and nothing
+    else: the policy announces its spec's controller settings, signed with the user's key, and
+    the controller runs with them before the policy's first gait; the simulator says it runs
+    lockstep, so the controller holds each due state for its decision: every state is the
+    ROS-free loop's (walk.py's) bit for bit. A controller started with one of the settings given
     otherwise takes none of them and says which in one line."""
     from rabbit_hzd_controller.controller import ControllerConfig
     from rabbit_policy.runtime.policies import controller_settings
 
-    wanted = controller_settings(make_policy("learned"))
+    learned = make_policy("learned")
+    wanted = controller_settings(learned)
     assert wanted["within_step_blend"] == 0.0  # not the controller's default (0.2)
+    duration = 1.5
+    reference = _reference(duration, policy=learned)
     for given in ({}, {"within_step_blend": 0.2}):
+        states: list = []
         with ros_context() as (context, executor):
             sim = SimNode(context=context)
             controller = HZDControllerNode(context=context, **given)
-            for node in (sim, controller, PolicyNode(context=context, policy="learned")):
+            for node in (sim, controller, PolicyNode(context=context, policy="learned"),
+                         _recorder(states)(context)):
                 executor.add_node(node)
-            assert spin_until(executor, lambda: sim.time >= 0.3, timeout=60.0)
+            assert spin_until(executor, lambda: sim.time >= duration + 0.05, timeout=120.0)
             running = {k: getattr(controller.config, k) for k in wanted}
+            waited = controller.decisions_waited
         err = capfd.readouterr().err
         if not given:
             assert running == wanted and "running with the policy's controller settings" in err
+            unique = [row for i, row in enumerate(states) if i == 0 or row != states[i - 1]]
+            walked = np.array(unique[:len(reference)])
+            assert walked.shape == reference.shape and np.array_equal(walked, reference)
+            assert waited > 0 and "decision_sync on" in err
         else:
             assert running == {**{k: getattr(ControllerConfig(), k) for k in wanted}, **given}
             line = next(line for line in err.splitlines() if "the policy needs" in line)

@@ -18,7 +18,8 @@ from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS
 from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
-from rabbit_policy.runtime.policies import LibraryPolicy, checkpoint_policy, make_policy, packaged_policy_file
+from rabbit_policy.runtime.policies import LibraryPolicy, packaged_policy_file
+from rabbit_policy.spec.make import checkpoint_policy, make_policy
 from rabbit_policy.experiment.loop import walk, walk_gait
 from rabbit_policy.experiment.result import Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario

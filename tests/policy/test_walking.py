@@ -152,7 +152,7 @@ def test_the_speed_integral_removes_the_steady_error_of_the_drives_model():
     """Classic HZD walks the ``drives`` model (rotor inertia, joint friction) about 0.19 m/s
     too slow at 1.0 m/s; Westervelt's event-based integral on the command removes it."""
     from rabbit_policy.experiment.loop import walk
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
     from rabbit_sim.model import ModelOptions
 
     scenario = Scenario.constant(1.0, model=ModelOptions("drives"))
@@ -171,7 +171,7 @@ def test_the_windup_decay_leaves_a_constant_command_alone_and_takes_the_overshoo
 
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.runtime.memory import SpeedMemory
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     plain, decaying = make_policy("learned"), make_policy("learned")
@@ -197,7 +197,8 @@ def test_the_integral_feedforward_start_takes_the_start_transient_out():
     from rabbit_policy.evaluation.steady_integral import steady_integral, steady_integrals
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.runtime.memory import SpeedMemory
-    from rabbit_policy.runtime.policies import NetworkPolicy, make_policy
+    from rabbit_policy.runtime.policies import NetworkPolicy
+    from rabbit_policy.spec.make import make_policy
 
     plain, fed = make_policy("learned"), make_policy("learned")
     plain.memory = SpeedMemory(plain.memory.config.with_integral(feedforward=None))
@@ -267,7 +268,7 @@ def test_times_are_on_the_tick_grid_whatever_decimals_a_schedule_and_duration_ha
     whole ticks and ends on the grid (4.132 s, not 4.131999...), the last segment ends there
     too, so its mean speed is reported; touchdowns and reach times are on the ns grid."""
     from rabbit_policy.experiment.loop import walk
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     duration = 4.132268422788288
     result = walk(make_policy("classic"), Scenario(schedule=((0.0, 0.9), (2.132268422788288, 1.1))), duration)
@@ -314,7 +315,7 @@ def test_a_reach_time_counts_from_the_tick_the_change_takes_effect():
     """A change at 2.0005 s takes effect at 2.001 s: its reach (the robustness check's, asked
     with the nominal time) is counted from there, in whole ticks."""
     from rabbit_policy.experiment.loop import walk
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     result = walk(make_policy("classic"), Scenario(schedule=((0.0, 0.9), (2.0005, 1.1))), 7.0)
     assert result.scenario.schedule[1][0] == 2.001

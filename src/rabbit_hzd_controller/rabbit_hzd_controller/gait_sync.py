@@ -113,6 +113,7 @@ class GaitSync:
         self._gaits: dict[str, deque] = {"alpha": deque(), "kd": deque()}
         self._held: tuple[State, float] | None = None
         self._timing_unknown = decision_sync and self.follow_policy_timing  # the first state waits for it
+        self._timing_seen = False  # the policy's /hzd/gait_timing came
         self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
         self._period = 0  # the policy's decision period (ticks; 0: once per step)
         self._gait_at: int | None = None  # stamp (ns) of the newest state when a gait part last came
@@ -180,6 +181,7 @@ class GaitSync:
         self.gait_timing = timing
         self._period = period
         self._timing_unknown = False
+        self._timing_seen = True
         due = PeriodicDecisions(period, TICK_NS) if period and self.decision_sync else None
         if due is not None and self.last_stamp >= 0:
             due.join(self.last_stamp)  # mid-run: the policy's clock has followed since the placement
@@ -188,6 +190,19 @@ class GaitSync:
             self._release_held("the policy's timing changed")
         self._answer_waiting()
         return self._out
+
+    def on_sim_mode(self, holds: bool) -> list[Action]:
+        """The simulator says whether it waits for each reply (lockstep, paced: ``holds``):
+        ``decision_sync`` follows it (the node calls this only when it was not given)."""
+        self._out = []
+        if holds == self.decision_sync:
+            return self._out
+        self.decision_sync = holds
+        if not self._timing_seen:
+            self._timing_unknown = holds and self.follow_policy_timing
+            self._answer_waiting()
+            return self._out
+        return self.on_gait_timing(self.gait_timing, self._period)
 
     def on_resets(self, count: int) -> list[Action]:
         """A count on ``/sim/resets`` (placements of the robot)."""

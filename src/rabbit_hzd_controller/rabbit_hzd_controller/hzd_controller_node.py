@@ -45,7 +45,8 @@ from rabbit_msgs_py.conversions import (
     stamp_to_ns,
     torques_to_msg,
 )
-from rabbit_msgs_py.decision_ticks import GAIT_TIMINGS, TICK_NS, parse_gait_timing, timing_settings
+from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_NS, parse_gait_timing,
+                                          timing_settings)
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
 from rabbit_msgs_py.pairing import GaitOrder, resolve_key
@@ -87,7 +88,8 @@ NODE_PARAMS = {
                                    "within the step)", choices=("policy",) + GAIT_TIMINGS),
     "decision_sync": Param(False, "lockstep/paced: hold the reply to a state the policy decides on (every N ticks, "
                                   "/hzd/gait_timing at_once:N) until that decision's gait is in (the ROS-free loop "
-                                  "bit for bit); not for realtime"),
+                                  "bit for bit); not for realtime. Not given: as the simulator's /sim/mode says "
+                                  "(on in lockstep and paced)"),
     "decision_timeout": Param(2.0, "decision_sync: wall s to wait for a due decision before answering with the "
                                    "gait in force, finite > 0", range=(0.001, 3600.0)),
     "reference_rate": Param(0.0, "publish /hzd/reference (the desired outputs y_d, dy_d/dt) and "
@@ -106,6 +108,14 @@ GAITLESS_WARNING_AFTER = 2.0
 """wall s: states held for want of a gait are warned about after this long (before, a start)."""
 SECRET_PARAMS = ("pairing_key",)
 """Read once at start and then removed (``rabbit_msgs_py.parameters.forget_secrets``)."""
+
+
+MAX_POLICIES = 8
+"""Policy instances whose signed settings (and one early gait each) a keyed controller keeps."""
+
+
+def _setting(value) -> str:
+    return ",".join(f"{v:g}" for v in value) if isinstance(value, tuple) else f"{value:g}"
 
 
 class HZDControllerNode(Node):
@@ -136,7 +146,9 @@ class HZDControllerNode(Node):
         self.rejected_gaits = 0
         self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
         self._given = set(overrides) | set(overrides_given(self))  # parameters set at start: a policy's wish yields
-        self._announced: dict[str, float] = {}
+        self._announced: dict = {}
+        self._settings_of: dict[str, dict] = {}  # keyed: each policy instance's signed settings (the last few)
+        self._early: dict[str, Float64MultiArray] = {}  # keyed: a policy's gait that came before its settings
         self._gait_order = GaitOrder()
         self._policy: str | None = None  # the policy instance whose signed gaits are taken
         self._policy_wall = 0.0  # wall s (monotonic) of its last gait: another is taken once it is silent
@@ -162,6 +174,8 @@ class HZDControllerNode(Node):
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
+        if "decision_sync" not in self._given:  # hold for due decisions as the simulator's stepping asks
+            self.create_subscription(String, topics.SIM_MODE, self._on_sim_mode, qos.STATUS_QOS)
         wall_timer(self, 0.05, lambda: self._do(self.sync.check_held()))  # decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
         (self.get_logger().info if self.pairing else self.get_logger().warning)(f"pairing: {self._key_source}")
@@ -252,6 +266,11 @@ class HZDControllerNode(Node):
                 self._refuse_gait(ValueError(f"it is from policy {source} while {self._policy} is alive (a replayed "
                                              "bag, or a second policy)"))
                 return
+            if source not in self._settings_of:  # held until its settings come: none of its gaits runs without
+                self._early[source] = msg
+                while len(self._early) > MAX_POLICIES:
+                    self._early.pop(next(iter(self._early)))
+                return
             if not self._gait_order.take(source, count):
                 self._refuse_gait(ValueError(f"gait {count} of {source} came again after a later one"))
                 return
@@ -259,6 +278,7 @@ class HZDControllerNode(Node):
                 if self._policy is not None:
                     self.get_logger().info(f"gaits now from policy {source}: {self._policy} was silent")
                 self._policy = source
+                self._adopt(self._settings_of[source])  # before its first gait
             self._policy_wall = now
         try:
             if raw is None:
@@ -297,43 +317,70 @@ class HZDControllerNode(Node):
 
     def _on_gait_timing(self, msg: String) -> None:
         """The policy's gait timing (followed unless ``gait_timing`` is fixed) and the
-        controller settings its spec needs (taken either way, :meth:`_adopt`)."""
+        controller settings its spec needs (:meth:`_adopt`). With a pairing key the settings
+        count only signed by a policy instance with the key, and are taken before that
+        instance's first gait (a gait that comes first waits for them); without one, at once."""
         try:
             timing, period = parse_gait_timing(msg.data)
             settings = timing_settings(msg.data)
+            signed = self.pairing is not None and (bool(settings) or f" {SIGNATURE_FIELD}" in msg.data)
+            source = self.pairing.verify_settings(msg.data) if signed else None
         except ValueError as exc:
             line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
-                                                        f"{short(repr(msg.data), 60)}: {exc}; keeping "
-                                                        f"{self.sync.gait_timing}")
+                                                        f"{short(repr(msg.data), 80)}: {exc}; keeping "
+                                                        f"{self.sync.gait_timing} and this controller's settings")
             if line is not None:
                 self.get_logger().error(line)
             return
-        self._adopt(settings)
+        if source is None:
+            self._adopt(settings)
+        else:
+            self._settings_of[source] = settings
+            while len(self._settings_of) > MAX_POLICIES:
+                self._settings_of.pop(next(iter(self._settings_of)))
+            if source == self._policy:
+                self._adopt(settings)
         if self.sync.follow_policy_timing:
             self._do(self.sync.on_gait_timing(timing, period))
+        if source is not None and source in self._early:
+            self._on_alpha(self._early.pop(source))
 
-    def _adopt(self, settings: dict[str, float]) -> None:
+    def _adopt(self, settings: dict) -> None:
         """The controller settings the policy announces (its spec's), taken before its gaits
         unless a parameter given at start says otherwise: then none is taken (a mix of the two
-        is neither controller), and one line says which conflict."""
+        is neither controller), and one line says which conflict. Settings the controller
+        cannot run with (``ControllerConfig`` refuses them) are refused with one line."""
         if not settings or settings == self._announced:
             return
         self._announced = settings
         conflicts = {k: v for k, v in settings.items() if k in self._given and getattr(self.config, k) != v}
         if conflicts:
             self.get_logger().error(
-                "the policy needs " + " ".join(f"{k}:={v:g}" for k, v in conflicts.items()) + ", but this controller "
-                "was started with " + " ".join(f"{k}:={getattr(self.config, k):g}" for k in conflicts)
+                "the policy needs " + " ".join(f"{k}:={_setting(v)}" for k, v in conflicts.items()) + ", but this "
+                "controller was started with " + " ".join(f"{k}:={_setting(getattr(self.config, k))}" for k in conflicts)
                 + ": keeping this controller's settings (start it without those parameters to run the policy's spec)")
             return
         changed = {k: v for k, v in settings.items() if getattr(self.config, k) != v}
         if changed:
-            config = replace(self.config, **changed)
+            try:
+                config = replace(self.config, **changed)
+            except ValueError as exc:
+                self.get_logger().error(f"refused the policy's controller settings: {exc}; keeping this controller's")
+                return
             self.sync.config = config
             if self.controller is not None:
                 self.controller.config = config
             self.get_logger().info("running with the policy's controller settings: "
-                                   + " ".join(f"{k}:={v:g}" for k, v in changed.items()))
+                                   + " ".join(f"{k}:={_setting(v)}" for k, v in changed.items()))
+
+    def _on_sim_mode(self, msg: String) -> None:
+        """The simulator's stepping (``/sim/mode``): lockstep and paced wait for each reply, so
+        the reply to a state the policy decides on waits for that decision (``decision_sync``)."""
+        holds = msg.data in ("lockstep", "paced")
+        if holds != self.sync.decision_sync:
+            self.get_logger().info(f"the simulator runs {msg.data}: decision_sync "
+                                   f"{'on (a due state waits for its decision)' if holds else 'off'}")
+        self._do(self.sync.on_sim_mode(holds))
 
     def _on_resets(self, msg: UInt32) -> None:
         self._do(self.sync.on_resets(msg.data))

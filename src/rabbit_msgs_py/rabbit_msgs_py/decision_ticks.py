@@ -92,32 +92,53 @@ OWN = DecisionTiming(None)
 PER_STEP = DecisionTiming(0)
 
 
-TIMING_SETTINGS = ("within_step_blend", "within_step_until", "blend_phase")
-"""The controller's gait-timing settings a policy may announce on ``/hzd/gait_timing`` (phase, [0, 1])."""
+CONTROLLER_SETTINGS = ("kp", "torque_limit", "touchdown_min_phase", "touchdown_height", "min_step_length",
+                       "hip_coefficient_range", "knee_coefficient_range", "max_kd", "blend_phase",
+                       "within_step_blend", "within_step_until", "min_phase_rate")
+"""The 1 kHz controller's settings a policy announces on ``/hzd/gait_timing`` (its spec's
+``controller``: every ``ControllerConfig`` field but the robot model's geometry and tick)."""
+SIGNATURE_FIELD = "signed="
+"""The last field of a signed announcement: ``signed=<policy instance>:<tag>``
+(``rabbit_msgs_py.pairing.PairingKey.sign_settings``)."""
 
 
-def gait_timing(period: int, settings: dict[str, float] | None = None) -> str:
+def _value_text(value) -> str:
+    if isinstance(value, (tuple, list)):
+        return ",".join(repr(float(v)) for v in value)
+    return repr(float(value))
+
+
+def gait_timing(period: int, settings: dict | None = None) -> str:
     """``/hzd/gait_timing`` for a policy deciding every ``period`` ticks (0: once per step):
     ``next_step``, or ``at_once:N``, which also tells a controller holding its reply for a
     due decision (``decision_sync``) which states are due; then the controller settings the
-    policy needs (its spec's), ``name=value`` each (:data:`TIMING_SETTINGS`)."""
+    policy needs (its spec's), ``name=value`` each, a range as ``name=low,high``
+    (:data:`CONTROLLER_SETTINGS`)."""
     text = f"at_once:{period}" if period else "next_step"
-    return text + "".join(f" {name}={float(value)!r}" for name, value in (settings or {}).items())
+    return text + "".join(f" {name}={_value_text(value)}" for name, value in (settings or {}).items())
 
 
-def timing_settings(text: str) -> dict[str, float]:
-    """The controller settings a ``/hzd/gait_timing`` announces ({} if none); ``ValueError``
-    for a name not in :data:`TIMING_SETTINGS` or a value outside [0, 1]."""
-    settings = {}
+def timing_settings(text: str) -> dict:
+    """The controller settings a ``/hzd/gait_timing`` announces ({} if none; a range as a
+    tuple of two floats; a signature field aside); ``ValueError`` for a name not in
+    :data:`CONTROLLER_SETTINGS` or a value that is not finite. Whether a value is one the
+    controller can run with is the controller's to say (``ControllerConfig``)."""
+    settings: dict = {}
     for part in text.split()[1:]:
+        if part.startswith(SIGNATURE_FIELD):
+            continue
         name, _, value = part.partition("=")
         try:
-            number = float(value)
+            numbers = tuple(float(v) for v in value.split(","))
         except ValueError:
-            number = math.nan
-        if name not in TIMING_SETTINGS or not 0.0 <= number <= 1.0:
-            raise ValueError(f"a setting is one of {TIMING_SETTINGS}=V with V in [0, 1], got {part!r}")
-        settings[name] = number
+            numbers = (math.nan,)
+        if name not in CONTROLLER_SETTINGS or not all(math.isfinite(v) for v in numbers) or len(numbers) > 2:
+            raise ValueError(f"a setting is one of {', '.join(CONTROLLER_SETTINGS)} = a finite number (a range: "
+                             f"low,high), got {part!r}")
+        ranged = name.endswith("_range")
+        if ranged != (len(numbers) == 2):
+            raise ValueError(f"{name} is {'a range low,high' if ranged else 'one number'}, got {part!r}")
+        settings[name] = numbers if ranged else numbers[0]
     return settings
 
 

@@ -97,6 +97,27 @@ class PairingKey:
         payload = struct.pack(f"<q{len(alpha)}dd", count, *alpha, kd) + source.encode()
         return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-gait").hexdigest()
 
+    def sign_settings(self, source: str, text: str) -> str:
+        """``text`` (a ``/hzd/gait_timing`` announcement) signed by policy instance ``source``:
+        ``text signed=<source>:<tag>``, the tag the MAC of both."""
+        return f"{text} signed={source}:{self._settings_tag(source, text)}"
+
+    def verify_settings(self, signed: str) -> str:
+        """The policy instance that signed the announcement ``signed`` with this key;
+        ``ValueError`` saying why not (unsigned, malformed, another key, or changed since)."""
+        text, separator, field = signed.rpartition(" signed=")
+        source, colon, tag = field.rpartition(":")
+        if not separator or not colon or not source:
+            raise ValueError("the controller settings are not signed (their policy runs without this stack's "
+                             "pairing key)")
+        if not hmac.compare_digest(tag, self._settings_tag(source, text)):
+            raise ValueError(f"the controller settings from {source} are not signed with this stack's pairing key")
+        return source
+
+    def _settings_tag(self, source: str, text: str) -> str:
+        payload = source.encode() + b"\0" + text.encode()
+        return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-settings").hexdigest()
+
     def verify(self, frame_id: str, stamp: int, torques: Sequence[float]) -> str | None:
         """The instance id of a reply signed with this key, else None (unsigned, another
         key, or torques or stamp changed since it was signed)."""

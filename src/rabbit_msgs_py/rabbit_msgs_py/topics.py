@@ -73,6 +73,12 @@ start, +1 at every reset), published just before the placed state. The controlle
 on it and answers the placed state even when it equals the last state it answered: a
 reset is an event, not inferred from stamps or values."""
 
+SIM_MODE = "sim/mode"
+"""std_msgs/String (transient local), published once by sim_node: how it steps, ``lockstep``,
+``paced`` (each state waits for its torque reply) or ``realtime`` (it steps on the wall
+clock). A controller not told ``decision_sync`` follows it: in lockstep and paced it holds
+the reply to a state the policy decides on until that decision is in, as run_stack's does."""
+
 MARKERS = "rabbit/markers"
 """visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every
 ``1 / markers_rate`` s of sim time; frame ``world``, namespace ``rabbit``): torso, femurs and

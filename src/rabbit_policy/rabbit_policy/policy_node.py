@@ -71,16 +71,8 @@ from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 from rabbit_policy.policy_driver import Gait, Log, PolicyDriver, PolicySettings, Scheduled
 from rabbit_policy.runtime.commands import COMMAND_RANGE
-from rabbit_policy.runtime.policies import (
-    CONTROLLER_CHOICES,
-    LIBRARY_MODES,
-    Policy,
-    PolicyUnavailable,
-    controller_name,
-    controller_settings,
-    make_policy,
-    spec_kind,
-)
+from rabbit_policy.runtime.policies import CONTROLLER_CHOICES, LIBRARY_MODES, Policy, PolicyUnavailable, controller_name, controller_settings
+from rabbit_policy.spec.make import make_policy, spec_kind
 
 
 POLICY_PARAMS = {
@@ -201,7 +193,9 @@ class PolicyNode(Node):
         self._kd_pub = self.create_publisher(Float64, topics.KD, qos.GAIT_QOS)
         self._initial_state_pub = self.create_publisher(JointState, topics.INITIAL_STATE, qos.GAIT_QOS)
         self._timing_pub = self.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
-        self._timing_pub.publish(String(data=gait_timing(self.core.decision_period, self._settings)))
+        timing = gait_timing(self.core.decision_period, self._settings)
+        self._timing_pub.publish(String(data=self.pairing.sign_settings(self.source, timing)
+                                        if self.pairing is not None else timing))
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)  # scheduled commands
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)

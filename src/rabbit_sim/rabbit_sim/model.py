@@ -80,6 +80,17 @@ def model_path() -> Path:
         return Path(path)
 
 
+def model_sha256() -> str:
+    """SHA-256 of the packaged model (``models/*.xml`` by name and content, in name order):
+    the robot a controller spec was made for (its leg geometry and 1 ms tick are the model's)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for path in sorted(model_path().parent.glob("*.xml")):
+        digest.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def load_model(options: ModelOptions | str = "paper", drives: DriveParameters | None = None) -> mujoco.MjModel:
     """Compile the RABBIT model for ``options`` (or a variant name, see :data:`MODEL_VARIANTS`)."""
     if isinstance(options, str):

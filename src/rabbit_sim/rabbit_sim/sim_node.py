@@ -102,6 +102,7 @@ class SimNode(Node):
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
+        pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
         # who of the torque publishers is alive (a stopped or killed controller vs a busy one): liveliness
         # events of a second, raw subscription that matches only publishers declaring a lease

@@ -12,7 +12,7 @@ from rabbit_msgs_py.pairing import new_key
 
 from rabbit_policy.experiment.scenario import (Push, Scenario, format_pushes, format_schedule, on_tick_grid,
                                                validate_schedule)
-from rabbit_policy.runtime.policies import controller_name, required_controller_settings
+from rabbit_policy.runtime.policies import controller_name
 from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
 
@@ -90,7 +90,7 @@ class StackConfig:
         """The policy policy_node builds for this run (run_stack builds it once, to refuse a
         bad one with one line before any node starts and to name it in the report); raises
         ``PolicyUnavailable`` or ``ValueError``."""
-        from rabbit_policy.runtime.policies import make_policy
+        from rabbit_policy.spec.make import make_policy
 
         return make_policy(self.controller, self.gait_dir or None, self.library_mode, self.policy_file or None,
                            decision=self.decision, speed_integral=self.speed_integral)
@@ -114,9 +114,7 @@ class StackConfig:
             # lockstep/paced: the reply to a state the policy decides on waits for that decision
             "hzd_controller_node": {"decision_sync": self.mode != "realtime", "reference_rate": self.reference_rate,
                                     "pairing_key": self.pairing_key, "solo_check": 0.0,
-                                    "stats_file": self.controller_stats_file,
-                                    **required_controller_settings(self.controller, self.policy_file or None,
-                                                                   once_per_step=self.decision.param == 0)},
+                                    "stats_file": self.controller_stats_file},
             "sim_node": {
                 "model": self.model,
                 "friction": self.friction,

@@ -181,7 +181,7 @@ def _worker(args: tuple[int, int]) -> tuple[float, float]:
 def acceptance_1_6(policy_file: Path, workers: int) -> dict:
     """The learning issue's checks 1-6 on a policy file (the full broad evaluation)."""
     from rabbit_policy.evaluation.acceptance import broad_acceptance
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     backend = LocalBackend(workers)
     try:

@@ -18,7 +18,7 @@ from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_policy.evaluation.ceiling import FAMILIES, CeilingConfig, ceiling, ladder, summarize
 from rabbit_policy.evaluation.robustness import phase_times
 from rabbit_policy.parallel import add_backend_arguments, open_backend
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 
 def _job(job: tuple) -> dict:

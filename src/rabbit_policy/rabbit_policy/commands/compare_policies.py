@@ -56,7 +56,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("give policy files, --classic-integral gains or --recovery")
 
     from rabbit_policy.evaluation.acceptance import broad_comparison, broad_table
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable
+    from rabbit_policy.spec.make import make_policy
 
     try:
         policies = [make_policy("learned", policy_file=p) for p in args.policies]

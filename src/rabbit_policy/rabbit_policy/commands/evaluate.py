@@ -103,7 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.robustness import robustness
     from rabbit_policy.experiment.provenance import provenance
     from rabbit_policy.evaluation.steady_integral import network_alone
-    from rabbit_policy.runtime.policies import CONTROLLERS, NetworkPolicy, PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import CONTROLLERS, NetworkPolicy, PolicyUnavailable
+    from rabbit_policy.spec.make import make_policy
     from rabbit_sim.model import ModelOptions
 
     try:

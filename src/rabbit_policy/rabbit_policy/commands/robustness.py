@@ -40,7 +40,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     from rabbit_policy.evaluation import robustness as rb
-    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name
+    from rabbit_policy.spec.make import make_policy
 
     try:
         names = [controller_name(c) for c in args.controller]

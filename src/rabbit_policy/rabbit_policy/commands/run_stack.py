@@ -200,7 +200,7 @@ def _report_and_exit(report, config, as_json: bool) -> int:
     """Print the report (JSON or text); the exit status: 1 fell or stalled, 3 not completed
     (interrupted, a node died), else 0."""
     if as_json:
-        from rabbit_policy.runtime.policies import spec_record
+        from rabbit_policy.spec.make import spec_record
 
         print(strict_json.dumps({**report.summary(), "spec": spec_record(config.controller, config.policy_file or None)}))
     else:

@@ -39,7 +39,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("give policy files, --classic, --classic-integral gains, or several")
 
     from rabbit_policy.evaluation.selection import HELD_OUT, quick_screen_config, screen, screen_rank
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable
+    from rabbit_policy.spec.make import make_policy
 
     try:
         named = [(str(p), make_policy("learned", policy_file=p)) for p in args.policies]

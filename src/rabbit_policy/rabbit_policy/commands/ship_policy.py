@@ -398,7 +398,7 @@ def with_integral_rules(policy: Path, out: Path, band: float | None = None,
     checkpoint.save(out)
     if feedforward is not None:
         from rabbit_policy.evaluation.steady_integral import steady_integrals
-        from rabbit_policy.runtime.policies import checkpoint_policy
+        from rabbit_policy.spec.make import checkpoint_policy
 
         try:
             table = steady_integrals(checkpoint_policy(out), feedforward)
@@ -431,7 +431,7 @@ def warm_start_policy(checkpoint):
     from rabbit_msgs_py.decision_ticks import PER_STEP
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.network import PolicyCheckpoint
-    from rabbit_policy.runtime.policies import policy_of_checkpoint
+    from rabbit_policy.spec.make import policy_of_checkpoint
     from rabbit_policy.learning.warm_start import WARM_STARTS, initial_network
 
     name = checkpoint.info.get("warm_start")
@@ -524,7 +524,8 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
     """Measure, write the card and ship (``main``'s work once its arguments are parsed);
     ``scratch``: a directory for the policy's copies with its ``--integral-*`` and ``--recovery-overlay`` rules."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance, broad_comparison
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy
+    from rabbit_policy.runtime.policies import PolicyUnavailable
+    from rabbit_policy.spec.make import make_policy
 
     source = args.policy
     try:

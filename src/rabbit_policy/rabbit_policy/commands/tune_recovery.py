@@ -14,7 +14,7 @@ import sys
 from rabbit_msgs_py.cli import ArgumentParser
 from rabbit_policy.gait_design.recovery_tuning import TuningConfig, tune
 from rabbit_policy.parallel import add_backend_arguments, open_backend
-from rabbit_policy.runtime.policies import make_policy
+from rabbit_policy.spec.make import make_policy
 
 
 def main(argv: list[str] | None = None) -> int:

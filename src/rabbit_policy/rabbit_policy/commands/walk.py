@@ -120,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.result import run_summary
     from rabbit_policy.experiment.scenario import Scenario, parse_pushes
     from rabbit_policy.experiment.options import model_options, resolve_controller, schedule_from_args
-    from rabbit_policy.runtime.policies import PolicyUnavailable, make_policy, spec_record
+    from rabbit_policy.runtime.policies import PolicyUnavailable
+    from rabbit_policy.spec.make import make_policy, spec_record
 
     try:
         resolve_controller(args)

@@ -363,7 +363,7 @@ def broad_comparison(policies: list[tuple[str, Policy]], quick: bool = False,
     finish: ``("classic", result)`` first, then ``(name, result)`` per policy. ``quick``:
     ``RobustnessConfig.quick()`` and 30 Poincaré samples (a first look)."""
     from rabbit_policy.evaluation.robustness import RobustnessConfig
-    from rabbit_policy.runtime.policies import make_policy
+    from rabbit_policy.spec.make import make_policy
 
     classic = make_policy("classic")
     config = RobustnessConfig.quick() if quick else RobustnessConfig()

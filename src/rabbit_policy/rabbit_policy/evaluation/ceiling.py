@@ -38,7 +38,8 @@ from rabbit_hzd_controller.alpha import N_FREE, expand_alpha, reduce_alpha
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_policy.runtime.policies import GaitCommand, Policy, make_policy, read_only_memo
+from rabbit_policy.runtime.policies import GaitCommand, Policy, read_only_memo
+from rabbit_policy.spec.make import make_policy
 from rabbit_policy.runtime.speed_window import Observation
 
 AT_ONCE = {"within_step_blend": 0.0, "within_step_until": 1.0, "blend_phase": 0.0}

@@ -109,7 +109,8 @@ def resolve_controller(args: argparse.Namespace) -> None:
     ``--spec FILE`` is the controller its file says (``--controller`` may name the same kind,
     ``--policy-file`` may not be given too); without it ``--controller`` or classic.
     ``ValueError`` / ``PolicyUnavailable`` with one line otherwise."""
-    from rabbit_policy.runtime.policies import controller_name, spec_kind
+    from rabbit_policy.runtime.policies import controller_name
+    from rabbit_policy.spec.make import spec_kind
 
     named = controller_name(args.controller) if args.controller else None
     if not args.spec:

@@ -191,7 +191,7 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     from rabbit_policy.parallel import BackendConfig, make_backend
     from rabbit_policy.runtime.actions import policy_bounds
     from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.policies import checkpoint_policy
+    from rabbit_policy.spec.make import checkpoint_policy
 
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)

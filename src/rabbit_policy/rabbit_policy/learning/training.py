@@ -36,6 +36,7 @@ a resumed run starts fresh episodes).
 from __future__ import annotations
 
 import csv
+import hashlib
 import os
 import signal
 import sys
@@ -92,6 +93,11 @@ class TrainingConfig:
         return self.trainer.seed
 
 
+SPEC_DECIDES = ("features", "action", "residual_base", "integral_gain", "integral_band", "integral_clip",
+                "integral_windup_decay", "decision_period")
+"""Episode options a ``--spec`` run takes from the spec instead (left out of its record)."""
+
+
 def make_trainer(args: TrainingConfig, net, backend=None):
     """The ES or PPO trainer for the configured algorithm, running its episodes on ``backend``."""
     if args.algo == "es":
@@ -136,7 +142,7 @@ def train(args: TrainingConfig) -> int:
     from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ResidualAction, policy_bounds, residual_sum_bounds
     from rabbit_policy.runtime.memory import INPUTS
     from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
-    from rabbit_policy.runtime.policies import policy_of_checkpoint
+    from rabbit_policy.spec.make import policy_of_checkpoint
     from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
 
     if getattr(args.trainer, "spec", "") and args.algo != "es":
@@ -166,6 +172,7 @@ def train(args: TrainingConfig) -> int:
         from rabbit_policy.spec import load_controller
 
         deployed = load_controller(spec_file)
+        spec_sha256 = hashlib.sha256(Path(spec_file).read_bytes()).hexdigest()
         net, mse = spec_network(deployed.forward), None
         bounds = ActionBounds(net.low.numpy().astype(float), net.high.numpy().astype(float))
         features, action = deployed.spec.network.features, "spec"
@@ -205,15 +212,22 @@ def train(args: TrainingConfig) -> int:
     def wall() -> float:
         return elapsed_before + time.perf_counter() - start
 
+    config = args.trainer.to_dict()
+    if spec_file:  # what the spec decides, not the options (which its deployed loop does not read)
+        for key in SPEC_DECIDES:
+            config.pop(key, None)
+
     def info(extra: dict | None = None) -> dict:
         return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
-                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": args.trainer.to_dict(),
-                "warm_start": args.warm_start, "eval_every": args.eval_every,
+                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config,
+                "warm_start": "none: the spec's network" if spec_file else args.warm_start,
+                "eval_every": args.eval_every,
                 "parameters": parameter_count(net), "features": features, "action": action, "output": net.output,
                 **({"memory": memory.to_dict()} if memory is not None else {}),
                 **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain,
                     "residual_base": args.trainer.residual_base} if residual is not None else {}),
-                **({"spec": str(Path(spec_file).resolve())} if spec_file else {}),
+                **({"spec": str(Path(spec_file).resolve()), "spec_sha256": spec_sha256,
+                    "decision_period": deployed.spec.decision.period_ticks} if spec_file else {}),
                 "provenance": ran_on, **(extra or {})}
 
     def save_policy(name: str, extra: dict | None = None) -> None:

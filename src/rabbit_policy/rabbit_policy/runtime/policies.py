@@ -1,6 +1,6 @@
 """Gait policies: observation (:class:`~.speed_window.Observation`) -> gait for the next
 step (24 Bezier coefficients alpha, derivative gain Kd). ROS-free; ``policy_node`` and the
-scripts pick one with :func:`make_policy`. The two controllers have one name each,
+scripts build one with :func:`rabbit_policy.spec.make.make_policy`. The controllers have one name each,
 everywhere (CLI, parameters, results):
 
 * ``classic``: classic HZD, the gait library (``rabbit_policy/gaits``), the gait nearest
@@ -10,7 +10,7 @@ everywhere (CLI, parameters, results):
   bounded integral of the speed error (:mod:`.speed_integral`).
 * ``learned``: HZD-RL, the network (:mod:`.forward`) and the rules its spec names (default:
   the packaged ``rabbit_policy/controllers/learned.yaml``; a training checkpoint ``.pt`` is
-  built as its spec, :func:`checkpoint_policy`).
+  built as its spec, :func:`rabbit_policy.spec.make.checkpoint_policy`).
 * ``recovery``: the model-based push-recovery baseline (:mod:`.recovery`): classic HZD plus
   a hand-designed rule that bends the stance knee and swings the swing leg forward, at once,
   when the hip falls behind its gait. It reads the body state and runs the controller with
@@ -29,22 +29,19 @@ from pathlib import Path
 
 import numpy as np
 
-from rabbit_msgs_py.decision_ticks import OWN, PER_STEP, DecisionTiming
 from rabbit_policy.runtime.forward import NetworkForward
 from rabbit_policy.runtime.classic import (CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW, LIBRARY_MODES,
                                            LibraryPolicy, PeriodicPolicy, RateLimitedPolicy)
 from rabbit_policy.runtime.gait_command import (GaitCommand, Policy, PolicyUnavailable, controller_settings,
                                                 decision_period, first_command, reset_policy)
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, check_gain
 from rabbit_policy.runtime.speed_window import Observation
 
 __all__ = ["CLASSIC_DECISION_PERIOD", "CONTROLLERS", "CONTROLLER_ALIASES", "CONTROLLER_CHOICES",
            "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LibraryPolicy",
            "NetworkPolicy", "PeriodicPolicy", "Policy", "PolicyUnavailable", "RateLimitedPolicy", "controller_name",
-           "checkpoint_policy", "controller_settings", "copy_policy", "decision_period", "first_command",
-           "make_policy", "policy_of_checkpoint", "spec_kind", "spec_record",
-           "packaged_policy_file", "read_only_memo", "required_controller_settings", "reset_policy"]
+           "controller_settings", "copy_policy", "decision_period", "first_command", "packaged_policy_file",
+           "read_only_memo", "reset_policy"]
 
 CONTROLLERS = ("classic", "learned", "recovery")
 CONTROLLER_ALIASES = {"hzd": "classic", "library": "classic", "rl": "learned"}
@@ -84,32 +81,6 @@ def copy_policy(policy: Policy) -> Policy:
     """An independent copy of ``policy`` and its decision state, sharing what no decision
     changes (:func:`read_only_memo`)."""
     return copy.deepcopy(policy, read_only_memo(policy))
-
-
-def required_controller_settings(kind: str, policy_file: str | Path | None = None,
-                                 once_per_step: bool = False) -> dict[str, float]:
-    """The controller settings the controller named ``kind`` needs (the stack's
-    configuration gives them to ``hzd_controller_node``): its spec's (:mod:`rabbit_policy.spec`;
-    every gait-timing field), or a training checkpoint's (``policy_file`` ``.pt``, as its spec
-    builds it; {} if there is none to read). ``once_per_step``: the policy decides once per
-    step, so a learned policy runs without its rule and asks for the classic settings."""
-    kind = controller_name(kind)
-    if kind == "learned" and policy_file and not is_spec_file(policy_file):
-        try:
-            return controller_settings(checkpoint_policy(policy_file, PER_STEP if once_per_step else OWN))
-        except Exception:  # noqa: BLE001 - the node says why when it builds the controller
-            return {}
-    from dataclasses import asdict
-
-    from rabbit_policy.spec import SpecError
-    from rabbit_policy.spec.variants import controller_spec
-
-    try:
-        spec, _base, _source = controller_spec(kind, None, "interpolate", policy_file,
-                                               PER_STEP if once_per_step else OWN)
-    except (SpecError, ValueError):
-        return {}  # the node says why when it builds the controller
-    return asdict(spec.controller)
 
 
 def packaged_policy_file() -> Path:
@@ -232,40 +203,6 @@ class NetworkPolicy:
         return GaitCommand(alpha=tuple(float(a) for a in expand_alpha(action[:N_FREE])), kd=float(action[N_FREE]))
 
 
-def checkpoint_policy(path: str | Path, decision: DecisionTiming = OWN) -> NetworkPolicy:
-    """The HZD-RL network of a training checkpoint (``.pt``, read with torch) as its spec
-    builds it (:func:`rabbit_policy.spec.convert.checkpoint_spec` from the checkpoint's
-    ``info``, then :func:`rabbit_policy.spec.build`; nothing written). ``decision``: as
-    trained (own), once per step (an overlay then drops: the rule acts within the step; the
-    name says so) or every N ticks. The policy's ``checkpoint`` is the file read."""
-    from rabbit_policy.runtime.network import PolicyCheckpoint  # torch is imported only when needed
-
-    checkpoint = PolicyCheckpoint.load(path)
-    if checkpoint.info.get("action") == "spec":
-        raise ValueError(f"a run of train.py --spec: its policy is {Path(path).with_suffix('.yaml').name}, the "
-                         "spec with these weights (this file records the run)")
-    return policy_of_checkpoint(checkpoint, Path(path).name, decision)
-
-
-def policy_of_checkpoint(checkpoint, name: str, decision: DecisionTiming = OWN) -> NetworkPolicy:
-    """:func:`checkpoint_policy` of a ``PolicyCheckpoint`` in memory (a run being trained):
-    ``name`` names it."""
-    from rabbit_policy.spec.build import build
-    from rabbit_policy.spec.convert import checkpoint_spec, network_arrays
-    from rabbit_policy.spec.files import PACKAGED, weights_spec_of
-    from rabbit_policy.spec.schema import WeightsSpec
-
-    info = checkpoint.info
-    weights, biases, buffers = network_arrays(checkpoint)
-    spec = checkpoint_spec(info, (weights, biases), buffers, WeightsSpec(*weights_spec_of(weights, biases)),
-                           Path(name).stem, PACKAGED, Path("."), decision, {"checkpoint": name})
-    dropped = info.get("recovery_overlay") is not None and spec.overlay is None
-    policy = build(spec, weights=(weights, biases),
-                   source=name + (" (no recovery rule: once per step)" if dropped else ""))
-    policy.checkpoint = checkpoint
-    return policy
-
-
 def controller_name(name: str) -> str:
     """The controller's one name (``classic`` or ``learned``) for a name or an alias;
     raises ``ValueError`` naming the choices."""
@@ -273,95 +210,3 @@ def controller_name(name: str) -> str:
     if canonical not in CONTROLLERS:
         raise ValueError(f"controller must be one of {CONTROLLERS} (aliases {sorted(CONTROLLER_ALIASES)}), got {name!r}")
     return canonical
-
-
-def make_policy(kind: str = "classic", gait_dir: str | Path | None = None, mode: str = "interpolate",
-                policy_file: str | Path | None = None, max_command_step: float = 0.0,
-                decision: DecisionTiming = OWN, speed_integral: float = 0.0,
-                integral_offset_limit: float = DEFAULT_OFFSET_LIMIT) -> Policy:
-    """Build a policy by name; raises :class:`PolicyUnavailable` / ``ValueError`` with a
-    message a user can act on. Every controller is its spec (:mod:`rabbit_policy.spec`): the
-    packaged one of ``kind``, or the spec ``policy_file`` (``.yaml``, of that kind:
-    :func:`spec_kind` says which), with the options below written into it, then built by
-    :func:`rabbit_policy.spec.build`. A training checkpoint (``policy_file`` ``.pt``, learned
-    only) is read with torch and built as its spec (:func:`checkpoint_policy`).
-    ``max_command_step`` > 0 wraps it in a :class:`RateLimitedPolicy` (m/s per step; 0: no
-    limit). ``decision``: the spec's own timing (classic every 20 ticks; learned as
-    trained), once per step, or every N ticks. ``speed_integral`` > 0 (1/s, classic only):
-    Westervelt's event-based speed integral with that gain, its offset within
-    +-``integral_offset_limit`` m/s (see :class:`LibraryPolicy`)."""
-    if not isinstance(decision, DecisionTiming):
-        raise ValueError(f"decision must be a DecisionTiming (own, step or N ticks), got {decision!r}")
-    check_gain(speed_integral, "the speed integral gain")
-    kind = controller_name(kind)
-    if kind != "classic" and speed_integral:
-        raise ValueError("the speed integral is the classic controller's (Westervelt's event-based PI); a learned "
-                         "policy with memory features carries its own")
-    if policy_file and is_spec_file(policy_file):
-        file_kind = spec_kind(policy_file)
-        if file_kind != kind:
-            raise PolicyUnavailable(f"controller spec {policy_file} is a {file_kind} controller, not {kind} (the kind "
-                                    "is the file's: --spec FILE, spec_file:=FILE)")
-    elif kind != "learned" and policy_file:
-        raise ValueError("a training checkpoint is a learned policy's: it is for the learned controller "
-                         "(policy:=learned, --controller learned); the classic one uses gait_dir")
-    if kind == "learned" and gait_dir:
-        raise ValueError("a gait directory is the classic controller's library: the learned one takes a policy "
-                         "file (policy_file, --policy-file)")
-    if mode not in LIBRARY_MODES:
-        raise ValueError(f"library mode must be one of {LIBRARY_MODES}, got {mode!r}")
-    if kind == "learned" and mode != "interpolate":
-        raise ValueError("the library mode is classic's (and recovery's): a learned controller's gaits are the "
-                         "calibrated blend with its residual")
-    if kind == "learned" and policy_file and not is_spec_file(policy_file):
-        policy = _checkpoint(policy_file, decision)  # a training checkpoint: it carries its decision period
-    else:
-        from rabbit_policy.spec import SpecError, build
-        from rabbit_policy.spec.variants import controller_spec
-
-        try:
-            spec, base, source = controller_spec(kind, gait_dir, mode, policy_file, decision, speed_integral,
-                                                 integral_offset_limit)
-            policy = build(spec, base, source=source)
-        except SpecError as exc:
-            raise PolicyUnavailable(str(exc)) from None
-    if max_command_step:
-        policy = RateLimitedPolicy(policy, max_command_step)
-    return policy
-
-
-def is_spec_file(path: str | Path) -> bool:
-    """A controller spec (YAML or JSON), not a training checkpoint."""
-    return Path(path).suffix.lower() in (".yaml", ".yml", ".json")
-
-
-def spec_record(kind: str, policy_file: str | Path | None = None) -> dict[str, str]:
-    """The file a controller was built from, ``{"file", "sha256"}``: ``policy_file`` (a spec or
-    a checkpoint), else the packaged spec of ``kind`` (a run's JSON names what ran)."""
-    from rabbit_policy.spec.files import file_sha256, packaged_spec
-
-    path = Path(policy_file) if policy_file else packaged_spec(controller_name(kind))
-    return {"file": str(path.resolve()), "sha256": file_sha256(path)}
-
-
-def spec_kind(path: str | Path) -> str:
-    """The kind of controller the spec file ``path`` is (``classic``, ``recovery``,
-    ``learned``); :class:`PolicyUnavailable` with one line for a file that is not a spec."""
-    from rabbit_policy.spec import SpecError, load_spec
-
-    try:
-        return load_spec(Path(path)).kind
-    except SpecError as exc:
-        raise PolicyUnavailable(str(exc)) from None
-
-
-def _checkpoint(policy_file: str | Path, decision: DecisionTiming) -> NetworkPolicy:
-    """The learned policy from the training checkpoint ``policy_file``."""
-    path = Path(policy_file)
-    if not path.is_file():
-        raise PolicyUnavailable(f"policy file {path} does not exist")
-    try:
-        return checkpoint_policy(path, decision)
-    except Exception as exc:  # noqa: BLE001 - any file that is not a checkpoint: torch raises many kinds
-        raise PolicyUnavailable(f"cannot load policy file {path}: not a policy checkpoint "
-                                f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})") from None

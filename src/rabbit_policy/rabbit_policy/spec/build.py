@@ -22,6 +22,7 @@ from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
+from rabbit_sim.model import model_sha256
 from rabbit_policy.spec.schema import (ControllerSpec, FeedforwardSpec, IntegralSpec, NetworkSpec, SpecError,
                                        WindupDecaySpec, load_spec)
 
@@ -45,6 +46,9 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
     policy's name. :class:`~.schema.SpecError` with one line for a spec that cannot be
     built (a file whose hash differs, an architecture its weights do not have)."""
     base = Path(base) if base is not None else Path.cwd()
+    if spec.controller.model_sha256 != model_sha256():
+        raise SpecError(f"controller.model_sha256 {spec.controller.model_sha256[:12]}: the spec was made for another "
+                        f"robot model than rabbit_sim's ({model_sha256()[:12]}), whose geometry the controller assumes")
     library = GaitLibrary.load(checked_library_dir(spec.gait_library.source, spec.gait_library.sha256, base))
     period, window = spec.decision.period_ticks, spec.decision.window_ticks  # checked by DecisionSpec
     integral = integral_config(spec.speed_integral)
@@ -61,7 +65,7 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
         raise
     except ValueError as exc:
         raise SpecError(f"{spec.kind} spec {source or spec.name}: {exc}") from None
-    policy.controller_settings = asdict(spec.controller)
+    policy.controller_settings = spec.controller.settings()
     policy.spec, policy.spec_base = spec, base
     return policy
 
@@ -144,7 +148,8 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
     residual = on_rule = None
     if net.residual is not None:
         margin = net.residual.bounds_margin if net.residual.bounds_margin is not None else float("inf")
-        bounds = ActionBounds.from_library(library, margin, net.residual.kd_bounds)
+        bounds = ActionBounds.from_library(library, margin, net.residual.kd_bounds,
+                                           ControllerConfig(**spec.controller.settings()))
         residual = ResidualAction(library, bounds, tuple(net.residual.scale),
                                   integral.gain if integral is not None else 0.0)
         if net.residual.base != "classic":  # on the recovery rule's decision (the spec's rule)

@@ -14,6 +14,7 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.experiment.provenance import code_commit
+from rabbit_sim.model import model_sha256
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
@@ -34,9 +35,11 @@ def _library(source: str, base: Path, mode: str = "interpolate") -> LibrarySpec:
 
 
 def _settings(values: dict) -> ControllerSettingsSpec:
-    defaults = ControllerConfig()
-    return ControllerSettingsSpec(**{f.name: float(values.get(f.name, getattr(defaults, f.name)))
-                                     for f in fields(ControllerSettingsSpec)})
+    """The controller section a checkpoint ran with: ``values`` over ``ControllerConfig``'s
+    defaults, for the packaged robot model."""
+    config = replace(ControllerConfig(), **values)
+    return ControllerSettingsSpec(**{f.name: getattr(config, f.name) for f in fields(ControllerSettingsSpec)
+                                     if f.name != "model_sha256"}, model_sha256=model_sha256())
 
 
 def _rule(config: RecoveryConfig) -> RuleSpec:

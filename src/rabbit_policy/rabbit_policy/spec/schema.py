@@ -17,8 +17,8 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
 6. ``recovery_rule``: the push-recovery rule's constants
    (:class:`~rabbit_policy.runtime.recovery.RecoveryConfig`), or null; ``overlay``: how it
    sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
-7. ``controller``: the 1 kHz HZD controller's settings this controller needs (every
-   gait-timing field of ``ControllerConfig``).
+7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (every
+   ``ControllerConfig`` field but the robot model's geometry and tick, and that model's hash).
 
 ``provenance`` is free text for people (what made it, from which commit); it is not read.
 Every other key is required, none more is allowed: a spec with an unknown or missing key,
@@ -34,6 +34,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
 from rabbit_policy.runtime.forward import OUTPUTS
@@ -261,19 +262,48 @@ class OverlaySpec:
 
 @dataclass(frozen=True)
 class ControllerSettingsSpec:
-    """The 1 kHz HZD controller's gait timing this controller needs (``ControllerConfig``
-    fields, phase units): a gait that arrives within the step blends in over
-    ``within_step_blend`` (0: at once) unless it arrives at or after ``within_step_until``
-    (then it waits for the touchdown); a gait that arrives with a touchdown blends in over
-    ``blend_phase``."""
+    """The 1 kHz HZD controller this controller runs on: every ``ControllerConfig`` field
+    (units as there: N m/rad, N m, m, rad, N m s/rad, phase, 1/s) but the leg geometry and
+    the tick, which are the robot model's: ``model_sha256`` names that model
+    (:func:`rabbit_sim.model.model_sha256`), and a spec made for another one is refused. A gait
+    that arrives within the step blends in over ``within_step_blend`` (0: at once) unless it
+    arrives at or after ``within_step_until`` (then it waits for the touchdown); a gait that
+    arrives with a touchdown blends in over ``blend_phase``."""
 
+    kp: float
+    torque_limit: float
+    touchdown_min_phase: float
+    touchdown_height: float
+    min_step_length: float
+    hip_coefficient_range: tuple[float, float]
+    knee_coefficient_range: tuple[float, float]
+    max_kd: float
+    blend_phase: float
     within_step_blend: float
     within_step_until: float
-    blend_phase: float
+    min_phase_rate: float
+    model_sha256: str
 
     def __post_init__(self) -> None:
         for name in ("within_step_blend", "within_step_until", "blend_phase"):
             _number(getattr(self, name), f"controller.{name}", 0.0, 1.0)
+        for name in ("hip_coefficient_range", "knee_coefficient_range"):
+            _ordered(getattr(self, name), f"controller.{name}")
+        _number(self.touchdown_height, "controller.touchdown_height")
+        if not _is_sha256(self.model_sha256):
+            raise SpecError(f"controller.model_sha256 must be 64 hex digits, got {self.model_sha256!r}")
+        try:
+            ControllerConfig(**self.settings())
+        except ValueError as exc:
+            raise SpecError(f"controller: {exc}") from None
+
+    def settings(self) -> dict:
+        """The ``ControllerConfig`` fields (by name) this spec sets: all but the model's."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "model_sha256"}
+
+
+def _is_sha256(text: str) -> bool:
+    return isinstance(text, str) and len(text) == 64 and all(c in "0123456789abcdef" for c in text)
 
 
 @dataclass(frozen=True)
