@@ -445,3 +445,16 @@ def test_train_es_on_a_spec_trains_its_network_in_its_deployed_loop_and_writes_a
                               str(tmp_path / "ppo"), "--no-progress"], cwd=root, capture_output=True, text=True,
                              timeout=300)
     assert refused.returncode == 2 and refused.stderr.strip().splitlines()[-1].startswith("error: --spec trains with ES")
+
+
+@pytest.mark.unit
+def test_the_packaged_specs_were_written_from_a_clean_commit_of_this_history():
+    """A dirty tree is not a provenance: each packaged spec names a commit (no ``+dirty``),
+    one this repository holds."""
+    root = Path(__file__).resolve().parents[2]
+    for kind in KINDS:
+        commit = load_spec(packaged_spec(kind)).provenance["code_commit"]
+        assert len(commit) == 40 and all(c in "0123456789abcdef" for c in commit), (kind, commit)
+        if (root / ".git").exists():
+            known = subprocess.run(["git", "cat-file", "-e", f"{commit}^{{commit}}"], cwd=root, capture_output=True)
+            assert known.returncode == 0, (kind, commit)
