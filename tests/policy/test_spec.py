@@ -447,7 +447,6 @@ def test_train_es_on_a_spec_trains_its_network_in_its_deployed_loop_and_writes_a
     assert refused.returncode == 2 and refused.stderr.strip().splitlines()[-1].startswith("error: --spec trains with ES")
 
 
-@pytest.mark.unit
 def test_the_packaged_specs_were_written_from_a_clean_commit_of_this_history():
     """A dirty tree is not a provenance: each packaged spec names a commit (no ``+dirty``),
     one this repository holds."""
