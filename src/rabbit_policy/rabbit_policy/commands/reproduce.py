@@ -91,6 +91,10 @@ def train_arguments(options: dict) -> list[str]:
     return argv
 
 
+def _number_text(value) -> str:
+    return "[" + ", ".join(f"{v:g}" for v in value) + "]" if isinstance(value, tuple) else f"{value:g}"
+
+
 def _seconds(value: float | None) -> str:
     return "never" if value is None else f"{value:.3f}"
 
@@ -130,7 +134,8 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
         "A learned HZD-RL controller written by `scripts/reproduce.py` (docs/controller_spec.md): the spec "
         "`learned.yaml` beside this card names every stage and constant; `walk.py --spec learned.yaml` walks it.", "",
         "## Stages", "", *[f"- {s}" for s in stages],
-        f"- the 1 kHz controller: {', '.join(f'{k} {v:g}' for k, v in vars(spec.controller).items())}", "",
+        "- the 1 kHz controller: " + ", ".join(f"{k} {_number_text(v)}" for k, v in spec.controller.settings().items())
+        + f" (robot model sha256 {spec.controller.model_sha256[:12]})", "",
         f"## Acceptance ({provenance['evaluation']} criteria): {'passed' if accepted['passed'] else 'failed'}, "
         f"{accepted['failures']} failed checks", "",
         "| command (m/s) | mean speed | error | passed |", "|---|---|---|---|", rows, "",
