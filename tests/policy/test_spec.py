@@ -179,7 +179,8 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["network"].update(hidden=[12, 12, 11]), "network layer 2 is (12, 12)"),
     (lambda d: d["network"]["weights"].update(sha256="0" * 64), "the spec names 0000000000000000"),
     (lambda d: d["gait_library"].update(sha256="1" * 64), "the library changed since the spec was written"),
-    (lambda d: d.update(spec_version=2), "spec_version 2 is not supported"),
+    (lambda d: d.update(spec_version=3), "spec_version 3 is not supported"),
+    (lambda d: d.update(spec_version=1), "spec_version 1 names only the controller's blends: upgrade the file with"),
     (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral.limit must be a finite number > 0, got -1.0"),
     # values checked by meaning, each refusal naming its field
     (lambda d: d["network"]["low"].__setitem__(0, 5.0), "network.low[0] (5.0) must be below network.high[0]"),
@@ -457,3 +458,23 @@ def test_the_packaged_specs_were_written_from_a_clean_commit_of_this_history():
         if (root / ".git").exists():
             known = subprocess.run(["git", "cat-file", "-e", f"{commit}^{{commit}}"], cwd=root, capture_output=True)
             assert known.returncode == 0, (kind, commit)
+
+
+def test_a_version_1_spec_is_refused_with_its_upgrade_and_upgrades_to_the_same_controller(tmp_path):
+    """Version 1 named the controller's blends alone: refused with one line naming
+    ``upgrade_spec``, which completes it with the values version 1 ran with: the packaged
+    specs, written back as version 1, upgrade to themselves (their provenance aside)."""
+    from rabbit_policy.spec.convert import upgrade_spec
+
+    for kind in KINDS:
+        path, data = _spec_copy(tmp_path, kind)
+        data["spec_version"] = 1
+        data["controller"] = {k: data["controller"][k] for k in ("within_step_blend", "within_step_until",
+                                                                 "blend_phase")}
+        path.write_text("# an old run's spec\n" + yaml.safe_dump(data, sort_keys=False))
+        with pytest.raises(SpecError, match="spec_version 1 names only the controller's blends"):
+            load_spec(path)
+        upgraded = upgrade_spec(path)
+        packaged = load_spec(packaged_spec(kind))
+        assert replace(upgraded, provenance={}) == replace(packaged, provenance={}), kind
+        assert load_spec(path) == upgraded and path.read_text().startswith("# an old run's spec\n")

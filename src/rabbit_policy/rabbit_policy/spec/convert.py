@@ -22,7 +22,8 @@ from rabbit_policy.runtime.speed_integral import decision_dt
 from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
-                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec)
+                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec,
+                                       dump_spec)
 
 RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
@@ -114,6 +115,33 @@ def _floats(values) -> tuple[float, ...]:
     """float32 numbers as the shortest decimals that read back as the same float32 (the
     network casts them so): 0.1, not 0.10000000149011612."""
     return tuple(float(str(v)) for v in np.asarray(values, dtype=np.float32))
+
+
+def upgrade_spec(path: str | Path) -> ControllerSpec:
+    """Rewrite the spec file ``path`` of ``spec_version`` 1 (its ``controller`` named the
+    blends alone) as version 2, in place: every other ``ControllerConfig`` field with the
+    value version 1 ran with (the code's default), and the packaged robot model's hash; its
+    comment lines kept. A version 2 file is left as it is. Returns the spec."""
+    import yaml
+
+    from rabbit_policy.spec.schema import load_spec, parse_spec
+
+    path = Path(path)
+    text = path.read_text()
+    data = yaml.safe_load(text)
+    if not isinstance(data, dict) or data.get("spec_version") != 1:
+        return load_spec(path)
+    blends = data.get("controller") or {}
+    data["spec_version"] = SPEC_VERSION
+    data["controller"] = {k: list(v) if isinstance(v, tuple) else v
+                          for k, v in asdict(_settings(blends)).items()}
+    data["provenance"] = {**(data.get("provenance") or {}),
+                          "upgraded": f"spec_version 1 -> {SPEC_VERSION} by convert.upgrade_spec at {code_commit()}"}
+    spec = parse_spec(data)
+    header = "\n".join(line[2:] if line.startswith("# ") else line.lstrip("#")
+                       for line in text.splitlines() if line.startswith("#"))
+    dump_spec(spec, path, header)
+    return spec
 
 
 def restarted_spec(spec_file: str | Path, seed: int, path: Path) -> ControllerSpec:

@@ -40,7 +40,8 @@ from rabbit_policy.runtime.actions import RESIDUAL_BASES
 from rabbit_policy.runtime.forward import OUTPUTS
 from rabbit_policy.runtime.speed_integral import decision_dt
 
-SPEC_VERSION = 1
+SPEC_VERSION = 2
+"""2: the ``controller`` section names every 1 kHz controller constant and the robot model (1: its blends alone)."""
 KINDS = ("classic", "recovery", "learned")
 
 
@@ -369,6 +370,9 @@ def _plain(value: Any) -> Any:
 def parse_spec(data: Any) -> ControllerSpec:
     """A :class:`ControllerSpec` from a parsed document; :class:`SpecError` with one line
     for an unknown or missing key or a value of the wrong kind."""
+    if isinstance(data, dict) and data.get("spec_version") == 1:
+        raise SpecError("spec_version 1 names only the controller's blends: upgrade the file with "
+                        "rabbit_policy.spec.convert.upgrade_spec(PATH) (it adds the values version 1 ran with)")
     return _parse(ControllerSpec, data, "spec")
 
 
