@@ -178,3 +178,38 @@ def test_a_policy_deciding_once_per_step_is_silent_after_two_seconds(gaits):
     clock.now += 2.0
     logs = [a for t in range(0, 2002) for a in sync.on_state(t * MS, q, dq) if isinstance(a, Log)]
     assert len(logs) == 1 and "since t = 0.000 s" in logs[0].text and "once per step" in logs[0].text
+
+
+def test_following_the_simulator_no_state_is_answered_before_it_says_how_it_steps(gaits):
+    """``mode_known=False`` (``decision_sync`` not given): the first states wait for
+    ``/sim/mode``; lockstep turns the hold for due decisions on (a due state then waits for its
+    decision), realtime leaves it off; a simulator that never says is waited for 2 s of wall
+    time, then the controller answers as given, with one warning."""
+    from rabbit_hzd_controller.gait_sync import SIM_MODE_WAIT
+
+    slow, fast, (q, dq) = gaits
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    assert sync.on_state(0, q, dq) == [] and sync.missing == ["sim_mode"]
+    assert _answers(sync.on_sim_mode(True)) == [0] and sync.decision_sync
+    for tick in range(1, 20):
+        assert _answers(sync.on_state(tick * MS, q, dq)) == [tick * MS]
+    assert sync.on_state(20 * MS, q, dq) == []  # due: held for its decision, as run_stack's controller does
+    sync.on_gait_part("alpha", fast)
+    assert _answers(sync.on_gait_part("kd", 60.0)) == [20 * MS]
+    realtime = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    realtime.on_gait_part("alpha", slow)
+    realtime.on_gait_part("kd", 50.0)
+    realtime.on_gait_timing("at_once", 20)
+    realtime.on_state(0, q, dq)
+    assert _answers(realtime.on_sim_mode(False)) == [0] and not realtime.decision_sync
+    silent = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    silent.on_gait_part("alpha", slow)
+    silent.on_gait_part("kd", 50.0)
+    assert silent.on_state(0, q, dq) == [] and silent.check_held() == []
+    clock.now += SIM_MODE_WAIT + 0.1
+    actions = silent.check_held()
+    assert [type(a) for a in actions] == [Log, Answer] and "did not say how it steps" in actions[0].text

@@ -86,12 +86,21 @@ Action = Union[Answer, Repeat, Log]
 State = tuple[int, list[float], list[float]]  # stamp (ns), q (7: m, rad), dq (7: m/s, rad/s)
 
 
+SIM_MODE_WAIT = 2.0
+"""wall s: a controller following the simulator's ``/sim/mode`` answers no state before it
+comes, for at most this long after the first state (a simulator that never says)."""
+
+
 class GaitSync:
     """See the module docstring. ``gait_timing``: ``"policy"`` (follow ``/hzd/gait_timing``;
     ``next_step`` until it says) or one of :data:`GAIT_TIMINGS`."""
 
     def __init__(self, config: ControllerConfig, gait_timing: str = "policy", decision_sync: bool = False,
-                 decision_timeout: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
+                 decision_timeout: float = 2.0, clock: Callable[[], float] = time.monotonic,
+                 mode_known: bool = True) -> None:
+        """``mode_known`` False: ``decision_sync`` follows the simulator (:meth:`on_sim_mode`),
+        and no state is answered before it says how it steps, or :data:`SIM_MODE_WAIT` wall s
+        have passed since the first state (then ``decision_sync`` stays as given)."""
         if gait_timing != "policy" and gait_timing not in GAIT_TIMINGS:
             raise ValueError(f"gait_timing must be policy or one of {GAIT_TIMINGS}, got {gait_timing!r}")
         law.warm()  # the compiled law loaded now, not on the first state (a real-time tick's worth and more)
@@ -114,6 +123,8 @@ class GaitSync:
         self._held: tuple[State, float] | None = None
         self._timing_unknown = decision_sync and self.follow_policy_timing  # the first state waits for it
         self._timing_seen = False  # the policy's /hzd/gait_timing came
+        self._mode_known = mode_known
+        self._mode_wait: float | None = None  # wall s (clock) of the first state held for the mode
         self._sync_paused = False  # a decision timed out: gaits apply on arrival until both come again
         self._period = 0  # the policy's decision period (ticks; 0: once per step)
         self._gait_at: int | None = None  # stamp (ns) of the newest state when a gait part last came
@@ -139,7 +150,7 @@ class GaitSync:
     def missing(self) -> list[str]:
         """What a state waits for before it can be answered: ``alpha``, ``kd``, ``gait_timing``."""
         return ([name for name, part in (("alpha", self.alpha), ("kd", self.kd)) if part is None]
-                + (["gait_timing"] if self._timing_unknown else []))
+                + (["gait_timing"] if self._timing_unknown else []) + ([] if self._mode_known else ["sim_mode"]))
 
     # ---------------------------------------------------------------- events
     def on_gait_part(self, part: str, value) -> list[Action]:
@@ -195,14 +206,15 @@ class GaitSync:
         """The simulator says whether it waits for each reply (lockstep, paced: ``holds``):
         ``decision_sync`` follows it (the node calls this only when it was not given)."""
         self._out = []
-        if holds == self.decision_sync:
-            return self._out
-        self.decision_sync = holds
-        if not self._timing_seen:
-            self._timing_unknown = holds and self.follow_policy_timing
-            self._answer_waiting()
-            return self._out
-        return self.on_gait_timing(self.gait_timing, self._period)
+        self._mode_known = True
+        if holds != self.decision_sync:
+            self.decision_sync = holds
+            if self._timing_seen:
+                self._out = self.on_gait_timing(self.gait_timing, self._period)
+            else:
+                self._timing_unknown = holds and self.follow_policy_timing
+        self._answer_waiting()
+        return self._out
 
     def on_resets(self, count: int) -> list[Action]:
         """A count on ``/sim/resets`` (placements of the robot)."""
@@ -241,8 +253,14 @@ class GaitSync:
                                  f"{', '.join(f'{a:.3f}' for a in (self.alpha or [])[:4])}, ...)")
 
     def check_held(self) -> list[Action]:
-        """Timer: a due decision that did not come within ``decision_timeout`` s."""
+        """Timer: a due decision that did not come within ``decision_timeout`` s; a simulator
+        that did not say how it steps within :data:`SIM_MODE_WAIT` s of its first state."""
         self._out = []
+        if not self._mode_known and self._mode_wait is not None and self.clock() - self._mode_wait > SIM_MODE_WAIT:
+            self._mode_known = True
+            self._log("warning", f"the simulator did not say how it steps (/sim/mode) within {SIM_MODE_WAIT:g} s: "
+                                 f"decision_sync {'on' if self.decision_sync else 'off'}, as given")
+            self._answer_waiting()
         if self._held is not None and self.clock() - self._held[1] > self.decision_timeout:
             self.decisions_timed_out += 1
             self._sync_paused = True
@@ -264,6 +282,8 @@ class GaitSync:
             return
         if self.missing:
             self._waiting = (stamp, q, dq)
+            if not self._mode_known and self._mode_wait is None:
+                self._mode_wait = self.clock()
             return
         controller = self.controller
         if controller is None or self._restart or stamp < self.last_stamp:

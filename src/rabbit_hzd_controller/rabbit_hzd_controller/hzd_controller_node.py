@@ -129,6 +129,7 @@ class HZDControllerNode(Node):
         super().__init__("hzd_controller_node", context=context, namespace=namespace)
         values = declare(self, {**CONTROLLER_PARAMS, **NODE_PARAMS}, overrides)
         forget_secrets(self, SECRET_PARAMS)
+        self._given = set(overrides) | set(overrides_given(self))  # parameters set at start: a policy's wish yields
         try:
             gait_timing = values.pop("gait_timing")
             decision_sync = bool(values.pop("decision_sync"))
@@ -138,14 +139,14 @@ class HZDControllerNode(Node):
             self.stats_file = values.pop("stats_file")
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
-            self.sync = GaitSync(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout)
+            self.sync = GaitSync(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout,
+                                 mode_known="decision_sync" in self._given)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.torques_published = 0
         self.rejected_gaits = 0
         self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
-        self._given = set(overrides) | set(overrides_given(self))  # parameters set at start: a policy's wish yields
         self._announced: dict = {}
         self._settings_of: dict[str, dict] = {}  # keyed: each policy instance's signed settings (the last few)
         self._early: dict[str, Float64MultiArray] = {}  # keyed: a policy's gait that came before its settings
