@@ -674,14 +674,15 @@ def test_nodes_started_by_hand_run_the_learned_spec_bit_for_bit_as_walk_py(capfd
 
 @pytest.mark.slow
 def test_a_killed_policy_is_named_by_the_controller_within_two_seconds(capfd):
-    """Nodes started by hand (no decision_sync: the robot walks on the last gait): the policy's
+    """Nodes started by hand, the controller with ``decision_sync:=false`` (the robot walks on
+    the last gait; in lockstep it would hold the due state for ``decision_timeout`` first): the policy's
     process dies (its context shut down). The controller logs one warning that the policy is
     silent, since when and on which gait it walks, within 2 s of wall time (five decisions of
     sim time and a second of wall time without a gait); nothing more while it stays silent. A
     policy that is only behind the simulation is not reported (tests/hzd_controller)."""
     with ros_context() as (context, executor), ros_context() as (ctx_p, ex_p):
         sim = SimNode(context=context)
-        controller = HZDControllerNode(context=context)
+        controller = HZDControllerNode(context=context, decision_sync=False)
         for node in (sim, controller):
             executor.add_node(node)
         ex_p.add_node(PolicyNode(context=ctx_p))
