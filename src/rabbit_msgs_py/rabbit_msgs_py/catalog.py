@@ -58,5 +58,6 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.RESETS, UInt32, qos.STATUS_QOS),
         TopicSpec(topics.MARKERS, MarkerArray, qos.MARKERS_QOS),
         TopicSpec(topics.ROBOT_DESCRIPTION, String, qos.STATUS_QOS),
+        TopicSpec(topics.SIM_MODE, String, qos.STATUS_QOS),
     )
 }

@@ -1,5 +1,11 @@
 """Benchmark the ROS 2 stack; prints one JSON object.
 
+* ``floor_round_trips_per_s_multi_process`` / ``_in_process``: the rclpy ping-pong floor
+  (:mod:`rabbit_policy.commands.ping_pong`: round trips of one small message per wall second
+  between two nodes, in two processes / on one executor), and ``*_to_floor``: each lockstep
+  and paced mode's ticks per second over the floor of its layout, measured in the same run
+  (a ratio carries to another machine).
+
 * ``lockstep_rtf_in_process``: real-time factor (sim s / wall s) of a lockstep walk with
   all nodes on one EventsExecutor in this process (goal >= 3).
 * ``lockstep_rtf_multi_process``: the same with the three nodes as separate processes
@@ -49,7 +55,7 @@ from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("startup", "stop", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+SCENARIOS = ("floor", "startup", "stop", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
              "realtime_multi_process", "realtime_in_process", "realtime_recording")
 
 
@@ -126,6 +132,11 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
     """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 
+    if name == "floor":
+        from rabbit_policy.commands.ping_pong import round_trips_per_s
+
+        return {"floor_round_trips_per_s_multi_process": round(round_trips_per_s(3.0), 1),
+                "floor_round_trips_per_s_in_process": round(round_trips_per_s(3.0, same_process=True), 1)}
     if name == "startup":
         return startup()
     if name == "stop":
@@ -200,6 +211,23 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
     }
 
 
+FLOOR_RATIOS = {"lockstep_in_process_to_floor": ("lockstep_rtf_in_process", "in_process"),
+                "lockstep_multi_process_to_floor": ("lockstep_rtf_multi_process", "multi_process"),
+                "paced_to_floor": ("paced_rtf", "multi_process")}
+"""Each mode's ticks per wall second (1000 x its real-time factor) over the round trips per
+second of the ping-pong floor of its layout, measured in the same run."""
+
+
+def floor_ratios(out: dict) -> dict:
+    """:data:`FLOOR_RATIOS` of what ``out`` holds (a ratio whose parts were not measured: left out)."""
+    ratios = {}
+    for name, (rtf_key, layout) in FLOOR_RATIOS.items():
+        floor = out.get(f"floor_round_trips_per_s_{layout}")
+        if out.get(rtf_key) is not None and floor:
+            ratios[name] = round(1000.0 * out[rtf_key] / floor, 3)
+    return ratios
+
+
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -232,6 +260,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for hog in hogs:
             hog.kill()
+    out.update(floor_ratios(out))
     out.update({"duration_s": args.duration, "realtime_duration_s": args.realtime_duration, "busy_loops": args.busy,
                 "executor": "EventsExecutor"})
     print(strict_json.dumps(out))
