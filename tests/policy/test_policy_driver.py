@@ -104,3 +104,22 @@ def test_the_decision_window_is_the_spec_s_unless_the_node_is_given_one(tmp_path
         core = PolicyDriver(policy, PolicySettings(**values, decision_window=given))
         assert core.clock.window.size == window, (given, window)
 
+
+
+def test_the_initial_state_is_computed_and_sent_only_when_the_gait_changed():
+    """Classic at a constant command decides the same gait every 20 ticks: its initial state
+    (the simulator's start and reset state) is computed once and not sent again; a new gait
+    carries its own."""
+    from rabbit_hzd_controller.gait_state import state_on_gait
+
+    core = driver()
+    (first,) = core.start()
+    assert not first.same_initial_state
+    gaits = [a for tick in range(1, 41) for a in core.on_hip_velocity(tick * MS, 1.0) if isinstance(a, Gait)]
+    assert len(gaits) == 2 and all(g.same_initial_state and g.command.alpha == first.command.alpha for g in gaits)
+    assert all(g.initial_state is first.initial_state for g in gaits)
+    core.on_cmd_speed(1.3, "/cmd_speed")
+    changed = [a for tick in range(41, 81) for a in core.on_hip_velocity(tick * MS, 1.0) if isinstance(a, Gait)]
+    assert changed[0].command.alpha != first.command.alpha and not changed[0].same_initial_state
+    expected = state_on_gait(changed[0].command.alpha, 1.0)
+    assert all(np.array_equal(a, b) for a, b in zip(changed[0].initial_state, expected))

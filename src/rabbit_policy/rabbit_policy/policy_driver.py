@@ -46,6 +46,7 @@ class Gait:
     command: GaitCommand
     initial_state: tuple[np.ndarray, np.ndarray] | None
     error: str = ""  # why there is no initial state
+    same_initial_state: bool = False  # the one published with the last gait: not sent again
 
 
 @dataclass(frozen=True)
@@ -128,6 +129,7 @@ class PolicyDriver:
         self.rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         self.decisions = self.rejected_commands = self.decisions_given_up = 0
         self.last_observation: Observation | None = None
+        self._initial: tuple[tuple, float, Gait] | None = None  # (alpha, initial speed, the gait that carried it)
         self.placements = 0
         self._echoes: list[float] = []  # scheduled commands published on /cmd_speed, not yet heard back
 
@@ -251,8 +253,16 @@ class PolicyDriver:
         return self._gait(self.policy.act(observation))
 
     def _gait(self, command: GaitCommand) -> Gait:
+        """The gait to publish; its initial state computed only when alpha or the initial
+        speed changed since the last gait (``same_initial_state``: nothing new to send)."""
         self.decisions += 1
+        key = (tuple(command.alpha), self.initial_speed)
+        if self._initial is not None and self._initial[:2] == key:
+            last = self._initial[2]
+            return Gait(command, last.initial_state, last.error, same_initial_state=True)
         try:
-            return Gait(command, state_on_gait(command.alpha, self.initial_speed))
+            gait = Gait(command, state_on_gait(command.alpha, self.initial_speed))
         except (ValueError, ZeroDivisionError) as exc:
-            return Gait(command, None, str(exc))
+            gait = Gait(command, None, str(exc))
+        self._initial = (*key, gait)
+        return gait

@@ -277,7 +277,9 @@ class PolicyNode(Node):
                              if self.pairing is not None else "")
                 self._alpha_pub.publish(alpha_to_msg(alpha, signature))
                 self._kd_pub.publish(Float64(data=kd))
-                if action.initial_state is None:
+                if action.same_initial_state:
+                    pass  # the one published with an earlier gait (transient local) stands
+                elif action.initial_state is None:
                     self.get_logger().error(f"no initial state on the gait just published: {action.error}",
                                             throttle_duration_sec=5.0)
                 else:
