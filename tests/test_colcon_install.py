@@ -104,14 +104,14 @@ def test_parameters_from_a_params_file_and_the_command_line(tmp_path):
 
 
 def test_the_install_space_carries_the_package_data(install_space):
-    """The gait library and the shipped HZD-RL policy + model card are installed."""
+    """The gait library, the shipped specs with their weights, and the learned one's model card are installed."""
     site = list((install_space / "rabbit_policy" / "lib").glob("python3*/site-packages/rabbit_policy"))
     assert len(site) == 1, site
     packaged = sorted(p.name for p in (Path(__file__).resolve().parents[1] / "src" / "rabbit_policy" / "rabbit_policy"
                                        / "gaits").glob("*.json"))
     assert sorted(p.name for p in (site[0] / "gaits").glob("*.json")) == packaged  # gaits + interpolation.json
     assert "interpolation.json" in packaged and len(packaged) == 12
-    for name in ("hzd_rl_policy.pt", "MODEL_CARD.md", "evaluation.json"):
+    for name in ("MODEL_CARD.md", "evaluation.json"):
         assert (site[0] / "trained" / name).is_file(), name
     specs = Path(__file__).resolve().parents[1] / "src" / "rabbit_policy" / "rabbit_policy" / "controllers"
     shipped = sorted(p.name for p in specs.iterdir() if p.suffix in (".yaml", ".npz"))

@@ -8,7 +8,7 @@ setup(
     name=PACKAGE,
     version="0.1.0",
     packages=find_packages(exclude=["test"]),
-    package_data={'rabbit_policy': ['gaits/*.json', 'controllers/*.yaml', 'controllers/*.npz', 
+    package_data={'rabbit_policy': ['gaits/*.json', 'controllers/*.yaml', 'controllers/*.npz',
                                    'trained/*.md', 'trained/*.json']},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + PACKAGE]),

@@ -430,7 +430,7 @@ def test_the_registered_presets_are_the_runs_we_ship_and_train():
     import yaml
 
     from rabbit_policy.learning.env import PRESETS, EpisodeConfig
-    from rabbit_policy.runtime.policies import packaged_policy_file
+    from checkpoints import SHIPPED_BEFORE
     from rabbit_policy.runtime.network import PolicyCheckpoint
 
     root = Path(__file__).resolve().parents[2] / "config" / "train"
@@ -439,7 +439,7 @@ def test_the_registered_presets_are_the_runs_we_ship_and_train():
         values = yaml.safe_load((root / preset_file).read_text())
         expected = EpisodeConfig(**{k: v for k, v in values.items() if k in fields})
         assert PRESETS[name] == expected, name
-    stored = PolicyCheckpoint.load(packaged_policy_file()).info["config"]
+    stored = PolicyCheckpoint.load(SHIPPED_BEFORE).info["config"]
     assert PRESETS["shipped"] == EpisodeConfig(**{k: v for k, v in stored.items() if k in fields})
     for env_id, name in (("RabbitHZD-Shipped-v0", "shipped"), ("RabbitHZD-Recovery-v0", "recovery")):
         env = gym.make(env_id)

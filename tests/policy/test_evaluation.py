@@ -420,7 +420,7 @@ def test_judge_applies_checks_1_to_6_as_the_issue_states_them():
 
 
 @pytest.mark.parametrize("args, message", [
-    (["src/rabbit_policy/rabbit_policy/trained/hzd_rl_policy.pt", "--names", "a", "b"], "2 names for 1 policies"),
+    (["tests/data/ship_policy_2026_11_28/hzd_rl_policy.pt", "--names", "a", "b"], "2 names for 1 policies"),
     pytest.param(["README.md"], "cannot load policy file README.md", marks=pytest.mark.slow),  # imports torch
     (["no/such.pt"], "does not exist"),
 ])

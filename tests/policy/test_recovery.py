@@ -547,10 +547,10 @@ def _overlay_file(tmp_path, at_once: bool = False, policy_blend: bool = False):
     with ``--recovery-overlay-at-once``; ``policy_blend``: ``--recovery-overlay-policy-blend``),
     and without."""
     from rabbit_policy.runtime.network import PolicyCheckpoint
-    from rabbit_policy.runtime.policies import packaged_policy_file
+    from checkpoints import SHIPPED_BEFORE
 
     plain = tmp_path / "plain.pt"  # the shipped network, without any overlay it may ship with
-    checkpoint = PolicyCheckpoint.load(packaged_policy_file())
+    checkpoint = PolicyCheckpoint.load(SHIPPED_BEFORE)
     checkpoint.info.pop("recovery_overlay", None)
     checkpoint.save(plain)
     name = "overlay_policy_blend.pt" if policy_blend else "overlay_at_once.pt" if at_once else "overlay.pt"

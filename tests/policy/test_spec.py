@@ -17,7 +17,9 @@ import yaml
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_policy.runtime.policies import LibraryPolicy, PeriodicPolicy, PolicyUnavailable, packaged_policy_file
+from rabbit_policy.runtime.policies import LibraryPolicy, PeriodicPolicy, PolicyUnavailable
+
+from checkpoints import SHIPPED_BEFORE
 from rabbit_policy.spec.make import checkpoint_policy, make_policy
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 from rabbit_policy.spec import SpecError, build, load_controller, load_packaged, load_spec, packaged_spec
@@ -37,14 +39,13 @@ def _trajectory(policy) -> np.ndarray:
 
 @pytest.mark.slow
 def test_the_shipped_specs_walk_as_the_controllers_assembled_before_them_bit_for_bit():
-    """The specs were written from the code's constants and the shipped checkpoint: built,
-    each walks exactly as the controller the code assembled from them (the learned one read
-    from its ``.pt`` with torch)."""
+    """Classic's and the recovery controller's specs were written from the code's constants:
+    built, each walks exactly as the controller the code assembles from them. (The learned one
+    is reproduce.py's output: test_training.py and test_reproduce.py hold it.)"""
     library = GaitLibrary.load()
     before = {"classic": PeriodicPolicy(LibraryPolicy(library, "interpolate"), 20),
-              "recovery": RecoveryPolicy(LibraryPolicy(library, "interpolate"), decision_period=20),
-              "learned": checkpoint_policy(packaged_policy_file())}
-    for kind in KINDS:
+              "recovery": RecoveryPolicy(LibraryPolicy(library, "interpolate"), decision_period=20)}
+    for kind in before:
         spec_built = load_packaged(kind)
         assert np.array_equal(_trajectory(spec_built), _trajectory(before[kind])), kind
         assert spec_built.controller_settings == spec_built.spec.controller.settings()
@@ -72,7 +73,7 @@ def test_no_code_default_moves_a_shipped_controller(monkeypatch):
     assert RecoveryConfig().offsets == (-0.3, 0.1, 0.2, -0.4) and ControllerConfig().within_step_blend == 0.5
     from_defaults = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), RecoveryConfig(), 20)
     assert not np.array_equal(_trajectory(from_defaults), shipped["recovery"])
-    assert not np.array_equal(_trajectory(checkpoint_policy(packaged_policy_file())), shipped["learned"])
+    assert not np.array_equal(_trajectory(checkpoint_policy(SHIPPED_BEFORE)), shipped["learned"])
     for kind in ("recovery", "learned"):
         assert np.array_equal(_trajectory(load_packaged(kind)), shipped[kind]), kind
 

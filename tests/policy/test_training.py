@@ -18,7 +18,9 @@ from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS
 from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count
-from rabbit_policy.runtime.policies import LibraryPolicy, packaged_policy_file
+from rabbit_policy.runtime.policies import LibraryPolicy
+
+from checkpoints import SHIPPED_BEFORE
 from rabbit_policy.spec.make import checkpoint_policy, make_policy
 from rabbit_policy.experiment.loop import walk, walk_gait
 from rabbit_policy.experiment.result import Touchdown, WalkResult
@@ -177,12 +179,35 @@ def test_train_ppo_logs_its_losses_and_refuses_a_foreign_resume(tmp_path):
 
 
 # ------------------------------------------------------------------- shipped policy
-def test_a_learned_policy_is_shipped_with_a_model_card():
-    path = packaged_policy_file()
+def test_the_learned_controller_shipped_is_what_reproduce_wrote_with_its_card_and_evaluation():
+    """The packaged learned spec is ``reproduce.py --preset shipped``'s output: its provenance
+    names the preset, a clean commit, every seed's run and the verdict; its card (beside it in
+    ``trained/``) is that run's, its acceptance rows the stored evaluation's; the screen's
+    evidence (docs/learning/zero_start_seeds/screen.json) names what shipped."""
+    from rabbit_policy.spec import load_spec, packaged_spec
+
+    spec = load_spec(packaged_spec("learned"))
+    provenance = spec.provenance
+    assert provenance["preset"].endswith("config/reproduce/shipped.yaml") and len(provenance["code_commit"]) == 40
+    assert [r["seed"] for r in provenance["runs"]] == [0, 1, 2] and provenance["commands"][0].startswith(
+        "scripts/reproduce.py --preset shipped ")
+    trained = packaged_spec("learned").parent.parent / "trained"
+    card = (trained / "MODEL_CARD.md").read_text()
+    evaluation = json.loads((trained / "evaluation.json").read_text())
+    for c in evaluation["acceptance"]["constant"]:
+        assert f"| {c['speed']:.2f} | {c['mean_speed_last']:.3f} | {c['error']:+.3f} |" in card
+    assert f"weights `{spec.network.weights.file}`" in card and provenance["commands"][0] in card
+    screen = json.loads((ROOT / "docs" / "learning" / "zero_start_seeds" / "screen.json").read_text())
+    assert screen["shipped"] == provenance["shipped"] and screen["beats_start"] == provenance["verdict"]["ships"]
+    shipped_row = next(r for r in screen["candidates"] if r["candidate"] == screen["shipped"])
+    assert evaluation["rates"] == shipped_row["rates"]
+
+
+def test_the_checkpoint_shipped_before_has_its_model_card():
+    path = SHIPPED_BEFORE
     assert path.is_file()
     assert (path.parent / "MODEL_CARD.md").is_file()
-    policy = checkpoint_policy(path)  # the training checkpoint the shipped spec was written from
-    assert "hzd_rl_policy.pt" in make_policy("learned").spec.provenance["from"]
+    policy = checkpoint_policy(path)
     info = policy.checkpoint.info
     assert info["algorithm"] in ("es", "ppo") and info["parameters"] == parameter_count(policy.checkpoint.network())
     card = (path.parent / "MODEL_CARD.md").read_text()
@@ -193,14 +218,14 @@ def test_a_learned_policy_is_shipped_with_a_model_card():
 
 
 def _shipped_tracking() -> dict:
-    stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["tracking"]
+    stored = json.loads((SHIPPED_BEFORE.parent / "evaluation.json").read_text())["tracking"]
     return stored[next(k for k in stored if "shipped" in k)]
 
 
 def test_the_model_card_states_the_stored_evaluation():
     """MODEL_CARD.md's tracking row for the shipped policy is evaluation.json's, as
     ship_policy wrote both (what the card says is what was measured)."""
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
     row = next(line for line in card.splitlines() if line.startswith("| HZD-RL (es, shipped) | ") and "False" not in line)
     cells = [c.strip() for c in row.strip("|").split("|")[1:]]
     assert cells == [f"{c['error']:+.3f}" for c in _shipped_tracking()["constant"]]
@@ -214,7 +239,7 @@ def test_the_shipped_policy_walks_as_its_card_says_over_a_short_horizon(speed):
     within 0.05 m/s of the card's 30 s figure. The card's own digits come from one machine
     and are not compared digit for digit."""
     stored = next(c for c in _shipped_tracking()["constant"] if c["speed"] == speed)
-    result = walk(make_policy("learned"), Scenario.constant(speed), 8.0)
+    result = walk(checkpoint_policy(SHIPPED_BEFORE), Scenario.constant(speed), 8.0)
     assert not result.failed and not stored["fell"]
     assert result.mean_speed(4.0, 8.0) == pytest.approx(stored["mean_speed_last"], abs=0.05)
 
@@ -228,11 +253,11 @@ def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy
     import yaml
 
     from rabbit_policy.commands.ship_policy import card_header
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
     assert card.startswith("---\n")
     header = card.split("---\n")[1]
-    stored = json.loads((packaged_policy_file().parent / "evaluation.json").read_text())["acceptance_1_6"]
-    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
+    stored = json.loads((SHIPPED_BEFORE.parent / "evaluation.json").read_text())["acceptance_1_6"]
+    info = checkpoint_policy(SHIPPED_BEFORE).checkpoint.info
     assert "---\n" + header + "---\n\n" == "\n".join(card_header(info, list(stored.items()))) + "\n"
     meta = yaml.safe_load(header)
     assert meta["license"] == "apache-2.0" and "reinforcement-learning" in meta["tags"]
@@ -245,7 +270,7 @@ def test_the_model_card_opens_with_the_model_hubs_metadata_of_the_shipped_policy
 
 
 def test_ship_policy_refuses_a_policy_failing_checks_1_to_6_and_writes_nothing(tmp_path):
-    target = packaged_policy_file()
+    target = SHIPPED_BEFORE
     before = target.read_bytes()
     refused = run_script("scripts/ship_policy.py", str(target), "--quick", "--dry-run", timeout=600)
     assert refused.returncode == 1, refused.stderr[-2000:]
@@ -268,8 +293,8 @@ def test_the_model_cards_network_paragraph_is_the_shipped_checkpoints():
     checkpoint's info (its speed integral parsed as the controller parses it)."""
     from rabbit_policy.commands.ship_policy import network_text
 
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
-    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
+    info = checkpoint_policy(SHIPPED_BEFORE).checkpoint.info
     lines = [line for line in network_text(info) if line]
     assert len(lines) >= 3 and all(line in card for line in lines), [line for line in lines if line not in card]
 
@@ -286,7 +311,7 @@ def test_ship_policy_sets_the_integral_rules_on_the_shipped_copy_and_the_card_sa
     from rabbit_policy.runtime.speed_integral import WindupDecay
 
     from rabbit_policy.commands.ship_policy import network_text, rules_set_after_training, with_integral_rules
-    trained = PolicyCheckpoint.load(packaged_policy_file())  # the network as its run left it: no rule set after
+    trained = PolicyCheckpoint.load(SHIPPED_BEFORE)  # the network as its run left it: no rule set after
     trained.info["memory"].pop("windup_decay", None)
     trained.info["memory"].pop("feedforward", None)
     trained.info.pop("recovery_overlay", None)
@@ -446,14 +471,14 @@ def test_train_defaults_are_the_first_shipped_run_and_the_card_command_rebuilds_
     import shlex
 
     train = importlib.import_module("rabbit_policy.commands.train")
-    info = PolicyCheckpoint.load(packaged_policy_file()).info
+    info = PolicyCheckpoint.load(SHIPPED_BEFORE).info
     defaults = train.parse_config(["--algo", "es", "--out", "runs/X"])
     first = train.parse_config(["--config", str(ROOT / "config/train/first_shipped_es.yaml"), "--out", "runs/X"])
     assert (defaults.trainer, defaults.workers, defaults.warm_start, defaults.eval_every) == (
         first.trainer, first.workers, first.warm_start, first.eval_every)
     assert (defaults.trainer.features, defaults.trainer.action) == ("paper", "direct")
     shipped = {**NEWER_FIELDS, **info["config"]}  # older files lack these
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py ([^`]+)`", card).group(1)
     assert train.parse_config(shlex.split(command)).trainer.to_dict() == shipped
 
@@ -468,10 +493,10 @@ def _train_module():
 def test_the_shipped_preset_is_the_shipped_policys_run_and_every_preset_parses(tmp_path):
     train = _train_module()
     preset = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x"])
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
     command = re.search(r"regenerate: `scripts/train.py (.*?) --out runs/X`", card).group(1).split()
     assert preset == train.parse_config([*command, "--out", "runs/x"])
-    trained = {**NEWER_FIELDS, **checkpoint_policy(packaged_policy_file()).checkpoint.info["config"]}  # what trained it
+    trained = {**NEWER_FIELDS, **checkpoint_policy(SHIPPED_BEFORE).checkpoint.info["config"]}  # what trained it
     assert preset.trainer.to_dict() == trained
     overridden = train.parse_config(["--config", str(ROOT / "config/train/shipped_es.yaml"), "--out", "runs/x",
                                      "--iterations", "3"])
@@ -530,17 +555,17 @@ def test_ship_policy_ships_the_checkpoints_spec_and_a_regenerate_line_that_runs(
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.spec import load_controller, load_spec
 
-    write_spec(packaged_policy_file(), tmp_path, "scripts/ship_policy.py X --out DIR", {"code_commit": "abc"})
+    write_spec(SHIPPED_BEFORE, tmp_path, "scripts/ship_policy.py X --out DIR", {"code_commit": "abc"})
     spec = load_spec(tmp_path / "learned.yaml")
     assert spec.provenance["written_by"] == "scripts/ship_policy.py X --out DIR"
     assert spec.provenance["code_commit"] == "abc"
     scenario = Scenario.constant(1.0, pushes=(Push(2.4, -120.0, 0.1),))
     shipped, checkpoint = (walk(p, scenario, 4.0, record_state=True) for p in
-                           (load_controller(tmp_path / "learned.yaml"), checkpoint_policy(packaged_policy_file())))
+                           (load_controller(tmp_path / "learned.yaml"), checkpoint_policy(SHIPPED_BEFORE)))
     assert np.array_equal(shipped.qpos, checkpoint.qpos)
-    info = checkpoint_policy(packaged_policy_file()).checkpoint.info
+    info = checkpoint_policy(SHIPPED_BEFORE).checkpoint.info
     assert screened_through(info, "screen_policies.py runs/X/evaluated/{00190,00255,00320}.pt") == 320
     assert screened_through(info, "") == info["iteration"] == 255
     assert "--iterations 320 " in train_command(info, True, 320)
-    card = (packaged_policy_file().parent / "MODEL_CARD.md").read_text()
+    card = (SHIPPED_BEFORE.parent / "MODEL_CARD.md").read_text()
     assert "--iterations 320 " in card and "--recovery-overlay-policy-blend --allow-failing`" in card

@@ -123,21 +123,23 @@ def es_rate(config, generations: int = 2) -> dict:
 
 
 def projection(per_core_rate: float, efficiency: float, startup_s: float) -> dict:
-    """Projected wall time (s) of the shipped policy's ES generations on N cores (its
-    checkpoint's generations and env steps; the acceptance evaluations between them not
-    included): each generation ceil(tasks / N) waves of one task's env steps at
-    ``per_core_rate`` x ``efficiency`` (the measured 2-worker efficiency, the waves taken
-    out), plus the backend's start-up."""
-    from rabbit_policy.runtime.network import PolicyCheckpoint
-    from rabbit_policy.runtime.policies import packaged_policy_file
+    """Projected wall time (s) of one seed of the shipped preset's ES generations on N cores
+    (``config/reproduce/shipped.yaml``; the generations and env steps of seed 0's run as the
+    packaged learned spec records it, the acceptance evaluations between them not included):
+    each generation ceil(tasks / N) waves of one task's env steps at ``per_core_rate`` x
+    ``efficiency`` (the measured 2-worker efficiency, the waves taken out), plus the
+    backend's start-up."""
+    from rabbit_policy.commands.reproduce import load_preset
+    from rabbit_policy.spec import load_spec, packaged_spec
 
-    info = PolicyCheckpoint.load(packaged_policy_file()).info
-    tasks = 2 * info["config"]["pairs"] + 1
-    steps_per_task = info["env_steps"] / (info["iteration"] * tasks)
+    train = load_preset("shipped")["train"]
+    run = load_spec(packaged_spec("learned")).provenance["runs"][0]
+    tasks = 2 * train["pairs"] + 1
+    steps_per_task = run["env_steps"] / (run["iterations"] * tasks)
     task_s = steps_per_task / (per_core_rate * efficiency)
-    return {"generations": info["iteration"], "env_steps": info["env_steps"], "tasks_per_generation": tasks,
-            "measured_wall_s": info["wall_s"], "measured_workers": info["workers"],
-            "wall_s_on_cores": {str(n): round(startup_s + info["iteration"] * math.ceil(tasks / n) * task_s, 1)
+    return {"generations": run["iterations"], "env_steps": run["env_steps"], "tasks_per_generation": tasks,
+            "measured_wall_s": run["wall_s"], "measured_workers": train["workers"],
+            "wall_s_on_cores": {str(n): round(startup_s + run["iterations"] * math.ceil(tasks / n) * task_s, 1)
                                 for n in PROJECTION_CORES}}
 
 

@@ -9,9 +9,8 @@ sequences, push margins against classic HZD's and three scenarios beyond them, m
 errors, Poincaré) on the policy and on classic HZD's best variant (the calibrated library,
 every 20 ticks) for comparison, and the 9-speed tracking table (``acceptance``) on the
 policy, each ``--compare`` file, the network the run started from (its warm start,
-rebuilt: what training added) and the classic library. Then writes, in ``--out DIR`` (default:
-the package, ``rabbit_policy/trained`` for the record and ``rabbit_policy/controllers`` for the
-spec that runs): the checkpoint as ``hzd_rl_policy.pt``, ``MODEL_CARD.md`` and
+rebuilt: what training added) and the classic library. Then writes, in ``--out DIR`` (never into the package: its
+learned controller is what ``reproduce.py --preset shipped`` writes): the checkpoint as ``hzd_rl_policy.pt``, ``MODEL_CARD.md`` and
 ``evaluation.json`` (every figure: algorithm, seed, workers, training time and steps from the
 checkpoint's ``info``, the exact commands, the tables) and its spec ``learned.yaml`` with its
 weights (``rabbit_policy.spec.convert.learned_spec``: the controller that walk.py, run_stack
@@ -40,10 +39,6 @@ from rabbit_policy.runtime.recovery import RecoveryConfig
 
 FEEDFORWARD_SPEEDS = tuple(round(0.7 + 0.025 * i, 3) for i in range(33))
 """``--integral-feedforward``'s table speeds (m/s): the library's range, every 0.025."""
-TARGET = Path(__file__).resolve().parents[1] / "trained"
-"""Where the shipped checkpoint, card and evaluation go without ``--out``."""
-SPEC_TARGET = Path(__file__).resolve().parents[1] / "controllers"
-"""Where the shipped spec and its weights go without ``--out`` (the packaged ``learned.yaml``)."""
 """Where ``--ship`` writes: the package's ``rabbit_policy/trained`` (editable in a clone)."""
 
 
@@ -492,13 +487,16 @@ def main(argv: list[str] | None = None) -> int:
                              "runtime.alpha_blend.AlphaBlend), so only the rule's offsets act at once "
                              "(OverlayConfig.policy_blend)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
-                        help="write the checkpoint, card, evaluation and spec here (default: into the package, "
-                             "replacing the shipped learned controller)")
+                        help="write the checkpoint, card, evaluation and spec here (needed unless --dry-run: the "
+                             "package's learned controller is what scripts/reproduce.py --preset shipped writes)")
     parser.add_argument("--screened", default="", metavar="COMMAND",
                         help="the scripts/screen_policies.py command that chose POLICY among a run's evaluated "
                              "policies (train.py --keep-evaluated), for the card")
     add_backend_arguments(parser, progress=True)
     args = parser.parse_args(argv)
+    if args.out is None and not args.dry_run:
+        parser.error("--out DIR is needed (or --dry-run): the package's learned controller is what "
+                     "scripts/reproduce.py --preset shipped writes")
     ran_on: dict = {}
     if not args.dry_run:  # before the measurements: a refused tree costs nothing
         from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
@@ -585,7 +583,7 @@ def ship(parser, args, argv: list[str] | None, scratch: Path) -> int:
               "(--allow-failing to ship it anyway, the card saying so)", file=sys.stderr)
         return 1
     if not args.dry_run:
-        record, spec_dir = (args.out, args.out) if args.out is not None else (TARGET, SPEC_TARGET)
+        record = spec_dir = args.out
         record.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(source, record / "hzd_rl_policy.pt")
         (record / "MODEL_CARD.md").write_text(card)

@@ -24,8 +24,6 @@ from __future__ import annotations
 
 import copy
 import sys
-from importlib.resources import files
-from pathlib import Path
 
 import numpy as np
 
@@ -40,7 +38,7 @@ from rabbit_policy.runtime.speed_window import Observation
 __all__ = ["CLASSIC_DECISION_PERIOD", "CONTROLLERS", "CONTROLLER_ALIASES", "CONTROLLER_CHOICES",
            "DEFAULT_DECISION_WINDOW", "GaitCommand", "LIBRARY_MODES", "LibraryPolicy",
            "NetworkPolicy", "PeriodicPolicy", "Policy", "PolicyUnavailable", "RateLimitedPolicy", "controller_name",
-           "controller_settings", "copy_policy", "decision_period", "first_command", "packaged_policy_file",
+           "controller_settings", "copy_policy", "decision_period", "first_command",
            "read_only_memo", "reset_policy"]
 
 CONTROLLERS = ("classic", "learned", "recovery")
@@ -81,11 +79,6 @@ def copy_policy(policy: Policy) -> Policy:
     """An independent copy of ``policy`` and its decision state, sharing what no decision
     changes (:func:`read_only_memo`)."""
     return copy.deepcopy(policy, read_only_memo(policy))
-
-
-def packaged_policy_file() -> Path:
-    """Where the shipped learned policy lives (it may not exist yet)."""
-    return Path(str(files("rabbit_policy") / "trained" / "hzd_rl_policy.pt"))
 
 
 class NetworkPolicy:
