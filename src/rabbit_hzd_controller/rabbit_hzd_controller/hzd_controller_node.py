@@ -114,6 +114,13 @@ MAX_POLICIES = 8
 """Policy instances whose signed settings (and one early gait each) a keyed controller keeps."""
 
 
+def _keep_newest(entries: dict, key: str, value) -> None:
+    """``entries[key] = value``, the oldest entries dropped beyond :data:`MAX_POLICIES`."""
+    entries[key] = value
+    while len(entries) > MAX_POLICIES:
+        entries.pop(next(iter(entries)))
+
+
 def _setting(value) -> str:
     return ",".join(f"{v:g}" for v in value) if isinstance(value, tuple) else f"{value:g}"
 
@@ -268,9 +275,7 @@ class HZDControllerNode(Node):
                                              "bag, or a second policy)"))
                 return
             if source not in self._settings_of:  # held until its settings come: none of its gaits runs without
-                self._early[source] = msg
-                while len(self._early) > MAX_POLICIES:
-                    self._early.pop(next(iter(self._early)))
+                _keep_newest(self._early, source, msg)
                 return
             if not self._gait_order.take(source, count):
                 self._refuse_gait(ValueError(f"gait {count} of {source} came again after a later one"))
@@ -336,9 +341,7 @@ class HZDControllerNode(Node):
         if source is None:
             self._adopt(settings)
         else:
-            self._settings_of[source] = settings
-            while len(self._settings_of) > MAX_POLICIES:
-                self._settings_of.pop(next(iter(self._settings_of)))
+            _keep_newest(self._settings_of, source, settings)
             if source == self._policy:
                 self._adopt(settings)
         if self.sync.follow_policy_timing:

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Mapping, Sequence
 
+from .decision_ticks import SIGNATURE_FIELD
+
 TAG_SEPARATOR = "#"
 MIN_KEY_CHARS = 16
 MAX_KEY_BYTES = 64  # BLAKE2b's longest key
@@ -100,12 +102,12 @@ class PairingKey:
     def sign_settings(self, source: str, text: str) -> str:
         """``text`` (a ``/hzd/gait_timing`` announcement) signed by policy instance ``source``:
         ``text signed=<source>:<tag>``, the tag the MAC of both."""
-        return f"{text} signed={source}:{self._settings_tag(source, text)}"
+        return f"{text} {SIGNATURE_FIELD}{source}:{self._settings_tag(source, text)}"
 
     def verify_settings(self, signed: str) -> str:
         """The policy instance that signed the announcement ``signed`` with this key;
         ``ValueError`` saying why not (unsigned, malformed, another key, or changed since)."""
-        text, separator, field = signed.rpartition(" signed=")
+        text, separator, field = signed.rpartition(f" {SIGNATURE_FIELD}")
         source, colon, tag = field.rpartition(":")
         if not separator or not colon or not source:
             raise ValueError("the controller settings are not signed (their policy runs without this stack's "

@@ -16,6 +16,8 @@ On top of either variant: the foot-ground Coulomb friction coefficient (``fricti
 
 from __future__ import annotations
 
+import functools
+
 import math
 from dataclasses import dataclass, field
 from importlib.resources import as_file, files
@@ -80,9 +82,11 @@ def model_path() -> Path:
         return Path(path)
 
 
+@functools.lru_cache(maxsize=1)
 def model_sha256() -> str:
     """SHA-256 of the packaged model (``models/*.xml`` by name and content, in name order):
-    the robot a controller spec was made for (its leg geometry and 1 ms tick are the model's)."""
+    the robot a controller spec was made for (its leg geometry and 1 ms tick are the model's).
+    Read once per process (every spec build checks it)."""
     import hashlib
 
     digest = hashlib.sha256()

@@ -36,7 +36,6 @@ a resumed run starts fresh episodes).
 from __future__ import annotations
 
 import csv
-import hashlib
 import os
 import signal
 import sys
@@ -170,9 +169,10 @@ def train(args: TrainingConfig) -> int:
         from rabbit_policy.runtime.actions import ActionBounds
         from rabbit_policy.runtime.network import spec_network
         from rabbit_policy.spec import load_controller
+        from rabbit_policy.spec.files import file_sha256
 
         deployed = load_controller(spec_file)
-        spec_sha256 = hashlib.sha256(Path(spec_file).read_bytes()).hexdigest()
+        spec_sha256 = file_sha256(spec_file)
         net, mse = spec_network(deployed.forward), None
         bounds = ActionBounds(net.low.numpy().astype(float), net.high.numpy().astype(float))
         features, action = deployed.spec.network.features, "spec"

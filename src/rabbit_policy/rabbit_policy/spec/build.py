@@ -22,9 +22,9 @@ from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
-from rabbit_sim.model import model_sha256
 from rabbit_policy.spec.schema import (ControllerSpec, FeedforwardSpec, IntegralSpec, NetworkSpec, SpecError,
                                        WindupDecaySpec, load_spec)
+from rabbit_sim.model import model_sha256
 
 
 def load_controller(path: str | Path) -> Policy:

@@ -14,16 +14,17 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.experiment.provenance import code_commit
-from rabbit_sim.model import model_sha256
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
+from rabbit_policy.runtime.forward import NetworkForward
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
-from rabbit_policy.spec.build import integral_spec
+from rabbit_policy.spec.build import integral_spec, load_controller
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
                                        LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec,
-                                       dump_spec)
+                                       dump_spec, load_spec, parse_spec)
+from rabbit_sim.model import model_sha256
 
 RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""
@@ -124,8 +125,6 @@ def upgrade_spec(path: str | Path) -> ControllerSpec:
     comment lines kept. A version 2 file is left as it is. Returns the spec."""
     import yaml
 
-    from rabbit_policy.spec.schema import load_spec, parse_spec
-
     path = Path(path)
     text = path.read_text()
     data = yaml.safe_load(text)
@@ -152,7 +151,6 @@ def restarted_spec(spec_file: str | Path, seed: int, path: Path) -> ControllerSp
     for training (``reproduce.py``'s ``start: zero``)."""
     from rabbit_policy.learning.warm_start import restart_network
     from rabbit_policy.runtime.network import spec_network
-    from rabbit_policy.spec.build import load_controller
 
     source = Path(spec_file).resolve()
     net = restart_network(spec_network(load_controller(source).forward), seed)
@@ -165,11 +163,6 @@ def trained_spec(spec_file: str | Path, net, path: Path, provenance: dict) -> Co
     """Write the spec ``spec_file`` with ``net``'s weights (a torch ``HZDPolicyNet`` trained
     from it) as ``path``, its weights file beside it; the gait library by an absolute path
     unless packaged. Returns the spec written."""
-    from dataclasses import replace
-
-    from rabbit_policy.runtime.forward import NetworkForward
-    from rabbit_policy.spec.schema import dump_spec, load_spec
-
     source = Path(spec_file).resolve()
     spec = load_spec(source)
     forward = NetworkForward.of(net)

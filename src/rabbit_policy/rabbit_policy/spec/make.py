@@ -5,7 +5,6 @@ scripts, training and evaluation get their controllers here."""
 
 from __future__ import annotations
 
-import hashlib
 from pathlib import Path
 
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
@@ -14,7 +13,7 @@ from rabbit_policy.runtime.gait_command import Policy, PolicyUnavailable
 from rabbit_policy.runtime.policies import NetworkPolicy, controller_name
 from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, check_gain
 from rabbit_policy.spec.build import build
-from rabbit_policy.spec.files import PACKAGED, packaged_spec, weights_spec_of
+from rabbit_policy.spec.files import PACKAGED, file_sha256, packaged_spec, weights_spec_of
 from rabbit_policy.spec.schema import SpecError, WeightsSpec, load_spec
 from rabbit_policy.spec.variants import controller_spec
 
@@ -111,7 +110,7 @@ def spec_record(kind: str, policy_file: str | Path | None = None) -> dict[str, s
     """The file a controller was built from, ``{"file", "sha256"}``: ``policy_file`` (a spec or
     a checkpoint), else the packaged spec of ``kind`` (a run's JSON names what ran)."""
     path = Path(policy_file) if policy_file else packaged_spec(controller_name(kind))
-    return {"file": str(path.resolve()), "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
+    return {"file": str(path.resolve()), "sha256": file_sha256(path)}
 
 
 def spec_kind(path: str | Path) -> str:
