@@ -1023,13 +1023,13 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
     # outruns it: its figures are not compared here; the bag has every state)
 
 
-def _state(t: float, x: float) -> JointState:
-    from rabbit_msgs_py.conversions import stamp_from_ns
+def _state(t: float, x: float):
+    """A one-state ``/sim/state_batch`` message: the state at ``t`` s with the hip at ``x`` m."""
+    import array
 
-    msg = JointState()
-    msg.header.stamp = stamp_from_ns(round(t * 1e9))
-    msg.position, msg.effort = [x, 0.75, 0.0, 0.0, 0.0, 0.0, 0.0], [0.0] * 7
-    return msg
+    from rabbit_msgs_py.conversions import state_batch_to_msg
+
+    return state_batch_to_msg(array.array("d", [round(t * 1e9), x, 0.75] + [0.0] * 19), 1)
 
 
 def _step(t: float):
@@ -1053,7 +1053,7 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
         late = module.Supervisor(config, context=context)
         ticks = np.round(np.arange(0.0, 3.5005, 0.001), 3)
         for t in ticks:
-            late._on_state(_state(t, t))
+            late._on_batch(_state(t, t))
             if t in (0.5, 1.0):
                 late._count_step(_step(t - 0.001))
         assert not late.stalled and late._suspected is not None and not late.done  # suspected, not concluded
@@ -1066,7 +1066,7 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
 
         stalled = module.Supervisor(config, context=context)
         for t in ticks:
-            stalled._on_state(_state(t, t))
+            stalled._on_batch(_state(t, t))
             if t == 1.0:
                 stalled._count_step(_step(t - 0.001))
         assert not stalled.stalled
@@ -1078,7 +1078,7 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
         gappy = module.Supervisor(config, context=context)  # it missed the states around the stall (load)
         for t in ticks:
             if not 2.95 < t < 3.033:
-                gappy._on_state(_state(t, t))
+                gappy._on_batch(_state(t, t))
             if t == 1.0:
                 gappy._count_step(_step(t - 0.001))
         time.sleep(0.3)
@@ -1097,7 +1097,7 @@ def test_the_supervisor_counts_sim_time_in_the_stamps_integer_ns():
     with ros_context() as (context, _executor):
         supervisor = module.Supervisor(StackConfig(duration=0.3004, schedule=((0.0, 1.0),)), context=context)
         for n in range(301):
-            supervisor._on_state(_state(n / 1000, n / 1000))
+            supervisor._on_batch(_state(n / 1000, n / 1000))
             if n == 100:
                 supervisor._count_step(_step(0.099))
             assert supervisor.done == (n == 300), n
@@ -1146,35 +1146,47 @@ def context_node(context):
     return rclpy.create_node("reset_publisher", context=context)
 
 
-def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_up_logged(tmp_path):
+@pytest.mark.parametrize("hip_source", ["state_batch", "hip_velocity"])
+def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_up_logged(tmp_path, hip_source):
     """A controller that publishes no /hzd/phase (another one, or none): policy_node keeps
     running, gives each due decision up once states 50 ticks newer are in (counted, logged)
-    and decides again as soon as the phase comes."""
-    from geometry_msgs.msg import TwistStamped
+    and decides again as soon as the phase comes; the states from the simulator's batches or
+    from the 1 kHz topics alike."""
+    import array
 
-    from rabbit_msgs_py.conversions import phase_to_msg, stamp_from_ns
+    from geometry_msgs.msg import TwistStamped
+    from std_msgs.msg import Float64MultiArray
+
+    from rabbit_msgs_py.conversions import phase_to_msg, stamp_from_ns, state_batch_to_msg
     from rabbit_msgs_py.joints import JOINT_NAMES
 
     path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
     with ros_context() as (context, executor):
-        policy = PolicyNode(context=context, policy="learned", policy_file=path)
+        policy = PolicyNode(context=context, policy="learned", policy_file=path, hip_source=hip_source)
         user = context_node(context)
         hip = user.create_publisher(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
         states = user.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        batches = user.create_publisher(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
         phase = user.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
         for node in (policy, user):
             executor.add_node(node)
+        inputs = ((topics.STATE_BATCH,) if hip_source == "state_batch" else (topics.HIP_VELOCITY, topics.JOINT_STATES))
         assert spin_until(executor, lambda: all(user.count_subscribers("/" + topic) == 1 for topic in
-                                                (topics.HIP_VELOCITY, topics.JOINT_STATES, topics.PHASE)))
+                                                inputs + (topics.PHASE,)))
         assert policy.decisions == 1  # the start
 
         def send(tick: int, with_phase: bool) -> None:
             stamp = stamp_from_ns(tick * 1_000_000)
             if with_phase:  # the controller's phase on the state before
                 phase.publish(phase_to_msg(0.5, 2.0, stamp_from_ns((tick - 1) * 1_000_000), "left_foot"))
-            states.publish(JointState(header=Header(stamp=stamp), name=list(JOINT_NAMES),
-                                      position=[0.1 * tick / 1000, 0.8, 0.05, 0.2, 0.3, -0.2, 0.4],
-                                      velocity=[1.0, 0.0, -0.1, 0.0, 0.0, 0.0, 0.0]))
+            position = [0.1 * tick / 1000, 0.8, 0.05, 0.2, 0.3, -0.2, 0.4]
+            velocity = [1.0, 0.0, -0.1, 0.0, 0.0, 0.0, 0.0]
+            if hip_source == "state_batch":
+                batches.publish(state_batch_to_msg(array.array("d", [tick * 1_000_000] + position + velocity
+                                                               + [0.0] * 7), 1))
+                return
+            states.publish(JointState(header=Header(stamp=stamp), name=list(JOINT_NAMES), position=position,
+                                      velocity=velocity))
             msg = TwistStamped()
             msg.header.stamp = stamp
             msg.twist.linear.x = 1.0

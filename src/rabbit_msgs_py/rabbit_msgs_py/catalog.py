@@ -40,6 +40,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
     for spec in (
         TopicSpec(topics.JOINT_STATES, JointState, qos.STREAM_QOS),
         TopicSpec(topics.HIP_VELOCITY, TwistStamped, qos.HIP_VELOCITY_QOS),
+        TopicSpec(topics.STATE_BATCH, Float64MultiArray, qos.BATCH_QOS),
         TopicSpec(topics.CLOCK, Clock, qos.CLOCK_QOS),
         TopicSpec(topics.FALLEN, Bool, qos.STATUS_QOS),
         TopicSpec(topics.JOINT_TORQUES, JointState, qos.TORQUE_QOS),

@@ -12,19 +12,23 @@ Joint torques travel as a *reply*: a sensor_msgs/JointState naming the four
 the ``/joint_states`` message they answer and ``header.frame_id`` = the id of the
 controller instance that computed them (:func:`controller_id`). The simulator applies a
 reply only to the state it answers and only from the one controller it is paired with.
+A state batch (``/sim/state_batch``) is a Float64MultiArray of ``n`` rows of
+:data:`BATCH_FIELDS` (``dim[0] = ("state", n, 22 n)``, ``dim[1] = ("stamp_ns,position[7],velocity[7],effort[7]",
+22, 22)``): each row one state as ``/joint_states`` sends it, the stamp as integer ns of sim time.
 """
 
 from __future__ import annotations
 
+import array
 import math
 import os
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
-from .joints import ACTUATED_JOINTS, JOINT_NAMES
+from .joints import ACTUATED_JOINTS, JOINT_NAMES, N_JOINTS
 from .runtime import one_line
 
 ALPHA_OUTPUTS = 4
@@ -173,6 +177,57 @@ def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocit
     if not all(math.isfinite(v) for v in q) or not all(math.isfinite(v) for v in dq):
         raise MessageError("joint state contains NaN or infinite values")
     return q, dq
+
+
+BATCH_FIELDS = 1 + 3 * N_JOINTS
+"""Values per state in a state batch: the stamp (ns), then position, velocity and effort of
+the 7 joints (``JOINT_NAMES`` order; m, rad, m/s, rad/s, N m)."""
+BATCH_DIMENSIONS = ("state", "stamp_ns,position[7],velocity[7],effort[7]")
+MAX_BATCH_STAMP = 2 ** 53
+"""ns: stamps up to here (104 days of sim time) are exact in a float64."""
+
+
+class BatchState(NamedTuple):
+    """One row of a state batch: stamp (ns of sim time), and the 7 joints' positions,
+    velocities and efforts (``JOINT_NAMES`` order)."""
+
+    stamp: int
+    position: Sequence[float]
+    velocity: Sequence[float]
+    effort: Sequence[float]
+
+
+def state_batch_to_msg(rows: array.array, count: int) -> Float64MultiArray:
+    """``count`` states, :data:`BATCH_FIELDS` values each (``rows``: float64, row after row)
+    -> the ``/sim/state_batch`` message (layout in the module docstring)."""
+    layout = MultiArrayLayout(dim=[
+        MultiArrayDimension(label=BATCH_DIMENSIONS[0], size=count, stride=count * BATCH_FIELDS),
+        MultiArrayDimension(label=BATCH_DIMENSIONS[1], size=BATCH_FIELDS, stride=BATCH_FIELDS)], data_offset=0)
+    return Float64MultiArray(layout=layout, data=rows)
+
+
+def state_batch_from_msg(msg: Float64MultiArray) -> list[BatchState]:
+    """A ``/sim/state_batch`` message -> its states, oldest first; raises
+    :class:`MessageError` on a wrong layout, a stamp that is not a whole number of ns in
+    [0, 2^53], or a value that is not finite."""
+    dims = [(d.label, d.size) for d in msg.layout.dim]
+    data = msg.data
+    count = len(data) // BATCH_FIELDS
+    if dims != [(BATCH_DIMENSIONS[0], count), (BATCH_DIMENSIONS[1], BATCH_FIELDS)] or msg.layout.data_offset != 0 \
+            or len(data) != count * BATCH_FIELDS:
+        raise MessageError(f"a state batch is n x {BATCH_FIELDS} values labelled {list(BATCH_DIMENSIONS)}, got "
+                           f"{len(data)} values in {short(dims, 100)}")
+    if not all(math.isfinite(v) for v in data):
+        raise MessageError("state batch contains NaN or infinite values")
+    states = []
+    j = N_JOINTS
+    for i in range(0, len(data), BATCH_FIELDS):
+        stamp = data[i]
+        if not (0.0 <= stamp <= MAX_BATCH_STAMP and stamp == int(stamp)):
+            raise MessageError(f"a state batch stamp is a whole number of ns in [0, 2^53], got {stamp!r}")
+        states.append(BatchState(int(stamp), data[i + 1:i + 1 + j], data[i + 1 + j:i + 1 + 2 * j],
+                                 data[i + 1 + 2 * j:i + 1 + 3 * j]))
+    return states
 
 
 def stamp_to_ns(stamp) -> int:

@@ -4,16 +4,14 @@
   on every torque arriving; depth 10 rides out short scheduling hiccups.
 * Hip velocity (1 kHz): reliable, keep last 250 — the policy averages the last 200
   samples at every step and must not lose one while it is busy.
+* State batches (``/sim/state_batch``, about 50 Hz): reliable, keep last 100 (2 s): the
+  policy averages every state and must not lose one.
 * Gait parameters (alpha, Kd): reliable, transient local, depth 1 — a controller started
   late still receives the gait currently in force.
 * User commands (speed, push): reliable, keep last 10.
 * Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
   the current state.
 * Events (``/hzd/step``): reliable, keep last 10.
-* Monitors that only need the newest state (run_stack's supervisor): reliable, keep last
-  1 — the newest state always arrives (the run's last one too: a best-effort subscriber
-  that missed it under load never saw the run end), and a slow monitor never holds the
-  1 kHz loop back (keep-last writers overwrite what it has not taken).
 * Torque replies: the stream profile, and hzd_controller_node's publisher declares a
   liveliness lease of 1 s (``TORQUE_QOS``: its DDS participant asserts it, whatever the
   Python thread does), so sim_node can tell a stopped or killed controller from a busy one
@@ -44,13 +42,13 @@ def _reliable(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATI
 
 STREAM_QOS = _reliable(10)
 HIP_VELOCITY_QOS = _reliable(250)
+BATCH_QOS = _reliable(100)
 GAIT_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
 CLOCK_QOS = _reliable(10)
 MARKERS_QOS = _reliable(10)
-MONITOR_QOS = _reliable(1)
 
 LIVELINESS_LEASE_S = 1
 """s: a controller's torque publisher asserts its liveliness at least this often."""

@@ -10,9 +10,20 @@ side by side in one ROS domain; in the root namespace they resolve to ``/joint_s
 JOINT_STATES = "joint_states"
 """sensor_msgs/JointState, all 7 model joints (``JOINT_NAMES``), sim_node at 1 kHz."""
 HIP_VELOCITY = "hip_velocity"
-"""geometry_msgs/TwistStamped, linear.x = forward hip speed (m/s), sim_node at 1 kHz."""
+"""geometry_msgs/TwistStamped, linear.x = forward hip speed (m/s), sim_node with every state
+while anyone subscribes (1 kHz)."""
+STATE_BATCH = "sim/state_batch"
+"""std_msgs/Float64MultiArray, sim_node: every state it publishes on ``/joint_states``, in
+batches of up to ``batch_ticks`` (``rabbit_msgs_py.conversions.state_batch_to_msg``: rows of
+stamp ns, position, velocity, effort). A batch goes out at every multiple of ``batch_ticks``
+ticks of sim time, on every state a policy decides on (the period ``/hzd/gait_timing``
+announces, ``rabbit_msgs_py.decision_ticks.PeriodicDecisions``), on a state sent again, and
+when the physics halts or pauses: so an observer that needs every state (the policy's
+averages, run_stack's supervisor, a plot) takes 50 messages a second instead of 1000, and a
+decision's last sample is never held back."""
 CLOCK = "clock"
-"""rosgraph_msgs/Clock, simulation time, sim_node."""
+"""rosgraph_msgs/Clock, simulation time, sim_node: ``clock_rate`` times per s of sim time
+(a state whose stamp is on that grid) while anyone subscribes."""
 JOINT_TORQUES = "joint_torques"
 """sensor_msgs/JointState, the controller's reply to one ``/joint_states`` message: the
 four ``ACTUATED_JOINTS`` with their torques (N m) in ``effort``, ``header.stamp`` = the

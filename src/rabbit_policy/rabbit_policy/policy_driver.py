@@ -192,9 +192,10 @@ class PolicyDriver:
         return self._decide_awaiting()
 
     def on_step(self, stamp: int) -> list[Action]:
-        """A touchdown on the state stamped ``stamp`` ns (the loop decides on the one after)."""
-        actions = self._follow_schedule(stamp + TICK_NS)
-        return actions + [self._decide(o) for o in self.clock.switch(stamp, self.desired_speed)]
+        """A touchdown on the state stamped ``stamp`` ns (the loop decides on the one after).
+        The schedule is followed only at samples: a touchdown may come before the states up
+        to it (a batch), and those states keep the command they had in the loop."""
+        return [self._decide(o) for o in self.clock.switch(stamp, self.desired_speed)]
 
     def flush(self) -> list[Action]:
         """The tails of throttled rejection bursts (call about once a second)."""

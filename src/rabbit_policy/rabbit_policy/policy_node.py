@@ -1,8 +1,11 @@
 """``policy_node``: picks the gait (alpha, Kd) for each step from the commanded speed and the
 averaged hip speed, as in the paper's Fig. 2.
 
-Subscribes ``/cmd_speed`` (m/s; or ``/cmd_vel``, geometry_msgs/Twist, linear.x),
-``/hip_velocity`` (1 kHz) and ``/hzd/step`` (touchdowns, from the controller); publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
+Subscribes ``/cmd_speed`` (m/s; or ``/cmd_vel``, geometry_msgs/Twist, linear.x), the
+simulator's states in batches (``/sim/state_batch``, about 50 a second, every state in them;
+``hip_source:=hip_velocity`` takes ``/hip_velocity`` at 1 kHz instead, for a robot or
+simulator that publishes only that) and ``/hzd/step`` (touchdowns, from the controller);
+publishes ``/hzd/alpha`` and ``/hzd/kd`` (transient local) once at
 start and then at every step, and with each gait ``/sim/initial_state`` (transient local):
 the state at phase 0 of that gait with the hip moving at ``initial_speed``, where the
 simulator starts and resets (it knows no gait itself). The policy's inputs are the paper's: the commanded speed v_d,
@@ -38,7 +41,8 @@ this node turns messages into its events and its actions into messages. Paramete
   tells the controller which (``at_once`` for periodic decisions).
 
 A policy that reads the body state inside the step (trained with features ``body``; it
-decides every N ticks) also subscribes ``/joint_states`` and ``/hzd/phase`` (the
+decides every N ticks) takes it from the same states (``/joint_states`` with
+``hip_source:=hip_velocity``) and also subscribes ``/hzd/phase`` (the
 controller's phase, published while anyone subscribes): each due decision is held until the
 state it is made on and the controller's phase on the state before it are in
 (:class:`rabbit_policy.runtime.body.BodyStateBuffer`, the loops' rule: a lockstep stack runs
@@ -60,7 +64,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import (MessageError, alpha_to_msg, controller_id, joint_state_vectors, phase_from_msg,
-                                        stamp_to_ns)
+                                        stamp_to_ns, state_batch_from_msg)
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
@@ -74,6 +78,9 @@ from rabbit_policy.runtime.commands import COMMAND_RANGE
 from rabbit_policy.runtime.policies import CONTROLLER_CHOICES, LIBRARY_MODES, Policy, PolicyUnavailable, controller_name, controller_settings
 from rabbit_policy.spec.make import make_policy, spec_kind
 
+
+HIP_SOURCES = ("state_batch", "hip_velocity")
+"""Where policy_node takes the hip speed from (parameter ``hip_source``)."""
 
 POLICY_PARAMS = {
     "policy": Param("classic", "classic (the HZD gait library; aliases library and hzd), learned (the HZD-RL "
@@ -96,6 +103,10 @@ POLICY_PARAMS = {
     "max_speed": Param(COMMAND_RANGE[1], "highest command, m/s, not below min_speed; /cmd_speed above is clamped "
                                          "with a warning (within the gait library's 0.7-1.5)", dynamic=True,
                        range=COMMAND_RANGE),
+    "hip_source": Param("state_batch", "where the hip speed (and a body-state policy's state) comes from: "
+                                       "state_batch (/sim/state_batch, every state in batches) or hip_velocity "
+                                       "(/hip_velocity, and /joint_states for a body-state policy, each at 1 kHz)",
+                        choices=HIP_SOURCES),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
@@ -161,6 +172,9 @@ class PolicyNode(Node):
                 self.resolve_topic_name(topics.PHASE)))
         except (PolicyUnavailable, ValueError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from None
+        self._hip_source = values["hip_source"]
+        if self._hip_source not in HIP_SOURCES:
+            raise NodeStartError(f"policy_node: hip_source must be one of {HIP_SOURCES}, got {self._hip_source!r}")
         self._settings = controller_settings(policy)  # announced on /hzd/gait_timing: the controller takes them
         self.add_on_set_parameters_callback(self._on_set_parameters)
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second
@@ -199,12 +213,16 @@ class PolicyNode(Node):
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)  # scheduled commands
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
-        self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
+        if self._hip_source == "state_batch":
+            self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS)
+        else:
+            self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, lambda msg: self._do(self.core.on_step(stamp_to_ns(msg.stamp))),
                                  qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, lambda msg: self.core.on_placed(msg.data), qos.STATUS_QOS)
         if self.core.body is not None:
-            self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
+            if self._hip_source == "hip_velocity":
+                self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
             self.create_subscription(JointState, topics.PHASE, self._on_phase, qos.STREAM_QOS)
         self._do(self.core.start())
         self.get_logger().info(f"policy {self.core.policy.name}: {self.core.desired_speed:.2f} m/s; "
@@ -248,6 +266,25 @@ class PolicyNode(Node):
         except ValueError as exc:
             self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}",
                                     throttle_duration_sec=1.0)
+
+    def _on_state_batch(self, msg: Float64MultiArray) -> None:
+        """The simulator's states, oldest first: each its hip speed (and, for a body-state
+        policy, its body state first), as one ``/hip_velocity`` and ``/joint_states`` each."""
+        try:
+            states = state_batch_from_msg(msg)
+        except MessageError as exc:
+            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
+                                    throttle_duration_sec=1.0)
+            return
+        body = self.core.body is not None
+        for state in states:
+            if body:
+                self._do(self.core.on_body_state(state.stamp, state.position, state.velocity))
+            try:
+                self._do(self.core.on_hip_velocity(state.stamp, state.velocity[0]))
+            except ValueError as exc:
+                self.get_logger().error(f"ignoring a state in {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
+                                        throttle_duration_sec=1.0)
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:

@@ -69,6 +69,12 @@ class SimSettings:
     stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
     markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "
                                        "one also goes out whenever RABBIT is placed", range=(0.0, 1000.0))
+    clock_rate: float = option(100.0, "/clock per s of sim time, in (0, 1000] (1000 = every state; rounded to whole "
+                                      "ticks), published only while anyone subscribes (use_sim_time nodes)",
+                               range=(0.001, 1000.0))
+    batch_ticks: int = option(20, "/sim/state_batch: states per batch at most, whole ticks in [1, 1000] (1 = every "
+                                  "state on its own); a batch also goes out on every state the policy decides on, a "
+                                  "state sent again, and when the physics halts or pauses", range=(1, 1000))
     viewer: bool = option(False, "open MuJoCo's own viewer window (passive, synced to the simulation; needs a "
                                  "display)")
 
@@ -90,6 +96,11 @@ class SimSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        if not (math.isfinite(self.clock_rate) and 0.0 < self.clock_rate <= 1000.0):
+            raise ValueError(f"clock_rate must be a finite number in (0, 1000] Hz, got {self.clock_rate}")
+        if isinstance(self.batch_ticks, bool) or not isinstance(self.batch_ticks, int) \
+                or not 1 <= self.batch_ticks <= 1000:
+            raise ValueError(f"batch_ticks must be a whole number of ticks in [1, 1000], got {self.batch_ticks!r}")
         if not 0.0 < self.max_late_fraction <= 1.0:
             raise ValueError(f"max_late_fraction must be in (0, 1], got {self.max_late_fraction}")
         if self.stats_file and not Path(self.stats_file).resolve().parent.is_dir():
@@ -107,6 +118,11 @@ class SimSettings:
     def model_options(self) -> ModelOptions:
         """The model to simulate: the variant with the foot friction and torso mass."""
         return ModelOptions(self.model, self.friction or None, self.torso_mass_scale)
+
+    @property
+    def clock_ticks(self) -> int:
+        """Ticks between ``/clock`` messages (``clock_rate`` rounded to whole ticks, >= 1)."""
+        return max(1, int(round(1.0 / (self.clock_rate * TIMESTEP))))
 
     @property
     def delay_ticks(self) -> int:

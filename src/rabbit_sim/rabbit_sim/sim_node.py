@@ -1,7 +1,11 @@
 """``sim_node``: the RABBIT MuJoCo simulation as a ROS 2 node.
 
-Publishes ``/joint_states`` (7 joints: position, velocity, applied effort), ``/hip_velocity``
-and ``/clock`` every 1 ms tick of simulation time, ``/fallen`` when it changes, and the URDF
+Publishes ``/joint_states`` (7 joints: position, velocity, applied effort) every 1 ms tick of
+simulation time, the same states in batches on ``/sim/state_batch`` for observers
+(:class:`rabbit_sim.stepping.batch.StateBatcher` says when a batch goes out: it follows the
+decision period a policy announces on ``/hzd/gait_timing``), ``/hip_velocity`` with every state
+while anyone subscribes, ``/clock`` ``clock_rate`` times per s of sim time while anyone
+subscribes, ``/fallen`` when it changes, and the URDF
 of its model once on ``/robot_description`` (transient local); applies the four
 ``/joint_torques`` of the controller it is paired with (``rabbit_msgs_py.pairing``); takes
 ``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and ``/sim/release_controller``.
@@ -25,13 +29,14 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Header, String, UInt32
+from std_msgs.msg import Bool, Float64MultiArray, Header, String, UInt32
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
-    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
+    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, state_batch_to_msg, torques_from_msg)
+from rabbit_msgs_py.decision_ticks import TICK_NS, parse_gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
@@ -45,6 +50,7 @@ from .model import load_model
 from .settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
 from .simulation import Simulator
 from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State, TorquePublishers
+from .stepping.batch import StateBatcher
 from .urdf import urdf_from_model
 from .viewer import PassiveViewer, ViewerUnavailable
 
@@ -76,6 +82,8 @@ class SimNode(Node):
         self._lock = threading.RLock()
         self._joint_msg = JointState(name=list(JOINT_NAMES))
         self._hip_msg = TwistStamped(header=Header(frame_id="world"))
+        self._batcher = StateBatcher(self.settings.batch_ticks)
+        self._clock_every = self.settings.clock_ticks * TICK_NS  # ns of sim time between /clock messages
         self._marker_builder = MarkerArrayBuilder()
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self.viewer = None
@@ -101,6 +109,8 @@ class SimNode(Node):
         self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
+        self._batch_pub = pub(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
+        self.driver.markers_wanted = lambda: self._markers_pub.get_subscription_count() > 0  # none built for nobody
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
@@ -111,6 +121,7 @@ class SimNode(Node):
                                      liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
+        self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
         if self.driver.by_replies:  # a recorder's progress: followed from its first report
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS)
@@ -189,6 +200,19 @@ class SimNode(Node):
             return
         self._run(self.driver.on_initial_state, qpos, qvel)
 
+    def _on_gait_timing(self, msg: String) -> None:
+        """A policy's decision period (``at_once:N``): each state it decides on ends a batch,
+        so the decision's last sample is not held back (the rest of the message is the
+        controller's)."""
+        try:
+            _timing, period = parse_gait_timing(msg.data)
+        except ValueError as exc:
+            self.get_logger().warning(f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; batches keep their "
+                                      f"{self.settings.batch_ticks}-tick grid", throttle_duration_sec=5.0)
+            return
+        with self._lock:
+            self._batcher.follow_decisions(period)
+
     def _on_torques(self, msg: JointState) -> None:
         now = time.perf_counter()
         try:
@@ -262,19 +286,29 @@ class SimNode(Node):
                 self._fallen_pub.publish(Bool(data=action.value))
             elif kind is Placed:
                 self._resets_pub.publish(UInt32(data=action.count))
+        if self._batcher.count and (self.driver.halted or self.driver.paused):
+            self._send_batch()  # nothing follows soon: the observers get the last states now
+
+    def _send_batch(self) -> None:
+        self._batch_pub.publish(state_batch_to_msg(*self._batcher.take()))
 
     def _publish_state(self, state: State) -> None:
-        """Joint states, hip velocity (world frame: x forward, z up, pitch rate) and clock."""
+        """Joint states; the state into the batch (sent when :class:`StateBatcher` says);
+        hip velocity (world frame: x forward, z up, pitch rate) and clock only for listeners."""
         stamp = stamp_from_ns(state.stamp)
         msg = self._joint_msg
         msg.header.stamp = stamp
         msg.position, msg.velocity, msg.effort = state.qpos, state.qvel, state.effort
-        hip = self._hip_msg
-        hip.header.stamp = stamp
-        hip.twist.linear.x, hip.twist.linear.z, hip.twist.angular.y = state.qvel[0], state.qvel[1], state.qvel[2]
         self._state_pub.publish(msg)
-        self._hip_pub.publish(hip)
-        self._clock_pub.publish(Clock(clock=stamp))
+        if self._batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
+            self._send_batch()
+        if self._hip_pub.get_subscription_count():
+            hip = self._hip_msg
+            hip.header.stamp = stamp
+            hip.twist.linear.x, hip.twist.linear.z, hip.twist.angular.y = state.qvel[0], state.qvel[1], state.qvel[2]
+            self._hip_pub.publish(hip)
+        if state.stamp % self._clock_every == 0 and self._clock_pub.get_subscription_count():
+            self._clock_pub.publish(Clock(clock=stamp))
 
 
 def main(args: list[str] | None = None) -> int:

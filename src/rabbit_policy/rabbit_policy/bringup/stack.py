@@ -9,10 +9,9 @@
   counts touchdowns (``/hzd/step``), watches ``/fallen``, detects a stall (no touchdown for
   ``stall_after`` s of sim time), and builds the fast path's ``WalkResult`` from the states
   and touchdowns it saw, so a run's report is the fast path's (:class:`RunReport`, the
-  same JSON as ``walk.py --json``). It samples states best effort, depth 1, so it never
-  slows the loop: a lockstep run in one process reports what the fast path reports;
-  across processes under load it may miss states, and its figures are then the nearest
-  sampled ones.
+  same JSON as ``walk.py --json``). It takes every state from the simulator's batches
+  (``/sim/state_batch``, about 50 messages a second), so it takes nothing at 1 kHz and
+  sees every state the fast path sees.
 * Pushes are not sent by the supervisor but given to ``sim_node`` as its
   ``push_schedule`` parameter: the simulator applies them at their exact sim times, as
   the fast path does, so a push experiment repeats exactly whatever the load.

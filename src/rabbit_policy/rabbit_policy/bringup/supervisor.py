@@ -10,12 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64, Header
+from std_msgs.msg import Bool, Float64, Float64MultiArray, Header
 from std_srvs.srv import SetBool
 
 from rabbit_msgs_py import qos, topics
-from rabbit_msgs_py.conversions import stamp_to_ns
+from rabbit_msgs_py.conversions import MessageError, stamp_to_ns, state_batch_from_msg
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
@@ -106,7 +105,7 @@ class Supervisor(Node):
         self.last_state_wall: float | None = None
         self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.MONITOR_QOS)
+        self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
@@ -201,13 +200,23 @@ class Supervisor(Node):
             self.fell = True
             self.fall_time = self.sim_time
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_batch(self, msg: Float64MultiArray) -> None:
+        """The simulator's states in a batch (``/sim/state_batch``), oldest first."""
+        try:
+            states = state_batch_from_msg(msg)
+        except MessageError as exc:
+            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
+                                    throttle_duration_sec=1.0)
+            return
         now = time.perf_counter()
+        for state in states:
+            self._on_state(state.stamp, state.position[0], state.effort, now)
+
+    def _on_state(self, t: int, x: float, effort, now: float) -> None:
+        """A state at ``t`` ns: hip x (m), the 7 joints' efforts (N m); ``now``: wall s it came."""
         if self.first_state_wall is None:
             self.first_state_wall = now
         self.last_state_wall = now
-        t = stamp_to_ns(msg.header.stamp)
-        x = msg.position[0]
         if t != self._sim_ns or self.last_progress_wall is None:
             self.last_progress_wall = now
         self._sim_ns = t
@@ -216,7 +225,7 @@ class Supervisor(Node):
         elif t > (self._times[-1] if self._times else self._start[0]):  # a state sent again is one state
             self._times.append(t)
             self._xs.append(x)
-            self.peak_torque = max(self.peak_torque, *(abs(e) for e in msg.effort[3:]))
+            self.peak_torque = max(self.peak_torque, *(abs(e) for e in effort[3:]))
         if self._pending_step is not None and t > self._pending_step:
             self._last_step_ns, self._pending_step = t, None
         if not self.stalled and self._suspected is None and self.config.rules.stalled(t / 1e9, self._last_step_ns / 1e9):

@@ -155,6 +155,7 @@ class SimDriver:
         self._unpaired: str | None = None  # no key: the last controller refused since a reply was accepted
         self._shapes = RobotShapes(sim.model) if shapes else None
         self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
+        self.markers_wanted: Callable[[], bool] = lambda: True  # the node: is anyone subscribed to the markers?
         self._out: list[Action] = []
 
     # ---------------------------------------------------------------- events
@@ -465,7 +466,8 @@ class SimDriver:
         self._out.append(PushApplied(seconds_to_ns(self.sim.time), tuple(self.sim.push_wrench)))
 
     def _markers(self) -> None:
-        self._out.append(Markers(seconds_to_ns(self.sim.time), self._shapes.shapes(self.sim.data)))
+        if self.markers_wanted():
+            self._out.append(Markers(seconds_to_ns(self.sim.time), self._shapes.shapes(self.sim.data)))
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
