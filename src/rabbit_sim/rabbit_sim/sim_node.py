@@ -92,9 +92,10 @@ class SimNode(Node):
                 self.viewer = PassiveViewer(self.sim.model, self.sim.data)
             except ViewerUnavailable as exc:
                 raise NodeStartError(f"sim_node: {exc}") from None
+        self._pace_timer = None  # paced: the one-shot wake-up of a state that waits for its wall time
         self._liveliness: tuple[int, int] | None = None  # torque publishers (alive, lapsed); None: none declares it
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.spin_timeout = 0.1 if self.settings.mode == "lockstep" else 0.001  # (see the timers in _wire)
+        self.spin_timeout = 0.001 if self.settings.mode == "realtime" else 0.1  # (see the timers in _wire)
         self.solo = SoloStart(self, "simulator", self.settings.solo_check, self._wire,
                               service=topics.RELEASE_CONTROLLER_SERVICE)
 
@@ -130,7 +131,7 @@ class SimNode(Node):
                             qos_profile=qos.SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
         # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also
-        # a 1 ms wake-up for states that wait for their wall time; realtime: the physics steps
+        # a one-shot wake-up armed only while a state waits for its wall time; realtime: the physics steps
         # in the thread that spins this node, woken by a 1 ms timer and paced by the wall
         # clock: no second thread, so a tick never waits for the GIL
         mode = self.settings.mode
@@ -138,7 +139,9 @@ class SimNode(Node):
             wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers,
                                                       lambda: self.count_publishers(topics.RECORDED_UNTIL)))
         if mode == "paced":
-            wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.paced_wake))
+            self._pace_timer = wall_timer(self, self.sim.timestep, self._paced_wake)
+            self._pace_timer.cancel()  # armed by _do while a state waits
+            self._arm_pace()
         if mode == "realtime":
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
         self.get_logger().info(f"RABBIT simulation ({self.settings.describe()}) waiting for a state on "
@@ -288,6 +291,21 @@ class SimNode(Node):
                 self._resets_pub.publish(UInt32(data=action.count))
         if self._batcher.count and (self.driver.halted or self.driver.paused):
             self._send_batch()  # nothing follows soon: the observers get the last states now
+        if self._pace_timer is not None:
+            self._arm_pace()
+
+    def _arm_pace(self) -> None:
+        """Paced: the one-shot timer runs while a state waits for its wall time, at its due time."""
+        wait = self.driver.pace_wait
+        if wait is None:
+            self._pace_timer.cancel()
+        elif self._pace_timer.is_canceled():
+            self._pace_timer.timer_period_ns = max(1000, int(wait * 1e9))  # (>= 1 µs: rcl wants a period > 0)
+            self._pace_timer.reset()
+
+    def _paced_wake(self) -> None:
+        self._pace_timer.cancel()
+        self._run(self.driver.paced_wake)  # re-armed by _do if the state is not due yet
 
     def _send_batch(self) -> None:
         self._batch_pub.publish(state_batch_to_msg(*self._batcher.take()))

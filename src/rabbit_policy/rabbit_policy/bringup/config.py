@@ -23,6 +23,12 @@ NODE_MODULES = {
     "sim_node": "rabbit_sim.sim_node",
     "recorder_node": "rabbit_sim.recorder_node",
 }
+LAYOUTS = ("composed", "separate", "in-process")
+"""Where the nodes run: ``composed`` (simulator, controller and supervisor in run_stack's
+process, on one executor; the policy and a recorder processes of their own), ``separate``
+(every node its own process) or ``in-process`` (every node in run_stack's process)."""
+COMPOSED_NODES = ("hzd_controller_node", "sim_node")
+"""The nodes the ``composed`` layout runs in run_stack's process: the 1 kHz loop."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +66,7 @@ class StackConfig:
     viewer: bool = False
     recorder_timeout: float = 10.0  # s (wall): a recorder that made no progress this long fails the run
     rules: StopRules = StopRules()  # the fall and stall rules of every experiment
+    layout: str = "composed"  # LAYOUTS: where the nodes run
     namespace: str = ""  # every node's ROS namespace ("" = the root); two stacks in two namespaces run side by side
     pairing_key: str = field(default_factory=new_key, repr=False)  # every node: rabbit_msgs_py.pairing
 
@@ -67,6 +74,8 @@ class StackConfig:
         if not self.duration > 0.0:
             raise ValueError("duration must be > 0 s")
         object.__setattr__(self, "namespace", valid_namespace(self.namespace))
+        if self.layout not in LAYOUTS:
+            raise ValueError(f"layout must be one of {', '.join(LAYOUTS)}, got {self.layout!r}")
         object.__setattr__(self, "controller", controller_name(self.controller))
         validate_schedule(self.schedule)
         self.scenario()  # raises for a bad model option or torque delay, before any node starts

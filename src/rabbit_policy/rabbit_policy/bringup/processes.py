@@ -1,5 +1,8 @@
 """A run with the nodes as child processes (``python -m <module> --ros-args ...``, what
-``ros2 run`` executes), supervised from this process."""
+``ros2 run`` executes), supervised from this process; in the ``composed`` layout (the
+default) the simulator and the 1 kHz controller run in this process beside the supervisor,
+on its executor, as a component container runs nodes, and only the policy (and a recorder)
+are processes of their own."""
 
 from __future__ import annotations
 
@@ -16,7 +19,9 @@ from typing import Callable
 
 from rabbit_msgs_py.runtime import init_context
 
-from .config import NODE_MODULES, StackConfig, policy_name, ros_arguments
+from .config import COMPOSED_NODES, NODE_MODULES, StackConfig, policy_name, ros_arguments
+from .cpu import CpuMeter
+from .in_process import close_nodes, compose
 from .probe import AnotherStack
 from .supervisor import RunReport, Supervisor, spin_until_done, wait_for_recording
 
@@ -45,10 +50,13 @@ class NodeProcesses:
     through :mod:`rabbit_msgs_py.quiet_start`: stopped while still importing, it exits
     without a traceback."""
 
-    def __init__(self, config: StackConfig, log=sys.stderr, hold: bool = False) -> None:
+    def __init__(self, config: StackConfig, log=sys.stderr, hold: bool = False, skip: tuple[str, ...] = ()) -> None:
+        """``skip``: nodes not to start (they run elsewhere: composed in run_stack's process)."""
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
         for name, params in config.node_parameters().items():
+            if name in skip:
+                continue
             cmd = [sys.executable, "-m", "rabbit_msgs_py.quiet_start", *(["--hold"] if hold else []),
                    NODE_MODULES[name], *ros_arguments(params, config.namespace)]
             self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
@@ -102,14 +110,17 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
     :class:`~.probe.AnotherStack` is raised."""
     import rclpy
 
-    from rabbit_msgs_py.runtime import make_executor
+    from rabbit_msgs_py.runtime import freeze_start_up_objects, make_executor, spin_timeout_of
 
+    if config.layout not in ("composed", "separate"):
+        raise ValueError(f"run_multi_process runs the composed or separate layout, not {config.layout}")
+    composed = COMPOSED_NODES if config.layout == "composed" else ()
     with tempfile.TemporaryDirectory(prefix="rabbit_run_") as scratch:
         if config.record and not config.record_stats_file:  # where the recorder says how it ended
             config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
         if not config.controller_stats_file:  # where the controller counts the gaits it rejected
             config = replace(config, controller_stats_file=os.path.join(scratch, "controller.json"))
-        procs = NodeProcesses(config, log=log, hold=probe is not None)
+        procs = NodeProcesses(config, log=log, hold=probe is not None, skip=composed)
         if probe is not None:
             try:
                 found = probe()
@@ -121,22 +132,37 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
                 raise AnotherStack(found)
             procs.release()
         context = init_context()
-        supervisor = Supervisor(config, context=context)
+        nodes: dict[str, object] = {}
         error = None
+        executor = None
+        meter = CpuMeter({**{name: proc.pid for name, proc in procs.procs.items()},
+                          ("run_stack" if not composed else "+".join(("run_stack",) + composed)): os.getpid()})
+        cpu = None
         try:
+            compose(config, context, composed, nodes)
+            supervisor = nodes["supervisor"] = Supervisor(config, context=context)
             executor = make_executor(context)
-            executor.add_node(supervisor)
-            error = spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop)
+            for node in nodes.values():
+                executor.add_node(node)
+            if composed:
+                freeze_start_up_objects()
+            error = spin_until_done(executor, supervisor, stall_timeout, alive=procs.dead, stop=stop,
+                                    spin_timeout=min(0.05, *(spin_timeout_of(n) for n in nodes.values())),
+                                    meter=meter)
             error = error or wait_for_recording(executor, supervisor, stall_timeout, alive=procs.dead)
+            cpu = meter.per_tick_us(supervisor._sim_ns)
         finally:
+            if executor is not None:
+                executor.shutdown()
             codes = procs.stop()
-            supervisor.destroy_node()
+            close_nodes(nodes)
             if context.ok():
                 rclpy.shutdown(context=context)
         if config.record:  # a failed recording is the cause whatever else it led to
             error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
         report = supervisor.report(error, policy or policy_name(config))
         report.rejected = controller_rejections(config.controller_stats_file)
+        report.cpu_us_per_tick = cpu
         return report
 
 

@@ -38,6 +38,7 @@ class RunReport:
     completed: bool = True
     error: str | None = None
     rejected: int | None = None  # gaits the controller rejected (None: not known: it wrote no counts, killed or never started)
+    cpu_us_per_tick: dict[str, float] | None = None  # each process's CPU µs per tick over the walk (processes: bench_stack)
 
     fell = property(lambda self: self.result.fell)
     fall_time = property(lambda self: self.result.fall_time)
@@ -277,10 +278,11 @@ stepping has halted (before the first torque it holds t = 0, however long that t
 
 
 def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, alive=lambda: None,
-                     spin_timeout: float = 0.05, stop=lambda: False) -> str | None:
+                     spin_timeout: float = 0.05, stop=lambda: False, meter=None) -> str | None:
     """Start the (paused) simulation once every node is connected, then spin until the run
     is over; returns an error message or None. ``stop()`` true (a signal arrived) ends
-    the run as "interrupted"; ``alive()`` returns a message when a node process died.
+    the run as "interrupted"; ``alive()`` returns a message when a node process died;
+    ``meter`` (a :class:`~.cpu.CpuMeter`) is started at the first state.
     Progress is sim time moving: a state sent again does not count."""
     from rclpy.executors import ExternalShutdownException
 
@@ -295,6 +297,8 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
             executor.spin_once(timeout_sec=spin_timeout if running else 0.02)
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
+        if meter is not None and not meter.started and supervisor.first_state_wall is not None:
+            meter.start(supervisor._sim_ns)
         problem = "interrupted" if stop() else alive()
         if problem:
             return problem

@@ -8,8 +8,12 @@
 
 * ``lockstep_rtf_in_process``: real-time factor (sim s / wall s) of a lockstep walk with
   all nodes on one EventsExecutor in this process (goal >= 3).
-* ``lockstep_rtf_multi_process``: the same with the three nodes as separate processes
-  (goal >= 1.5).
+* ``lockstep_rtf_multi_process``: the same with every node its own process (``--layout
+  separate``).
+* ``lockstep_rtf_composed``: the same in run_stack's default layout (simulator, controller and
+  supervisor in one process, the policy in its own).
+* ``*_cpu_us_per_tick``: each process's CPU time (user + system, all threads) per tick over
+  the walk, and their total (``/proc``; Linux).
 * realtime mode, nodes as separate processes: ``realtime_rate_hz`` (physics/control ticks
   per wall second), ``realtime_late_fraction`` (share of ticks whose torque, the reply to
   the previous state, had not arrived when the step was due; goal < 1 %),
@@ -17,8 +21,8 @@
   seen by sim_node), ``realtime_damped_ticks``.
 
 * ``realtime_in_process_*``: the realtime run with all nodes in this process.
-* ``paced_*``: paced mode (lockstep held to the wall clock, ``--rtf`` target), nodes as
-  separate processes: the achieved real-time factor (sim s / wall s over the run), whether
+* ``paced_*``: paced mode (lockstep held to the wall clock, ``--rtf`` target), run_stack's
+  default layout: the achieved real-time factor (sim s / wall s over the run), whether
   it fell, and with ``--record`` (``paced_recording_*``) the states lost: distinct
   ``/joint_states`` ticks simulated minus those in the bag (0 by design).
 * Realtime runs halt when the loop falls too far behind (``*_halted``: the reason, or None).
@@ -55,7 +59,8 @@ from rabbit_msgs_py.cli import ArgumentParser, positive
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
-SCENARIOS = ("floor", "startup", "stop", "lockstep_in_process", "lockstep_multi_process", "paced_multi_process", "paced_recording",
+SCENARIOS = ("floor", "startup", "stop", "lockstep_in_process", "lockstep_composed", "lockstep_multi_process",
+             "paced_multi_process", "paced_recording",
              "realtime_multi_process", "realtime_in_process", "realtime_recording")
 
 
@@ -152,16 +157,19 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
             report = run_multi_process(config, log=sys.stderr)
             sim = json.loads(sim_stats.read_text())
             out = {f"{prefix}_rtf": round(report.rtf, 3), f"{prefix}_target_rtf": rtf, f"{prefix}_fell": report.fell,
-                   f"{prefix}_completed": report.completed}
+                   f"{prefix}_completed": report.completed, f"{prefix}_cpu_us_per_tick": report.cpu_us_per_tick}
             if bag is not None:
                 out[f"{prefix}_states_lost"] = sim["ticks"] + 1 - recorded_ticks(bag)
             return out
     if name == "lockstep_in_process":
         report, _ = run_in_process(StackConfig(duration=duration, schedule=schedule))
-        return {"lockstep_rtf_in_process": round(report.rtf, 3), "lockstep_in_process_fell": report.fell}
-    if name == "lockstep_multi_process":
-        report = run_multi_process(StackConfig(duration=duration, schedule=schedule), log=sys.stderr)
-        return {"lockstep_rtf_multi_process": round(report.rtf, 3), "lockstep_multi_process_fell": report.fell}
+        return {"lockstep_rtf_in_process": round(report.rtf, 3), "lockstep_in_process_fell": report.fell,
+                "lockstep_in_process_cpu_us_per_tick": report.cpu_us_per_tick}
+    if name in ("lockstep_multi_process", "lockstep_composed"):
+        layout = "separate" if name == "lockstep_multi_process" else "composed"
+        report = run_multi_process(StackConfig(duration=duration, schedule=schedule, layout=layout), log=sys.stderr)
+        return {f"lockstep_rtf_{name[9:]}": round(report.rtf, 3), f"{name}_fell": report.fell,
+                f"{name}_cpu_us_per_tick": report.cpu_us_per_tick}
     if name == "realtime_in_process":
         report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
         stats = nodes["sim_node"].statistics()
@@ -213,6 +221,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
 
 FLOOR_RATIOS = {"lockstep_in_process_to_floor": ("lockstep_rtf_in_process", "in_process"),
                 "lockstep_multi_process_to_floor": ("lockstep_rtf_multi_process", "multi_process"),
+                "lockstep_composed_to_floor": ("lockstep_rtf_composed", "multi_process"),
                 "paced_to_floor": ("paced_rtf", "multi_process")}
 """Each mode's ticks per wall second (1000 x its real-time factor) over the round trips per
 second of the ping-pong floor of its layout, measured in the same run."""

@@ -6,13 +6,17 @@
     scripts/run_stack.py --speed 1.0 --duration 10 --in-process --json
     scripts/run_stack.py --speed 1.0 --duration 30 --record runs/walk1   # rosbag2 (MCAP) bag
 
-By default the three nodes start as separate processes (``python -m <package>.<node>
---ros-args -p ...``, as ``ros2 run`` would) and this script supervises the run: it sends
+By default (``--layout composed``) the simulator and the 1 kHz controller run in this
+script's process beside its supervisor, on one executor, as a ROS component container runs
+nodes (each still a node with its own name, parameters and topics), and the policy starts as
+a process of its own (``python -m rabbit_policy.policy_node --ros-args -p ...``, as ``ros2
+run`` would); ``--layout separate`` starts every node as its own process. This script
+supervises the run: it sends
 the speed schedule on ``/cmd_speed`` at its sim times (the pushes are sim_node's
 ``push_schedule``, applied at their exact sim times), and at the end prints, per schedule segment, the commanded speed and the mean hip speed over
 the segment's second half, the steps, whether RABBIT fell, and the real-time factor
-(sim time / wall time). ``--in-process`` runs all nodes in this process on one
-EventsExecutor instead (the fastest choice measured here; see README "Executors").
+(sim time / wall time). ``--layout in-process`` (or ``--in-process``) runs every node in
+this process on one EventsExecutor (the fastest; docs/benchmarks.md measures each layout).
 Ctrl-C stops the nodes cleanly and prints what was measured so far.
 
 With ``--json``: one object, the same keys as ``walk.py --json`` for the same scenario
@@ -39,6 +43,7 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from rabbit_policy.bringup.config import LAYOUTS
     from rabbit_policy.experiment.options import add_model_options, add_policy_options, add_walk_options  # here: after main() took Ctrl-C over
 
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -61,7 +66,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="--record: fail the run when the simulation waited this long (wall s) for a recorder "
                              "that has stopped writing (default 10; its first state may take up to 30 s)")
     parser.add_argument("--overwrite", action="store_true", help="replace an existing --record DIR")
-    parser.add_argument("--in-process", action="store_true", help="all nodes in this process, one executor")
+    parser.add_argument("--layout", choices=LAYOUTS, default="composed",
+                        help="composed: simulator and controller in this process, the policy a process of its own "
+                             "(default); separate: every node its own process; in-process: every node here")
+    parser.add_argument("--in-process", dest="layout", action="store_const", const="in-process",
+                        help="the same as --layout in-process")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true", help="sim_node opens MuJoCo's viewer (needs a display)")
     parser.add_argument("--reference-rate", type=float, default=0.0, metavar="HZ",
@@ -140,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
             record=os.path.abspath(args.record) if args.record else "",
             record_compression=args.compression, record_overwrite=args.overwrite,
             markers_rate=args.markers_rate, reference_rate=args.reference_rate, viewer=args.viewer, rtf=args.rtf,
-            recorder_timeout=args.recorder_timeout, namespace=args.namespace,
+            recorder_timeout=args.recorder_timeout, namespace=args.namespace, layout=args.layout,
         )
         if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
             raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
@@ -175,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
     stop = lambda: bool(interrupted)  # noqa: E731
     probe = lambda: other_stack(namespace=config.namespace, stop=stop)  # noqa: E731
     try:
-        if args.in_process:
+        if config.layout == "in-process":
             found = probe()
             if found and not interrupted:
                 raise AnotherStack(found)

@@ -262,12 +262,14 @@ class SimDriver:
 
     def supervise(self, torque_publishers: Callable[[], TorquePublishers],
                   recorders: Callable[[], int] = lambda: 1) -> list[Action]:
-        """Lockstep/paced, a 20 Hz wall-clock timer: the recorder's first state, a followed
+        """Lockstep/paced, a 20 Hz wall-clock timer: the achieved real-time factor (paced), the recorder's first state, a followed
         recorder that left (``recorders()``: publishers of its reports), and the state sent
         again when its reply is overdue (``torque_publishers()``: who publishes torques,
         asked only then, for the log line that names the cause)."""
         self._out = []
         now = self.clock()
+        if self.pacer is not None:
+            self._report_pace()
         if self.recorder.following or self._recorder_ignored:
             if recorders() == 0:
                 if self.recorder.following:
@@ -319,13 +321,23 @@ class SimDriver:
         if not self.paused and self.lockstep.held_torques is not None:
             self._resume()
 
+    @property
+    def pace_wait(self) -> float | None:
+        """Paced: wall s until the state that waits for its wall time is due (<= 0: now);
+        None while none waits (the node arms its one-shot timer only then)."""
+        return self.pacer.wait(self.sim.time) if self.pace_pending else None
+
     def paced_wake(self) -> list[Action]:
-        """Paced, a 1 ms timer: send the state that waits for its wall time; report the
-        achieved real-time factor."""
+        """Paced, the node's one-shot timer at :attr:`pace_wait`: send the state that waits
+        for its wall time, if it is due."""
         self._out = []
         if self.pace_pending and self.pacer.wait(self.sim.time) <= 0.0:
             self.pace_pending = False
             self._send_next_state()
+        return self._out
+
+    def _report_pace(self) -> None:
+        """Paced, from the 20 Hz supervision: the achieved real-time factor, once per window."""
         achieved = self.pacer.achieved(self.sim.time)
         if achieved is not None and self.started and not (self.paused or self.halted):
             self.achieved_rtf = achieved
@@ -333,7 +345,6 @@ class SimDriver:
             self._log("info", f"paced: real-time factor {achieved:.2f} (target {self.settings.rtf:g}) at "
                               f"t = {self.sim.time:.1f} s"
                               + ("; this machine cannot keep up, the simulation runs slower" if slow else ""))
-        return self._out
 
     def realtime_wake(self) -> list[Action]:
         """Realtime, a 1 ms timer: the ticks now due by the wall clock, zero-order hold."""
