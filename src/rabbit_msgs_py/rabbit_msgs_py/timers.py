@@ -18,3 +18,26 @@ def wall_timer(node, period: float, callback: Callable[[], None]):
     from rclpy.clock import Clock, ClockType
 
     return node.create_timer(period, callback, clock=Clock(clock_type=ClockType.STEADY_TIME))
+
+
+class OneShot:
+    """A steady-clock timer that calls ``callback`` once, ``wait`` s after :meth:`arm` (an
+    rclpy timer repeats: this one cancels itself before it calls back); idle until armed."""
+
+    def __init__(self, node, callback: Callable[[], None]) -> None:
+        self._callback = callback
+        self._timer = wall_timer(node, 0.001, self._fire)
+        self._timer.cancel()
+
+    def arm(self, wait: float) -> None:
+        """Call back ``wait`` s (wall) from now, unless armed already."""
+        if self._timer.is_canceled():
+            self._timer.timer_period_ns = max(1000, int(wait * 1e9))  # (rcl wants a period > 0)
+            self._timer.reset()
+
+    def cancel(self) -> None:
+        self._timer.cancel()
+
+    def _fire(self) -> None:
+        self._timer.cancel()
+        self._callback()

@@ -1,11 +1,9 @@
 """``sim_node``: the RABBIT MuJoCo simulation as a ROS 2 node.
 
-Publishes ``/joint_states`` (7 joints: position, velocity, applied effort) every 1 ms tick of
-simulation time, the same states in batches on ``/sim/state_batch`` for observers
-(:class:`rabbit_sim.stepping.batch.StateBatcher` says when a batch goes out: it follows the
-decision period a policy announces on ``/hzd/gait_timing``), ``/hip_velocity`` with every state
-while anyone subscribes, ``/clock`` ``clock_rate`` times per s of sim time while anyone
-subscribes, ``/fallen`` when it changes, and the URDF
+Publishes each state (every 1 ms tick of sim time) as :class:`~rabbit_sim.state_topics.StateTopics`
+says (``/joint_states``; ``/sim/state_batch``, batches ending on the states a policy decides on
+as ``/hzd/gait_timing`` announces; ``/hip_velocity`` and ``/clock`` for listeners),
+``/fallen`` when it changes, and the URDF
 of its model once on ``/robot_description`` (transient local); applies the four
 ``/joint_torques`` of the controller it is paired with (``rabbit_msgs_py.pairing``); takes
 ``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and ``/sim/release_controller``.
@@ -23,37 +21,35 @@ import time
 from dataclasses import fields, replace
 from pathlib import Path
 
-from geometry_msgs.msg import TwistStamped, Wrench, WrenchStamped
+from geometry_msgs.msg import Wrench, WrenchStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Float64MultiArray, Header, String, UInt32
+from std_msgs.msg import Bool, String, UInt32
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
-    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, state_batch_to_msg, torques_from_msg)
-from rabbit_msgs_py.decision_ticks import TICK_NS, parse_gait_timing
-from rabbit_msgs_py.joints import JOINT_NAMES
+    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
+from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
-from rabbit_msgs_py.timers import wall_timer
+from rabbit_msgs_py.timers import OneShot, wall_timer
 
 from .marker_msgs import MarkerArrayBuilder
 from .model import load_model
 from .settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
 from .simulation import Simulator
+from .state_topics import StateTopics
 from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State, TorquePublishers
-from .stepping.batch import StateBatcher
 from .urdf import urdf_from_model
 from .viewer import PassiveViewer, ViewerUnavailable
-
 
 
 SIM_PARAMS = {f.name: Param(f.default, f.metadata["help"], dynamic=f.name in RUN_TIME_PARAMS + SECRET_PARAMS,
@@ -80,10 +76,6 @@ class SimNode(Node):
             raise NodeStartError(f"sim_node: {exc}") from exc
         self.sim = self.driver.sim
         self._lock = threading.RLock()
-        self._joint_msg = JointState(name=list(JOINT_NAMES))
-        self._hip_msg = TwistStamped(header=Header(frame_id="world"))
-        self._batcher = StateBatcher(self.settings.batch_ticks)
-        self._clock_every = self.settings.clock_ticks * TICK_NS  # ns of sim time between /clock messages
         self._marker_builder = MarkerArrayBuilder()
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self.viewer = None
@@ -103,14 +95,11 @@ class SimNode(Node):
         """Publishers, subscriptions, services and timers: once no other simulator runs in
         this namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         pub = self.create_publisher
-        self._state_pub = pub(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
-        self._hip_pub = pub(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
-        self._clock_pub = pub(Clock, topics.CLOCK, qos.CLOCK_QOS)
+        self._states = StateTopics(self, self.settings.batch_ticks, self.settings.clock_ticks)
         self._fallen_pub = pub(Bool, topics.FALLEN, qos.STATUS_QOS)
         self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
-        self._batch_pub = pub(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
         self.driver.markers_wanted = lambda: self._markers_pub.get_subscription_count() > 0  # none built for nobody
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
@@ -139,9 +128,7 @@ class SimNode(Node):
             wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers,
                                                       lambda: self.count_publishers(topics.RECORDED_UNTIL)))
         if mode == "paced":
-            self._pace_timer = wall_timer(self, self.sim.timestep, self._paced_wake)
-            self._pace_timer.cancel()  # armed by _do while a state waits
-            self._arm_pace()
+            self._pace_timer = OneShot(self, lambda: self._run(self.driver.paced_wake))  # armed by _do
         if mode == "realtime":
             wall_timer(self, self.sim.timestep, lambda: self._run(self.driver.realtime_wake))
         self.get_logger().info(f"RABBIT simulation ({self.settings.describe()}) waiting for a state on "
@@ -204,9 +191,7 @@ class SimNode(Node):
         self._run(self.driver.on_initial_state, qpos, qvel)
 
     def _on_gait_timing(self, msg: String) -> None:
-        """A policy's decision period (``at_once:N``): each state it decides on ends a batch,
-        so the decision's last sample is not held back (the rest of the message is the
-        controller's)."""
+        """A policy's decision period (``at_once:N``): each state it decides on ends a batch."""
         try:
             _timing, period = parse_gait_timing(msg.data)
         except ValueError as exc:
@@ -214,7 +199,7 @@ class SimNode(Node):
                                       f"{self.settings.batch_ticks}-tick grid", throttle_duration_sec=5.0)
             return
         with self._lock:
-            self._batcher.follow_decisions(period)
+            self._states.batcher.follow_decisions(period)
 
     def _on_torques(self, msg: JointState) -> None:
         now = time.perf_counter()
@@ -271,7 +256,7 @@ class SimNode(Node):
         for action in actions:
             kind = type(action)
             if kind is State:
-                self._publish_state(action)
+                self._states.publish(action)
                 self.driver.sent(action)
             elif kind is Log:
                 self._log(action)
@@ -289,44 +274,11 @@ class SimNode(Node):
                 self._fallen_pub.publish(Bool(data=action.value))
             elif kind is Placed:
                 self._resets_pub.publish(UInt32(data=action.count))
-        if self._batcher.count and (self.driver.halted or self.driver.paused):
-            self._send_batch()  # nothing follows soon: the observers get the last states now
-        if self._pace_timer is not None:
-            self._arm_pace()
-
-    def _arm_pace(self) -> None:
-        """Paced: the one-shot timer runs while a state waits for its wall time, at its due time."""
-        wait = self.driver.pace_wait
-        if wait is None:
-            self._pace_timer.cancel()
-        elif self._pace_timer.is_canceled():
-            self._pace_timer.timer_period_ns = max(1000, int(wait * 1e9))  # (>= 1 µs: rcl wants a period > 0)
-            self._pace_timer.reset()
-
-    def _paced_wake(self) -> None:
-        self._pace_timer.cancel()
-        self._run(self.driver.paced_wake)  # re-armed by _do if the state is not due yet
-
-    def _send_batch(self) -> None:
-        self._batch_pub.publish(state_batch_to_msg(*self._batcher.take()))
-
-    def _publish_state(self, state: State) -> None:
-        """Joint states; the state into the batch (sent when :class:`StateBatcher` says);
-        hip velocity (world frame: x forward, z up, pitch rate) and clock only for listeners."""
-        stamp = stamp_from_ns(state.stamp)
-        msg = self._joint_msg
-        msg.header.stamp = stamp
-        msg.position, msg.velocity, msg.effort = state.qpos, state.qvel, state.effort
-        self._state_pub.publish(msg)
-        if self._batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
-            self._send_batch()
-        if self._hip_pub.get_subscription_count():
-            hip = self._hip_msg
-            hip.header.stamp = stamp
-            hip.twist.linear.x, hip.twist.linear.z, hip.twist.angular.y = state.qvel[0], state.qvel[1], state.qvel[2]
-            self._hip_pub.publish(hip)
-        if state.stamp % self._clock_every == 0 and self._clock_pub.get_subscription_count():
-            self._clock_pub.publish(Clock(clock=stamp))
+        if self.driver.halted or self.driver.paused:
+            self._states.send_batch()  # nothing follows soon: the observers get the last states now
+        wait = self.driver.pace_wait if self._pace_timer is not None else None
+        if wait is not None:  # paced: wake once when the state that waits is due (no 1 kHz timer)
+            self._pace_timer.arm(wait)
 
 
 def main(args: list[str] | None = None) -> int:

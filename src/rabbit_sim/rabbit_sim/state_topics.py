@@ -1,0 +1,61 @@
+"""The topics a simulated state goes out on (needs rclpy): :class:`StateTopics`.
+
+``/joint_states`` with every state (the controller's input, 1 kHz); the same state into the
+next ``/sim/state_batch`` (sent when :class:`~rabbit_sim.stepping.batch.StateBatcher` says:
+the observers' stream); ``/hip_velocity`` (world frame: x forward, z up, pitch rate) with every
+state and ``/clock`` on the states of its ``clock_rate`` grid, each only while anyone
+subscribes (an unread 1 kHz stream costs every process on the machine).
+"""
+
+from __future__ import annotations
+
+from geometry_msgs.msg import TwistStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header
+
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.conversions import stamp_from_ns, state_batch_to_msg
+from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.joints import JOINT_NAMES
+
+from .stepping import State
+from .stepping.batch import StateBatcher
+
+
+class StateTopics:
+    """Publishers of a node for its states; ``batch_ticks`` and ``clock_ticks`` as in
+    :class:`~rabbit_sim.settings.SimSettings`."""
+
+    def __init__(self, node, batch_ticks: int, clock_ticks: int) -> None:
+        pub = node.create_publisher
+        self._state_pub = pub(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        self._batch_pub = pub(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
+        self._hip_pub = pub(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
+        self._clock_pub = pub(Clock, topics.CLOCK, qos.CLOCK_QOS)
+        self.batcher = StateBatcher(batch_ticks)
+        self._clock_every = clock_ticks * TICK_NS  # ns of sim time between /clock messages
+        self._joint_msg = JointState(name=list(JOINT_NAMES))
+        self._hip_msg = TwistStamped(header=Header(frame_id="world"))
+
+    def publish(self, state: State) -> None:
+        """One state on every topic that takes it now."""
+        stamp = stamp_from_ns(state.stamp)
+        msg = self._joint_msg
+        msg.header.stamp = stamp
+        msg.position, msg.velocity, msg.effort = state.qpos, state.qvel, state.effort
+        self._state_pub.publish(msg)
+        if self.batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
+            self.send_batch()
+        if self._hip_pub.get_subscription_count():
+            hip = self._hip_msg
+            hip.header.stamp = stamp
+            hip.twist.linear.x, hip.twist.linear.z, hip.twist.angular.y = state.qvel[0], state.qvel[1], state.qvel[2]
+            self._hip_pub.publish(hip)
+        if state.stamp % self._clock_every == 0 and self._clock_pub.get_subscription_count():
+            self._clock_pub.publish(Clock(clock=stamp))
+
+    def send_batch(self) -> None:
+        """The states not yet batched, now (nothing if there are none)."""
+        if self.batcher.count:
+            self._batch_pub.publish(state_batch_to_msg(*self.batcher.take()))
