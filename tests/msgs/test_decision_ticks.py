@@ -70,3 +70,10 @@ def test_gait_timing_carries_the_controller_settings_a_policy_needs():
     for bad in ("at_once:20 kp=1,2", "at_once:20 hip_coefficient_range=1.0"):
         with pytest.raises(ValueError, match="is (one number|a range)"):
             timing_settings(bad)
+
+
+def test_the_state_before_each_decision_is_the_one_whose_phase_it_reads():
+    from rabbit_msgs_py.decision_ticks import precedes_decision
+
+    assert [k for k in range(0, 61) if precedes_decision(k, 20, 1)] == [19, 39, 59]
+    assert all(precedes_decision(k * 1_000_000, 0) for k in range(5))  # once per step, or not known: every state

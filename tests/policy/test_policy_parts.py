@@ -111,6 +111,27 @@ def test_schedule_and_push_parsing():
         build(((0.0, 0.8), (0.1, 1.0)))  # exactly the spacing is fine
 
 
+def test_a_layout_is_one_of_three_and_a_cpu_meter_counts_per_tick():
+    import os
+
+    from rabbit_policy.bringup.config import LAYOUTS
+    from rabbit_policy.bringup.cpu import CpuMeter, process_cpu_seconds
+
+    assert StackConfig(duration=1.0, schedule=((0.0, 1.0),)).layout == "composed" == LAYOUTS[0]
+    with pytest.raises(ValueError, match="layout must be one of composed, separate, in-process"):
+        StackConfig(duration=1.0, schedule=((0.0, 1.0),), layout="components")
+    meter = CpuMeter({"me": os.getpid()})
+    assert meter.per_tick_us(5_000_000) is None and not meter.started  # not started: nothing measured
+    meter.start(1_000_000)
+    spent = process_cpu_seconds(os.getpid())
+    while process_cpu_seconds(os.getpid()) < spent + 0.05:  # burn at least 50 ms of CPU
+        pass
+    per_tick = meter.per_tick_us(1_000_000 + 100 * 1_000_000)  # over 100 ticks
+    assert per_tick["me"] >= 0.05 / 100 * 1e6 and per_tick["total"] == per_tick["me"]
+    assert meter.per_tick_us(1_000_000) is None  # no ticks
+    assert process_cpu_seconds(2 ** 30) is None  # no such process
+
+
 def test_ros_arguments():
     assert ros_arguments({"mode": "lockstep", "stop_time": 5.0, "start_paused": True, "gait_dir": ""}) == [
         "--ros-args", "-p", "mode:=lockstep", "-p", "stop_time:=5.0", "-p", "start_paused:=true",

@@ -26,6 +26,11 @@ def _node_processes(parent: int) -> list[str]:
     return [row[0] for row in rows if len(row) == 3 and row[1] == str(parent) and "-m rabbit_" in row[2]]
 
 
+NODE_PROCESSES = {"composed": 1, "separate": 3}
+"""Node processes run_stack starts in each layout: composed (the default) runs the simulator and
+the controller in its own process, and starts the policy; separate starts all three."""
+
+
 def _alive(pids: list[str]) -> list[str]:
     return [pid for pid in pids if Path(f"/proc/{pid}").exists()]
 
@@ -82,10 +87,11 @@ def test_a_lone_publisher_of_our_topics_does_not_stop_a_start():
     assert json.loads(run.stdout)["completed"] is True
 
 
-def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
+@pytest.mark.parametrize("layout", ["composed", "separate"])
+def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured(layout):
     """Lockstep (the mode that holds on any machine): Ctrl-C once the simulation runs."""
     proc = subprocess.Popen(
-        [sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--json"],
+        [sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--json", "--layout", layout],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     lines: list[str] = []
@@ -102,7 +108,7 @@ def test_ctrl_c_stops_the_nodes_and_prints_what_was_measured():
     try:
         assert running.wait(120), "".join(lines)[-2000:]
         children = _node_processes(proc.pid)
-        assert len(children) == 3
+        assert len(children) == NODE_PROCESSES[layout]
         time.sleep(1.0)  # walk a little
         proc.send_signal(signal.SIGINT)
         out = proc.stdout.read()
@@ -134,7 +140,7 @@ def test_ctrl_c_during_start_up_gives_exit_3_and_an_interrupted_report(delay):
     try:
         if isinstance(delay, str):
             deadline = time.monotonic() + 60.0
-            while len(_node_processes(proc.pid)) < 3 and time.monotonic() < deadline:
+            while len(_node_processes(proc.pid)) < NODE_PROCESSES["composed"] and time.monotonic() < deadline:
                 time.sleep(0.02)
             time.sleep(1.0 if delay.endswith("1 s") else 0.0)
         else:
@@ -161,7 +167,7 @@ def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace
                               "--namespace", "rabbit1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 60
-        while len(_node_processes(first.pid)) < 3 and time.monotonic() < deadline:
+        while len(_node_processes(first.pid)) < NODE_PROCESSES["composed"] and time.monotonic() < deadline:
             time.sleep(0.2)
         time.sleep(2.0)  # let its nodes come up and be discovered
         clash = subprocess.run([sys.executable, str(SCRIPT), "--speed", "1.2", "--duration", "2", "--json",
@@ -188,9 +194,10 @@ def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace
 
 def test_a_run_stack_killed_outright_takes_its_nodes_with_it():
     """SIGKILL to run_stack (no chance to stop its nodes, as a test's timeout or the OOM
-    killer does): its node processes end too, so no stack is left running in the domain."""
-    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600"],
-                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    killer does): its node processes end too, so no stack is left running in the domain
+    (every node its own process: the layout with the most to leave behind)."""
+    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--layout",
+                              "separate"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     nodes: list[str] = []
     while len(nodes) < 3 and time.monotonic() < deadline:

@@ -7,8 +7,10 @@ per distinct state (sensor_msgs/JointState: the four ``ACTUATED_JOINTS`` and the
 in ``effort``, ``header.stamp`` = the stamp of the state answered, ``header.frame_id`` = this
 controller instance's id, :attr:`HZDControllerNode.source`, signed with ``pairing_key`` where
 the stack gave one: ``rabbit_msgs_py.pairing``), ``/hzd/step`` at each
-touchdown and, while anyone subscribes, ``/hzd/phase`` (the gait phase and its rate on each
-state answered, before the reply: what a body-state policy reads); with ``reference_rate`` > 0
+touchdown and, while anyone subscribes, ``/hzd/phase`` (the gait phase and its rate on a
+state answered, before the reply: what a body-state policy reads; on each state, or, when the
+policy announces a decision every N ticks, on the state before each of its decisions, the
+one it reads: :func:`~rabbit_msgs_py.decision_ticks.precedes_decision`); with ``reference_rate`` > 0
 also ``/hzd/reference`` and ``/hzd/tracking_error`` (the desired outputs and the tracking
 error, for tuning Kp and Kd).
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
@@ -46,7 +48,7 @@ from rabbit_msgs_py.conversions import (
     torques_to_msg,
 )
 from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_NS, parse_gait_timing,
-                                          timing_settings)
+                                          precedes_decision, timing_settings)
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
 from rabbit_msgs_py.pairing import GaitOrder, resolve_key
@@ -163,6 +165,7 @@ class HZDControllerNode(Node):
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
+        self._decision_period = 0  # ticks between the policy's decisions (/hzd/gait_timing; 0: per step, unknown)
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
         self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
         self._gaitless_since: float | None = None  # wall s of the first state answered without a gait
@@ -338,6 +341,7 @@ class HZDControllerNode(Node):
             if line is not None:
                 self.get_logger().error(line)
             return
+        self._decision_period = period
         if source is None:
             self._adopt(settings)
         else:
@@ -430,7 +434,7 @@ class HZDControllerNode(Node):
         frame = FOOT_FRAMES[answer.stance]
         if answer.touchdown:  # before the reply: the policy has it before the states that follow
             self._step_pub.publish(Header(stamp=stamp, frame_id=frame))
-        if self._phase_pub.get_subscription_count():  # only for someone reading it (a body-state policy)
+        if self._phase_pub.get_subscription_count() and precedes_decision(answer.stamp, self._decision_period):
             self._phase_pub.publish(phase_to_msg(answer.tau, answer.tau_rate, stamp, frame))
         torque_msg = self._torque_msg
         torque_msg.header.stamp = stamp

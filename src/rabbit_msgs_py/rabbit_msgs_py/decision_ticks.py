@@ -152,6 +152,14 @@ def parse_gait_timing(text: str) -> tuple[str, int]:
     return timing, int(period) if period else 0
 
 
+def precedes_decision(stamp: int, period: int, tick: int = TICK_NS) -> bool:
+    """Is the state at ``stamp`` the one before a decision of a policy deciding every
+    ``period`` ticks (the state whose controller phase that decision reads: the next stamp is
+    a multiple of the period since the placement)? Always true for ``period`` 0 (once per
+    step, or not known): every state may be."""
+    return not period or (stamp + tick) % (period * tick) == 0
+
+
 class PeriodicDecisions:
     """See the module docstring."""
 

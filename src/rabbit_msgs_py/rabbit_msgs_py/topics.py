@@ -58,8 +58,9 @@ of the state on which the stance switched, ``frame_id`` = the new stance foot
 (``left_foot`` / ``right_foot``, the model's foot sites). The policy node evaluates its
 policy on this event."""
 PHASE = "hzd/phase"
-"""sensor_msgs/JointState, hzd_controller_node with each torque reply while anyone
-subscribes: one joint ``gait_phase``, ``position`` = the phase tau of the step (0 at the
+"""sensor_msgs/JointState, hzd_controller_node with a torque reply while anyone subscribes
+(each reply; when the policy announces a decision every N ticks, the reply to the state
+before each decision, the one it reads): one joint ``gait_phase``, ``position`` = the phase tau of the step (0 at the
 touchdown, 1 at the next; unitless), ``velocity`` = d tau/dt (1/s), ``header.stamp`` = the
 stamp of the state it was computed on, ``frame_id`` = the stance foot. A policy reading the
 body state inside the step (features ``body``) takes it from here."""
