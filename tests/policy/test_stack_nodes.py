@@ -779,9 +779,13 @@ def test_a_stopped_or_killed_controller_is_named_as_such(capfd):
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             assert spin_until(executor, lambda: sim.time >= 0.3, timeout=60.0)
+            # the simulator learns that the controller is alive from its writers' liveliness (its
+            # participant announces it within about a second of matching): only a controller seen
+            # alive can be seen to lapse (one stopped before is "busy, or died")
+            assert spin_until(executor, lambda: sim._torque_publishers().alive == 1, timeout=30.0)
             controller = sim.controller
             os.kill(proc.pid, signal.SIGSTOP)
-            assert spin_until(executor, lapsed, timeout=30.0)
+            assert spin_until(executor, lapsed, timeout=30.0), (sim._liveliness, sim._torque_publishers())
             capfd.readouterr()  # what was logged before the lease lapsed
             stopped = warnings_within(30.0)
             os.kill(proc.pid, signal.SIGCONT)
@@ -791,7 +795,7 @@ def test_a_stopped_or_killed_controller_is_named_as_such(capfd):
             assert spin_until(executor, lambda: not lapsed(), timeout=30.0)  # alive again
             os.kill(proc.pid, signal.SIGKILL)
             proc.wait(timeout=10)
-            assert spin_until(executor, lapsed, timeout=30.0)
+            assert spin_until(executor, lapsed, timeout=30.0), (sim._liveliness, sim._torque_publishers())
             capfd.readouterr()
             killed = warnings_within(30.0)
         finally:

@@ -175,7 +175,7 @@ class HZDControllerNode(Node):
         """Publishers, subscriptions and timers: once no other controller runs in this
         namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         self._torque_pub = self.create_publisher(JointState, topics.JOINT_TORQUES, qos.TORQUE_QOS)
-        self._step_pub = self.create_publisher(Header, topics.STEP, qos.EVENT_QOS)
+        self._step_pub = self.create_publisher(Header, topics.STEP, qos.STEP_QOS)  # (its lease: sim_node's monitor)
         self._phase_pub = self.create_publisher(JointState, topics.PHASE, qos.STREAM_QOS)
         if self._reference_every:
             self._reference_pub = self.create_publisher(JointState, topics.REFERENCE, qos.STREAM_QOS)

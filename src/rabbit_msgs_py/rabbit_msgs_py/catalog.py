@@ -44,7 +44,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.CLOCK, Clock, qos.CLOCK_QOS),
         TopicSpec(topics.FALLEN, Bool, qos.STATUS_QOS),
         TopicSpec(topics.JOINT_TORQUES, JointState, qos.TORQUE_QOS),
-        TopicSpec(topics.STEP, Header, qos.EVENT_QOS),
+        TopicSpec(topics.STEP, Header, qos.STEP_QOS),
         TopicSpec(topics.PHASE, JointState, qos.STREAM_QOS),
         TopicSpec(topics.REFERENCE, JointState, qos.STREAM_QOS),
         TopicSpec(topics.TRACKING_ERROR, JointState, qos.STREAM_QOS),

@@ -12,11 +12,13 @@
 * Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
   the current state.
 * Events (``/hzd/step``): reliable, keep last 10.
-* Torque replies: the stream profile, and hzd_controller_node's publisher declares a
-  liveliness lease of 1 s (``TORQUE_QOS``: its DDS participant asserts it, whatever the
-  Python thread does), so sim_node can tell a stopped or killed controller from a busy one
-  (``LIVELINESS_MONITOR_QOS``, a second subscription that asks for that lease). Subscribers
-  with the default profile stay compatible.
+* Torque replies and touchdowns: the stream and event profiles, and hzd_controller_node's
+  publishers declare a liveliness lease of 1 s (``TORQUE_QOS``, ``STEP_QOS``: its DDS
+  participant asserts it, whatever the Python thread does), so sim_node can tell a stopped
+  or killed controller from a busy one: a second subscription to ``/hzd/step`` (a few
+  messages a second, not the 1 kHz replies) asks for that lease
+  (``LIVELINESS_MONITOR_QOS``) and matches only the controllers' writers. Subscribers with
+  the default profile stay compatible.
 * Services (``/sim/reset``, ``/sim/pause``, ``/sim/release_controller``): depth 1000 on both
   sides (``SERVICE_QOS``). The server keeps every request; but a caller's responses land in
   its own client's history, and rclpy's default client keeps 10: a client that makes more
@@ -55,6 +57,10 @@ LIVELINESS_LEASE_S = 1
 TORQUE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
                         liveliness=LivelinessPolicy.AUTOMATIC,
                         liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
+STEP_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE,
+                      liveliness=LivelinessPolicy.AUTOMATIC,
+                      liveliness_lease_duration=Duration(seconds=LIVELINESS_LEASE_S))
+"""``/hzd/step``: the event profile with the controller's liveliness lease."""
 LIVELINESS_MONITOR_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                                     reliability=ReliabilityPolicy.BEST_EFFORT,
                                     liveliness=LivelinessPolicy.AUTOMATIC,

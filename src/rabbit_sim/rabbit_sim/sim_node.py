@@ -27,7 +27,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, String, UInt32
+from std_msgs.msg import Bool, Header, String, UInt32
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -85,7 +85,7 @@ class SimNode(Node):
             except ViewerUnavailable as exc:
                 raise NodeStartError(f"sim_node: {exc}") from None
         self._pace_timer = None  # paced: the one-shot wake-up of a state that waits for its wall time
-        self._liveliness: tuple[int, int] | None = None  # torque publishers (alive, lapsed); None: none declares it
+        self._liveliness: tuple[int, int] | None = None  # controllers (alive, lapsed); None: none declares a lease
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.spin_timeout = 0.001 if self.settings.mode == "realtime" else 0.1  # (see the timers in _wire)
         self.solo = SoloStart(self, "simulator", self.settings.solo_check, self._wire,
@@ -104,9 +104,10 @@ class SimNode(Node):
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
-        # who of the torque publishers is alive (a stopped or killed controller vs a busy one): liveliness
-        # events of a second, raw subscription that matches only publishers declaring a lease
-        self.create_subscription(JointState, topics.JOINT_TORQUES, lambda _raw: None, qos.LIVELINESS_MONITOR_QOS,
+        # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
+        # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)
+        # that matches only publishers declaring a lease
+        self.create_subscription(Header, topics.STEP, lambda _raw: None, qos.LIVELINESS_MONITOR_QOS,
                                  raw=True, event_callbacks=SubscriptionEventCallbacks(
                                      liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
