@@ -40,15 +40,14 @@ from rabbit_msgs_py.conversions import (
     alpha_from_msg,
     alpha_signature,
     controller_id,
-    joint_state_vectors,
+    joint_state_from_bytes,
     phase_to_msg,
     short,
     stamp_from_ns,
-    stamp_to_ns,
-    torques_to_msg,
 )
 from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_NS, parse_gait_timing,
                                           precedes_decision, timing_settings)
+from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
 from rabbit_msgs_py.pairing import GaitOrder, resolve_key
@@ -167,7 +166,8 @@ class HZDControllerNode(Node):
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self._decision_period = 0  # ticks between the policy's decisions (/hzd/gait_timing; 0: per step, unknown)
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
-        self._torque_msg = torques_to_msg([0.0] * 4, source=self.source)  # names once; effort, stamp per tick
+        self._replies = JointStateWriter(ACTUATED_JOINTS)  # serialized replies: no message object per tick
+        self._reply = b""  # the last reply sent (a re-sent state gets it again)
         self._gaitless_since: float | None = None  # wall s of the first state answered without a gait
         self.solo = SoloStart(self, "controller", solo_check, self._wire)
 
@@ -180,7 +180,7 @@ class HZDControllerNode(Node):
         if self._reference_every:
             self._reference_pub = self.create_publisher(JointState, topics.REFERENCE, qos.STREAM_QOS)
             self._error_pub = self.create_publisher(JointState, topics.TRACKING_ERROR, qos.STREAM_QOS)
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
+        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS, raw=True)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
         self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
@@ -393,15 +393,16 @@ class HZDControllerNode(Node):
     def _on_resets(self, msg: UInt32) -> None:
         self._do(self.sync.on_resets(msg.data))
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_state(self, msg: bytes) -> None:
+        """A state, serialized (taken raw: the 1 kHz path builds no message object)."""
         try:
-            q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
+            stamp, q, dq = joint_state_from_bytes(msg)
         except MessageError as exc:
             self.rejected_states += 1
             self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
                                     throttle_duration_sec=1.0)
             return
-        self._do(self.sync.on_state(stamp_to_ns(msg.header.stamp), q, dq))
+        self._do(self.sync.on_state(stamp, q, dq))
         missing = self.sync.missing
         if not missing:
             self._gaitless_since = None
@@ -422,7 +423,7 @@ class HZDControllerNode(Node):
             if isinstance(action, Answer):
                 self._answer(action)
             elif isinstance(action, Repeat):
-                self._torque_pub.publish(self._torque_msg)  # a re-send: the same reply again
+                self._torque_pub.publish(self._reply)  # a re-send: the same reply again
             elif action.level == "warning":  # (rclpy wants one severity per call site)
                 self.get_logger().warning(action.text)
             else:
@@ -436,12 +437,10 @@ class HZDControllerNode(Node):
             self._step_pub.publish(Header(stamp=stamp, frame_id=frame))
         if self._phase_pub.get_subscription_count() and precedes_decision(answer.stamp, self._decision_period):
             self._phase_pub.publish(phase_to_msg(answer.tau, answer.tau_rate, stamp, frame))
-        torque_msg = self._torque_msg
-        torque_msg.header.stamp = stamp
-        torque_msg.effort = answer.torques
-        if self.pairing is not None:
-            torque_msg.header.frame_id = self.pairing.sign(self.source, answer.stamp, torque_msg.effort)
-        self._torque_pub.publish(torque_msg)
+        torques = answer.torques
+        frame_id = self.pairing.sign(self.source, answer.stamp, torques) if self.pairing is not None else self.source
+        self._reply = self._replies.bytes(answer.stamp, frame_id, (), (), torques)
+        self._torque_pub.publish(self._reply)
         self.torques_published += 1
         if self._reference_every and (answer.stamp + TICK_NS // 2) % self._reference_every < TICK_NS:
             self._publish_reference(stamp, frame)

@@ -28,6 +28,7 @@ from builtin_interfaces.msg import Time
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
+from .cdr import CdrError, read_joint_state
 from .joints import ACTUATED_JOINTS, JOINT_NAMES, N_JOINTS
 from .runtime import one_line
 
@@ -114,7 +115,22 @@ def torques_from_msg(msg: JointState) -> tuple[int, str, list[float]]:
     """A torque reply -> (stamp answered in ns, controller id, 4 torques in
     ``ACTUATED_JOINTS`` order, whatever order the message names them in); raises
     :class:`MessageError` if malformed."""
-    names, effort = list(msg.name), list(msg.effort)
+    return torques_from_fields(stamp_to_ns(msg.header.stamp), msg.header.frame_id, msg.name, msg.effort)
+
+
+def torques_from_bytes(data: bytes) -> tuple[int, str, list[float]]:
+    """:func:`torques_from_msg` of a reply as its serialized bytes (``rabbit_msgs_py.cdr``)."""
+    try:
+        stamp, frame_id, names, _position, _velocity, effort = read_joint_state(data)
+    except CdrError as exc:
+        raise MessageError(str(exc)) from None
+    return torques_from_fields(stamp, frame_id, names, effort)
+
+
+def torques_from_fields(stamp: int, frame_id: str, names: Sequence[str], effort: Sequence[float]
+                        ) -> tuple[int, str, list[float]]:
+    """The checks of :func:`torques_from_msg` on the reply's fields (stamp in ns)."""
+    names, effort = list(names), list(effort)
     if len(effort) != len(names):
         raise MessageError(f"torque reply needs one effort per name, got {len(names)} names and {len(effort)} efforts")
     if tuple(names) == ACTUATED_JOINTS:
@@ -126,7 +142,7 @@ def torques_from_msg(msg: JointState) -> tuple[int, str, list[float]]:
             raise MessageError(f"torque reply lacks a joint ({exc}); expected {list(ACTUATED_JOINTS)}") from None
     if not all(math.isfinite(v) for v in data):
         raise MessageError("torques contain NaN or infinite values")
-    return stamp_to_ns(msg.header.stamp), msg.header.frame_id, data
+    return stamp, frame_id, data
 
 
 PHASE_JOINT = "gait_phase"
@@ -157,6 +173,16 @@ def short(value: object, limit: int = 120) -> str:
     """A string as it is, anything else as ``repr``, on one line cut to ``limit`` characters:
     for log messages about bad input (:func:`rabbit_msgs_py.runtime.one_line`)."""
     return one_line(value if isinstance(value, str) else repr(value), limit)
+
+
+def joint_state_from_bytes(data: bytes) -> tuple[int, list[float], list[float]]:
+    """A serialized JointState (``rabbit_msgs_py.cdr``) -> (stamp ns, q, dq) in ``JOINT_NAMES``
+    order, checked as :func:`joint_state_vectors` checks them; :class:`MessageError` otherwise."""
+    try:
+        stamp, _frame_id, names, position, velocity, _effort = read_joint_state(data)
+    except CdrError as exc:
+        raise MessageError(str(exc)) from None
+    return (stamp, *joint_state_vectors(names, position, velocity))
 
 
 def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocity: Sequence[float]

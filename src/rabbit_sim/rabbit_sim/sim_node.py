@@ -33,7 +33,7 @@ from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
-    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_msg)
+    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_bytes)
 from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
@@ -103,7 +103,7 @@ class SimNode(Node):
         self.driver.markers_wanted = lambda: self._markers_pub.get_subscription_count() > 0  # none built for nobody
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
-        self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS)
+        self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
         # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
         # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)
         # that matches only publishers declaring a lease
@@ -202,10 +202,11 @@ class SimNode(Node):
         with self._lock:
             self._states.batcher.follow_decisions(period)
 
-    def _on_torques(self, msg: JointState) -> None:
+    def _on_torques(self, msg: bytes) -> None:
+        """A reply, serialized (taken raw: the 1 kHz path builds no message object)."""
         now = time.perf_counter()
         try:
-            stamp, frame_id, torques = torques_from_msg(msg)
+            stamp, frame_id, torques = torques_from_bytes(msg)
         except MessageError as exc:
             self.driver.on_malformed_torques()
             self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_TORQUES)}: {exc}",

@@ -15,6 +15,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header
 
 from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.conversions import stamp_from_ns, state_batch_to_msg
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.joints import JOINT_NAMES
@@ -35,18 +36,15 @@ class StateTopics:
         self._clock_pub = pub(Clock, topics.CLOCK, qos.CLOCK_QOS)
         self.batcher = StateBatcher(batch_ticks)
         self._clock_every = clock_ticks * TICK_NS  # ns of sim time between /clock messages
-        self._joint_msg = JointState(name=list(JOINT_NAMES))
+        self._joint_states = JointStateWriter(JOINT_NAMES)  # serialized: no message object per tick
         self._hip_msg = TwistStamped(header=Header(frame_id="world"))
 
     def publish(self, state: State) -> None:
         """One state on every topic that takes it now."""
-        stamp = stamp_from_ns(state.stamp)
-        msg = self._joint_msg
-        msg.header.stamp = stamp
-        msg.position, msg.velocity, msg.effort = state.qpos, state.qvel, state.effort
-        self._state_pub.publish(msg)
+        self._state_pub.publish(self._joint_states.bytes(state.stamp, "", state.qpos, state.qvel, state.effort))
         if self.batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
             self.send_batch()
+        stamp = stamp_from_ns(state.stamp)
         if self._hip_pub.get_subscription_count():
             hip = self._hip_msg
             hip.header.stamp = stamp
