@@ -42,7 +42,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
         error = spin_until_done(executor, supervisor, stall_timeout, spin_timeout=spin_timeout, stop=stop,
                                 meter=meter)
         error = error or wait_for_recording(executor, supervisor, stall_timeout)
-        cpu = meter.per_tick_us(supervisor._sim_ns)
+        cpu = meter.per_tick_us(supervisor.sim_stamp)
         drain_until = time.monotonic() + 0.3  # deliver what is in flight (last states, recorder)
         while time.monotonic() < drain_until:
             executor.spin_once(timeout_sec=0.005)

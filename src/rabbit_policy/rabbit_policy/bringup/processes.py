@@ -150,7 +150,7 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
                                     spin_timeout=min(0.05, *(spin_timeout_of(n) for n in nodes.values())),
                                     meter=meter)
             error = error or wait_for_recording(executor, supervisor, stall_timeout, alive=procs.dead)
-            cpu = meter.per_tick_us(supervisor._sim_ns)
+            cpu = meter.per_tick_us(supervisor.sim_stamp)
         finally:
             if executor is not None:
                 executor.shutdown()

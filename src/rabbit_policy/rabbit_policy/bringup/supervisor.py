@@ -123,6 +123,11 @@ class Supervisor(Node):
         return self._sim_ns / 1e9
 
     @property
+    def sim_stamp(self) -> int:
+        """The newest state's stamp (ns of sim time)."""
+        return self._sim_ns
+
+    @property
     def recorded_until(self) -> float:
         """The sim time (s) of the newest state the recorder has written (negative before its first)."""
         return self._recorded_ns / 1e9
@@ -298,7 +303,7 @@ def spin_until_done(executor, supervisor: Supervisor, stall_timeout: float, aliv
         except (KeyboardInterrupt, ExternalShutdownException):
             return "interrupted"
         if meter is not None and not meter.started and supervisor.first_state_wall is not None:
-            meter.start(supervisor._sim_ns)
+            meter.start(supervisor.sim_stamp)
         problem = "interrupted" if stop() else alive()
         if problem:
             return problem

@@ -7,14 +7,14 @@
   (a ratio carries to another machine).
 
 * ``lockstep_rtf_in_process``: real-time factor (sim s / wall s) of a lockstep walk with
-  all nodes on one EventsExecutor in this process (goal >= 3).
+  all nodes on one EventsExecutor in this process.
 * ``lockstep_rtf_multi_process``: the same with every node its own process (``--layout
   separate``).
 * ``lockstep_rtf_composed``: the same in run_stack's default layout (simulator, controller and
   supervisor in one process, the policy in its own).
 * ``*_cpu_us_per_tick``: each process's CPU time (user + system, all threads) per tick over
   the walk, and their total (``/proc``; Linux).
-* realtime mode, nodes as separate processes: ``realtime_rate_hz`` (physics/control ticks
+* realtime mode, run_stack's default layout: ``realtime_rate_hz`` (physics/control ticks
   per wall second), ``realtime_late_fraction`` (share of ticks whose torque, the reply to
   the previous state, had not arrived when the step was due; goal < 1 %),
   ``latency_p50_ms`` / ``latency_p99_ms`` (state published -> its torque received, as
@@ -27,7 +27,7 @@
   ``/joint_states`` ticks simulated minus those in the bag (0 by design).
 * Realtime runs halt when the loop falls too far behind (``*_halted``: the reason, or None).
 * ``--busy N`` runs N busy loops (``while True: pass``) beside every scenario: a loaded machine.
-* ``recorder_*``: the realtime multi-process run with ``--record``: the recorder process's
+* ``recorder_*``: the realtime run (default layout) with ``--record``: the recorder process's
   CPU share (CPU s / wall s over its life), messages written per wall second (its life
   includes start-up and shutdown, so this understates the rate during the walk), and
   /joint_states recorded vs published.
