@@ -64,3 +64,14 @@ def test_a_batch_message_round_trips_and_a_malformed_one_is_refused_in_one_line(
         broken[0 if why != "NaN" else 3] = value
         with pytest.raises(MessageError, match=why):
             state_batch_from_msg(state_batch_to_msg(broken, 2))
+
+
+def test_a_malformed_batch_gives_no_state_and_one_line():
+    from rabbit_msgs_py.conversions import batch_states_or_log
+
+    lines: list[str] = []
+    good = state_batch_to_msg(array.array("d", [MS] + [0.0] * 21), 1)
+    assert [s.stamp for s in batch_states_or_log(good, "/sim/state_batch", lines.append)] == [MS] and lines == []
+    bad = state_batch_to_msg(array.array("d", [MS] + [0.0] * 20), 1)
+    assert batch_states_or_log(bad, "/sim/state_batch", lines.append) == []
+    assert len(lines) == 1 and lines[0].startswith("ignoring /sim/state_batch: a state batch is n x 22")

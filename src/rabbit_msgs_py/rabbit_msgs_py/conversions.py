@@ -22,7 +22,7 @@ from __future__ import annotations
 import array
 import math
 import os
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 from builtin_interfaces.msg import Time
 from sensor_msgs.msg import JointState
@@ -254,6 +254,16 @@ def state_batch_from_msg(msg: Float64MultiArray) -> list[BatchState]:
         states.append(BatchState(int(stamp), data[i + 1:i + 1 + j], data[i + 1 + j:i + 1 + 2 * j],
                                  data[i + 1 + 2 * j:i + 1 + 3 * j]))
     return states
+
+
+def batch_states_or_log(msg: Float64MultiArray, topic: str, error: Callable[[str], None]) -> list[BatchState]:
+    """The states of a ``/sim/state_batch`` message from ``topic`` (its full name); for a
+    malformed one, none, and one line to ``error`` (the node's logger, throttled)."""
+    try:
+        return state_batch_from_msg(msg)
+    except MessageError as exc:
+        error(f"ignoring {topic}: {exc}")
+        return []
 
 
 def stamp_to_ns(stamp) -> int:

@@ -64,7 +64,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import (MessageError, alpha_to_msg, controller_id, joint_state_vectors, phase_from_msg,
-                                        stamp_to_ns, state_batch_from_msg)
+                                        stamp_to_ns, batch_states_or_log)
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
@@ -270,14 +270,9 @@ class PolicyNode(Node):
     def _on_state_batch(self, msg: Float64MultiArray) -> None:
         """The simulator's states, oldest first: each its hip speed (and, for a body-state
         policy, its body state first), as one ``/hip_velocity`` and ``/joint_states`` each."""
-        try:
-            states = state_batch_from_msg(msg)
-        except MessageError as exc:
-            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
-                                    throttle_duration_sec=1.0)
-            return
         body = self.core.body is not None
-        for state in states:
+        for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
+                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0)):
             if body:
                 self._do(self.core.on_body_state(state.stamp, state.position, state.velocity))
             try:

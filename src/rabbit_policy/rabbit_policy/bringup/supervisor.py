@@ -14,7 +14,7 @@ from std_msgs.msg import Bool, Float64, Float64MultiArray, Header
 from std_srvs.srv import SetBool
 
 from rabbit_msgs_py import qos, topics
-from rabbit_msgs_py.conversions import MessageError, stamp_to_ns, state_batch_from_msg
+from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
@@ -208,14 +208,9 @@ class Supervisor(Node):
 
     def _on_batch(self, msg: Float64MultiArray) -> None:
         """The simulator's states in a batch (``/sim/state_batch``), oldest first."""
-        try:
-            states = state_batch_from_msg(msg)
-        except MessageError as exc:
-            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
-                                    throttle_duration_sec=1.0)
-            return
         now = time.perf_counter()
-        for state in states:
+        for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
+                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0)):
             self._on_state(state.stamp, state.position[0], state.effort, now)
 
     def _on_state(self, t: int, x: float, effort, now: float) -> None:
