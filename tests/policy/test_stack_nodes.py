@@ -20,6 +20,7 @@ from rabbit_msgs_py.decision_ticks import DecisionTiming
 from rabbit_msgs_py.pairing import new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
+from rabbit_policy.bringup import processes as processes_module
 from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
@@ -1274,3 +1275,26 @@ def test_a_use_sim_time_node_follows_the_simulation_clock():
     # the ROS clock is the newest /clock: within a few ticks of the state being read, never the wall clock (~1.8e9 s)
     assert all(abs(now - stamp) < 0.05 for stamp, now in late), late[:5]
     assert late[-1][1] > 1.9
+
+
+def test_a_composed_node_that_cannot_start_ends_the_run_with_its_line_and_leaves_no_process(monkeypatch):
+    """run_stack's default layout builds the simulator in its own process: one that cannot start
+    (here its viewer without a display) raises its one line after the policy process started,
+    and that process is stopped (nothing of the stack is left in the domain)."""
+    from rabbit_msgs_py.runtime import NodeStartError
+
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    started = []
+    real = processes_module.NodeProcesses
+
+    class Recorded(real):
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            started.extend(self.procs.values())
+
+    monkeypatch.setattr(processes_module, "NodeProcesses", Recorded)
+    with pytest.raises(NodeStartError, match="sim_node: the viewer needs a display"):
+        run_multi_process(StackConfig(duration=1.0, schedule=((0.0, 1.0),), viewer=True))
+    assert [p.args[3] for p in started] == ["rabbit_policy.policy_node"]
+    assert all(p.poll() is not None for p in started)

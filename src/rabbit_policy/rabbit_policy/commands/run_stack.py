@@ -127,6 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.scenario import parse_pushes
     from rabbit_policy.bringup.stack import AnotherStack, StackConfig, other_stack, run_in_process, run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
+    from rabbit_msgs_py.runtime import NodeStartError
 
     def refused(error: str) -> None:
         """--json: the report of a run refused before it started (every exit prints one)."""
@@ -202,6 +203,9 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         refused(found)
         return 2
+    except NodeStartError as exc:  # a node run in this process could not start: its one line, the report
+        print(f"error: {exc}", file=sys.stderr)
+        return _report_and_exit(RunReport.not_started(config, str(exc)), config, args.json)
     return _report_and_exit(report, config, args.json)
 
 
