@@ -172,9 +172,7 @@ class PolicyNode(Node):
                 self.resolve_topic_name(topics.PHASE)))
         except (PolicyUnavailable, ValueError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from None
-        self._hip_source = values["hip_source"]
-        if self._hip_source not in HIP_SOURCES:
-            raise NodeStartError(f"policy_node: hip_source must be one of {HIP_SOURCES}, got {self._hip_source!r}")
+        self._hip_source = values["hip_source"]  # (one of HIP_SOURCES: declare checks the choices)
         self._settings = controller_settings(policy)  # announced on /hzd/gait_timing: the controller takes them
         self.add_on_set_parameters_callback(self._on_set_parameters)
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second

@@ -44,14 +44,13 @@ class StateTopics:
         self._state_pub.publish(self._joint_states.bytes(state.stamp, "", state.qpos, state.qvel, state.effort))
         if self.batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
             self.send_batch()
-        stamp = stamp_from_ns(state.stamp)
         if self._hip_pub.get_subscription_count():
             hip = self._hip_msg
-            hip.header.stamp = stamp
+            hip.header.stamp = stamp_from_ns(state.stamp)
             hip.twist.linear.x, hip.twist.linear.z, hip.twist.angular.y = state.qvel[0], state.qvel[1], state.qvel[2]
             self._hip_pub.publish(hip)
         if state.stamp % self._clock_every == 0 and self._clock_pub.get_subscription_count():
-            self._clock_pub.publish(Clock(clock=stamp))
+            self._clock_pub.publish(Clock(clock=stamp_from_ns(state.stamp)))
 
     def send_batch(self) -> None:
         """The states not yet batched, now (nothing if there are none)."""
