@@ -46,8 +46,8 @@ scheduled push; PUSH_CHANGED is 1 after a step in which a push started or ended;
 PUSHES_STARTED counts them."""
 
 PUSH_TIME_TOLERANCE = 1e-9
-"""s: a push due at t starts on the first step that ends at or after t - this (sim time sums
-1 ms steps and drifts below exact values)."""
+"""s: a push due at t starts on the first step that ends at or after t - this (a push time is a
+float read from text; the step's end is its exact tick time, :attr:`Simulator.time`)."""
 
 
 @njit(cache=True)

@@ -98,6 +98,15 @@ class TorqueDelay:
         return self._out.tolist()
 
 
+def timestep_ns(timestep: float) -> int:
+    """A model timestep (s) as the whole ns of one tick; ``ValueError`` unless it is one
+    (sim time is counted in ticks of whole ns)."""
+    ns = round(timestep * 1e9)
+    if not (ns >= 1 and abs(timestep * 1e9 - ns) < 1e-3):
+        raise ValueError(f"the model's timestep must be a whole number of ns, got {timestep!r} s")
+    return ns
+
+
 class Simulator:
     """The RABBIT model stepped with given joint torques (no controller inside).
 
@@ -107,6 +116,11 @@ class Simulator:
     scheduled at sim times (:meth:`schedule_pushes`; a push due at t acts from the first
     step that starts at or after t, for ``round(duration / timestep)`` steps).
     ``push_changed`` is true after a step in which a push started or ended.
+
+    Sim time is counted in whole steps: :attr:`tick` (steps since the last :meth:`reset`),
+    :attr:`stamp` (``tick x tick_ns``, ns) and :attr:`time` (that stamp in s, the float
+    nearest it). MuJoCo's ``data.time`` is its own float sum of timesteps and drifts off the
+    ns grid after about 181,000 steps; nothing here reads it.
     """
 
     def __init__(self, model: mujoco.MjModel, limits: FallLimits | None = None) -> None:
@@ -120,6 +134,8 @@ class Simulator:
         self.push_state[compiled.PUSH_UNTIL] = -1.0
         self.push_schedule = np.zeros((0, 3))  # time s, force N, duration s, by time
         self._torques = np.zeros(4)
+        self.tick_ns = timestep_ns(float(model.opt.timestep))
+        self.tick = 0  # steps since the last reset
 
     def bind(self) -> None:
         """Keep views of the data's controls and the torso's row of ``xfrc_applied`` (MjData
@@ -154,9 +170,14 @@ class Simulator:
         return min(end, start)
 
     @property
+    def stamp(self) -> int:
+        """Simulation time (ns): the steps since the last reset times the timestep, exact."""
+        return self.tick * self.tick_ns
+
+    @property
     def time(self) -> float:
-        """Simulation time (s)."""
-        return float(self.data.time)
+        """Simulation time (s): :attr:`stamp` as the float nearest it (on the ns grid)."""
+        return self.stamp / 1e9
 
     @property
     def timestep(self) -> float:
@@ -167,6 +188,7 @@ class Simulator:
         """Set the state (``JOINT_NAMES`` order) at t = 0 and zero controls and pushes
         (a push schedule stays: it applies again from t = 0)."""
         mujoco.mj_resetData(self.model, self.data)
+        self.tick = 0
         self.data.qpos[:] = qpos
         self.data.qvel[:] = qvel
         self.push_state[compiled.PUSH_UNTIL] = -1.0
@@ -186,7 +208,7 @@ class Simulator:
         self._rearm()
 
     def _rearm(self) -> None:
-        now = self.data.time
+        now = self.time
         self.push_schedule = np.array([(p.time, p.force_x, p.duration) for p in self._schedule], dtype=float
                                       ).reshape(-1, 3)
         due = [i for i, p in enumerate(self._schedule) if p.time >= now - compiled.PUSH_TIME_TOLERANCE]
@@ -207,7 +229,7 @@ class Simulator:
         wrench[0] = force_x
         wrench[2] = force_z
         wrench[4] = torque_y
-        state[compiled.PUSH_UNTIL] = self.data.time + duration
+        state[compiled.PUSH_UNTIL] = self.time + duration
         state[compiled.PUSH_CHANGED] = 1.0
         state[compiled.PUSHES_STARTED] += 1.0
 
@@ -218,7 +240,8 @@ class Simulator:
         data, ctrl = self.data, self._ctrl
         ctrl[0], ctrl[1], ctrl[2], ctrl[3] = torques
         mujoco.mj_step(self.model, data)
-        now = data.time
+        self.tick += 1
+        now = self.time
         compiled.push_rule(now, 0.5 * self.model.opt.timestep, self.push_state, self.push_schedule, self._wrench)
         return now
 

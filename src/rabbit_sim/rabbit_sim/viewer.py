@@ -73,8 +73,8 @@ def require_display() -> None:
 
 
 class ViewerObserver:
-    """A per-tick observer for a simulation loop (anything with ``model``, ``data`` and sim
-    ``data.time``): opens the viewer on the first tick and syncs it; with ``realtime`` it
+    """A per-tick observer for a simulation loop (anything with ``model``, ``data`` and its sim
+    ``time`` in s): opens the viewer on the first tick and syncs it; with ``realtime`` it
     also holds the loop to the wall clock (sim time never ahead of wall time), so a fast
     ROS-free walk can be watched. Holding only waits: the physics is unchanged."""
 
@@ -88,10 +88,10 @@ class ViewerObserver:
     def __call__(self, loop, _torques=None) -> None:
         if self.viewer is None:
             self.viewer = PassiveViewer(loop.model, loop.data)
-            self._start_wall, self._start_sim = time.perf_counter(), float(loop.data.time)
+            self._start_wall, self._start_sim = time.perf_counter(), loop.time
         self.viewer.sync()
         if self.realtime:
-            ahead = (float(loop.data.time) - self._start_sim) - (time.perf_counter() - self._start_wall)
+            ahead = (loop.time - self._start_sim) - (time.perf_counter() - self._start_wall)
             if ahead > 0.002:
                 time.sleep(ahead)
 

@@ -67,6 +67,7 @@ class _Capture:
     foot_velocity: np.ndarray  # its linear velocity (world, m/s)
     step_count: int  # ticks of the current step up to the section
     policy: Policy  # the policy with its memory (speed integral, last action) as on the cycle
+    tick: int  # the simulator's tick count (its sim time; MuJoCo's time is in ``state``)
 
 
 @dataclass(frozen=True)
@@ -145,7 +146,8 @@ class WalkReturnMap:
         site = self._feet[self.controller.stance]
         mujoco.mj_jacSite(self.model, self.data, self._jac, None, site)
         self._capture = _Capture(state, self._controller_state(), self.data.site_xpos[site].copy(),
-                                 self._jac @ self.data.qvel, self.step_count, copy_policy(self.policy))
+                                 self._jac @ self.data.qvel, self.step_count, copy_policy(self.policy),
+                                 self.loop.sim.tick)
 
     def _controller_state(self) -> tuple[np.ndarray, ...]:
         """A copy of what the controller's ticks change: its state and gait arrays."""
@@ -167,6 +169,7 @@ class WalkReturnMap:
         """Restore the captured state and controller, then set the coordinates ``x``."""
         model, data, cap = self.model, self.data, self._capture
         mujoco.mj_setState(model, data, cap.state, self._spec)
+        self.loop.sim.tick = cap.tick
         self._restore_controller(cap.controller)
         self.policy = copy_policy(cap.policy)  # a policy with memory decides from the cycle's memory
         stance = self.controller.stance
@@ -229,11 +232,12 @@ class WalkReturnMap:
         and replayed one tick shorter, the same ticks again, bit for bit."""
         model, data = self.model, self.data
         mujoco.mj_getState(model, data, self._before, self._spec)
-        controller = self._controller_state()
+        controller, tick = self._controller_state(), self.loop.sim.tick
         speeds, stop = self.loop.advance(limit, self.section_phase - self.section_margin)
         if self.controller.touchdown or self.controller.tau < self.section_phase:
             return self._commit(speeds, stop), False
         mujoco.mj_setState(model, data, self._before, self._spec)
+        self.loop.sim.tick = tick
         self._restore_controller(controller)
         return (self._ticks(len(speeds) - 1) if len(speeds) > 1 else 0), True
 

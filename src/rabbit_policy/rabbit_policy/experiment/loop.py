@@ -66,7 +66,8 @@ class ClosedLoop:
     tick. ``record_state``: keep per-tick ``qpos``/``qvel``/stance. ``observe_speed``:
     keep the speed window without a policy (the learning environment), observed as a policy
     deciding every ``decision_period`` ticks (0: once per step) would see it (with a policy,
-    the policy's own ``decision_period`` is used).
+    the policy's own ``decision_period`` is used). ``start_tick``: the simulator's tick count
+    at the placement (sim time ``start_tick`` ms; the scenario's times are absolute).
     """
 
     def __init__(self, scenario: Scenario, policy: Policy | None = None, start: GaitCommand | None = None,
@@ -74,7 +75,7 @@ class ClosedLoop:
                  controller: ControllerConfig | None = None,
                  model: mujoco.MjModel | None = None, observer: Observer | None = None,
                  record_state: bool = False, observe_speed: bool = False,
-                 decision_period: int = 0, decide_outside: bool = False) -> None:
+                 decision_period: int = 0, decide_outside: bool = False, start_tick: int = 0) -> None:
         if decide_outside and (policy is not None or not observe_speed or not decision_period):
             raise ValueError("decide_outside is for a loop without a policy, observing every N > 0 ticks")
         reset_policy(policy)  # a policy with memory starts each walk afresh
@@ -93,6 +94,7 @@ class ClosedLoop:
         self.controller = HZDController(start.alpha, start.kd, config, Leg.LEFT)
         speed = scenario.initial_speed if start_speed is None else start_speed
         self.sim.reset(*state_on_gait(start.alpha, speed, config.geometry))
+        self.sim.tick = start_tick
         self.sim.schedule_pushes(scenario.pushes)
         self._phase_pushes = list(scenario.phase_pushes)  # placed in time at a touchdown (_touchdown)
         self.placed_pushes: list = []  # the phase pushes as placed (rabbit_msgs_py.pushes.Push)
@@ -120,9 +122,9 @@ class ClosedLoop:
         fall = scenario.rules.fall
         self._feet = (self.model.site("left_foot").id, self.model.site("right_foot").id)
         self._state = np.zeros(ticks.LOOP_STATE_SIZE)
-        self._state[[ticks.TIMESTEP, ticks.MIN_HEIGHT, ticks.MAX_HEIGHT, ticks.MAX_PITCH, ticks.ROLL_BACK_TICKS,
+        self._state[[ticks.TICK_NS, ticks.TIMESTEP, ticks.MIN_HEIGHT, ticks.MAX_HEIGHT, ticks.MAX_PITCH, ticks.ROLL_BACK_TICKS,
                      ticks.LEFT_FOOT, ticks.RIGHT_FOOT]] = (
-            dt, fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch,
+            self.sim.tick_ns, dt, fall.min_hip_height, fall.max_hip_height, fall.max_abs_pitch,
             int(round(scenario.rules.roll_back_after / dt)), *self._feet)
         self._state[ticks.SECTION] = np.inf  # no section stop (advance's section_phase)
         self._no_delay = (np.zeros((0, 4)), np.zeros(1))
@@ -131,7 +133,7 @@ class ClosedLoop:
         self._bind()
         # what happened
         self.ticks = 0
-        self.start_time = round(float(self.data.time), 9)  # times on the ns grid of the stack's stamps
+        self.start_time = self.sim.time  # every time on the ns grid of the stack's stamps (whole ticks)
         self.start_x = float(self.data.qpos[0])
         self._time_chunks: list[np.ndarray] = []  # sim time (s) and hip x (m) after each tick, per compiled run
         self._x_chunks: list[np.ndarray] = []
@@ -156,8 +158,8 @@ class ClosedLoop:
     # ------------------------------------------------------------------ state
     @property
     def time(self) -> float:
-        """Simulation time (s)."""
-        return float(self.data.time)
+        """Simulation time (s): the whole ticks since the placement (:attr:`Simulator.time`)."""
+        return self.sim.time
 
     @property
     def failed(self) -> bool:
@@ -237,7 +239,7 @@ class ClosedLoop:
             due = self.clock.next_due
             if due is not None:
                 n = min(n, max(1, due - self.ticks))
-        now, dt = self._state[ticks.TIME], self._state[ticks.TIMESTEP]
+        now, dt = self.sim.time, self._state[ticks.TIMESTEP]
         for event in (self._next_change, self._last_touchdown_time + self._stall_after):
             if event != float("inf"):  # the first tick that may reach it can be the last
                 n = min(n, max(1, int((event - now) / dt - 1e-6) + 1))
@@ -250,18 +252,16 @@ class ClosedLoop:
         times, xs, speeds = self._buffers
         cfg, controller_state, gaits = controller.arrays
         queue, count = (self._delay.queue, self._delay.count) if self._delay is not None else self._no_delay
-        state[ticks.TIME] = data.time
+        state[ticks.TICK] = sim.tick
         k = ticks.run_ticks(self.model._address, data._address, self._qpos, self._qvel, self._ctrl, self._site_xpos,
                             cfg, controller_state, gaits, queue, count, sim.push_state, sim.push_schedule,
                             sim.wrench, state, times, xs, speeds, self._applied, self._quiet_ticks(limit))
-        if state[ticks.TIME] != data.time:
-            raise RuntimeError("the compiled loop's clock left MuJoCo's: the model's integrator must advance the "
-                               "time by one timestep per step (Euler or implicit)")
-        self._time_chunks.append(times[:k].copy())  # rounded to the ns grid when a result is built
+        sim.tick += k  # the simulator's count (MuJoCo's own float time is not read)
+        self._time_chunks.append(times[:k].copy())  # whole ticks, on the ns grid
         self._x_chunks.append(xs[:k].copy())
         i = self.ticks
         self.ticks = i + k
-        t = round(float(times[k - 1]), 9)  # on the ns grid of the stack's stamps (16.132)
+        t = float(times[k - 1])  # whole ticks: on the ns grid of the stack's stamps (16.132)
         if self.clock is not None and k > 1:  # the samples before the last decide nothing (_quiet_ticks)
             self.clock.add_quiet(range(i + 1, i + k), speeds[:k - 1], self.desired_speed, self._deciding)
         if t >= self._next_change:
@@ -368,7 +368,7 @@ class ClosedLoop:
         return WalkResult(
             scenario=self.scenario, fell=self.fell, fall_time=self.fall_time, stalled=self.stalled,
             stall_time=self.stall_time, start_time=self.start_time, start_x=self.start_x,
-            times=np.array([round(t, 9) for t in _joined(self._time_chunks).tolist()]),  # the ns grid, as t above
+            times=_joined(self._time_chunks),  # whole ticks, on the ns grid, as t in _advance
             hip_x=_joined(self._x_chunks), touchdowns=list(self.touchdowns),
             decisions=list(self.decisions), peak_torque=self.peak_torque,
             qpos=np.array(self._qpos_rows).reshape(-1, self.model.nq) if record else None,

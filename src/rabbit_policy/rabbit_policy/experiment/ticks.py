@@ -10,8 +10,10 @@ inside: those happen between calls, on the same state as before. Every rule here
 implementation the node stack runs too (the controller node and ``sim_node`` call the same
 compiled functions tick by tick).
 
-The loop state ``state`` (float64, :data:`LOOP_STATE_SIZE`): sim time (s, MuJoCo's sum of
-timesteps, mirrored: ``mj_step`` adds one timestep), the timestep (s), the fall limits (m, m,
+The loop state ``state`` (float64, :data:`LOOP_STATE_SIZE`): the tick (steps since the
+placement, a whole number: the :class:`~rabbit_sim.simulation.Simulator`'s count) and the tick in
+ns, from which each tick's sim time is ``tick x tick_ns / 1e9`` s (the float nearest the exact
+stamp, never MuJoCo's drifting float sum), the timestep (s), the fall limits (m, m,
 rad), the early stall rule's length (ticks, 0: off) and its count, the peak |torque| (N m), the
 two foot sites, the stop flags of the last tick (:data:`FELL`, :data:`ROLLED_BACK`,
 :data:`SECTION_REACHED`) and the section phase (+inf: none; the Poincaré return map stops at it).
@@ -25,9 +27,9 @@ from numba import njit
 from rabbit_hzd_controller import law
 from rabbit_sim import compiled as sim_rules
 
-TIME, TIMESTEP, MIN_HEIGHT, MAX_HEIGHT, MAX_PITCH, ROLL_BACK_TICKS, ROLLING, PEAK, LEFT_FOOT, RIGHT_FOOT, STOP, \
-    SECTION = range(12)
-LOOP_STATE_SIZE = 12
+TICK, TICK_NS, TIMESTEP, MIN_HEIGHT, MAX_HEIGHT, MAX_PITCH, ROLL_BACK_TICKS, ROLLING, PEAK, LEFT_FOOT, RIGHT_FOOT, \
+    STOP, SECTION = range(13)
+LOOP_STATE_SIZE = 13
 FELL, ROLLED_BACK, SECTION_REACHED = 1, 2, 4
 """Bits of ``state[STOP]``."""
 
@@ -85,8 +87,9 @@ def run_ticks(model: int, data: int, qpos: np.ndarray, qvel: np.ndarray, ctrl: n
             elif -tq > peak:
                 peak = -tq
         sim_rules.mj_step(model, data)
-        now = state[TIME] + state[TIMESTEP]
-        state[TIME] = now
+        tick = state[TICK] + 1.0
+        state[TICK] = tick
+        now = tick * state[TICK_NS] / 1e9
         sim_rules.push_rule(now, half_step, push_state, push_schedule, wrench)
         times[k] = now
         xs[k] = qpos[0]

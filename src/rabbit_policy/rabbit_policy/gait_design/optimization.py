@@ -184,7 +184,7 @@ def evaluate(x: np.ndarray, problem: GaitProblem, model: mujoco.MjModel | None =
     effort, peak, saturated = metrics.effort, metrics.peak, metrics.saturated
     max_ratio, slip, min_clear, liftoff = metrics.max_ratio, metrics.slip, metrics.min_clear, metrics.liftoff
     dt = model.opt.timestep
-    walked = float(data.time)
+    walked = loop.time
     if fell or len([t for t in td_times if t >= half * dt]) < 3:
         # Any fall, or a stall (no steady stepping), costs more than any walk; walking
         # longer and further is better, so the optimizer can climb out of these regions.

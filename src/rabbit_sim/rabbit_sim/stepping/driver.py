@@ -107,7 +107,7 @@ Action = State | PushApplied | Fallen | Placed | Markers | Frame | Log
 
 
 def seconds_to_ns(seconds: float) -> int:
-    """Seconds (a float sum of timesteps, or a parameter) as the integer ns of a stamp."""
+    """Seconds (a parameter's value) as the integer ns of a stamp."""
     return int(round(seconds * 1e9))
 
 
@@ -139,7 +139,7 @@ class SimDriver:
         self.pacer = Pacer(settings.rtf, clock=clock) if mode == "paced" else None
         self.pace_pending = False  # paced: the newest state waits for its wall time
         self.recorder = RecorderGate(settings.wait_for_recorder and self.by_replies, RECORDER_LAG,
-                                     seconds_to_ns(sim.timestep))
+                                     sim.tick_ns)
         self.pairing = ControllerPairing(key)  # every mode: torques from one controller
         self.watchdog = Watchdog(settings.watchdog_timeout, settings.damping)
         self.lateness = LatenessMonitor(settings.max_late_fraction, clock=clock)
@@ -467,18 +467,18 @@ class SimDriver:
 
     def _send_state(self, track_latency: bool = False) -> int:
         data = self.sim.data
-        stamp = seconds_to_ns(data.time)
+        stamp = self.sim.stamp
         self._out.append(State(stamp, data.qpos.tolist(), data.qvel.tolist(), data.qfrc_actuator.tolist(),
                                track_latency))
         self.published_stamp = stamp
         return stamp
 
     def _push_applied(self) -> None:
-        self._out.append(PushApplied(seconds_to_ns(self.sim.time), tuple(self.sim.push_wrench)))
+        self._out.append(PushApplied(self.sim.stamp, tuple(self.sim.push_wrench)))
 
     def _markers(self) -> None:
         if self.markers_wanted():
-            self._out.append(Markers(seconds_to_ns(self.sim.time), self._shapes.shapes(self.sim.data)))
+            self._out.append(Markers(self.sim.stamp, self._shapes.shapes(self.sim.data)))
 
     def _step(self, torques: list[float]) -> None:
         sim = self.sim
@@ -486,7 +486,7 @@ class SimDriver:
             torques = self._delay(torques)
         sim.step(torques)
         self.stats.tick(self.clock())
-        if self._marker_period and round(sim.time / sim.timestep) % self._marker_period == 0:
+        if self._marker_period and sim.tick % self._marker_period == 0:
             self._markers()
         if self.settings.viewer:
             self._out.append(Frame())
@@ -502,7 +502,7 @@ class SimDriver:
             self._log("warning", f"RABBIT fell at t = {sim.time:.3f} s (hip height {qpos[1]:.3f} m, torso pitch "
                                  f"{qpos[2]:.3f} rad); physics halted, call {self._topic(topics.RESET_SERVICE)} to "
                                  "start again")
-        elif self.settings.stop_time and seconds_to_ns(sim.time) >= seconds_to_ns(self.settings.stop_time):
+        elif self.settings.stop_time and sim.stamp >= seconds_to_ns(self.settings.stop_time):
             self.halted = True
             self._log("info", f"stop_time {self.settings.stop_time:.3f} s reached; physics halted")
 
