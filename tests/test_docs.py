@@ -113,7 +113,7 @@ def test_one_spelling_per_flag_across_scripts():
             flags = [o for o in action.option_strings if o.startswith("--") and o != "--help"]
             if not flags:
                 continue
-            primary_of.setdefault(action.dest, {})[name] = flags[0]
+            primary_of.setdefault(action.dest, {}).setdefault(name, flags[0])  # the first option for it
             dest_of.setdefault(flags[0], {})[name] = action.dest
             aliases += [(name, alias, action.dest) for alias in flags[1:]]
     for dest, spelled in primary_of.items():

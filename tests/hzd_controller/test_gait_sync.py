@@ -213,3 +213,25 @@ def test_following_the_simulator_no_state_is_answered_before_it_says_how_it_step
     clock.now += SIM_MODE_WAIT + 0.1
     actions = silent.check_held()
     assert [type(a) for a in actions] == [Log, Answer] and "did not say how it steps" in actions[0].text
+
+
+def test_a_policy_back_after_a_reset_is_logged_without_a_negative_duration(gaits):
+    """Silent at t = 313 s, the simulation placed again (sim time restarts at 0), then a gait:
+    the line says so instead of "after -313.421 s without one" (issue 76)."""
+    slow, fast, (q, dq) = gaits
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), clock=clock)
+    sync.on_resets(1)
+    sync.on_gait_timing("at_once", 20)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    start = 313_000
+    sync.on_state(start * MS, q, dq)
+    sync.on_gait_part("kd", 50.0)  # the last gait before the silence, at t = 313 s
+    clock.now += 2.0
+    assert any(isinstance(a, Log) and "silent" in a.text for a in sync.on_state((start + 421) * MS, q, dq))
+    sync.on_resets(2)
+    sync.on_state(0, q, dq)
+    (back,) = [a for a in sync.on_gait_part("alpha", fast) if isinstance(a, Log)]
+    assert "the policy is back" in back.text and "-" not in back.text.split("without")[0].split("after")[-1]
+    assert "placed again" in back.text

@@ -134,6 +134,7 @@ class GaitSync:
         self.replies_repeated = 0
         self.decisions_waited = 0  # due states answered with their decision
         self.decisions_timed_out = 0
+        self.silences = 0  # times the policy was found silent (logged)
         self._out: list[Action] = []
 
     @property
@@ -158,8 +159,10 @@ class GaitSync:
         (N m s/rad); ``value`` None: it was rejected (it still counts as a decision's part)."""
         self._out = []
         if self._silent_since is not None:
-            self._log("info", f"the policy is back: a gait on /hzd/{part} at t = {max(self.last_stamp, 0) / 1e9:.3f} s, "
-                              f"after {(self.last_stamp - self._silent_since) / 1e9:.3f} s without one")
+            now = max(self.last_stamp, 0)
+            silence = (f"after {(now - self._silent_since) / 1e9:.3f} s without one" if now >= self._silent_since
+                       else "the first since the simulation was placed again")  # a reset: sim time restarted
+            self._log("info", f"the policy is back: a gait on /hzd/{part} at t = {now / 1e9:.3f} s, {silence}")
             self._silent_since = None
         self._gait_at = max(self.last_stamp, 0)
         self._gait_wall = self.clock()
@@ -247,6 +250,7 @@ class GaitSync:
         limit = SILENT_DECISIONS * self._period * TICK_NS if self._period else int(SILENT_PER_STEP * 1e9)
         if stamp - self._gait_at > limit and self.clock() - self._gait_wall > SILENT_WALL:
             self._silent_since = self._gait_at
+            self.silences += 1
             every = f"every {self._period} ms" if self._period else "once per step"
             self._log("warning", f"the policy is silent: no gait since t = {self._gait_at / 1e9:.3f} s (it decides "
                                  f"{every}); walking on the last gait it sent (Kd {self.kd:.1f} N m s/rad, alpha "

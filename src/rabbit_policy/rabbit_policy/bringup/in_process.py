@@ -53,7 +53,7 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
                 error = f"recording failed: {recorder.error}"
         policy, controller = nodes.get("policy_node"), nodes.get("hzd_controller_node")
         report = supervisor.report(error, policy.policy.name if policy is not None else None)
-        report.rejected = controller.rejected_gaits if controller is not None else None
+        report.take_controller_counts(controller.statistics() if controller is not None else None)
         report.cpu_us_per_tick = cpu
         return report, nodes
     finally:

@@ -161,18 +161,19 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
         if config.record:  # a failed recording is the cause whatever else it led to
             error = recording_error(codes.get("recorder_node", 0), config.record_stats_file) or error
         report = supervisor.report(error, policy or policy_name(config))
-        report.rejected = controller_rejections(config.controller_stats_file)
+        report.take_controller_counts(controller_counts(config.controller_stats_file))
         report.cpu_us_per_tick = cpu
         return report
 
 
-def controller_rejections(stats_file: str) -> int | None:
-    """The gaits the controller process rejected, from the counts it wrote on close (None if
-    it wrote none: it was killed, or never started)."""
+def controller_counts(stats_file: str) -> dict | None:
+    """The counts the controller process wrote on close (``HZDControllerNode.statistics``),
+    or None if it wrote none (it was killed, or never started)."""
     try:
-        return int(json.loads(Path(stats_file).read_text())["rejected_gaits"])
-    except (OSError, ValueError, KeyError, TypeError):
+        counts = json.loads(Path(stats_file).read_text())
+    except (OSError, ValueError):
         return None
+    return counts if isinstance(counts, dict) else None
 
 
 def recording_error(exit_status: int, stats_file: str) -> str | None:

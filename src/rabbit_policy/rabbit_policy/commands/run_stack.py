@@ -23,9 +23,11 @@ With ``--json``: one object, the same keys as ``walk.py --json`` for the same sc
 (``rabbit_policy.experiment.result.run_summary``: ``fell``, ``steps``, ``segments`` with
 ``mean_speed`` and ``reach_time``, ``real_time_factor``, ``completed``, ``error``, ...);
 node logs go to stderr.
-Exit status: 0 walked the whole run, 1 fell or stalled (no touchdown for 2 s), 2 bad arguments or another
-stack already running in this ROS_DOMAIN_ID (they would cross-talk), 3 the run did not complete
-(a node died, no progress, interrupted).
+Exit status: 0 walked the whole run and reached its last command, 1 fell or stalled (no touchdown
+for 2 s), 2 bad arguments or another stack already running in this ROS_DOMAIN_ID (they would
+cross-talk), 3 the run did not complete (a node died, no progress, interrupted, the policy
+stopped deciding: ``decisions_lost`` > 0), 4 walked but never reached the last command
+(``last_command_reached`` false).
 """
 
 from __future__ import annotations
@@ -93,6 +95,11 @@ def print_report(report, config) -> None:
         mean = "   n/a" if seg["mean_speed"] is None else f"{seg['mean_speed']:6.3f}"
         reach = "never" if seg["reach_time"] is None else f"{seg['reach_time']:.2f} s"
         print(f"{seg['start']:6.1f}-{seg['end']:6.1f} s  {seg['command']:5.2f}     {mean} m/s              {reach}")
+    if report.decisions_lost:
+        print(f"decisions    lost {report.decisions_lost} times: the policy stopped deciding (the controller's log "
+              "says when)")
+    if report.completed and not report.fell and not report.stalled and report.result.last_command_reached() is False:
+        print("last command never reached")
     if report.sim_time > 0.0:
         print(f"simulated    {report.sim_time:.2f} s in {report.wall_time:.2f} s wall "
               f"(real-time factor {report.rtf:.2f})")
@@ -210,17 +217,20 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _report_and_exit(report, config, as_json: bool) -> int:
-    """Print the report (JSON or text); the exit status: 1 fell or stalled, 3 not completed
-    (interrupted, a node died), else 0."""
+    """Print the report (JSON or text); the exit status
+    (:func:`~rabbit_policy.experiment.result.exit_status`): 1 fell or stalled, 3 not completed
+    (interrupted, a node died, the policy stopped deciding), 4 never reached the last command,
+    else 0."""
+    from rabbit_policy.experiment.result import exit_status
+
+    summary = report.summary()
     if as_json:
         from rabbit_policy.spec.make import spec_record
 
-        print(strict_json.dumps({**report.summary(), "spec": spec_record(config.controller, config.policy_file or None)}))
+        print(strict_json.dumps({**summary, "spec": spec_record(config.controller, config.policy_file or None)}))
     else:
         print_report(report, config)
-    if report.fell or report.stalled:
-        return 1
-    return 0 if report.completed else 3
+    return exit_status(summary)
 
 
 if __name__ == "__main__":

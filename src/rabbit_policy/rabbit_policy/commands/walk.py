@@ -30,7 +30,9 @@ step within ``--tolerance`` of the command, or null), plus ``controller``, ``pol
 ``scenario``, ``real_time_factor``, ``wall_time`` (s), ``completed``, ``error`` and ``spec``
 (``file``, ``sha256``: the spec or checkpoint the controller was built from). No NaN: null
 instead. ``--spec FILE``: a controller spec of any kind, run as the kind its file says.
-Exit status: 0 walked, 1 fell or stalled, 2 bad arguments or no policy.
+``last_command_reached``: the last segment's command was reached. Exit status: 0 walked and
+reached the last command, 1 fell or stalled, 2 bad arguments or no policy, 4 walked but never
+reached the last command (``rabbit_policy.experiment.result.exit_status``).
 """
 
 from __future__ import annotations
@@ -117,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
             parser.error(f"--video {args.video}: its directory does not exist")
 
     from rabbit_policy.experiment.loop import walk
-    from rabbit_policy.experiment.result import run_summary
+    from rabbit_policy.experiment.result import exit_status, run_summary
     from rabbit_policy.experiment.scenario import Scenario, parse_pushes
     from rabbit_policy.experiment.options import model_options, resolve_controller, schedule_from_args
     from rabbit_policy.runtime.policies import PolicyUnavailable
@@ -173,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         print(strict_json.dumps(summary))
     else:
         print_summary(summary)
-    return 1 if result.failed else 0
+    return exit_status(summary)
 
 
 if __name__ == "__main__":

@@ -178,6 +178,19 @@ class WalkResult:
                          "reach_time": self.reach_time(start, end, command, tolerance)})
         return rows
 
+    def last_command_reached(self, tolerance: float = REACH_TOLERANCE) -> bool | None:
+        """Did the walk reach its last segment's command (a whole step within ``tolerance``
+        of it, :meth:`reach_time`)? False for a walk that fell or stalled; None when the
+        segment holds no whole step to judge (a walk shorter than a step)."""
+        segments = self.segments(tolerance)
+        if self.failed or not segments:
+            return False
+        last = segments[-1]
+        if last["reach_time"] is not None:
+            return True
+        whole = any(a >= last["start"] - 1e-9 and b <= last["end"] + 1e-9 for a, b, _ in self.step_speeds())
+        return False if whole else None
+
     def summary(self, tolerance: float = REACH_TOLERANCE) -> dict:
         """JSON-ready, always the same keys (no NaN: None instead)."""
         half = self.start_time + 0.5 * self.duration
@@ -193,6 +206,7 @@ class WalkResult:
             "rejected": self.rejected,
             "touchdowns": [round(td.time, 6) for td in self.touchdowns],
             "segments": self.segments(tolerance),
+            "last_command_reached": self.last_command_reached(tolerance),
         }
 
     def outcome(self) -> dict:
@@ -203,16 +217,31 @@ class WalkResult:
                 "stall_time": self.stall_time}
 
 
+def exit_status(summary: dict) -> int:
+    """The exit status of ``walk.py`` and ``run_stack.py`` from a run's report
+    (:func:`run_summary`): 1 fell or stalled, 3 not completed (interrupted, a node died, the
+    policy stopped deciding), 4 walked to the end but never reached the last command (a last
+    segment with whole steps, none within the tolerance), else 0."""
+    if summary["fell"] or summary["stalled"]:
+        return 1
+    if not summary["completed"]:
+        return 3
+    return 4 if summary["last_command_reached"] is False else 0
+
+
 def run_summary(controller: str, policy: str | None, result: WalkResult, wall_time: float,
                 completed: bool = True, error: str | None = None,
-                tolerance: float = REACH_TOLERANCE) -> dict:
+                tolerance: float = REACH_TOLERANCE, decisions_lost: int | None = 0) -> dict:
     """The one JSON report of a walk, the same keys from ``walk.py --json`` (the fast path)
     and ``run_stack.py --json`` (the node stack): the controller and policy, the scenario,
     :meth:`WalkResult.summary`, the real-time factor (sim s per wall s; None if no time
-    passed), whether the run completed and its error (None)."""
+    passed), whether the run completed and its error (None), and ``decisions_lost``: the times
+    the controller found the policy not deciding (0 on the fast path, where it always decides;
+    None: not known)."""
     return {"controller": controller, "policy": policy, "scenario": result.scenario.to_dict(),
             **result.summary(tolerance),
             "real_time_factor": round(result.duration / wall_time, 2) if wall_time > 0 and result.duration > 0
             else None,
-            "wall_time": round(wall_time, 3), "completed": completed, "error": error}
+            "wall_time": round(wall_time, 3), "completed": completed, "error": error,
+            "decisions_lost": decisions_lost}
 

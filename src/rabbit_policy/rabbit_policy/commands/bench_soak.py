@@ -1,0 +1,249 @@
+"""Soak benchmark: the ROS 2 stack for an hour of sim time (or ``--duration``) in lockstep, with
+a random command every 5-20 s and small pushes; prints one JSON object.
+
+    scripts/bench_soak.py --layout composed --controller learned [--duration 3600] [--record DIR]
+
+It runs ``run_stack.py --json`` (``--layout`` composed, separate or in-process) as a
+process and, beside it in this process, an observer node on ``/clock`` and a sampler of the
+stack's processes (``/proc``: resident memory and CPU time of run_stack and its children,
+every 2 s of wall time, with the sim time then). What it reports:
+
+* ``decisions_lost`` (the controller's count of times the policy did not decide: 0 when
+  every due decision was made), ``completed``, ``fell``, ``stalled``, ``real_time_factor``;
+* ``commands``, ``commands_reached`` and ``unreached`` (each segment whose command no whole
+  step came within 0.05 m/s of, with its start: reported, not hidden);
+* ``clock_fraction_by_tenth``: ``/clock`` messages received in each tenth of the run over
+  those due (``clock_rate`` 100 Hz of sim time), and its minimum;
+* ``rss_mb_first_tenth`` / ``rss_mb_last_tenth`` (the stack's processes together, the mean
+  of the samples in each tenth) and ``cpu_us_per_tick_first_tenth`` / ``_last_tenth``;
+* with ``--record DIR``: ``recorded_states`` and ``states_lost`` (ticks simulated minus
+  distinct ``/joint_states`` stamps in the bag; 0 by design).
+
+The scenario is drawn from ``--seed`` (commands uniform in 0.7-1.5 m/s, at most 0.3 m/s from the
+one before; a push of
+``--push-impulse`` N s over 0.1 s, backward or forward, every 20-40 s), the same on every
+machine. Results: docs/benchmarks.md ("Soak").
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+from rabbit_msgs_py import strict_json
+from rabbit_msgs_py.cli import ArgumentParser, positive
+from rabbit_msgs_py.environment import ensure_localhost_discovery
+
+CLOCK_RATE = 100.0
+"""Hz of sim time: sim_node's default ``clock_rate``."""
+MAX_CHANGE = 0.3
+"""m/s: the largest change between two commands of the soak (it measures time, not agility:
+larger random jumps make a fall within the hour likely; docs/results.md rates those)."""
+SAMPLE_EVERY = 2.0
+"""s (wall) between two samples of the stack's processes."""
+
+
+def soak_scenario(seed: int, duration: float, impulse: float) -> tuple[str, str]:
+    """(speed schedule, pushes) as run_stack's options: every 5-20 s a command uniform in 0.7-1.5
+    m/s within :data:`MAX_CHANGE` of the one before; a push of ``impulse`` N s over 0.1 s, either way, every 20-40 s."""
+    rng = random.Random(seed)
+    schedule, t = [(0.0, 1.0)], 0.0
+    while True:
+        t = round(t + rng.uniform(5.0, 20.0), 3)
+        if t > duration - 5.0:
+            break
+        last = schedule[-1][1]
+        schedule.append((t, round(rng.uniform(max(0.7, last - MAX_CHANGE), min(1.5, last + MAX_CHANGE)), 3)))
+    pushes, t = [], 0.0
+    while True:
+        t = round(t + rng.uniform(20.0, 40.0), 3)
+        if t > duration - 5.0:
+            break
+        pushes.append((t, rng.choice((-1.0, 1.0)) * impulse / 0.1, 0.1))
+    return (",".join(f"{a}:{b}" for a, b in schedule), ",".join(f"{a}:{f:g}:{d}" for a, f, d in pushes))
+
+
+def process_tree(root: int) -> list[int]:
+    """``root`` and every process descended from it (Linux ``/proc``)."""
+    parents: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            parents.setdefault(ppid, []).append(int(entry.name))
+    tree, todo = [], [root]
+    while todo:
+        pid = todo.pop()
+        tree.append(pid)
+        todo.extend(parents.get(pid, []))
+    return tree
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of ``pid`` (MB; 0 when it is gone)."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    except (OSError, ValueError):
+        pass
+    return 0.0
+
+
+class ClockObserver:
+    """A node counting ``/clock`` messages by sim time (its newest stamp, ns)."""
+
+    def __init__(self, context) -> None:
+        from rclpy.node import Node
+        from rosgraph_msgs.msg import Clock
+
+        from rabbit_msgs_py import qos, topics
+        from rabbit_msgs_py.conversions import stamp_to_ns
+
+        self.node = Node("soak_clock_observer", context=context)
+        self.stamps: list[int] = []
+        self.node.create_subscription(Clock, topics.CLOCK, lambda m: self.stamps.append(stamp_to_ns(m.clock)),
+                                      qos.CLOCK_QOS)
+
+
+Sample = tuple[float, float, dict[int, float]]
+"""(sim s, RSS MB of the stack's processes together, CPU s of each process by pid)."""
+
+
+def tenths(samples: list[Sample], duration: float) -> tuple[list[Sample], list[Sample]]:
+    """The samples in the first and the last tenth of the walk (start-up, at sim time 0, left out)."""
+    first = [s for s in samples if 0.0 < s[0] <= 0.1 * duration]
+    last = [s for s in samples if 0.9 * duration <= s[0] < duration]
+    return first, last
+
+
+def cpu_per_tick_us(part: list[Sample]) -> float | None:
+    """CPU µs per 1 ms tick between the first and last sample of ``part``, summed over the
+    processes alive at both."""
+    if len(part) < 2 or part[-1][0] <= part[0][0]:
+        return None
+    (t0, _, cpu0), (t1, _, cpu1) = part[0], part[-1]
+    spent = sum(cpu1[pid] - cpu0[pid] for pid in cpu0.keys() & cpu1.keys())
+    return round(spent / ((t1 - t0) * 1000.0) * 1e6, 1)
+
+
+def soak(layout: str, controller: str, duration: float, seed: int, impulse: float, record: str,
+         log: Path) -> dict[str, object]:
+    """One soak run; see the module docstring."""
+    import rclpy
+
+    from rabbit_msgs_py.runtime import init_context, make_executor
+    from rabbit_policy.bringup.cpu import process_cpu_seconds
+
+    schedule, pushes = soak_scenario(seed, duration, impulse)
+    bag = Path(record) if record else None
+    command = [sys.executable, "-m", "rabbit_policy.commands.run_stack", "--controller", controller,
+               "--layout", layout, "--speed-schedule", schedule, "--duration", str(duration), "--json"]
+    if pushes:
+        command += ["--push", pushes]
+    if bag is not None:
+        command += ["--record", str(bag)]
+    context = init_context()
+    observer = ClockObserver(context)
+    executor = make_executor(context)
+    executor.add_node(observer.node)
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    samples: list[Sample] = []
+    start = time.perf_counter()
+    with open(log, "w") as err:
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=err, text=True)
+        while proc.poll() is None:
+            time.sleep(SAMPLE_EVERY)
+            pids = process_tree(proc.pid)
+            cpu = {p: process_cpu_seconds(p) for p in pids}
+            sim = observer.stamps[-1] / 1e9 if observer.stamps else 0.0
+            samples.append((sim, sum(rss_mb(p) for p in pids), {p: c for p, c in cpu.items() if c is not None}))
+        out = proc.stdout.read()
+    wall = time.perf_counter() - start
+    stop.set()
+    spinner.join(timeout=5.0)
+    executor.shutdown()
+    observer.node.destroy_node()
+    rclpy.shutdown(context=context)
+    report = json.loads(out)
+    recorded = None
+    if bag is not None and bag.exists():
+        from rabbit_sim.bag import joint_state_stamps
+
+        recorded = len(joint_state_stamps(bag))
+    segments = report["segments"]
+    unreached = [{"start": s["start"], "command": s["command"]} for s in segments if s["reach_time"] is None]
+    per_tenth = [0] * 10
+    for stamp in observer.stamps:
+        k = min(9, int(stamp / 1e9 / duration * 10))
+        per_tenth[k] += 1
+    due = duration / 10 * CLOCK_RATE
+    first, last = tenths(samples, duration)
+    simulated = int(round(report["duration"] * 1000)) + 1  # ticks, the placed state too
+    return {
+        "layout": layout, "controller": controller, "duration_s": duration, "seed": seed,
+        "push_impulse_Ns": impulse, "pushes": len(pushes.split(",")) if pushes else 0,
+        "completed": report["completed"], "error": report["error"], "fell": report["fell"],
+        "stalled": report["stalled"], "sim_s": report["duration"], "wall_s": round(wall, 1),
+        "real_time_factor": report["real_time_factor"], "decisions_lost": report["decisions_lost"],
+        "commands": len(segments), "commands_reached": len(segments) - len(unreached), "unreached": unreached,
+        "last_command_reached": report["last_command_reached"],
+        "clock_fraction_by_tenth": [round(n / due, 3) for n in per_tenth],
+        "clock_fraction_min": round(min(per_tenth) / due, 3),
+        "rss_mb_first_tenth": round(sum(s[1] for s in first) / len(first), 1) if first else None,
+        "rss_mb_last_tenth": round(sum(s[1] for s in last) / len(last), 1) if last else None,
+        "cpu_us_per_tick_first_tenth": cpu_per_tick_us(first), "cpu_us_per_tick_last_tenth": cpu_per_tick_us(last),
+        "recorded_states": recorded, "states_lost": None if recorded is None else simulated - recorded,
+    }
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--layout", choices=("composed", "separate", "in-process"), default="composed")
+    parser.add_argument("--controller", choices=("classic", "learned", "recovery"), default="learned")
+    parser.add_argument("--duration", type=positive, default=3600.0, help="sim s (default 3600: an hour)")
+    parser.add_argument("--seed", type=int, default=0, help="the scenario's draw (default 0)")
+    parser.add_argument("--push-impulse", type=positive, default=3.0, metavar="NS",
+                        help="each push's impulse, N s over 0.1 s (default 3)")
+    parser.add_argument("--record", default="", metavar="DIR",
+                        help="record the run to a rosbag2 bag in DIR (must not exist) and count the states lost")
+    parser.add_argument("--log", default="", metavar="FILE", help="the stack's log (default: a temporary file)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    ensure_localhost_discovery()
+    args = build_parser().parse_args(argv)
+    log = Path(args.log) if args.log else Path(tempfile.mkstemp(prefix="rabbit_soak_", suffix=".log")[1])
+    try:
+        log.parent.mkdir(parents=True, exist_ok=True)
+        log.touch()
+    except OSError as exc:
+        print(f"error: --log {args.log}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    result = soak(args.layout, args.controller, args.duration, args.seed, args.push_impulse, args.record, log)
+    result["log"] = str(log)
+    print(strict_json.dumps(result))
+    return 0 if result["completed"] and not (result["fell"] or result["stalled"]) else 1
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONUNBUFFERED", "1")
+    sys.exit(main())
