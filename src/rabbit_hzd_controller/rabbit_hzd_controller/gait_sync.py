@@ -143,6 +143,11 @@ class GaitSync:
         return self._last[0] if self._last is not None else -1
 
     @property
+    def decision_period(self) -> int:
+        """The decision period followed (ticks; 0: once per step, or not known)."""
+        return self._period
+
+    @property
     def last_state(self) -> tuple[list[float], list[float]] | None:
         """(q, dq) of the state last answered."""
         return (self._last[1], self._last[2]) if self._last is not None else None

@@ -45,12 +45,12 @@ from rabbit_msgs_py.conversions import (
     short,
     stamp_from_ns,
 )
-from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_NS, parse_gait_timing,
+from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, TICK_NS, parse_gait_timing,
                                           precedes_decision, timing_settings)
 from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
-from rabbit_msgs_py.pairing import GaitOrder, resolve_key
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, GaitOrder, resolve_key
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -101,6 +101,7 @@ NODE_PARAMS = {
                              "per stack; read once at start, then removed so ros2 param get cannot read it). '' = "
                              "the user's own key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); "
                              "'none' = unsigned replies, UNSAFE", dynamic=True),
+    "pairing_key_file": Param("", KEY_FILE_HELP),
     "solo_check": Param(0.0, SOLO_CHECK_HELP.format(kind="controller"), range=(0.0, 60.0)),
     "stats_file": Param("", "write the controller's counts (gaits rejected and refused, torques published, "
                             "decisions waited for and given up) as JSON here when the node closes ('' = don't)"),
@@ -142,7 +143,7 @@ class HZDControllerNode(Node):
             gait_timing = values.pop("gait_timing")
             decision_sync = bool(values.pop("decision_sync"))
             decision_timeout = finite("decision_timeout", values.pop("decision_timeout"), 1e-3)
-            self.pairing, self._key_source = resolve_key(values.pop("pairing_key"))
+            self.pairing, self._key_source = resolve_key(values.pop("pairing_key"), file=values.pop("pairing_key_file"))
             solo_check = finite("solo_check", values.pop("solo_check"), 0.0)
             self.stats_file = values.pop("stats_file")
             rate = values.pop("reference_rate")
@@ -157,6 +158,7 @@ class HZDControllerNode(Node):
         self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
         self._announced: dict = {}
         self._settings_of: dict[str, dict] = {}  # keyed: each policy instance's signed settings (the last few)
+        self._timing_of: dict[str, tuple[str, int]] = {}  # keyed: each instance's signed timing, as the settings
         self._early: dict[str, Float64MultiArray] = {}  # keyed: a policy's gait that came before its settings
         self._gait_order = GaitOrder()
         self._policy: str | None = None  # the policy instance whose signed gaits are taken
@@ -288,6 +290,7 @@ class HZDControllerNode(Node):
                     self.get_logger().info(f"gaits now from policy {source}: {self._policy} was silent")
                 self._policy = source
                 self._adopt(self._settings_of[source])  # before its first gait
+                self._follow_timing(*self._timing_of[source])
             self._policy_wall = now
         try:
             if raw is None:
@@ -326,14 +329,15 @@ class HZDControllerNode(Node):
 
     def _on_gait_timing(self, msg: String) -> None:
         """The policy's gait timing (followed unless ``gait_timing`` is fixed) and the
-        controller settings its spec needs (:meth:`_adopt`). With a pairing key the settings
-        count only signed by a policy instance with the key, and are taken before that
-        instance's first gait (a gait that comes first waits for them); without one, at once."""
+        controller settings its spec needs (:meth:`_adopt`). With a pairing key every
+        announcement, a bare timing too, counts only signed by a policy instance with the
+        key, and only the paired instance's is followed: another instance's (a replay from
+        an earlier run with the same key, a second policy) is kept until its first gait is
+        taken; an unsigned one is refused with one line a second. Without a key, at once."""
         try:
             timing, period = parse_gait_timing(msg.data)
             settings = timing_settings(msg.data)
-            signed = self.pairing is not None and (bool(settings) or f" {SIGNATURE_FIELD}" in msg.data)
-            source = self.pairing.verify_settings(msg.data) if signed else None
+            source = self.pairing.verify_settings(msg.data) if self.pairing is not None else None
         except ValueError as exc:
             line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
                                                         f"{short(repr(msg.data), 80)}: {exc}; keeping "
@@ -341,17 +345,23 @@ class HZDControllerNode(Node):
             if line is not None:
                 self.get_logger().error(line)
             return
-        self._decision_period = period
         if source is None:
             self._adopt(settings)
+            self._follow_timing(timing, period)
         else:
             _keep_newest(self._settings_of, source, settings)
+            _keep_newest(self._timing_of, source, (timing, period))
             if source == self._policy:
                 self._adopt(settings)
-        if self.sync.follow_policy_timing:
-            self._do(self.sync.on_gait_timing(timing, period))
+                self._follow_timing(timing, period)
         if source is not None and source in self._early:
             self._on_alpha(self._early.pop(source))
+
+    def _follow_timing(self, timing: str, period: int) -> None:
+        """The paired policy's gait timing (``next_step`` or ``at_once`` every ``period`` ticks)."""
+        self._decision_period = period
+        if self.sync.follow_policy_timing:
+            self._do(self.sync.on_gait_timing(timing, period))
 
     def _adopt(self, settings: dict) -> None:
         """The controller settings the policy announces (its spec's), taken before its gaits

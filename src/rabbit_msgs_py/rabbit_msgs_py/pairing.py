@@ -13,10 +13,14 @@ simulator applies only replies whose tag checks with its key. A node without the
 make a tag for a new stamp or new torques, even after seeing every earlier reply: replaying
 a seen reply repeats the real controller's torques for a stamp no longer due (ignored).
 
+run_stack hands its key to the node processes it starts in a file (``pairing_key_file``,
+owner read/write only, in a directory of its own, removed at exit), never on a command line
+or in the environment, which other users can read (``/proc/PID/cmdline``).
+
 This guards the robot against other nodes on the ROS graph (a second controller, a test
 script, a node that answers every state) that do not have the key: another user's process, or
-a node of this user's that does not read the key file. It is not SROS2: a process of the same
-user can read the key file, or the key from the command line of the nodes it was given to.
+a node of this user's that does not read the key file. It is not SROS2: root, and any process
+of the same user, can read the key file (and a process's memory).
 """
 
 from __future__ import annotations
@@ -38,6 +42,9 @@ MIN_KEY_CHARS = 16
 MAX_KEY_BYTES = 64  # BLAKE2b's longest key
 NO_KEY = "none"
 """``pairing_key:=none``: pair with no key (unsafe: any node on the graph can drive the robot)."""
+KEY_FILE_HELP = ("read the pairing key from this file (owner read/write only; how run_stack hands its key to the "
+                 "node processes it starts, never on a command line); '' = use pairing_key")
+"""The ``pairing_key_file`` parameter's description, the same on every node."""
 USER_KEY_FILE = Path("rabbit_hzd") / "pairing_key"
 """The user's own key, under ROS's home directory (:func:`user_key_file`)."""
 
@@ -110,10 +117,10 @@ class PairingKey:
         text, separator, field = signed.rpartition(f" {SIGNATURE_FIELD}")
         source, colon, tag = field.rpartition(":")
         if not separator or not colon or not source:
-            raise ValueError("the controller settings are not signed (their policy runs without this stack's "
-                             "pairing key)")
+            raise ValueError("the gait timing is not signed (its policy runs without this stack's pairing key, or "
+                             "another node sent it)")
         if not hmac.compare_digest(tag, self._settings_tag(source, text)):
-            raise ValueError(f"the controller settings from {source} are not signed with this stack's pairing key")
+            raise ValueError(f"the gait timing from {source} is not signed with this stack's pairing key")
         return source
 
     def _settings_tag(self, source: str, text: str) -> str:
@@ -172,10 +179,44 @@ def user_key(path: Path) -> PairingKey:
     return key
 
 
-def resolve_key(text: str, environ: Mapping[str, str] | None = None) -> tuple[PairingKey | None, str]:
-    """The key a node pairs with, from its ``pairing_key`` parameter, and where it came from
-    (for the start-up log): ``""`` the user's key (:func:`user_key`), ``none`` no key, else
-    the key given (:meth:`PairingKey.parse`). ``ValueError`` with one line otherwise."""
+def key_file(path: Path) -> PairingKey:
+    """The key in an existing key file (``pairing_key_file``: run_stack writes one for its
+    node processes, owner read/write only, and removes it at exit). ``ValueError`` for a file
+    that is missing, another user's, open to group or others, or not a key."""
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ValueError(f"pairing_key_file {path}: {exc.strerror or exc}") from None
+    if info.st_uid != os.getuid():
+        raise ValueError(f"pairing_key_file {path} belongs to another user (uid {info.st_uid})")
+    if stat.S_IMODE(info.st_mode) & 0o077:
+        raise ValueError(f"pairing_key_file {path} is open to others (mode {stat.S_IMODE(info.st_mode):04o}): "
+                         f"chmod 600 {path}")
+    key = PairingKey.parse(path.read_text().strip())
+    if key is None:
+        raise ValueError(f"pairing_key_file {path} is empty")
+    return key
+
+
+def write_key_file(path: Path, key: str) -> Path:
+    """Write ``key`` to a new file ``path``, owner read/write only from its creation (the
+    directory should be the owner's alone, as ``tempfile.mkdtemp`` makes one); returns it."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    with os.fdopen(fd, "w") as out:
+        out.write(key + "\n")
+    return path
+
+
+def resolve_key(text: str, environ: Mapping[str, str] | None = None, file: str = "") -> tuple[PairingKey | None, str]:
+    """The key a node pairs with, from its ``pairing_key`` and ``pairing_key_file``
+    parameters, and where it came from (for the start-up log): a ``file`` the key in it
+    (:func:`key_file`; never on a command line), ``""`` the user's key (:func:`user_key`),
+    ``none`` no key, else the key given (:meth:`PairingKey.parse`). ``ValueError`` with one
+    line otherwise (both a key and a file included)."""
+    if file:
+        if text:
+            raise ValueError("give pairing_key or pairing_key_file, not both")
+        return key_file(Path(file)), f"signed with the pairing key in {file}"
     if text == NO_KEY:
         return None, "NO pairing key (pairing_key:=none): any node on the graph can drive the robot"
     if text:

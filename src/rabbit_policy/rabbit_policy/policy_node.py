@@ -68,7 +68,7 @@ from rabbit_msgs_py.conversions import (MessageError, alpha_to_msg, controller_i
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
-from rabbit_msgs_py.pairing import resolve_key
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, resolve_key
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -124,6 +124,7 @@ POLICY_PARAMS = {
                              "read once at start, then removed so ros2 param get cannot read it). '' = the user's "
                              "own key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); 'none' = "
                              "unsigned gaits, UNSAFE", dynamic=True),
+    "pairing_key_file": Param("", KEY_FILE_HELP),
 }
 
 
@@ -158,7 +159,7 @@ class PolicyNode(Node):
         values = declare(self, POLICY_PARAMS, overrides)
         forget_secrets(self, SECRET_PARAMS)
         try:
-            self.pairing, key_source = resolve_key(values["pairing_key"])
+            self.pairing, key_source = resolve_key(values["pairing_key"], file=values["pairing_key_file"])
             low = finite("min_speed", values["min_speed"], *POLICY_PARAMS["min_speed"].range)
             high = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
             kind, policy_file = spec_choice(values["policy"], values["policy_file"], values["spec_file"])

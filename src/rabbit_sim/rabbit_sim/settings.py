@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from rabbit_msgs_py.cli import option
-from rabbit_msgs_py.pairing import NO_KEY, PairingKey
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, NO_KEY, PairingKey
 from rabbit_msgs_py.solo import SOLO_CHECK_HELP
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
@@ -65,6 +65,7 @@ class SimSettings:
                                   "key, $ROS_HOME/rabbit_hzd/pairing_key (made on first use, owner-only); 'none' = no "
                                   "key, UNSAFE: the first controller to answer, until /sim/release_controller, and "
                                   "any node that copies its id", secret=True)
+    pairing_key_file: str = option("", KEY_FILE_HELP)
     solo_check: float = option(0.0, SOLO_CHECK_HELP.format(kind="simulator"), range=(0.0, 60.0))
     stats_file: str = option("", "write the run statistics as JSON here when the node closes ('' = don't)")
     markers_rate: float = option(30.0, "/rabbit/markers (RViz/Foxglove 3D view) per s of sim time, >= 0 (0 = off); "

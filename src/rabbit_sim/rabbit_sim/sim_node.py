@@ -69,7 +69,7 @@ class SimNode(Node):
         forget_secrets(self, SECRET_PARAMS)
         try:
             self.settings = SimSettings(**values)
-            key, self._key_source = resolve_key(self.settings.pairing_key)
+            key, self._key_source = resolve_key(self.settings.pairing_key, file=self.settings.pairing_key_file)
             self.driver = SimDriver(self.settings, Simulator(load_model(self.settings.model_options)),
                                     shapes=bool(self.settings.markers_rate), namespace=self.get_namespace(), key=key)
         except (ValueError, TypeError) as exc:

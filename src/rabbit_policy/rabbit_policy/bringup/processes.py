@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Callable
 
+from rabbit_msgs_py.pairing import write_key_file
 from rabbit_msgs_py.runtime import init_context
 
 from .config import COMPOSED_NODES, NODE_MODULES, StackConfig, policy_name, ros_arguments
@@ -50,13 +51,25 @@ class NodeProcesses:
     through :mod:`rabbit_msgs_py.quiet_start`: stopped while still importing, it exits
     without a traceback."""
 
-    def __init__(self, config: StackConfig, log=sys.stderr, hold: bool = False, skip: tuple[str, ...] = ()) -> None:
-        """``skip``: nodes not to start (they run elsewhere: composed in run_stack's process)."""
+    def __init__(self, config: StackConfig, log=sys.stderr, hold: bool = False, skip: tuple[str, ...] = (),
+                 key_file: str = "") -> None:
+        """``skip``: nodes not to start (they run elsewhere: composed in run_stack's process).
+        ``key_file``: where the stack's pairing key is written for them (owner-only, in a
+        directory of run_stack's; required when a started node takes a key): each gets the
+        file's path, never the key, on its command line."""
         self.procs: dict[str, subprocess.Popen] = {}
         env = dict(os.environ)
+        written = False
         for name, params in config.node_parameters().items():
             if name in skip:
                 continue
+            if params.get("pairing_key"):
+                if not key_file:
+                    raise ValueError("a node process takes the stack's pairing key: give key_file")
+                if not written:
+                    write_key_file(Path(key_file), config.pairing_key)
+                    written = True
+                params = {**{k: v for k, v in params.items() if k != "pairing_key"}, "pairing_key_file": key_file}
             cmd = [sys.executable, "-m", "rabbit_msgs_py.quiet_start", *(["--hold"] if hold else []),
                    NODE_MODULES[name], *ros_arguments(params, config.namespace)]
             self.procs[name] = subprocess.Popen(cmd, env=env, stdout=log, stderr=log, start_new_session=True,
@@ -120,7 +133,8 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
             config = replace(config, record_stats_file=os.path.join(scratch, "recorder.json"))
         if not config.controller_stats_file:  # where the controller counts the gaits it rejected
             config = replace(config, controller_stats_file=os.path.join(scratch, "controller.json"))
-        procs = NodeProcesses(config, log=log, hold=probe is not None, skip=composed)
+        procs = NodeProcesses(config, log=log, hold=probe is not None, skip=composed,
+                              key_file=os.path.join(scratch, "pairing_key"))  # scratch: 0700, removed at exit
         if probe is not None:
             try:
                 found = probe()

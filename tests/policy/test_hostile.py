@@ -1,0 +1,91 @@
+"""A stranger on the machine (issue 75), each attack provoked directly: the key run_stack
+hands its node processes is on no command line and in no environment (another user reads
+``/proc/PID/cmdline`` and, for the same user, ``environ``); a bare or replayed
+``/hzd/gait_timing`` moves no keyed controller's timing."""
+
+from __future__ import annotations
+
+import os
+import stat
+import tempfile
+from pathlib import Path
+
+import pytest
+from std_msgs.msg import String
+
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py import qos, topics
+from rabbit_msgs_py.pairing import key_file, new_key, resolve_key, write_key_file
+from rabbit_policy.bringup.config import StackConfig
+from rabbit_policy.bringup.processes import NodeProcesses
+
+from ros_helpers import GaitSigner, ros_context, spin_for, spin_until
+
+
+@pytest.mark.unit
+def test_a_key_file_is_owner_only_from_its_creation_and_refused_when_open_or_missing(tmp_path):
+    key = new_key()
+    path = write_key_file(tmp_path / "k", key)
+    assert stat.S_IMODE(path.stat().st_mode) == 0o600 and key_file(path).secret == key.encode()
+    assert resolve_key("", file=str(path))[0].secret == key.encode()
+    with pytest.raises(ValueError, match="not both"):
+        resolve_key(key, file=str(path))
+    path.chmod(0o640)
+    with pytest.raises(ValueError, match="open to others"):
+        key_file(path)
+    with pytest.raises(ValueError, match="missing: No such file"):
+        key_file(tmp_path / "missing")
+
+
+@pytest.mark.ros
+def test_run_stacks_node_processes_get_the_key_by_a_file_never_on_their_command_line_or_environment():
+    config = StackConfig(duration=1.0, schedule=((0.0, 1.0),))
+    scratch = tempfile.mkdtemp(prefix="rabbit_test_key_")  # 0700, as run_multi_process's
+    key_path = os.path.join(scratch, "pairing_key")
+    procs = NodeProcesses(config, log=open(os.devnull, "w"), hold=True, key_file=key_path)
+    try:
+        assert set(procs.procs) == {"sim_node", "hzd_controller_node", "policy_node"}
+        for name, proc in procs.procs.items():
+            cmdline = Path(f"/proc/{proc.pid}/cmdline").read_bytes().decode()
+            environ = Path(f"/proc/{proc.pid}/environ").read_bytes().decode()
+            assert config.pairing_key not in cmdline and config.pairing_key not in environ, name
+            assert f"pairing_key_file:={key_path}" in cmdline, name
+        assert stat.S_IMODE(os.stat(key_path).st_mode) == 0o600 and stat.S_IMODE(os.stat(scratch).st_mode) == 0o700
+        assert key_file(Path(key_path)).secret == config.pairing_key.encode()
+    finally:
+        procs.stop()
+        for entry in Path(scratch).iterdir():
+            entry.unlink()
+        os.rmdir(scratch)
+
+
+@pytest.mark.ros
+def test_a_keyed_controller_follows_only_its_paired_policys_signed_timing(capfd):
+    """A bare ``at_once:7`` (the attack that took a lockstep run from RTF 8 to 0.15), one signed
+    with another key, and a signed one from another policy instance of the same key (a replay)
+    all leave the controller deciding as its policy says; the refusals are logged."""
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from std_msgs.msg import Float64MultiArray
+
+    gait = GaitLibrary.load().nearest(1.0)
+    signer, replay = GaitSigner(), GaitSigner(source="earlier_policy/11111111")
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)  # started by hand: the user's key, as the signer's
+        user = rclpy.create_node("timing_sender", context=context)
+        for node in (controller, user):
+            executor.add_node(node)
+        alpha_pub = user.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        timing_pub = user.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
+        timing_pub.publish(signer.announcement(20))
+        alpha_pub.publish(signer.alpha(gait.alpha, gait.kd))
+        assert spin_until(executor, lambda: controller.gait is not None)
+        assert controller.sync.decision_period == 20
+        timing_pub.publish(String(data="at_once:7"))
+        spin_for(executor, 0.2)
+        timing_pub.publish(replay.announcement(7))
+        spin_for(executor, 0.3)
+        assert controller.sync.decision_period == 20
+    err = capfd.readouterr().err
+    assert "rejected /hzd/gait_timing" in err and "not signed" in err
