@@ -10,7 +10,10 @@ Per generation, from the current parameters theta (flat vector of the network's 
    the fall penalty's scale);
 3. gradient estimate g = sum_i (rank+_i - rank-_i) eps_i / (2 pairs sigma), plus weight
    decay; Adam step on theta. With ``top`` = b > 0 (ARS V2-t) only the b pairs whose better
-   member ranked highest enter the sum (divided by 2 b sigma).
+   member ranked highest enter the sum (divided by 2 b sigma). With ``optimizer: ars``
+   (Mania, Guy, Recht 2018) instead theta += lr (sum_i (R+_i - R-_i) eps_i / (b std R) - decay
+   theta): raw returns, the step scaled by the std of the 2b returns, no Adam (which turns a
+   noise gradient into full steps: docs/learning.md).
 Evaluations run on a :mod:`rabbit_policy.parallel` backend (a local process pool of
 ``workers``, or Ray); every evaluation is a pure function of (parameters, episodes) and
 results come back in order, so a run is deterministic for a given seed whatever the
@@ -31,6 +34,9 @@ from rabbit_policy.runtime.fixed_order import vecmat
 from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_network
 
 
+OPTIMIZERS = ("adam", "ars")
+
+
 @dataclass(frozen=True)
 class ESConfig(EpisodeConfig):
     """ES hyper-parameters, one ``scripts/train.py`` option each (defaults: the first shipped run's, config/train/first_shipped_es.yaml)."""
@@ -41,6 +47,9 @@ class ESConfig(EpisodeConfig):
     weight_decay: float = option(0.005, "L2 weight decay added to the gradient estimate")
     episodes: int = option(6, "episodes per population member (the same for every member)")
     top: int = option(0, "ARS's top-b: the update uses only the b pairs whose better member did best (0: all pairs)")
+    optimizer: str = option("adam", "adam (centred ranks, an Adam step) or ars (ARS V2-t: the return differences "
+                                    "over the returns' std, a plain step of lr; Mania et al. 2018)",
+                            choices=OPTIMIZERS)
     workers: int = option(1, "processes or Ray CPUs for the rollouts (the run's --workers)", cli=False)
 
     def __post_init__(self) -> None:
@@ -49,6 +58,8 @@ class ESConfig(EpisodeConfig):
             raise ValueError("pairs, episodes and workers must be >= 1")
         if not 0 <= self.top <= self.pairs:
             raise ValueError(f"top must be in [0, pairs], got {self.top}")
+        if self.optimizer not in OPTIMIZERS:
+            raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
         if not (self.sigma > 0.0 and self.lr > 0.0 and self.weight_decay >= 0.0):
             raise ValueError("sigma and lr must be > 0, weight_decay >= 0")
 
@@ -211,9 +222,15 @@ class EvolutionStrategy:
         chosen = np.arange(cfg.pairs)
         if cfg.top:  # ARS V2-t: the directions whose better member did best
             chosen = np.argsort(-np.maximum(plus, minus), kind="stable")[: cfg.top]
-        grad = vecmat(plus[chosen] - minus[chosen], eps[chosen]) / (2 * len(chosen) * cfg.sigma)  # BLAS-free: same bits on every CPU
-        grad -= cfg.weight_decay * self.theta
-        self.theta = self.adam.step(self.theta, grad)
+        if cfg.optimizer == "ars":  # a step of lr along the differences over their returns' std: noise stays small
+            raw_plus, raw_minus = returns[: cfg.pairs][chosen], returns[cfg.pairs:][chosen]
+            spread = float(np.std(np.concatenate([raw_plus, raw_minus])))
+            step = vecmat(raw_plus - raw_minus, eps[chosen]) / (len(chosen) * (spread if spread > 0.0 else 1.0))
+            self.theta = self.theta + cfg.lr * (step - cfg.weight_decay * self.theta)
+        else:
+            grad = vecmat(plus[chosen] - minus[chosen], eps[chosen]) / (2 * len(chosen) * cfg.sigma)  # BLAS-free: same bits on every CPU
+            grad -= cfg.weight_decay * self.theta
+            self.theta = self.adam.step(self.theta, grad)
         set_flat(self.net, self.theta)
         self.generation += 1
         return {
