@@ -7,6 +7,8 @@ import argparse
 import dataclasses
 import math
 import sys
+import tempfile
+from pathlib import Path
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter, argparse.ArgumentDefaultsHelpFormatter):
@@ -19,6 +21,30 @@ class ArgumentParser(argparse.ArgumentParser):
     def error(self, message: str) -> None:  # type: ignore[override]
         print(f"{self.prog}: error: {message}", file=sys.stderr)
         sys.exit(2)
+
+
+def unwritable_dir(path: Path) -> str | None:
+    """Make the directory ``path`` (its parents too) and write a file in it; why not (one
+    line), or None when it can be written."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):
+            pass
+    except OSError as exc:
+        return f"cannot write there ({exc.strerror or exc})"
+    return None
+
+
+def ensure_output_dir(parser: argparse.ArgumentParser, path, flag: str = "--out", empty: bool = False) -> None:
+    """Make an output directory now, before any work (its parents too), and check that a file
+    can be written in it (and, with ``empty``, that it holds nothing); otherwise
+    ``parser.error``: one line, exit status 2."""
+    path = Path(path)
+    problem = unwritable_dir(path)
+    if problem:
+        parser.error(f"{flag} {path}: {problem}")
+    if empty and any(path.iterdir()):
+        parser.error(f"{flag} {path} is not empty: give a new directory")
 
 
 def positive(text: str) -> float:

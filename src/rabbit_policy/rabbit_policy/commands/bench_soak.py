@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser, positive
+from rabbit_msgs_py.cli import ArgumentParser, positive, unwritable_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 CLOCK_RATE = 100.0
@@ -230,7 +230,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    problem = unwritable_dir(Path(args.record).resolve().parent) if args.record else None
+    if problem:
+        parser.error(f"--record {args.record}: {problem}")
     log = Path(args.log) if args.log else Path(tempfile.mkstemp(prefix="rabbit_soak_", suffix=".log")[1])
     try:
         log.parent.mkdir(parents=True, exist_ok=True)

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser
+from rabbit_msgs_py.cli import ArgumentParser, ensure_output_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
 from rabbit_sim.gl_backend import choose_headless_gl
@@ -95,7 +95,9 @@ def judge_policy(policy, robust: dict, classic_margins: list[dict], stability: d
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("PYTHONUNBUFFERED", "1")  # worker processes print as they go
     ensure_localhost_discovery()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    ensure_output_dir(parser, args.out)  # before any work: one line, exit 2
 
     from rabbit_policy.evaluation import experiments as evaluation
     from rabbit_policy.evaluation import figures

@@ -196,7 +196,7 @@ def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rabbit_msgs_py.cli import ArgumentParser
+    from rabbit_msgs_py.cli import ArgumentParser, ensure_output_dir
     from rabbit_policy.experiment.options import add_allow_dirty_option
     from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
     from rabbit_policy.parallel import add_backend_arguments, open_backend
@@ -208,6 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     add_allow_dirty_option(parser)
     add_backend_arguments(parser, progress=False, workers=True)
     args = parser.parse_args(argv)
+    ensure_output_dir(parser, args.out)  # before any work: one line, exit 2
     try:
         preset = load_preset(args.preset)
         ran_on = shipping_provenance(args.allow_dirty, preset_dir().parents[1])  # before the training, not after

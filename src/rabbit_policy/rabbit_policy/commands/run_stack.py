@@ -40,7 +40,7 @@ import sys
 from pathlib import Path
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import ArgumentParser, positive
+from rabbit_msgs_py.cli import ArgumentParser, positive, unwritable_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 
@@ -177,6 +177,9 @@ def main(argv: list[str] | None = None) -> int:
                 raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
             if not is_bag_directory(Path(args.record)):
                 raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
+        problem = unwritable_dir(Path(os.path.abspath(args.record)).parent) if args.record else None
+        if problem:
+            raise ValueError(f"--record {args.record}: {problem}")
         built = config.build_policy()  # once: a bad one is refused before any node starts
         policy = built.name
     except ValueError as exc:
