@@ -1,6 +1,6 @@
 # rabbit-hzd: two commands for a fresh machine (see README).
-#   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks on the learned policy,
-#               changing speed (down from 1.4 m/s too) and pushed
+#   make demo   set up .venv if needed, then run the ROS 2 stack: RABBIT walks on the learned controller,
+#               changing speed (down from 1.4 m/s too) and pushed, judged beside classic (scripts/demo.py)
 #   make test   set up .venv if needed, then run the whole test suite (CI's command)
 #   make test-fast  the edit-loop tier: every test not marked slow
 #   make lint   ruff (pyflakes and pycodestyle; ruff.toml), as CI runs it
@@ -32,7 +32,7 @@ $(STAMP): requirements.txt requirements-extras.txt $(foreach p,$(PACKAGES),$(p)/
 	touch $@
 
 demo: $(STAMP)
-	$(PY) scripts/run_stack.py --controller learned --speed-schedule "0:0.8,6:1.4,13:0.9,18:1.2" --push "20:-60:0.1" --duration 26
+	$(PY) scripts/demo.py
 
 test: $(STAMP)
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadgroup
