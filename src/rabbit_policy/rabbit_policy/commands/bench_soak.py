@@ -41,6 +41,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser, positive, unwritable_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.runtime.policies import controller_argument
 
 CLOCK_RATE = 100.0
 """Hz of sim time: sim_node's default ``clock_rate``."""
@@ -217,7 +218,8 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
 def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--layout", choices=("composed", "separate", "in-process"), default="composed")
-    parser.add_argument("--controller", choices=("classic", "learned", "recovery"), default="learned")
+    parser.add_argument("--controller", type=controller_argument, default="learned",
+                        metavar="{classic,learned,recovery}")
     parser.add_argument("--duration", type=positive, default=3600.0, help="sim s (default 3600: an hour)")
     parser.add_argument("--seed", type=int, default=0, help="the scenario's draw (default 0)")
     parser.add_argument("--push-impulse", type=positive, default=3.0, metavar="NS",

@@ -19,6 +19,7 @@ import subprocess
 import sys
 
 from rabbit_msgs_py.cli import ArgumentParser, positive
+from rabbit_policy.runtime.policies import controller_argument
 
 SCENARIO = ["--speed-schedule", "0:0.8,6:1.4,13:0.9,18:1.2", "--push", "20:-60:0.1", "--duration", "26"]
 """The demo's walk, as run_stack.py and walk.py take it."""
@@ -63,7 +64,7 @@ def judge(reports: dict[str, dict], tolerance: float) -> list[str]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = ArgumentParser(description=__doc__)
-    parser.add_argument("--controller", choices=("learned", "recovery", "classic"), default="learned",
+    parser.add_argument("--controller", type=controller_argument, default="learned", metavar="{classic,learned,recovery}",
                         help="the controller the ROS 2 stack runs (default learned)")
     parser.add_argument("--tolerance", type=positive, default=0.03, metavar="M_S",
                         help="how close a segment's mean must be to its command, m/s (default 0.03)")

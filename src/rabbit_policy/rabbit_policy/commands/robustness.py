@@ -21,7 +21,7 @@ from rabbit_msgs_py.cli import ArgumentParser, non_negative
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.experiment.options import add_policy_options
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
-from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+from rabbit_policy.runtime.policies import controller_argument
 
 PARTS = ("grid", "transitions", "random", "pushes", "models")
 
@@ -29,7 +29,8 @@ PARTS = ("grid", "transitions", "random", "pushes", "models")
 def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--controller", nargs="+", choices=CONTROLLER_CHOICES, default=["classic"])
+    parser.add_argument("--controller", nargs="+", type=controller_argument, default=["classic"],
+                        metavar="{classic,learned,recovery}")
     add_policy_options(parser)
     parser.add_argument("--max-command-step", type=non_negative, default=0.0,
                         help="command rate limit (m/s per step)")

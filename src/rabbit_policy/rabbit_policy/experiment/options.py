@@ -18,11 +18,11 @@ from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
 def add_walk_options(parser: argparse.ArgumentParser) -> None:
     """``--controller`` or ``--spec``, ``--speed`` or ``--speed-schedule``, ``--duration``,
     ``--push`` (:func:`resolve_controller` settles the controller after parsing)."""
-    from rabbit_policy.runtime.policies import CONTROLLER_CHOICES
+    from rabbit_policy.runtime.policies import controller_argument
 
-    parser.add_argument("--controller", choices=CONTROLLER_CHOICES, default=None,
+    parser.add_argument("--controller", type=controller_argument, default=None, metavar="{classic,learned,recovery}",
                         help="classic (the default): the HZD gait library; learned: the HZD-RL policy; recovery: "
-                             "classic plus the model-based push-recovery rule (hzd, library, rl: aliases)")
+                             "classic plus the model-based push-recovery rule")
     parser.add_argument("--spec", default="", metavar="FILE",
                         help="a controller spec of any kind (classic, recovery or learned; docs/controller_spec.md), "
                              "edited or written by reproduce.py: the controller is the file's kind")

@@ -197,9 +197,19 @@ class NetworkPolicy:
 
 
 def controller_name(name: str) -> str:
-    """The controller's one name (``classic`` or ``learned``) for a name or an alias;
-    raises ``ValueError`` naming the choices."""
+    """The controller's one name (``classic``, ``learned`` or ``recovery``) for a name or an
+    older alias (accepted quietly); raises ``ValueError`` naming the three."""
     canonical = CONTROLLER_ALIASES.get(name, name)
     if canonical not in CONTROLLERS:
-        raise ValueError(f"controller must be one of {CONTROLLERS} (aliases {sorted(CONTROLLER_ALIASES)}), got {name!r}")
+        raise ValueError(f"controller must be one of {', '.join(CONTROLLERS)}, got {name!r}")
     return canonical
+
+
+def controller_argument(text: str) -> str:
+    """An argparse type: :func:`controller_name` (one line naming the three controllers)."""
+    import argparse
+
+    try:
+        return controller_name(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
