@@ -10,6 +10,7 @@ import io
 import re
 import shlex
 import runpy
+import subprocess
 import sys
 from pathlib import Path
 
@@ -318,3 +319,12 @@ def test_every_quoted_results_table_is_the_one_rendered_from_the_committed_resul
         text = doc.read_text()
         block = text.split(HEADLINE_BEGIN, 1)[1].split("-->", 1)[1].split(HEADLINE_END, 1)[0].strip()
         assert block == rendered, f"{doc.name}'s results table differs from docs/results/headline.md"
+
+
+@pytest.mark.sim
+def test_the_gymnasium_quickstart_runs_as_written():
+    text = (ROOT / "docs" / "learning.md").read_text()
+    block = re.search(r"## Gymnasium quickstart.*?```python\n(.*?)```", text, re.S).group(1)
+    run = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert re.fullmatch(r"\d+ steps, return -?\d+\.\d\d, walked at \d\.\d\d m/s for \d\.\d\d\n", run.stdout), run.stdout

@@ -20,7 +20,11 @@ learned controller, everything under ``DIR`` (never into the package):
    the commands that ran);
 4. **evaluate**: its measurements (``DIR/evaluation.json``);
 5. **model card**: ``DIR/MODEL_CARD.md``, from the spec and its evaluation; its regenerate
-   line is the command that ran.
+   line is the command that ran (paths as ``$OUT`` and relative to the repository).
+
+The last lines say one verdict (the console's ``verdict:`` line, the JSON's ``passed`` and
+``beats_start``, the card's "Shipped" and "Acceptance"); the exit status is 0 when what ships
+passes its acceptance checks, 1 when it fails them (or a training failed), 2 for bad arguments.
 
 Presets are data (``config/reproduce/NAME.yaml``: ``start``, ``seeds``, ``train``,
 ``screen``, ``evaluation``, every key required; the seed is ``seeds``', not ``train``'s).
@@ -31,6 +35,7 @@ DIR/learned.yaml`` walks the result; ``run_stack.py`` and ``policy_node`` run it
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import shutil
 import sys
@@ -77,6 +82,15 @@ def load_preset(name: str) -> dict:
         raise ValueError(f"preset {path}: screen is {{candidates: a whole number >= 1 per seed, trials: one of "
                          f"{EVALUATIONS}}}")
     return {**data, "path": str(path)}
+
+
+def portable(text: str, out: Path, root: Path) -> str:
+    """``text`` (a path or a command line) without this machine's paths, for a provenance that
+    reads the same wherever it was made: the output directory as ``$OUT``, paths in the
+    repository relative to it."""
+    for path in sorted({str(out.resolve()), str(out)}, key=len, reverse=True):
+        text = text.replace(path, "$OUT")
+    return text.replace(str(root.resolve()) + os.sep, "")
 
 
 def train_arguments(options: dict) -> list[str]:
@@ -147,10 +161,10 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
         "against it, on all trials.", "",
         "| candidate | failed checks | forward pushes | backward pushes | changes | all | against the start |",
         "|---|---|---|---|---|---|---|", screened, "",
-        f"Chosen: `{provenance['screened']}`. Significantly better than the start (p below "
-        f"{verdict['level']:.3g}, no family significantly worse, no more failed checks): "
-        f"**{'yes' if verdict['ships'] else 'no'}**"
-        + ("" if verdict["ships"] else "; " + "; ".join(verdict["why"]) + f". Shipped: `{provenance['shipped']}`."),
+        f"**Shipped: `{provenance['shipped']}`.** The best trained candidate, `{provenance['screened']}`, is "
+        f"significantly better than the start (p below {verdict['level']:.3g}, no family significantly worse, no "
+        f"more failed checks): **{'yes' if verdict['ships'] else 'no'}**"
+        + (", so it ships." if verdict["ships"] else "; " + "; ".join(verdict["why"]) + ", so the start ships."),
         "",
         "## Provenance", "",
         f"- code commit: {provenance['code_commit']}",
@@ -298,14 +312,15 @@ def main(argv: list[str] | None = None) -> int:
     spec = load_spec(chosen)
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
-    provenance = {**ran_on, "preset": preset["path"], "start": preset["start"],
+    commands = [portable(c, out, root) for c in commands]
+    provenance = {**ran_on, "preset": portable(preset["path"], out, root), "start": portable(preset["start"], out, root),
                   "library_sha256": library_hash(library_dir(spec.gait_library.source, chosen.parent)),
                   "runs": [{k: v for k, v in r.items() if k != "run"} for r in runs],
                   "evaluation": preset["evaluation"], "screen_trials": preset["screen"]["trials"],
                   "screened": best["candidate"], "shipped": chosen_name,
                   "verdict": {"ships": ships, "why": why, "level": level}, "commands": commands}
     shipped = replace(spec, provenance=provenance)
-    dump_spec(shipped, out / "learned.yaml", f"{spec.name}, reproduced by {reproduce_line}")
+    dump_spec(shipped, out / "learned.yaml", f"{spec.name}, reproduced by {portable(reproduce_line, out, root)}")
     print(f"[3/5] ship: {out / 'learned.yaml'} ({chosen_name}; {best['candidate']} significantly better than the "
           f"start: {'yes' if ships else 'no'}" + ("" if ships else f": {'; '.join(why)}") + ")", flush=True)
     shipped_row = next(r for r in rows if r["candidate"] == chosen_name)
@@ -314,7 +329,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"[4/5] evaluate: {out / 'evaluation.json'}", flush=True)
     (out / "MODEL_CARD.md").write_text(model_card(shipped, evaluation, rows, provenance))
     print(f"[5/5] model card: {out / 'MODEL_CARD.md'}", flush=True)
+    passed = shipped_row["acceptance"]["passed"]
+    print(f"verdict: ships {chosen_name}; its acceptance ({preset['evaluation']} criteria) "
+          f"{'passed' if passed else 'FAILED'} ({shipped_row['failures']} failed checks); a trained candidate "
+          f"significantly better than the start: {'yes' if ships else 'no'}", flush=True)
     print(strict_json.dumps({"out": str(out), "spec": str(out / "learned.yaml"), "shipped": chosen_name,
-                             "passed": shipped_row["acceptance"]["passed"], "failures": shipped_row["failures"],
-                             "beats_start": ships}))
-    return 0
+                             "passed": passed, "failures": shipped_row["failures"], "beats_start": ships}))
+    return 0 if passed else 1

@@ -83,4 +83,5 @@ def network_alone(policy: NetworkPolicy) -> NetworkPolicy:
                        controller=spec.controller if on_rule else classic.controller)
     forward = policy.forward
     return build(replace(spec, speed_integral=integral), policy.spec_base,
-                 weights=(list(forward.weights), list(forward.biases)), source=policy.name)
+                 weights=(list(forward.weights), list(forward.biases)),
+                 source=policy.name.removeprefix("learned/").split("@")[0] + " (network alone)")  # named once

@@ -140,7 +140,7 @@ from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.options import decision_ticks_option
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
-from rabbit_policy.registration import MAX_EPISODE_STEPS, register
+from rabbit_policy.registration import ENV_ID, MAX_EPISODE_STEPS, register
 from rabbit_policy.runtime.actions import (ACTIONS, RESIDUAL_BASES, ActionBounds,  # noqa: F401  (ActionBounds re-exported)
                                            ResidualAction, clip, residual_gate, residual_sum_bounds)
 from rabbit_policy.runtime.gait_library import GaitLibrary
@@ -697,13 +697,24 @@ class RabbitHZDEnv(gym.Env):
             self._view = None
 
 
+EPISODE_SECONDS = 30.0
+"""s of sim time: the nominal length of ``RabbitHZD-v0``'s 60 walking steps (0.4-0.7 s each)."""
+
+
+def decisions_for(seconds: float, period: int) -> int:
+    """Env steps of ``period`` ticks (1 ms) that last ``seconds`` s of sim time."""
+    return max(1, int(round(seconds * 1000 / period)))
+
+
 class EpisodeLength(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """One episode length for ``gymnasium.make``: the env's own (``max_steps``, which also
     places the command changes and the push) and its TimeLimit's (``max_episode_steps``), which
     Gymnasium keeps apart (``make`` never gives ``max_episode_steps`` to the env). Registered
     as an additional wrapper of every id, applied after the TimeLimit: ``max_episode_steps``
     alone sets the env's length too, and ``max_steps`` alone the TimeLimit's; given both, both
-    stay as given."""
+    stay as given. ``RabbitHZD-v0``'s length (60) counts walking steps: with
+    ``decision_period=N`` and neither given, an episode is :data:`EPISODE_SECONDS` of sim time,
+    ``30000 / N`` decisions (1500 at N = 20), not 60 decisions (1.2 s)."""
 
     def __init__(self, env: gym.Env) -> None:
         gym.utils.RecordConstructorArgs.__init__(self)
@@ -723,6 +734,12 @@ class EpisodeLength(gym.Wrapper, gym.utils.RecordConstructorArgs):
             limit._cached_spec = None
             self._cached_spec = None
         elif "max_steps" not in spec.kwargs:
+            period = int(spec.kwargs.get("decision_period") or 0)
+            if spec.id == ENV_ID and period > 0 and limit._max_episode_steps == registered:
+                # the id's length is in walking steps: N ms decisions last as long in sim time
+                limit._max_episode_steps = decisions_for(EPISODE_SECONDS, period)
+                limit._cached_spec = None
+                self._cached_spec = None
             unwrapped.max_steps = limit._max_episode_steps  # max_episode_steps alone (or the id's): the env follows
 
 
