@@ -56,3 +56,38 @@ def test_walk_py_gives_every_segment_its_mean_at_400_and_600_s(duration):
     assert first["mean_speed"] == pytest.approx(1.0, abs=0.03)
     assert last["mean_speed"] == pytest.approx(1.3, abs=0.03) and last["reach_time"] is not None
     assert report["duration"] == float(duration)
+
+
+@pytest.mark.unit
+def test_a_report_of_a_run_whose_policy_stopped_deciding_is_not_complete():
+    from rabbit_policy.bringup.config import StackConfig
+    from rabbit_policy.bringup.supervisor import RunReport
+    from rabbit_policy.experiment.result import exit_status
+
+    report = RunReport.not_started(StackConfig(duration=1.0, schedule=((0.0, 1.0),)), "x")
+    report.completed, report.error = True, None
+    report.take_controller_counts({"rejected_gaits": 0, "decisions_timed_out": 1, "policy_silences": 9})
+    summary = report.summary()
+    assert summary["decisions_lost"] == 10 and summary["completed"] is False
+    assert "stopped deciding" in summary["error"] and exit_status(summary) == 3
+
+
+@pytest.mark.unit
+def test_the_exit_status_says_fell_incomplete_or_never_reached():
+    from rabbit_policy.experiment.result import exit_status
+
+    ok = {"fell": False, "stalled": False, "completed": True, "last_command_reached": True}
+    assert exit_status(ok) == 0 and exit_status({**ok, "last_command_reached": None}) == 0  # no whole step to judge
+    assert exit_status({**ok, "last_command_reached": False}) == 4
+    assert exit_status({**ok, "completed": False}) == 3 and exit_status({**ok, "fell": True}) == 1
+
+
+@pytest.mark.sim
+def test_a_last_command_never_reached_is_said():
+    from rabbit_policy.experiment.loop import walk
+
+    # 0.7 -> 1.5 m/s 0.6 s before the end: whole steps in the segment, none within 0.05 m/s yet
+    scenario = Scenario(schedule=((0.0, 0.7), (3.0, 1.5)))
+    result = walk(LibraryPolicy(GaitLibrary.load()), scenario, 4.2)
+    assert result.summary()["last_command_reached"] is False
+    assert walk(LibraryPolicy(GaitLibrary.load()), Scenario.constant(1.0), 0.3).last_command_reached() is None
