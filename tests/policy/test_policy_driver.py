@@ -123,3 +123,32 @@ def test_the_initial_state_is_computed_and_sent_only_when_the_gait_changed():
     assert changed[0].command.alpha != first.command.alpha and not changed[0].same_initial_state
     expected = state_on_gait(changed[0].command.alpha, 1.0)
     assert all(np.array_equal(a, b) for a, b in zip(changed[0].initial_state, expected))
+
+
+def test_a_command_flood_moves_the_command_no_faster_than_its_rate():
+    """/cmd_speed at 1 kHz cycling nan, inf, -5 and 1e9 (issue 75): the bad ones are refused, the
+    clamped ones (0.7 and 1.5 m/s) are followed at command_rate, so the command the policy walks
+    drifts by at most 2 mm/s a tick instead of jumping 0.8 m/s every ms."""
+    core = driver(command_rate=2.0)
+    core.start()
+    core.on_hip_velocity(MS, 1.0)
+    commands, flood = [], [float("nan"), float("inf"), -5.0, 1e9]
+    for tick in range(2, 2002):
+        core.on_cmd_speed(flood[tick % 4], "/cmd_speed")
+        core.on_hip_velocity(tick * MS, 1.0)
+        commands.append(core.desired_speed)
+    steps = np.abs(np.diff([1.0] + commands))
+    assert steps.max() <= 2.0e-3 + 1e-12 and 0.7 <= min(commands) and max(commands) <= 1.5
+    assert core.rejected_commands == 1000
+    core.on_cmd_speed(1.3, "/cmd_speed")  # one command: reached in (1.3 - v) / 2 s, then held
+    for tick in range(2002, 3002):
+        core.on_hip_velocity(tick * MS, 1.0)
+    assert core.desired_speed == 1.3 and core.target is None
+
+
+def test_the_schedule_applies_at_once_whatever_the_command_rate():
+    core = driver(schedule="0.2:1.4", command_rate=2.0)
+    core.start()
+    for tick in range(1, 202):
+        core.on_hip_velocity(tick * MS, 1.0)
+    assert core.desired_speed == 1.4

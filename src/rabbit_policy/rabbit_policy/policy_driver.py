@@ -76,6 +76,7 @@ class PolicySettings:
     decision_window: int
     speed_schedule: str = ""
     phase_topic: str = "/hzd/phase"  # named in the line when a decision's phase never comes
+    command_rate: float = 0.0  # m/s per s of sim time a live command is followed at (0: at once)
 
 
 def speed_schedule(text: str, initial_speed: float) -> SpeedSchedule | None:
@@ -103,6 +104,7 @@ class PolicyDriver:
     (one line) for settings it cannot run with."""
 
     def __init__(self, policy: Policy, settings: PolicySettings) -> None:
+        self.target: float | None = None  # a live command the desired speed is still moving to (command_rate)
         self.set_range(settings.min_speed, settings.max_speed, settings.initial_speed)
         if not math.isfinite(settings.initial_speed) or not self.min_speed <= settings.initial_speed <= self.max_speed:
             raise ValueError(f"initial_speed must be a finite number in [{self.min_speed}, {self.max_speed}], "
@@ -132,6 +134,10 @@ class PolicyDriver:
         self._initial: tuple[tuple, float, Gait] | None = None  # (alpha, initial speed, the gait that carried it)
         self.placements = 0
         self._echoes: list[float] = []  # scheduled commands published on /cmd_speed, not yet heard back
+        if not (math.isfinite(settings.command_rate) and settings.command_rate >= 0.0):
+            raise ValueError(f"command_rate must be a finite number >= 0 m/s per s, got {settings.command_rate}")
+        self.command_rate = settings.command_rate
+        self._ramp_stamp: int | None = None  # ns: the newest sample the ramp has followed to
 
     # ----------------------------------------------------------------- events
     def start(self) -> list[Action]:
@@ -145,6 +151,8 @@ class PolicyDriver:
             raise ValueError(f"min_speed ({low}) must not be above max_speed ({high})")
         self.min_speed, self.max_speed = low, high
         self.desired_speed = min(max(self.desired_speed if command is None else command, low), high)
+        if self.target is not None:
+            self.target = min(max(self.target, low), high)
 
     def on_command(self, value: float, source: str) -> list[Action]:
         """A commanded speed (m/s) from ``source`` (a topic's name, in log lines)."""
@@ -164,6 +172,7 @@ class PolicyDriver:
         if count > 1 and count != self.placements:
             reset_policy(self.policy)
             self.awaiting.clear()  # decisions of the walk before the placement
+            self._ramp_stamp = None  # sim time starts again
             if self.schedule is not None:
                 self.schedule.restart()
                 self.desired_speed = self.initial_speed
@@ -173,6 +182,7 @@ class PolicyDriver:
         """A state's hip velocity (m/s, world x) stamped ``stamp`` ns: a scheduled change due
         then, the sample, and the decisions that fall due."""
         actions = self._follow_schedule(stamp)
+        self._follow_ramp(stamp)
         due = self.clock.sample(stamp, speed, self.desired_speed)  # ValueError: a stamp it cannot take
         if self.body is None:
             return actions + [self._decide(observation) for observation in due]
@@ -224,11 +234,27 @@ class PolicyDriver:
             line = self.rejections.line(f"clamp {source}", clamp_message(value, self.min_speed, self.max_speed,
                                                                          speed, source))
             actions += [Log("warning", line)] if line is not None else []
-        if speed != self.desired_speed and source != SCHEDULE_SOURCE:  # (a scheduled one is logged with its time)
-            line = self.rejections.line("command", f"commanded speed {speed:.2f} m/s")
+        if speed != (self.target if self.target is not None else self.desired_speed) and source != SCHEDULE_SOURCE:
+            line = self.rejections.line("command", f"commanded speed {speed:.2f} m/s")  # (scheduled: with its time)
             actions += [Log("info", line)] if line is not None else []
-        self.desired_speed = speed
+        if source == SCHEDULE_SOURCE or not self.command_rate or self._ramp_stamp is None:
+            self.desired_speed, self.target = speed, None  # the schedule (the fast path's), or before the walk
+        else:
+            self.target = speed  # followed at command_rate from the next sample (_follow_ramp)
         return actions
+
+    def _follow_ramp(self, stamp: int) -> None:
+        """The desired speed moves toward a live command at ``command_rate`` m/s per s of sim
+        time (nav2's velocity smoother's rule: no sequence of valid commands makes it jump)."""
+        last, self._ramp_stamp = self._ramp_stamp, stamp
+        if self.target is None or last is None or stamp <= last:
+            return
+        step = self.command_rate * (stamp - last) / 1e9
+        gap = self.target - self.desired_speed
+        if abs(gap) <= step:
+            self.desired_speed, self.target = self.target, None
+        else:
+            self.desired_speed += step if gap > 0 else -step
 
     def _decide_awaiting(self) -> list[Action]:
         """Decide, in order, the due decisions whose body state is complete; one whose state

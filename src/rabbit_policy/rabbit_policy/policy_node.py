@@ -82,6 +82,9 @@ from rabbit_policy.spec.make import make_policy, spec_kind
 HIP_SOURCES = ("state_batch", "hip_velocity")
 """Where policy_node takes the hip speed from (parameter ``hip_source``)."""
 
+COMMAND_RATE = 2.0
+"""m/s per s: ``command_rate``'s default, a 0.8 m/s change within 0.4 s (about a step), so that no
+sequence of commands (a flood cycling 0.7 and 1.5 m/s every ms) makes the command jump."""
 POLICY_PARAMS = {
     "policy": Param("classic", "classic (the HZD gait library; aliases library and hzd), learned (the HZD-RL "
                                "network; alias rl) or recovery (classic plus the model-based push-recovery rule)",
@@ -109,6 +112,9 @@ POLICY_PARAMS = {
                         choices=HIP_SOURCES),
     "window": Param(1000, "longest averaging window of the observation, ticks (1 ms), >= 1", range=(1, 100000)),
     "max_command_step": Param(0.0, "command rate limit, m/s per step (0 = none)", range=(0.0, 10.0)),
+    "command_rate": Param(COMMAND_RATE, "a command on /cmd_speed or /cmd_vel is followed at most this fast, m/s per s "
+                                        "of sim time (0 = at once); the speed schedule's changes apply at once, as on "
+                                        "the fast path", range=(0.0, 100.0)),
     "decision_period": Param(-1, "-1: the policy's own (classic: every 20 ticks; learned: as trained); 0: once per "
                                  "step (at /hzd/step); N > 0: every N ticks (1 ms) of sim time, the gait applied "
                                  "at once", range=(-1, 100000)),
@@ -170,7 +176,7 @@ class PolicyNode(Node):
             self.core = PolicyDriver(policy, PolicySettings(
                 low, high, values["initial_speed"],
                 values["window"], values["decision_window"], values["speed_schedule"],
-                self.resolve_topic_name(topics.PHASE)))
+                self.resolve_topic_name(topics.PHASE), finite("command_rate", values["command_rate"], 0.0)))
         except (PolicyUnavailable, ValueError) as exc:
             raise NodeStartError(f"policy_node: {exc}") from None
         self._hip_source = values["hip_source"]  # (one of HIP_SOURCES: declare checks the choices)
