@@ -89,3 +89,45 @@ def test_a_keyed_controller_follows_only_its_paired_policys_signed_timing(capfd)
         assert controller.sync.decision_period == 20
     err = capfd.readouterr().err
     assert "rejected /hzd/gait_timing" in err and "not signed" in err
+
+
+class Resetter:
+    """A stranger's node that calls /sim/reset once, on the first state batch past 0.5 s of sim time."""
+
+    def __init__(self, context) -> None:
+        import rclpy
+        from std_msgs.msg import Float64MultiArray
+        from std_srvs.srv import Trigger
+
+        self.node = rclpy.create_node("stranger", context=context)
+        self._client = self.node.create_client(Trigger, topics.RESET_SERVICE, qos_profile=qos.SERVICE_QOS)
+        self.node.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS)
+        self.called = False
+
+    def _on_batch(self, msg) -> None:
+        from std_srvs.srv import Trigger
+
+        if not self.called and msg.data and msg.data[0] > 0.5e9:
+            self.called = True
+            self._client.call_async(Trigger.Request())
+
+    def destroy_node(self) -> None:
+        self.node.destroy_node()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_strangers_reset_mid_run_is_reported_and_the_run_is_not_complete():
+    from rabbit_policy.bringup.in_process import run_in_process
+
+    made = []
+
+    def factory(context):
+        made.append(Resetter(context))
+        return made[-1].node
+
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
+    report, _nodes = run_in_process(config, observers=[factory])
+    assert made[0].called
+    summary = report.summary()
+    assert summary["completed"] is False and "was reset 1 time during the run" in summary["error"]

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from std_msgs.msg import Bool, Float64, Float64MultiArray, Header
+from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, UInt32
 from std_srvs.srv import SetBool
 
 from rabbit_msgs_py import qos, topics
@@ -126,6 +126,9 @@ class Supervisor(Node):
         self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
+        self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
+        self._placements: int | None = None  # /sim/resets when first heard (the placement before the run)
+        self.resets = 0  # placements since: resets nobody in the run asked for (run_stack never resets)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
         self._recorded_ns = -1  # sim time (ns) of the newest state the recorder has written; -1: none yet
         if config.record:
@@ -218,6 +221,16 @@ class Supervisor(Node):
         else:
             self._pending_step = t
 
+    def _on_resets(self, msg: UInt32) -> None:
+        """``/sim/resets``: a placement after the first is a reset this run did not ask for."""
+        if self._placements is None:
+            self._placements = msg.data
+        elif msg.data > self._placements:
+            self.resets += msg.data - self._placements
+            self._placements = msg.data
+            self.get_logger().error(f"the simulation was reset at t = {self.sim_time:.3f} s by a /sim/reset call this "
+                                    "run did not make: the run is not complete")
+
     def _on_fallen(self, msg: Bool) -> None:
         if msg.data and not self.fell:
             self.fell = True
@@ -285,6 +298,9 @@ class Supervisor(Node):
             if self.first_state_wall is not None and self.last_state_wall is not None
             else 0.0
         )
+        if error is None and self.resets:
+            times = f"{self.resets} time" + ("s" if self.resets != 1 else "")
+            error = f"the simulation was reset {times} during the run (a /sim/reset run_stack did not make)"
         return RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
                          completed=self.done and error is None, error=error)
 
