@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import array
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from rclpy.node import Node
@@ -19,7 +19,8 @@ from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
-from rabbit_policy.experiment.scenario import on_tick_grid, whole_ticks
+from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid, whole_ticks
+from rabbit_policy.runtime.commands import COMMAND_RANGE, clamp_speed
 
 from .config import StackConfig
 
@@ -127,6 +128,8 @@ class Supervisor(Node):
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
+        self.create_subscription(Float64, topics.CMD_SPEED, self._on_command, qos.COMMAND_QOS)
+        self.live_commands: list[tuple[float, float]] = []  # (sim s, m/s): commands sent during the run, not scheduled
         self._placements: int | None = None  # /sim/resets when first heard (the placement before the run)
         self.resets = 0  # placements since: resets nobody in the run asked for (run_stack never resets)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
@@ -221,6 +224,33 @@ class Supervisor(Node):
         else:
             self._pending_step = t
 
+    def _on_command(self, msg: Float64) -> None:
+        """A command on ``/cmd_speed`` (clamped into the policy's range, as it does; a bad one it
+        refuses is left out): one the schedule does not hold (the policy publishes the
+        schedule's own as it applies them) joins the report's segments, dated at the newest
+        state this node had when it came (within the states in flight)."""
+        try:
+            value = clamp_speed(msg.data, *COMMAND_RANGE)
+        except ValueError:
+            return
+        now = self.sim_time
+        if self._start is None or any(abs(t - now) < 1.0 and v == value for t, v in self.config.schedule):
+            return  # before the walk (run_stack's own first command), or a scheduled change's echo
+        last = self.live_commands[-1] if self.live_commands else None
+        if last is not None and now - last[0] < MIN_SCHEDULE_SPACING:
+            self.live_commands[-1] = (last[0], value)  # a burst: the newest value of it stands for it
+        elif (last[1] if last is not None else None) != value:
+            self.live_commands.append((round(now, 3), value))
+
+    def walked_schedule(self) -> tuple[tuple[float, float], ...]:
+        """The schedule the robot walked: the run's, with the live commands merged in by time
+        (a scheduled change within 0.1 s of a live one is kept, the live one left out)."""
+        merged = list(self.config.schedule)
+        for t, v in self.live_commands:
+            if all(abs(t - s) >= MIN_SCHEDULE_SPACING for s, _ in merged):
+                merged.append((t, v))
+        return tuple(sorted(merged))
+
     def _on_resets(self, msg: UInt32) -> None:
         """``/sim/resets``: a placement after the first is a reset this run did not ask for."""
         if self._placements is None:
@@ -271,7 +301,7 @@ class Supervisor(Node):
         tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
         with that state's hip x; the foot's x is on no topic (NaN)."""
         config = self.config
-        scenario = config.scenario()
+        scenario = replace(config.scenario(), schedule=self.walked_schedule())
         t0_ns, x0 = self._start or (0, 0.0)
         t0 = t0_ns / 1e9
         times, xs = np.array(self._times, dtype=np.int64), np.array(self._xs, dtype=float)
