@@ -75,6 +75,8 @@ def test_a_short_sb3_ppo_run_logs_like_train_py_and_its_policy_walks(tmp_path):
         log = list(csv.DictReader(f))
     assert [int(r["env_steps"]) for r in log] == [512, 1024] and all(np.isfinite(float(r["mean_abs_error"]))
                                                                       for r in log)
+    assert [line.split(":")[0] for line in run.stderr.splitlines() if line.startswith("iteration ")] == [
+        "iteration 1", "iteration 2"]  # progress per iteration, with --no-progress too
     with (out / "eval.csv").open() as f:
         assert [int(r["env_steps"]) for r in csv.DictReader(f)] == [1024]  # --eval-every 0: at the end only
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator

@@ -22,6 +22,7 @@ has (``log.csv``, ``eval.csv``, ``tb/`` under the same tags, ``policy.pt``, ``be
 
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -222,7 +223,12 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
         model.save(out / CHECKPOINT)
         (out / STATE).write_text(strict_json.dumps({**state, "wall_s": time.perf_counter() - start}) + "\n")
 
+    evaluated_at = [-1]  # env steps of the last evaluation: one eval.csv row per iteration
+
     def evaluate() -> None:
+        if int(model.num_timesteps) == evaluated_at[0]:
+            return  # the last in-loop evaluation was at these very steps
+        evaluated_at[0] = int(model.num_timesteps)
         checkpoint = export_actor(model, config.algo, bounds.low, bounds.high, info())
         checkpoint.save(out / "policy.pt")
         result = acceptance(checkpoint_policy(out / "policy.pt"), map_fn=backend.map)
@@ -272,6 +278,9 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
                 append_csv(out / "log.csv", row)
                 scalars.iteration(row, row["wall_s"])
                 self.bar.set_postfix(ret=f"{row['episode_return']:.2f}", falls=f"{row['fall_fraction']:.2f}")
+                tqdm.write(f"iteration {row['iteration']}: {row['env_steps']} env steps, {row['episodes']} episodes, "
+                           f"return {row['episode_return']:.2f}, falls {row['fall_fraction']:.2f}, |v - v_d| "
+                           f"{row['mean_abs_error']:.3f} m/s, {row['wall_s']:.0f} s", file=sys.stderr)
                 self.returns, self.falls, self.errors = [], [], []
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += config.eval_every
