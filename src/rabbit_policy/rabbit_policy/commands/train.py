@@ -21,7 +21,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, ensure_output_dir
+from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, unwritable_dir
 from rabbit_policy.learning.env import EpisodeConfig
 from rabbit_policy.learning.es import ESConfig
 from rabbit_policy.learning.ppo import PPOConfig
@@ -49,9 +49,6 @@ def parse_config(argv: list[str] | None) -> TrainingConfig:
     (``rabbit_policy.learning.presets``; bad values: one line, exit status 2)."""
     parser = build_parser()
     args = parse_with_preset(parser, argv)
-    if args.resume and not (args.out / "checkpoint.pt").is_file():
-        parser.error(f"--resume: no {args.out / 'checkpoint.pt'}")
-    ensure_output_dir(parser, args.out, empty=not args.resume)  # before any work: one line, exit 2
     try:
         trainer_cls = TRAINERS[args.algo]
         trainer = (config_from_args(ESConfig, args, workers=args.workers) if trainer_cls is ESConfig
@@ -63,9 +60,14 @@ def parse_config(argv: list[str] | None) -> TrainingConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    config = parse_config(argv)
+    problem = unwritable_dir(config.out)  # before any work (parse_config itself writes nothing)
+    if problem:
+        print(f"train.py: error: --out {config.out}: {problem}", file=sys.stderr)
+        return 2
     from rabbit_policy.learning.training import train
 
-    return train(parse_config(argv))
+    return train(config)
 
 
 if __name__ == "__main__":

@@ -21,7 +21,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, ensure_output_dir
+from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, unwritable_dir
 from rabbit_policy.learning.presets import parse_with_preset
 from rabbit_policy.learning.sb3 import SB3Config
 from rabbit_policy.parallel import BackendConfig, add_backend_arguments, backend_config
@@ -48,12 +48,16 @@ def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, Backend
             parser.error(f"--resume: no {args.out / 'sb3_checkpoint.zip'}")
     elif args.out.exists() and any(args.out.iterdir()):
         parser.error(f"{args.out} is not empty; use --resume or another --out")
-    ensure_output_dir(parser, args.out)  # before any work: one line, exit 2
+
     return config, args.out, not args.no_progress, backend, args.resume
 
 
 def main(argv: list[str] | None = None) -> int:
     config, out, progress, backend, resume = parse_config(argv)
+    problem = unwritable_dir(out)  # before any work (parse_config itself writes nothing)
+    if problem:
+        print(f"train_sb3.py: error: --out {out}: {problem}", file=sys.stderr)
+        return 2
     try:
         import stable_baselines3  # noqa: F401  (an optional dependency: requirements-extras.txt)
     except ImportError:

@@ -701,9 +701,9 @@ EPISODE_SECONDS = 30.0
 """s of sim time: the nominal length of ``RabbitHZD-v0``'s 60 walking steps (0.4-0.7 s each)."""
 
 
-def decisions_for(seconds: float, period: int) -> int:
-    """Env steps of ``period`` ticks (1 ms) that last ``seconds`` s of sim time."""
-    return max(1, int(round(seconds * 1000 / period)))
+def decisions_for(seconds: float, decision_period: int) -> int:
+    """Env steps of ``decision_period`` ticks (1 ms) that last ``seconds`` s of sim time."""
+    return max(1, int(round(seconds * 1000 / decision_period)))
 
 
 class EpisodeLength(gym.Wrapper, gym.utils.RecordConstructorArgs):
