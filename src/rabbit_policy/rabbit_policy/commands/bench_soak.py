@@ -168,15 +168,18 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
     spinner.start()
     samples: list[Sample] = []
     start = time.perf_counter()
-    with open(log, "w") as err:
-        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=err, text=True)
+    with open(log, "w") as err, tempfile.TemporaryFile("w+") as report_file:
+        # the report to a file, not a pipe: an hour's JSON is larger than a pipe holds, and a
+        # run_stack writing into a full pipe nobody reads until it exits would never exit
+        proc = subprocess.Popen(command, stdout=report_file, stderr=err, text=True)
         while proc.poll() is None:
             time.sleep(SAMPLE_EVERY)
             pids = process_tree(proc.pid)
             cpu = {p: process_cpu_seconds(p) for p in pids}
             sim = observer.stamps[-1] / 1e9 if observer.stamps else 0.0
             samples.append((sim, sum(rss_mb(p) for p in pids), {p: c for p, c in cpu.items() if c is not None}))
-        out = proc.stdout.read()
+        report_file.seek(0)
+        out = report_file.read()
     wall = time.perf_counter() - start
     stop.set()
     spinner.join(timeout=5.0)
