@@ -113,7 +113,7 @@ def test_library_covers_the_required_speeds():
 
 WALK_KEYS = {"fell", "stalled", "fall_time", "stall_time", "duration", "steps", "mean_speed", "peak_torque",
              "rejected", "touchdowns", "segments", "controller", "policy", "scenario", "real_time_factor",
-             "wall_time", "completed", "error", "spec"}
+             "wall_time", "completed", "error", "spec", "decisions_lost", "last_command_reached"}
 
 
 def _walk_script(*args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -126,8 +126,10 @@ def test_walk_script_json_has_the_same_keys_with_and_without_a_schedule():
     constant = json.loads(_walk_script("--controller", "classic", "--speed", "0.9", "--duration", "5", "--json").stdout)
     integral = json.loads(_walk_script("--speed", "0.9", "--duration", "1", "--speed-integral", "0.3", "--json").stdout)
     assert integral["policy"].startswith("classic/interpolate+integral0.3") and set(integral) == WALK_KEYS
-    scheduled = json.loads(_walk_script("--controller", "hzd", "--speed-schedule", "0:0.9,2:1.0", "--duration", "5",
-                                        "--json").stdout)
+    run = _walk_script("--controller", "hzd", "--speed-schedule", "0:0.9,2:1.0", "--duration", "5", "--json",
+                       check=False)
+    scheduled = json.loads(run.stdout)
+    assert run.returncode == (4 if scheduled["last_command_reached"] is False else 0)  # exit 4: never reached
     assert set(constant) == set(scheduled) == WALK_KEYS
     assert constant["controller"] == scheduled["controller"] == "classic"
     assert constant["fell"] is False and constant["stalled"] is False

@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import os
 import sys
 import tempfile
 from pathlib import Path
@@ -24,11 +25,16 @@ class ArgumentParser(argparse.ArgumentParser):
 
 
 def unwritable_dir(path: Path) -> str | None:
-    """Make the directory ``path`` (its parents too) and write a file in it; why not (one
-    line), or None when it can be written."""
+    """Why the directory ``path`` cannot be made or written (one line), or None: its nearest
+    existing ancestor (itself if it exists) must be a directory a file can be written in (a
+    file is made there and removed at once; nothing else is left behind)."""
+    probe = Path(os.path.abspath(path))
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"cannot write there ({probe} is not a directory)"
     try:
-        path.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-check-"):
+        with tempfile.NamedTemporaryFile(dir=probe, prefix=".write-check-"):
             pass
     except OSError as exc:
         return f"cannot write there ({exc.strerror or exc})"
@@ -36,14 +42,14 @@ def unwritable_dir(path: Path) -> str | None:
 
 
 def ensure_output_dir(parser: argparse.ArgumentParser, path, flag: str = "--out", empty: bool = False) -> None:
-    """Make an output directory now, before any work (its parents too), and check that a file
-    can be written in it (and, with ``empty``, that it holds nothing); otherwise
-    ``parser.error``: one line, exit status 2."""
+    """Check, before any work, that an output directory can be made and written (and, with
+    ``empty``, that it holds nothing if it exists); otherwise ``parser.error``: one line, exit
+    status 2."""
     path = Path(path)
     problem = unwritable_dir(path)
     if problem:
         parser.error(f"{flag} {path}: {problem}")
-    if empty and any(path.iterdir()):
+    if empty and path.is_dir() and any(path.iterdir()):
         parser.error(f"{flag} {path} is not empty: give a new directory")
 
 

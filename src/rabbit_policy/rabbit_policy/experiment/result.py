@@ -179,12 +179,15 @@ class WalkResult:
         return rows
 
     def last_command_reached(self, tolerance: float = REACH_TOLERANCE) -> bool | None:
-        """Did the walk reach its last segment's command (a whole step within ``tolerance``
-        of it, :meth:`reach_time`)? False for a walk that fell or stalled; None when the
-        segment holds no whole step to judge (a walk shorter than a step)."""
+        """Did the walk reach its last commanded change (a whole step within ``tolerance`` of
+        it, :meth:`reach_time`)? False for a walk that fell or stalled; None when there is no
+        change to reach (one segment: the robot starts on the command's gait) or the last
+        segment holds no whole step to judge."""
         segments = self.segments(tolerance)
-        if self.failed or not segments:
+        if self.failed:
             return False
+        if len(segments) < 2:
+            return None
         last = segments[-1]
         if last["reach_time"] is not None:
             return True
