@@ -28,6 +28,8 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     run = subprocess.run([sys.executable, "scripts/reproduce.py", "--preset", "tiny", "--out", str(out), *dirty],
                          cwd=ROOT, capture_output=True, text=True, timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
+    verdict = json.loads(run.stdout.strip().splitlines()[-1])  # the console's verdict line says the JSON's
+    assert f"verdict: ships {verdict['shipped']}; its acceptance (full criteria) passed" in run.stdout
     assert sorted(p.name for p in packaged_spec_dir().iterdir()) == packaged_before  # nothing into the package
     spec = load_spec(out / "learned.yaml")
     assert (out / spec.network.weights.file).is_file()
@@ -41,7 +43,7 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert ("dirty_diff_sha256" in provenance) == bool(dirty) and provenance["machine"]["numpy"]
     evaluation = json.loads((out / "evaluation.json").read_text())
     card = (out / "MODEL_CARD.md").read_text()
-    assert f"scripts/reproduce.py --preset tiny --out {out}" in card  # its regenerate line is what ran
+    assert "scripts/reproduce.py --preset tiny --out $OUT" in card  # its regenerate line is what ran
     first = evaluation["acceptance"]["constant"][0]
     assert f"| {first['speed']:.2f} | {first['mean_speed_last']:.3f} | {first['error']:+.3f} |" in card
     assert load_controller(out / "learned.yaml").spec == spec
@@ -54,7 +56,7 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025}
     assert provenance["shipped"] == screen["shipped"] == (screen["best"] if screen["beats_start"] else "start")
     shipped_row = next(r for r in screen["candidates"] if r["candidate"] == screen["shipped"])
-    assert evaluation["rates"] == shipped_row["rates"] and "Significantly better than the start" in card
+    assert evaluation["rates"] == shipped_row["rates"] and f"**Shipped: `{screen['shipped']}`.**" in card
     if screen["shipped"] == "start":  # not better: the start ships, its network a zero residual
         start = load_controller(out / "seed-0" / "start.yaml")
         assert spec.network.weights == start.spec.network.weights
