@@ -167,15 +167,23 @@ def user_key(path: Path) -> PairingKey:
                 pass  # another node made it first: use theirs
         finally:
             fresh.unlink()
-    info = path.stat()
+    return _owned_key(path, "pairing key file", ": remove it and a node makes a new one")
+
+
+def _owned_key(path: Path, what: str, if_empty: str = "") -> PairingKey:
+    """The key in ``path``, a file of this user's that group and others cannot open;
+    ``ValueError`` (one line naming ``what``) otherwise."""
+    try:
+        info = path.stat()
+    except OSError as exc:
+        raise ValueError(f"{what} {path}: {exc.strerror or exc}") from None
     if info.st_uid != os.getuid():
-        raise ValueError(f"pairing key file {path} belongs to another user (uid {info.st_uid})")
+        raise ValueError(f"{what} {path} belongs to another user (uid {info.st_uid})")
     if stat.S_IMODE(info.st_mode) & 0o077:
-        raise ValueError(f"pairing key file {path} is open to others (mode {stat.S_IMODE(info.st_mode):04o}): "
-                         f"chmod 600 {path}")
+        raise ValueError(f"{what} {path} is open to others (mode {stat.S_IMODE(info.st_mode):04o}): chmod 600 {path}")
     key = PairingKey.parse(path.read_text().strip())
     if key is None:
-        raise ValueError(f"pairing key file {path} is empty: remove it and a node makes a new one")
+        raise ValueError(f"{what} {path} is empty{if_empty}")
     return key
 
 
@@ -183,19 +191,7 @@ def key_file(path: Path) -> PairingKey:
     """The key in an existing key file (``pairing_key_file``: run_stack writes one for its
     node processes, owner read/write only, and removes it at exit). ``ValueError`` for a file
     that is missing, another user's, open to group or others, or not a key."""
-    try:
-        info = path.stat()
-    except OSError as exc:
-        raise ValueError(f"pairing_key_file {path}: {exc.strerror or exc}") from None
-    if info.st_uid != os.getuid():
-        raise ValueError(f"pairing_key_file {path} belongs to another user (uid {info.st_uid})")
-    if stat.S_IMODE(info.st_mode) & 0o077:
-        raise ValueError(f"pairing_key_file {path} is open to others (mode {stat.S_IMODE(info.st_mode):04o}): "
-                         f"chmod 600 {path}")
-    key = PairingKey.parse(path.read_text().strip())
-    if key is None:
-        raise ValueError(f"pairing_key_file {path} is empty")
-    return key
+    return _owned_key(path, "pairing_key_file")
 
 
 def write_key_file(path: Path, key: str) -> Path:
