@@ -489,3 +489,53 @@ def test_the_integral_band_clip_and_windup_decay_reach_the_env_memory_and_bad_on
                           "integral_band acts on the speed integral")):
         with pytest.raises(ValueError, match=message):
             replace(config, **bad)
+
+
+def test_the_evaluation_reward_pays_the_walks_graded_reach_and_settling_at_its_end_and_a_fall_is_below_any_walk():
+    """reward="evaluation": every step pays 0 until the episode is truncated, then the walk's
+    own tracking scores (WalkResult.tracking_scores, the evaluation's reach and settle rules);
+    a fall returns exactly fall_penalty."""
+    env = RabbitHZDEnv(max_steps=150, decision_period=20, distribution="changes", reward="evaluation",
+                       fall_penalty=-1.0)
+    env.reset(seed=3, options={"desired_speed": 0.8, "next_speed": 1.2})
+    rewards = []
+    while True:
+        _obs, reward, terminated, truncated, info = env.step(np.zeros(21, np.float32))
+        rewards.append(reward)
+        if terminated or truncated:
+            break
+    assert truncated and not terminated and set(rewards[:-1]) == {0.0}
+    reach, settle = env.loop.result().tracking_scores()
+    assert (info["reward_reach"], info["reward_settle"]) == (reach, settle) and rewards[-1] == reach + settle
+    assert "reward_tracking" not in info and settle > 0.0
+    falling = RabbitHZDEnv(max_steps=150, decision_period=20, distribution="changes", reward="evaluation",
+                           fall_penalty=-1.0)
+    falling.reset(seed=3)
+    total = 0.0
+    for _ in range(150):  # the lowest coefficients and Kd everywhere: RABBIT collapses
+        _obs, reward, terminated, _tr, info = falling.step(-np.ones(21, np.float32))
+        total += reward
+        if terminated:
+            break
+    assert terminated and total == -1.0 and info["reward_reach"] == info["reward_settle"] == 0.0
+    with pytest.raises(ValueError, match="fall_penalty < 0"):
+        RabbitHZDEnv(reward="evaluation", fall_penalty=0.0)
+    with pytest.raises(ValueError, match="reward must be one of"):
+        RabbitHZDEnv(reward="speed")
+
+
+def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on_the_nominal_model():
+    from rabbit_policy.evaluation.push_recovery import classic_margin
+
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="changes")
+    pushed = 0
+    for seed in range(24):
+        env.reset(seed=seed)
+        scenario = env.loop.scenario
+        assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
+        for push in scenario.phase_pushes:
+            command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
+            direction = 1 if push.impulse > 0 else -1
+            assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
+            pushed += 1
+    assert 6 <= pushed <= 18

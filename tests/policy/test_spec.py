@@ -479,3 +479,22 @@ def test_a_version_1_spec_is_refused_with_its_upgrade_and_upgrades_to_the_same_c
         packaged = load_spec(packaged_spec(kind))
         assert replace(upgraded, provenance={}) == replace(packaged, provenance={}), kind
         assert load_spec(path) == upgraded and path.read_text().startswith("# an old run's spec\n")
+
+
+def test_a_start_calibrated_to_itself_carries_its_own_steady_integrals(tmp_path):
+    """calibrate_spec re-measures a learned spec's feed-forward table on that spec's own
+    controller (the start reproduce.py's ``start: calibrated`` trains from), keeping the
+    speeds, the ``start`` flag and everything else."""
+    from rabbit_policy.evaluation.steady_integral import calibrate_spec, steady_integrals
+
+    path, data = _spec_copy(tmp_path)
+    data["speed_integral"]["feedforward"].update(speeds=[0.8, 1.1, 1.4], values=[0.3, -0.3, 0.3])
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    before = load_spec(path)
+    written = calibrate_spec(path)
+    assert load_spec(path) == written and "re-measured" in written.provenance["feedforward"]
+    table = written.speed_integral.feedforward
+    assert table.speeds == (0.8, 1.1, 1.4) and table.start == before.speed_integral.feedforward.start
+    assert table.values == steady_integrals(load_controller(path), table.speeds).values
+    assert max(abs(v) for v in table.values) < 0.1  # the zero residual's own integral stays near 0
+    assert written.network == before.network and written.recovery_rule == before.recovery_rule

@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.pairs < 2 or args.episodes < 0:
         parser.error("--pairs must be >= 2 and --episodes >= 1")
-    from rabbit_policy.commands.reproduce import load_preset
+    from rabbit_policy.commands.reproduce import load_preset, write_start
 
     try:
         preset = load_preset(args.preset)
@@ -66,18 +66,13 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.learning.es import ESConfig, get_flat
     from rabbit_policy.learning.signal import probe
     from rabbit_policy.runtime.network import spec_network
-    from rabbit_policy.spec import load_controller, packaged_spec
-    from rabbit_policy.spec.convert import restarted_spec
+    from rabbit_policy.spec import load_controller
 
     train = preset["train"]
     names = {f.name for f in fields(ESConfig)} - {"workers", "seed"}
     results = []
     with tempfile.TemporaryDirectory(prefix="rabbit_probe_") as scratch:
-        if preset["start"] == "zero":
-            start = Path(scratch) / "start.yaml"
-            restarted_spec(packaged_spec("learned"), preset["seeds"][0], start)
-        else:
-            start = packaged_spec("learned") if preset["start"] == "packaged" else Path(preset["start"])
+        start = write_start(preset["start"], preset["seeds"][0], Path(scratch) / "start.yaml")
         config = ESConfig(**{k: v for k, v in train.items() if k in names}, spec=str(start))
         key = tuple(sorted(config.env_kwargs().items()))
         theta = get_flat(spec_network(load_controller(start).forward))
@@ -93,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             backend.close()
     report = {"preset": preset["path"], "start": preset["start"], "distribution": config.distribution,
-              "fall_penalty": config.fall_penalty, "max_steps": config.max_steps, "probes": results}
+              "reward": config.reward, "fall_penalty": config.fall_penalty, "max_steps": config.max_steps, "probes": results}
     text = strict_json.dumps(report)
     if args.out is not None:
         args.out.write_text(text + "\n")

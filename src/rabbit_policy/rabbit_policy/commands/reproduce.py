@@ -5,7 +5,9 @@ learned controller, everything under ``DIR`` (never into the package):
    START --seed N`` with the preset's options: ES on the start spec's network in its deployed
    loop (``DIR/seed-N/run``). ``start: zero`` is the packaged learned spec with its network
    restarted from the seed (fresh hidden layers, a zero last layer: its rules on the library
-   alone; ``DIR/seed-N/start.yaml``), ``packaged`` the packaged spec, else a spec file. Each
+   alone; ``DIR/seed-N/start.yaml``), ``calibrated`` the same with its feed-forward table
+   re-measured on itself (:func:`~rabbit_policy.evaluation.steady_integral.calibrate_spec`:
+   the rules at their best before training), ``packaged`` the packaged spec, else a spec file. Each
    run evaluates the acceptance checks every ``eval_every`` generations: its held-out
    learning curve (``DIR/curves.png``, every seed);
 2. **screen**: the start, the packaged learned controller (when it is not the start) and each
@@ -46,7 +48,28 @@ from rabbit_policy.evaluation.statistics import format_rate
 PRESET_KEYS = ("start", "seeds", "train", "screen", "evaluation")
 SCREEN_KEYS = ("candidates", "trials")
 EVALUATIONS = ("quick", "full")
-STARTS = ("zero", "packaged")
+STARTS = ("zero", "calibrated", "packaged")
+
+
+def write_start(start: str, seed: int, path: Path) -> Path:
+    """The start spec of a preset's ``start`` for ``seed``: ``zero`` and ``calibrated``
+    written as ``path`` (once: an existing file is kept, so ``--resume`` trains on the same
+    start), ``packaged`` the packaged learned spec, else the spec file ``start``."""
+    from rabbit_policy.spec import packaged_spec
+
+    if start not in ("zero", "calibrated"):
+        return packaged_spec("learned") if start == "packaged" else Path(start).resolve()
+    if not path.is_file():
+        from rabbit_policy.spec.convert import restarted_spec
+
+        scratch = path.with_name(path.stem + ".partial.yaml")
+        restarted_spec(packaged_spec("learned"), seed, scratch)
+        if start == "calibrated":
+            from rabbit_policy.evaluation.steady_integral import calibrate_spec
+
+            calibrate_spec(scratch)
+        scratch.replace(path)
+    return path
 
 
 def preset_dir() -> Path:
@@ -245,7 +268,6 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.shipping import ScreenTrials, pooled, screen_rank, verdict
     from rabbit_policy.evaluation.statistics import mcnemar_exact
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
-    from rabbit_policy.spec.convert import restarted_spec
     from rabbit_policy.spec.files import library_dir, library_hash
 
     root = preset_dir().parents[1]
@@ -256,12 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     for index, seed in enumerate(preset["seeds"]):
         seed_dir = out / f"seed-{seed}"
         seed_dir.mkdir(parents=True, exist_ok=True)
-        if preset["start"] == "zero":
-            start = seed_dir / "start.yaml"
-            if not start.is_file():
-                restarted_spec(packaged_spec("learned"), seed, start)
-        else:
-            start = packaged_spec("learned") if preset["start"] == "packaged" else Path(preset["start"]).resolve()
+        start = write_start(preset["start"], seed, seed_dir / "start.yaml")
         starts.append(start)
         run = seed_dir / "run"
         train_argv = ["--algo", "es", "--spec", str(start), "--out", str(run), "--no-progress", "--seed", str(seed),

@@ -27,6 +27,7 @@ from typing import Callable, Iterable, Iterator
 
 from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, seeded_analyses
 from rabbit_policy.experiment.loop import walk
+from rabbit_policy.experiment.result import REACH_WITHIN, SETTLE_TOLERANCE
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.scenario import PhasePush, Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
@@ -49,8 +50,8 @@ class Criteria:
     average_over: float = 15.0
     speed_tolerance: float = 0.05
     segment_duration: float = 10.0
-    reach_within: float = 4.0
-    settle_tolerance: float = 0.03
+    reach_within: float = REACH_WITHIN
+    settle_tolerance: float = SETTLE_TOLERANCE
     push_after: float = 3.0
     push_horizon: float = 5.0
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from rabbit_policy.evaluation.statistics import rate
 from rabbit_policy.experiment.loop import walk
-from rabbit_policy.experiment.result import REACH_TOLERANCE
+from rabbit_policy.experiment.result import REACH_TOLERANCE, REACH_WITHIN
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.policies import Policy
 from rabbit_sim.model import ModelOptions
@@ -85,7 +85,7 @@ class RobustnessConfig:
     change_phases: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
     transition_settle: float = 6.0
     transition_horizon: float = 6.0
-    reach_within: float = 4.0
+    reach_within: float = REACH_WITHIN
     random_episodes: int = 100
     random_duration: float = 60.0
     random_interval: tuple[float, float] = (2.0, 5.0)

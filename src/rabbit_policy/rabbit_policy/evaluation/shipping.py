@@ -29,6 +29,7 @@ from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.evaluation.robustness import (MapFn, RobustnessConfig, phase_times, push_survived,
                                                  transition_outcome)
 from rabbit_policy.evaluation.statistics import mcnemar_exact, rate
+from rabbit_policy.experiment.result import REACH_WITHIN
 from rabbit_policy.runtime.gait_command import Policy
 
 DIRECTIONS = {"forward": 1, "backward": -1}
@@ -56,7 +57,7 @@ class ScreenTrials:
     change_phases: tuple[float, ...] = (0.125, 0.625)
     change_settle: float = 6.0
     change_horizon: float = 6.0
-    reach_within: float = 4.0
+    reach_within: float = REACH_WITHIN
 
     def __post_init__(self) -> None:
         if (not self.speeds or self.phases < 1 or self.horizon <= 0 or self.push_duration <= 0

@@ -11,6 +11,7 @@ hip between 0.64 and 0.89 m/s: docs/learning.md, 2026-11-27 (seventh)).
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 
@@ -18,6 +19,7 @@ from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.speed_integral import IntegralFeedforward
+from rabbit_policy.spec import ControllerSpec, dump_spec, load_controller, load_spec
 
 
 class _IntegralRecorder:
@@ -85,3 +87,23 @@ def network_alone(policy: NetworkPolicy) -> NetworkPolicy:
     return build(replace(spec, speed_integral=integral), policy.spec_base,
                  weights=(list(forward.weights), list(forward.biases)),
                  source=policy.name.removeprefix("learned/").split("@")[0] + " (network alone)")  # named once
+
+
+def calibrate_spec(path: str | Path) -> ControllerSpec:
+    """Re-measure the feed-forward table of the learned spec file ``path`` on that spec's own
+    controller (:func:`steady_integrals` at the table's speeds, the table's ``start`` kept) and
+    write the spec back with it: a start calibrated to itself, so the rules alone are at
+    their best before training. Returns the spec written. ``ValueError`` if the spec has no
+    feed-forward table."""
+    path = Path(path)
+    spec = load_spec(path)
+    table = spec.speed_integral.feedforward if spec.speed_integral is not None else None
+    if table is None:
+        raise ValueError(f"{path}: no speed_integral.feedforward table to calibrate")
+    measured = steady_integrals(load_controller(path), tuple(table.speeds))
+    calibrated = replace(spec, speed_integral=replace(spec.speed_integral, feedforward=replace(
+        table, values=tuple(measured.values))), provenance={**spec.provenance, "feedforward": (
+            "re-measured on this spec's own controller (rabbit_policy.evaluation.steady_integral.calibrate_spec)")})
+    dump_spec(calibrated, path, f"{spec.name}, its feed-forward re-measured on itself "
+                                "(rabbit_policy.evaluation.steady_integral.calibrate_spec)")
+    return calibrated

@@ -31,6 +31,10 @@ from rabbit_policy.experiment.scenario import Scenario, first_tick_at, whole_tic
 
 REACH_TOLERANCE = 0.05
 """m/s: a speed is "reached" when a whole step's mean is this close to the command."""
+REACH_WITHIN = 4.0
+"""s: a commanded change passes the evaluation's reach rule when reached this soon after it."""
+SETTLE_TOLERANCE = 0.03
+"""m/s: a segment is "settled" when its mean speed (second half) is this close to its command."""
 
 
 @dataclass(frozen=True)
@@ -193,6 +197,26 @@ class WalkResult:
             return True
         whole = any(a >= last["start"] - 1e-9 and b <= last["end"] + 1e-9 for a, b, _ in self.step_speeds())
         return False if whole else None
+
+    def tracking_scores(self, reach_within: float = REACH_WITHIN,
+                        settle_tolerance: float = SETTLE_TOLERANCE) -> tuple[float, float]:
+        """(reach, settle): the evaluation's two tracking rules as graded scores, summed over
+        the walk's segments, every segment weighted alike whatever the size of its change.
+        reach, per commanded change (each segment after the first): ``1 - t / reach_within``
+        for a change reached (:meth:`reach_time`) after t <= ``reach_within`` s, else 0.
+        settle, per segment: ``1 / (1 + (e / settle_tolerance)^2)`` with e (m/s) its mean
+        speed's error (:meth:`segments`): 0.5 at the tolerance, near 0 far from it, 0 when
+        the walk ended before the segment did. Both 0 for a walk that fell or stalled."""
+        if self.failed:
+            return 0.0, 0.0
+        reach = settle = 0.0
+        for k, segment in enumerate(self.segments()):
+            t = segment["reach_time"]
+            if k and t is not None and t <= reach_within:
+                reach += 1.0 - t / reach_within
+            if segment["mean_speed"] is not None:
+                settle += 1.0 / (1.0 + ((segment["mean_speed"] - segment["command"]) / settle_tolerance) ** 2)
+        return reach, settle
 
     def summary(self, tolerance: float = REACH_TOLERANCE) -> dict:
         """JSON-ready, always the same keys (no NaN: None instead)."""

@@ -57,7 +57,9 @@ v_d + gain x the memory's integral (index 3, then bounded so that the offset sta
 
 | term (``info`` key) | value |
 |---------------------|-------|
-| ``reward_tracking`` | ``-(mean hip speed - v_d)^2`` per env step (the paper; the true speed, without noise) |
+| ``reward_tracking`` | ``reward="tracking"`` (the default): ``-(mean hip speed - v_d)^2`` per env step (the paper; the true speed, without noise) |
+| ``reward_reach`` | ``reward="evaluation"``: 0 until the episode is truncated, then each commanded change's graded reach, ``1 - t / 4 s`` when reached after t <= 4 s (the evaluation's reach rule), else 0 |
+| ``reward_settle`` | ``reward="evaluation"``: 0 until the episode is truncated, then each segment's ``1 / (1 + (e / 0.03)^2)`` for its mean speed's error e (m/s): every change weighted alike; a fall pays neither, so it returns ``fall_penalty`` alone, below any walk |
 | ``reward_fall`` | ``fall_penalty`` once, when the episode ends by a fall or stall (0 otherwise): with only negative rewards an early end would otherwise pay |
 | ``reward_alive`` | ``alive_bonus`` per env step that did not end the episode (0 by default): a survival term, so that a fall forfeits the rest of the episode's bonus and a survived push pays more than its tracking costs |
 | ``reward_slow`` | ``slow_penalty`` x (:data:`SLOW_HIP_SPEED` - hip velocity) per env step whose hip velocity (m/s, world x, at its end) is below that speed, 0 otherwise (0 by default): a margin that grows as a pushed robot nears a stall, smooth in the policy's parameters where the fall penalty is all or nothing (docs/learning.md, 2026-11-27 (third)) |
@@ -254,8 +256,50 @@ DISTRIBUTIONS = {
                                     frictions=(None, None, 0.6), torso_mass_scales=(0.9, 1.0, 1.0, 1.1),
                                     variants=("paper", "paper", "drives"), torque_delays=(0.0, 0.0, 0.001, 0.002),
                                     observation_noise=0.02),
+    # the evaluation's trials as a training signal (reward evaluation): commands every 2-5 s, half
+    # the episodes pushed at a phase of a step (common random numbers in phase), 0.5-1.5x
+    # classic's margin either way, the nominal model with delays up to 2 ms (no friction or
+    # drives episodes that no policy can pass: they held most of moderate's spread, the
+    # learning issue's measurement)
+    "changes": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, push_timing="phase",
+                                   relative_impulse=True, min_impulse=0.5, max_impulse=1.5,
+                                   torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
+
+
+REWARDS = ("tracking", "evaluation")
+"""``reward``: ``tracking`` (the paper's per-step squared speed error) or ``evaluation`` (what
+the evaluation counts, paid when the episode ends: :func:`reward_terms`)."""
+
+
+def reward_terms(reward: str, loop: ClosedLoop, mean_speed: float, desired_speed: float, terminated: bool,
+                 truncated: bool, fall_penalty: float, alive_bonus: float, slow_penalty: float) -> dict[str, float]:
+    """One env step's reward terms (their sum is the reward; ``info`` holds each). Both
+    rewards: ``reward_fall`` (``fall_penalty`` when the step ends the episode by a fall or
+    stall), ``reward_alive`` and ``reward_slow`` (see the module docstring). ``tracking`` adds
+    ``reward_tracking``, -(``mean_speed`` - ``desired_speed``)^2 (m/s) every step.
+    ``evaluation`` adds ``reward_reach`` and ``reward_settle``, 0 until the episode is
+    truncated, then the walk's graded reach and settle scores
+    (:meth:`~rabbit_policy.experiment.result.WalkResult.tracking_scores`: every change weighted
+    alike): with ``alive_bonus`` and ``slow_penalty`` at 0 a walk returns >= 0 and a fall
+    exactly ``fall_penalty`` (< 0), below any walk."""
+    terms = {"reward_fall": fall_penalty if terminated else 0.0,
+             "reward_alive": 0.0 if terminated else alive_bonus,
+             "reward_slow": slow_penalty * max(0.0, SLOW_HIP_SPEED - float(loop.data.qvel[0]))}
+    if reward == "tracking":
+        return {"reward_tracking": -((mean_speed - desired_speed) ** 2), **terms}
+    reach, settle = loop.result().tracking_scores() if truncated and not terminated else (0.0, 0.0)
+    return {"reward_reach": reach, "reward_settle": settle, **terms}
+
+
+def check_reward(reward: str, fall_penalty: float) -> None:
+    """Raise ``ValueError`` unless ``reward`` is one of :data:`REWARDS` (``evaluation`` with a
+    ``fall_penalty`` < 0, so that a fall returns less than any walk)."""
+    if reward not in REWARDS:
+        raise ValueError(f"reward must be one of {REWARDS}, got {reward!r}")
+    if reward == "evaluation" and not fall_penalty < 0.0:
+        raise ValueError(f"reward evaluation needs fall_penalty < 0 (a fall below any walk), got {fall_penalty}")
 
 
 def check_integral_gain(gain: float, action: str) -> None:
@@ -279,9 +323,15 @@ class EpisodeConfig:
                                         "to 2 ms, noisy speeds), robust (pushes up to 20 N s, delays up to 4 ms, "
                                         "noisy speeds), pushes (a 6-20 N s push either way in every episode) or "
                                         "recovery (a push at a phase of a step in every episode, 0.8-2.2x classic's "
-                                        "margin); DISTRIBUTIONS",
+                                        "margin) or changes (commands every 2-5 s, half the episodes pushed at a "
+                                        "phase, 0.5-1.5x classic's margin, the nominal model); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
+    reward: str = option("tracking", "tracking (the paper's: -(mean speed - v_d)^2 every env step) or evaluation "
+                                     "(what the evaluation counts, at the episode's end: each change's graded reach "
+                                     "within 4 s and each segment's settling within 0.03 m/s; a fall returns "
+                                     "fall_penalty, below any walk); learning/env.py's reward_terms",
+                         choices=REWARDS)
     alive_bonus: float = option(0.0, "reward per env step survived, >= 0 (a survival term: a fall forfeits the "
                                      "rest of the episode's)")
     slow_penalty: float = option(0.0, "reward per env step per m/s the hip velocity is below SLOW_HIP_SPEED "
@@ -334,6 +384,7 @@ class EpisodeConfig:
             raise ValueError(f"distribution must be one of {sorted(DISTRIBUTIONS)}, got {self.distribution!r}")
         if not self.fall_penalty <= 0.0:
             raise ValueError(f"fall_penalty must be <= 0, got {self.fall_penalty}")
+        check_reward(self.reward, self.fall_penalty)
         if not (np.isfinite(self.alive_bonus) and self.alive_bonus >= 0.0):
             raise ValueError(f"alive_bonus must be finite and >= 0, got {self.alive_bonus}")
         check_slow_penalty(self.slow_penalty)
@@ -364,10 +415,10 @@ class EpisodeConfig:
         :class:`RabbitHZDEnv`'s."""
         if self.spec:
             return {"spec": self.spec, "max_steps": self.max_steps, "distribution": self.distribution,
-                    "fall_penalty": self.fall_penalty, "alive_bonus": self.alive_bonus,
+                    "fall_penalty": self.fall_penalty, "reward": self.reward, "alive_bonus": self.alive_bonus,
                     "slow_penalty": self.slow_penalty, "rules": StopRules(roll_back_after=self.roll_back_after)}
         return {"max_steps": self.max_steps, "decision_period": self.decision_period,
-                "distribution": self.distribution, "fall_penalty": self.fall_penalty,
+                "distribution": self.distribution, "fall_penalty": self.fall_penalty, "reward": self.reward,
                 "alive_bonus": self.alive_bonus, "slow_penalty": self.slow_penalty, "features": self.features,
                 "action": self.action,
                 "residual_base": self.residual_base, "integral_gain": self.integral_gain,
@@ -440,7 +491,7 @@ class RabbitHZDEnv(gym.Env):
 
     def __init__(self, model: ModelOptions | str = "paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = DEFAULT_MAX_STEPS, window: int = 1000, fall_penalty: float = -10.0,
-                 alive_bonus: float = 0.0, slow_penalty: float = 0.0,
+                 alive_bonus: float = 0.0, slow_penalty: float = 0.0, reward: str = "tracking",
                  rules: StopRules = StopRules(), margin: float = 0.15, decision_period: int = 0,
                  distribution: EpisodeDistribution | str = "paper", render_mode: str | None = None,
                  features: str = "paper", action: str = "direct", integral_gain: float = 0.0,
@@ -491,6 +542,8 @@ class RabbitHZDEnv(gym.Env):
         self.max_steps = max_steps
         self.window_size = window
         self.fall_penalty = fall_penalty
+        check_reward(reward, fall_penalty)
+        self.reward = reward
         if not (np.isfinite(alive_bonus) and alive_bonus >= 0.0):
             raise ValueError(f"alive_bonus must be finite and >= 0, got {alive_bonus}")
         self.alive_bonus = alive_bonus
@@ -651,12 +704,10 @@ class RabbitHZDEnv(gym.Env):
         obs = self._observation(clean)
         mean_speed = float(clean.mean_speed)  # noise-free
         terminated = fell or stalled
-        terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
-                 "reward_fall": self.fall_penalty if terminated else 0.0,
-                 "reward_alive": 0.0 if terminated else self.alive_bonus,
-                 "reward_slow": self.slow_penalty * max(0.0, SLOW_HIP_SPEED - float(self._loop.data.qvel[0]))}
-        reward = terms["reward_tracking"] + terms["reward_fall"] + terms["reward_alive"] + terms["reward_slow"]
         truncated = not terminated and self._steps >= self.max_steps
+        terms = reward_terms(self.reward, self._loop, mean_speed, self.desired_speed, terminated, truncated,
+                             self.fall_penalty, self.alive_bonus, self.slow_penalty)
+        reward = sum(terms.values())
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell,
                 "stalled": stalled, "rejected": rejected, "time": self._loop.time,
                 "privileged": self.privileged_state(), **terms}

@@ -36,7 +36,7 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
-from rabbit_policy.learning.env import SLOW_HIP_SPEED, RabbitHZDEnv
+from rabbit_policy.learning.env import RabbitHZDEnv, reward_terms
 from rabbit_policy.runtime.actions import ActionBounds, clip
 from rabbit_policy.runtime.gait_command import reset_policy
 from rabbit_policy.runtime.speed_window import Observation
@@ -57,8 +57,8 @@ class SpecEnv(RabbitHZDEnv):
 
     def __init__(self, spec: str | Path | None = None, model="paper", speed_range: tuple[float, float] = (0.7, 1.5),
                  max_steps: int = DEFAULT_STEPS, fall_penalty: float = -50.0, alive_bonus: float = 0.0,
-                 slow_penalty: float = 0.0, rules: StopRules = StopRules(), distribution="paper",
-                 render_mode: str | None = None) -> None:
+                 slow_penalty: float = 0.0, reward: str = "tracking", rules: StopRules = StopRules(),
+                 distribution="paper", render_mode: str | None = None) -> None:
         self.spec_file = Path(spec) if spec else packaged_spec("learned")
         self.policy = load_controller(self.spec_file)
         controller_spec = self.policy.spec
@@ -66,7 +66,7 @@ class SpecEnv(RabbitHZDEnv):
             raise ValueError(f"{self.spec_file}: the env learns a learned spec that decides every N ticks")
         super().__init__(model=model, speed_range=speed_range, max_steps=max_steps,
                          window=controller_spec.decision.window_ticks, fall_penalty=fall_penalty,
-                         alive_bonus=alive_bonus, slow_penalty=slow_penalty, rules=rules,
+                         alive_bonus=alive_bonus, slow_penalty=slow_penalty, reward=reward, rules=rules,
                          decision_period=controller_spec.decision.period_ticks, distribution=distribution,
                          render_mode=render_mode)
         self.memory = None  # the policy's own memory is the one that runs
@@ -145,12 +145,10 @@ class SpecEnv(RabbitHZDEnv):
         obs = self._input(clean) if loop.pending is not None else np.zeros(self.observation_space.shape,
                                                                             dtype=np.float32)
         mean_speed = float(clean.mean_speed)
-        terms = {"reward_tracking": -((mean_speed - self.desired_speed) ** 2),
-                 "reward_fall": self.fall_penalty if terminated else 0.0,
-                 "reward_alive": 0.0 if terminated else self.alive_bonus,
-                 "reward_slow": self.slow_penalty * max(0.0, SLOW_HIP_SPEED - float(loop.data.qvel[0]))}
-        reward = sum(terms.values())
         truncated = not terminated and self._steps >= self.max_steps
+        terms = reward_terms(self.reward, loop, mean_speed, self.desired_speed, terminated, truncated,
+                             self.fall_penalty, self.alive_bonus, self.slow_penalty)
+        reward = sum(terms.values())
         info = {"desired_speed": self.desired_speed, "mean_speed": mean_speed, "fell": fell, "stalled": stalled,
                 "rejected": rejected, "time": loop.time, "privileged": self.privileged_state(), **terms}
         if self.render_mode == "human":
