@@ -328,3 +328,20 @@ def test_the_gymnasium_quickstart_runs_as_written():
     run = subprocess.run([sys.executable, "-c", block], capture_output=True, text=True, timeout=300, cwd=ROOT)
     assert run.returncode == 0, run.stderr[-2000:]
     assert re.fullmatch(r"\d+ steps, return -?\d+\.\d\d, walked at \d\.\d\d m/s for \d\.\d\d\n", run.stdout), run.stdout
+
+
+@pytest.mark.unit
+def test_the_docs_count_the_gaits_the_library_ships():
+    """Every "N periodic gaits" in the docs is the packaged library's count."""
+    gaits = len(list((ROOT / "src/rabbit_policy/rabbit_policy/gaits").glob("gait_*.json")))
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        for count in re.findall(r"(\d+) periodic gaits", doc.read_text()):
+            assert int(count) == gaits, (doc.name, count, gaits)
+
+
+@pytest.mark.unit
+def test_every_image_under_docs_is_shown_where_it_is_explained():
+    """No orphan figure: every image under docs/ is linked from a Markdown page."""
+    pages = " ".join(p.read_text() for p in [ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
+    images = [p for p in (ROOT / "docs").rglob("*") if p.suffix in (".png", ".gif", ".jpg", ".svg")]
+    assert images and [p.relative_to(ROOT) for p in images if p.name not in pages] == []
