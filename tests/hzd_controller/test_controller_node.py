@@ -49,3 +49,24 @@ def test_a_state_before_the_first_gait_is_a_start_not_a_warning(capfd, monkeypat
         assert spin_until(executor, lambda: controller.states_received >= 2)
         spin_for(executor, 0.1)
         assert "no gait yet (waiting for /hzd/alpha and /hzd/kd" in capfd.readouterr().err
+
+
+def test_a_simulator_that_stops_sending_is_named_by_the_controller_within_two_seconds(capfd):
+    """The states stop (a hand-started sim_node killed with -9 sends nothing again): the
+    controller's warning names the simulator (after SIM_SILENT_WALL s of wall time: the unit
+    test times it on a fake clock) and counts the silence in its statistics."""
+    import rclpy
+
+    with ros_context() as (context, executor):
+        controller = HZDControllerNode(context=context)
+        sender = rclpy.create_node("state_sender", context=context)
+        for node in (controller, sender):
+            executor.add_node(node)
+        pub = sender.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        for tick in range(3):
+            pub.publish(_state(tick * 1_000_000))
+        assert spin_until(executor, lambda: controller.states_received >= 3)
+        assert spin_until(executor, lambda: controller.statistics()["simulator_silences"] == 1)
+        spin_for(executor, 0.1)
+    err = capfd.readouterr().err
+    assert "the simulator is silent: no state on the joint states for 1 s" in err and "sim_node stopped" in err

@@ -70,12 +70,13 @@ def test_a_decision_that_never_comes_is_given_up_and_gaits_then_apply_on_arrival
     sync.on_gait_timing("at_once", 20)
     for tick in range(0, 21):
         sync.on_state(tick * MS, q, dq)
-    clock.now += 1.0
-    assert sync.check_held() == []
-    clock.now += 1.5
+    for _ in range(4):  # the lockstep simulator sends the held state again while it waits (resend_timeout)
+        clock.now += 0.5
+        assert sync.on_state(20 * MS, q, dq) == [] and sync.check_held() == []
+    clock.now += 0.5
     warning, answer = sync.check_held()
     assert warning.level == "warning" and "no decision from the policy within 2 s" in warning.text
-    assert answer.stamp == 20 * MS and sync.decisions_timed_out == 1
+    assert answer.stamp == 20 * MS and sync.decisions_timed_out == 1 and sync.simulator_silences == 0
     assert sync.on_state(40 * MS, q, dq)[0].stamp == 40 * MS  # not held while paused
     sync.on_gait_part("alpha", fast)
     sync.on_gait_part("kd", 60.0)  # the policy is back: sync resumes
@@ -210,8 +211,9 @@ def test_following_the_simulator_no_state_is_answered_before_it_says_how_it_step
     silent.on_gait_part("alpha", slow)
     silent.on_gait_part("kd", 50.0)
     assert silent.on_state(0, q, dq) == [] and silent.check_held() == []
-    clock.now += SIM_MODE_WAIT + 0.1
-    actions = silent.check_held()
+    for _ in range(int(SIM_MODE_WAIT / 0.5) + 1):  # the simulator sends its state again while it waits
+        clock.now += 0.5
+        actions = silent.on_state(0, q, dq) + silent.check_held()
     assert [type(a) for a in actions] == [Log, Answer] and "did not say how it steps" in actions[0].text
 
 
@@ -235,3 +237,26 @@ def test_a_policy_back_after_a_reset_is_logged_without_a_negative_duration(gaits
     (back,) = [a for a in sync.on_gait_part("alpha", fast) if isinstance(a, Log)]
     assert "the policy is back" in back.text and "-" not in back.text.split("without")[0].split("after")[-1]
     assert "placed again" in back.text
+
+
+def test_a_silent_simulator_is_named_within_a_second_and_no_decision_is_waited_for_meanwhile(gaits):
+    """A simulator killed while a state waits for its decision: it sends nothing again (a live
+    one sends the held state every resend_timeout), so the controller names the simulator,
+    not the policy, and counts no lost decision; a state again ends the silence."""
+    slow, _fast, (q, dq) = gaits
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    for tick in range(0, 21):
+        sync.on_state(tick * MS, q, dq)
+    clock.now += 0.9
+    assert sync.check_held() == []
+    clock.now += 0.2
+    (warning,) = sync.check_held()
+    assert warning.level == "warning" and "the simulator is silent" in warning.text and "t = 0.020 s" in warning.text
+    clock.now += 5.0
+    assert sync.check_held() == [] and sync.decisions_timed_out == 0 and sync.simulator_silences == 1
+    back = sync.on_state(20 * MS, q, dq)  # the held state again: it is back, still waiting for its decision
+    assert [a.text for a in back if hasattr(a, "text")][0].startswith("the simulator is back")

@@ -86,6 +86,12 @@ Action = Union[Answer, Repeat, Log]
 State = tuple[int, list[float], list[float]]  # stamp (ns), q (7: m, rad), dq (7: m/s, rad/s)
 
 
+SIM_SILENT_WALL = 1.0
+"""wall s without any state (a new one or one sent again) after which the simulator counts as
+silent: a live simulator sends the state whose reply it waits for again every
+``resend_timeout`` (0.2 s by default) in lockstep and paced mode, and a new one every tick in
+realtime, so only a simulator that stopped, died or was paused goes this long without one."""
+
 SIM_MODE_WAIT = 2.0
 """wall s: a controller following the simulator's ``/sim/mode`` answers no state before it
 comes, for at most this long after the first state (a simulator that never says)."""
@@ -135,6 +141,10 @@ class GaitSync:
         self.decisions_waited = 0  # due states answered with their decision
         self.decisions_timed_out = 0
         self.silences = 0  # times the policy was found silent (logged)
+        self._state_wall: float | None = None  # wall s (clock) of the last state (sent again or not)
+        self._state_stamp = 0  # ns: that state's stamp
+        self._sim_silent_since: float | None = None  # the simulator is silent (logged): since this wall s
+        self.simulator_silences = 0  # times the simulator was found silent (logged)
         self._out: list[Action] = []
 
     @property
@@ -244,6 +254,12 @@ class GaitSync:
     def on_state(self, stamp: int, q: list[float], dq: list[float]) -> list[Action]:
         """A state (stamp ns; q, dq: the 7 joints)."""
         self._out = []
+        now = self.clock()
+        if self._sim_silent_since is not None:
+            self._log("info", f"the simulator is back: a state at t = {stamp / 1e9:.3f} s after "
+                              f"{now - self._sim_silent_since:.1f} s of wall time without one")
+            self._sim_silent_since = None
+        self._state_wall, self._state_stamp = now, stamp
         self._check_policy(stamp)
         self._state(stamp, q, dq)
         return self._out
@@ -262,9 +278,20 @@ class GaitSync:
                                  f"{', '.join(f'{a:.3f}' for a in (self.alpha or [])[:4])}, ...)")
 
     def check_held(self) -> list[Action]:
-        """Timer: a due decision that did not come within ``decision_timeout`` s; a simulator
-        that did not say how it steps within :data:`SIM_MODE_WAIT` s of its first state."""
+        """Timer: a simulator that sent no state for :data:`SIM_SILENT_WALL` s (named, once per
+        silence; while it lasts no decision is waited for, as none is waited on); a due
+        decision that did not come within ``decision_timeout`` s; a simulator that did not say
+        how it steps within :data:`SIM_MODE_WAIT` s of its first state."""
         self._out = []
+        if (self._state_wall is not None and self._sim_silent_since is None
+                and self.clock() - self._state_wall > SIM_SILENT_WALL):
+            self._sim_silent_since = self._state_wall
+            self.simulator_silences += 1
+            self._log("warning", f"the simulator is silent: no state on the joint states for {SIM_SILENT_WALL:g} s "
+                                 f"of wall time (the last at t = {self._state_stamp / 1e9:.3f} s): sim_node "
+                                 "stopped, died or was paused")
+        if self._sim_silent_since is not None:
+            return self._out
         if not self._mode_known and self._mode_wait is not None and self.clock() - self._mode_wait > SIM_MODE_WAIT:
             self._mode_known = True
             self._log("warning", f"the simulator did not say how it steps (/sim/mode) within {SIM_MODE_WAIT:g} s: "

@@ -216,7 +216,8 @@ class HZDControllerNode(Node):
         """The controller's counts (run_stack reports ``rejected`` from them)."""
         return {"rejected_gaits": self.rejected_gaits, "refused_gaits": self.refused_gaits,
                 "torques_published": self.torques_published, "decisions_waited": self.sync.decisions_waited,
-                "decisions_timed_out": self.sync.decisions_timed_out, "policy_silences": self.sync.silences}
+                "decisions_timed_out": self.sync.decisions_timed_out, "policy_silences": self.sync.silences,
+                "simulator_silences": self.sync.simulator_silences}
 
     def close(self) -> None:
         """Write the statistics file (``stats_file``); called before the node is destroyed."""
