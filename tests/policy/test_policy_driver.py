@@ -152,3 +152,24 @@ def test_the_schedule_applies_at_once_whatever_the_command_rate():
     for tick in range(1, 202):
         core.on_hip_velocity(tick * MS, 1.0)
     assert core.desired_speed == 1.4
+
+
+def test_a_simulation_that_stops_is_named_once_after_a_second_of_wall_time_and_its_return_is_said():
+    """The policy's view of a killed simulator (or a lockstep simulation no controller answers):
+    its samples stop. The driver's timer names it once SIM_SILENT_WALL wall s have passed, not
+    before any sample, and says when the samples come again."""
+    from rabbit_policy.policy_driver import SIM_SILENT_WALL
+
+    core = driver()
+    core.start()
+    assert core.check_simulation(0.0) == [] and core.check_simulation(100.0) == []  # no sample yet: not started
+    for tick in range(1, 31):
+        core.on_hip_velocity(tick * MS, 1.0)
+    assert core.check_simulation(100.0) == []
+    assert core.check_simulation(100.0 + SIM_SILENT_WALL) == []
+    (warning,) = core.check_simulation(100.0 + SIM_SILENT_WALL + 0.01)
+    assert warning.level == "warning" and "the simulation is silent" in warning.text and "t = 0.030 s" in warning.text
+    assert core.check_simulation(200.0) == [] and core.simulation_silences == 1  # said once
+    core.on_hip_velocity(31 * MS, 1.0)
+    (back,) = core.check_simulation(200.5)
+    assert back.level == "info" and "back" in back.text

@@ -99,6 +99,12 @@ def decision_window(policy: Policy, settings: PolicySettings) -> int:
     return settings.decision_window or int(getattr(policy, "decision_window", DEFAULT_DECISION_WINDOW))
 
 
+SIM_SILENT_WALL = 1.0
+"""wall s without a sample of the simulation (a hip velocity) after which the policy says so:
+the simulator stopped, died or was paused, or no controller answers it (lockstep holds the
+simulation for its controller's reply)."""
+
+
 class PolicyDriver:
     """``policy`` deciding on the events of a walk; see the module docstring. ``ValueError``
     (one line) for settings it cannot run with."""
@@ -138,6 +144,10 @@ class PolicyDriver:
             raise ValueError(f"command_rate must be a finite number >= 0 m/s per s, got {settings.command_rate}")
         self.command_rate = settings.command_rate
         self._ramp_stamp: int | None = None  # ns: the newest sample the ramp has followed to
+        self.samples = 0  # hip velocities taken
+        self._watched: tuple[int, float] | None = None  # (samples, wall s) when the count last moved
+        self._silent = False
+        self.simulation_silences = 0  # times the simulation was found silent (logged)
 
     # ----------------------------------------------------------------- events
     def start(self) -> list[Action]:
@@ -181,6 +191,7 @@ class PolicyDriver:
     def on_hip_velocity(self, stamp: int, speed: float) -> list[Action]:
         """A state's hip velocity (m/s, world x) stamped ``stamp`` ns: a scheduled change due
         then, the sample, and the decisions that fall due."""
+        self.samples += 1
         actions = self._follow_schedule(stamp)
         self._follow_ramp(stamp)
         due = self.clock.sample(stamp, speed, self.desired_speed)  # ValueError: a stamp it cannot take
@@ -206,6 +217,30 @@ class PolicyDriver:
         The schedule is followed only at samples: a touchdown may come before the states up
         to it (a batch), and those states keep the command they had in the loop."""
         return [self._decide(o) for o in self.clock.switch(stamp, self.desired_speed)]
+
+    def check_simulation(self, now: float) -> list[Action]:
+        """Timer (``now``: wall s, monotonic; call a few times a second): one warning when no
+        sample has come for :data:`SIM_SILENT_WALL` s since the first, one line when they come
+        again."""
+        if self.samples == 0:
+            return []
+        if self._watched is None or self._watched[0] != self.samples:
+            back = self._silent
+            self._watched, self._silent = (self.samples, now), False
+            return [Log("info", "the simulation is back: its samples come again")] if back else []
+        if self._silent or now - self._watched[1] <= SIM_SILENT_WALL:
+            return []
+        self._silent = True
+        self.simulation_silences += 1
+        last = self.last_sample_stamp
+        return [Log("warning", f"the simulation is silent: no state for {SIM_SILENT_WALL:g} s of wall time"
+                               + (f" (the last at t = {last / 1e9:.3f} s)" if last is not None else "")
+                               + ": the simulator stopped, died or was paused, or no controller answers it")]
+
+    @property
+    def last_sample_stamp(self) -> int | None:
+        """ns: the stamp of the newest sample taken (None before any)."""
+        return self.clock.newest
 
     def flush(self) -> list[Action]:
         """The tails of throttled rejection bursts (call about once a second)."""

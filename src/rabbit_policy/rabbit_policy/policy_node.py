@@ -55,6 +55,7 @@ NaN/inf commands are rejected with an error; the last good command stays in forc
 from __future__ import annotations
 
 import sys
+import time
 
 from geometry_msgs.msg import Twist, TwistStamped
 from rcl_interfaces.msg import SetParametersResult
@@ -183,6 +184,7 @@ class PolicyNode(Node):
         self._settings = controller_settings(policy)  # announced on /hzd/gait_timing: the controller takes them
         self.add_on_set_parameters_callback(self._on_set_parameters)
         wall_timer(self, 1.0, lambda: self._do(self.core.flush()))  # a burst's tail is said within a second
+        wall_timer(self, 0.25, lambda: self._do(self.core.check_simulation(time.monotonic())))  # a lost simulator
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
         self._warned_planar = False
         self.source = controller_id(self.get_name())  # this instance, in its gaits' signatures
@@ -201,6 +203,7 @@ class PolicyNode(Node):
     decisions = property(lambda self: self.core.decisions)
     rejected_commands = property(lambda self: self.core.rejected_commands)
     decisions_given_up = property(lambda self: self.core.decisions_given_up)
+    simulation_silences = property(lambda self: self.core.simulation_silences)
     last_observation = property(lambda self: self.core.last_observation)
     clock = property(lambda self: self.core.clock)
     body = property(lambda self: self.core.body)
