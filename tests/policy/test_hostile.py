@@ -131,3 +131,34 @@ def test_a_strangers_reset_mid_run_is_reported_and_the_run_is_not_complete():
     assert made[0].called
     summary = report.summary()
     assert summary["completed"] is False and "was reset 1 time during the run" in summary["error"]
+
+
+@pytest.mark.ros
+def test_a_keyed_controller_takes_only_its_simulators_signed_mode_and_never_a_second_one(capfd):
+    """/sim/mode steers decision_sync. A bare "realtime" (a stranger's) is refused; the mode
+    the simulator signs with the key is taken; a later signed "realtime" is refused too, as
+    a simulator's mode never changes while it runs: decision_sync stays on."""
+    from rabbit_msgs_py.conversions import controller_id
+
+    signer = GaitSigner()
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)  # decision_sync not given: it follows /sim/mode
+        user = rclpy.create_node("mode_sender", context=context)
+        for node in (controller, user):
+            executor.add_node(node)
+        mode_pub = user.create_publisher(String, topics.SIM_MODE, qos.STATUS_QOS)
+        mode_pub.publish(String(data="realtime"))
+        spin_for(executor, 0.3)
+        assert controller._sim_mode is None
+        simulator = controller_id("sim_node")
+        mode_pub.publish(String(data=signer.key.sign_settings(simulator, "lockstep")))
+        assert spin_until(executor, lambda: controller._sim_mode == "lockstep")
+        assert controller.sync.decision_sync
+        mode_pub.publish(String(data=signer.key.sign_settings(simulator, "realtime")))
+        spin_for(executor, 0.3)
+        assert controller._sim_mode == "lockstep" and controller.sync.decision_sync
+    err = capfd.readouterr().err
+    assert "rejected /sim/mode 'realtime': the simulator's mode is not signed" in err
+    assert "its mode does not change while it runs" in err

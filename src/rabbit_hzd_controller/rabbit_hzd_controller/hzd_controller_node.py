@@ -165,6 +165,7 @@ class HZDControllerNode(Node):
         self._policy_wall = 0.0  # wall s (monotonic) of its last gait: another is taken once it is silent
         self.rejected_states = 0
         self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
+        self._sim_mode: str | None = None  # the simulator's mode taken from /sim/mode (kept: it never changes)
         wall_timer(self, 1.0, self._flush_rejections)  # a burst's tail is said within a second
         self._decision_period = 0  # ticks between the policy's decisions (/hzd/gait_timing; 0: per step, unknown)
         self.source = controller_id(self.get_name())  # this instance, in every reply's frame_id
@@ -338,7 +339,7 @@ class HZDControllerNode(Node):
         try:
             timing, period = parse_gait_timing(msg.data)
             settings = timing_settings(msg.data)
-            source = self.pairing.verify_settings(msg.data) if self.pairing is not None else None
+            source = self.pairing.verify_settings(msg.data)[0] if self.pairing is not None else None
         except ValueError as exc:
             line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
                                                         f"{short(repr(msg.data), 80)}: {exc}; keeping "
@@ -394,10 +395,31 @@ class HZDControllerNode(Node):
 
     def _on_sim_mode(self, msg: String) -> None:
         """The simulator's stepping (``/sim/mode``): lockstep and paced wait for each reply, so
-        the reply to a state the policy decides on waits for that decision (``decision_sync``)."""
-        holds = msg.data in ("lockstep", "paced")
+        the reply to a state the policy decides on waits for that decision (``decision_sync``).
+        With a pairing key only a mode signed with it counts; the first mode taken is kept (a
+        simulator's mode never changes while it runs): any other is refused, one line a second."""
+        mode, kind = msg.data, "sim_mode signature"  # each kind of refusal logged at most once a second
+        try:
+            if self.pairing is not None:
+                mode = self.pairing.verify_settings(mode, "the simulator's mode", "simulator")[1]
+            kind = "sim_mode value"
+            if mode not in topics.SIM_MODES:
+                raise ValueError(f"not one of {', '.join(topics.SIM_MODES)}")
+            kind = "sim_mode change"
+            if self._sim_mode is not None and mode != self._sim_mode:
+                raise ValueError(f"the simulator runs {self._sim_mode}, and its mode does not change while it runs "
+                                 "(restart this controller to follow another simulator)")
+        except ValueError as exc:
+            line = self._rejections.line(kind, f"rejected {self.resolve_topic_name(topics.SIM_MODE)} "
+                                                     f"{short(repr(msg.data), 80)}: {exc}; decision_sync stays "
+                                                     f"{'on' if self.sync.decision_sync else 'off'}")
+            if line is not None:
+                self.get_logger().error(line)
+            return
+        self._sim_mode = mode
+        holds = mode in topics.REPLY_MODES
         if holds != self.sync.decision_sync:
-            self.get_logger().info(f"the simulator runs {msg.data}: decision_sync "
+            self.get_logger().info(f"the simulator runs {mode}: decision_sync "
                                    f"{'on (a due state waits for its decision)' if holds else 'off'}")
         self._do(self.sync.on_sim_mode(holds))
 

@@ -111,17 +111,18 @@ class PairingKey:
         ``text signed=<source>:<tag>``, the tag the MAC of both."""
         return f"{text} {SIGNATURE_FIELD}{source}:{self._settings_tag(source, text)}"
 
-    def verify_settings(self, signed: str) -> str:
-        """The policy instance that signed the announcement ``signed`` with this key;
-        ``ValueError`` saying why not (unsigned, malformed, another key, or changed since)."""
+    def verify_settings(self, signed: str, what: str = "the gait timing", sender: str = "policy") -> tuple[str, str]:
+        """(the instance that signed ``signed`` with this key, the text it signed);
+        ``ValueError`` saying why not (unsigned, malformed, another key, or changed since).
+        ``what``, ``sender``: the message and the node that signs it, for the error."""
         text, separator, field = signed.rpartition(f" {SIGNATURE_FIELD}")
         source, colon, tag = field.rpartition(":")
         if not separator or not colon or not source:
-            raise ValueError("the gait timing is not signed (its policy runs without this stack's pairing key, or "
+            raise ValueError(f"{what} is not signed (its {sender} runs without this stack's pairing key, or "
                              "another node sent it)")
         if not hmac.compare_digest(tag, self._settings_tag(source, text)):
-            raise ValueError(f"the gait timing from {source} is not signed with this stack's pairing key")
-        return source
+            raise ValueError(f"{what} from {source} is not signed with this stack's pairing key")
+        return source, text
 
     def _settings_tag(self, source: str, text: str) -> str:
         payload = source.encode() + b"\0" + text.encode()

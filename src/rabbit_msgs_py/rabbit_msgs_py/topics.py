@@ -88,8 +88,15 @@ reset is an event, not inferred from stamps or values."""
 SIM_MODE = "sim/mode"
 """std_msgs/String (transient local), published once by sim_node: how it steps, ``lockstep``,
 ``paced`` (each state waits for its torque reply) or ``realtime`` (it steps on the wall
-clock). A controller not told ``decision_sync`` follows it: in lockstep and paced it holds
-the reply to a state the policy decides on until that decision is in, as run_stack's does."""
+clock), then `` signed=<simulator id>:<tag>`` when the simulator has a pairing key
+(``PairingKey.sign_settings``). A controller not told ``decision_sync`` follows it: in
+lockstep and paced it holds the reply to a state the policy decides on until that decision
+is in, as run_stack's does. A keyed controller takes only a signed one, and the first it
+takes only: the mode never changes while a simulator runs."""
+SIM_MODES = ("lockstep", "paced", "realtime")
+"""The values of ``/sim/mode`` (sim_node's ``mode``)."""
+REPLY_MODES = ("lockstep", "paced")
+"""Modes that step once per torque reply (never without the torque for the state)."""
 
 MARKERS = "rabbit/markers"
 """visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every

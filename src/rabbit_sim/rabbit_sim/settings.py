@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from rabbit_msgs_py import topics
 from rabbit_msgs_py.cli import option
 from rabbit_msgs_py.pairing import KEY_FILE_HELP, NO_KEY, PairingKey
 from rabbit_msgs_py.solo import SOLO_CHECK_HELP
@@ -17,9 +18,7 @@ from .model import MODEL_VARIANTS, ModelOptions
 TIMESTEP = 0.001
 """s: the model's timestep, one control tick."""
 
-MODES = ("lockstep", "paced", "realtime")
-REPLY_MODES = ("lockstep", "paced")
-"""Modes that step once per torque reply (never without the torque for the state)."""
+MODES = topics.SIM_MODES
 
 
 @dataclass(frozen=True)

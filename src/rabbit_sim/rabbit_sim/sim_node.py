@@ -33,7 +33,7 @@ from visualization_msgs.msg import MarkerArray
 
 from rabbit_msgs_py import qos, strict_json, topics
 from rabbit_msgs_py.conversions import (
-    MessageError, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_bytes)
+    MessageError, controller_id, joint_state_vectors, stamp_from_ns, stamp_to_ns, torques_from_bytes)
 from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
@@ -102,7 +102,9 @@ class SimNode(Node):
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
         self.driver.markers_wanted = lambda: self._markers_pub.get_subscription_count() > 0  # none built for nobody
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
-        pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(data=self.settings.mode))
+        key, mode = self.driver.pairing.key, self.settings.mode  # signed where keyed: a controller takes no other
+        pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(
+            data=key.sign_settings(controller_id(self.get_name()), mode) if key is not None else mode))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
         # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
         # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)

@@ -24,9 +24,11 @@ from rabbit_msgs_py import topics
 from rabbit_msgs_py.joints import N_ACTUATED
 from rabbit_msgs_py.pairing import PairingKey
 
+from rabbit_msgs_py.topics import REPLY_MODES
+
 from .. import compiled
 from ..markers import RobotShapes, marker_period_ticks
-from ..settings import REPLY_MODES, SimSettings
+from ..settings import SimSettings
 from ..simulation import Simulator, TorqueDelay
 from .rules import (
     FOLLOW_PATIENCE,
