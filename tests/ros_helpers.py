@@ -204,3 +204,21 @@ class GaitSigner:
         from rabbit_msgs_py.decision_ticks import gait_timing
 
         return String(data=self.key.sign_settings(self.source, gait_timing(period, settings)))
+
+
+class BatchSigner:
+    """State batches as a simulator signs them (``key``: a PairingKey; None: the user's, from
+    this test process's ``ROS_HOME``, as a sim_node started by hand): ``batch(rows, count)`` is
+    the next ``/sim/state_batch`` message."""
+
+    def __init__(self, key=None, source: str = "test_sim/00000000") -> None:
+        from rabbit_msgs_py.pairing import resolve_key
+
+        self.key = key if key is not None else resolve_key("")[0]
+        self.source, self.count = source, 0
+
+    def batch(self, rows, count: int):
+        from rabbit_msgs_py.conversions import state_batch_to_msg
+
+        self.count += 1
+        return state_batch_to_msg(rows, count, self.key.batch_label(self.source, self.count, rows.tobytes()))

@@ -162,3 +162,57 @@ def test_a_keyed_controller_takes_only_its_simulators_signed_mode_and_never_a_se
     err = capfd.readouterr().err
     assert "rejected /sim/mode 'realtime': the simulator's mode is not signed" in err
     assert "its mode does not change while it runs" in err
+
+
+class BatchForger:
+    """A stranger's node on /sim/state_batch: past 0.5 s of sim time it sends, once each, a
+    forged unsigned row stamped 30 s (the attack that made run_stack report "stalled") and
+    a signed batch of the run sent again after later ones (a replay)."""
+
+    def __init__(self, context) -> None:
+        import rclpy
+        from std_msgs.msg import Float64MultiArray
+
+        self.node = rclpy.create_node("batch_forger", context=context)
+        self._pub = self.node.create_publisher(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
+        self.node.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS)
+        self.first = None
+        self.sent = False
+
+    def _on_batch(self, msg) -> None:
+        import array
+
+        from rabbit_msgs_py.conversions import BATCH_FIELDS, state_batch_to_msg
+
+        if self.first is None and msg.layout.dim[0].label.startswith("state signed="):
+            self.first = msg
+        if not self.sent and msg.data and msg.data[0] > 0.5e9:
+            self.sent = True
+            row = array.array("d", msg.data[:BATCH_FIELDS])
+            row[0] = 30e9
+            self._pub.publish(state_batch_to_msg(row, 1))
+            self._pub.publish(self.first)
+
+    def destroy_node(self) -> None:
+        self.node.destroy_node()
+
+
+@pytest.mark.ros
+def test_a_forged_or_replayed_state_batch_moves_no_verdict_and_no_decision(capfd):
+    from rabbit_policy.bringup.in_process import run_in_process
+
+    made = []
+
+    def factory(context):
+        made.append(BatchForger(context))
+        return made[-1].node
+
+    config = StackConfig(duration=2.0, schedule=((0.0, 1.0),))
+    report, nodes = run_in_process(config, observers=[factory])
+    assert made[0].sent and made[0].first is not None
+    summary = report.summary()
+    assert summary["completed"] and not summary["stalled"] and not summary["fell"], summary.get("error")
+    assert summary["duration"] == pytest.approx(2.0)
+    assert nodes["supervisor"]._batches.refused == nodes["policy_node"]._batches.refused == 2  # the forgery, the replay
+    assert nodes["policy_node"].decisions_given_up == 0
+    assert "the state batch is not signed" in capfd.readouterr().err  # (the replay's line: throttled, 1 a second)

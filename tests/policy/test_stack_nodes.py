@@ -27,7 +27,7 @@ from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.spec.make import make_policy
 from rabbit_sim.sim_node import SimNode
 
-from ros_helpers import ros_context, spin_for, spin_until, spinning, wait_until
+from ros_helpers import BatchSigner, ros_context, spin_for, spin_until, spinning, wait_until
 
 pytestmark = pytest.mark.ros
 
@@ -1059,7 +1059,7 @@ def test_late_touchdown_events_are_not_a_stall_and_a_real_stall_still_ends_the_r
     from rabbit_policy.bringup import supervisor as module
 
     with ros_context() as (context, _executor):
-        config = StackConfig(duration=10.0, schedule=((0.0, 1.0),))
+        config = StackConfig(duration=10.0, schedule=((0.0, 1.0),), pairing_key="")  # unsigned batches, by hand
         late = module.Supervisor(config, context=context)
         ticks = np.round(np.arange(0.0, 3.5005, 0.001), 3)
         for t in ticks:
@@ -1105,7 +1105,8 @@ def test_the_supervisor_counts_sim_time_in_the_stamps_integer_ns():
     from rabbit_policy.bringup import supervisor as module
 
     with ros_context() as (context, _executor):
-        supervisor = module.Supervisor(StackConfig(duration=0.3004, schedule=((0.0, 1.0),)), context=context)
+        supervisor = module.Supervisor(StackConfig(duration=0.3004, schedule=((0.0, 1.0),), pairing_key=""),
+                                       context=context)  # unsigned batches, made by hand
         for n in range(301):
             supervisor._on_batch(_state(n / 1000, n / 1000))
             if n == 100:
@@ -1167,10 +1168,11 @@ def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_u
     from geometry_msgs.msg import TwistStamped
     from std_msgs.msg import Float64MultiArray
 
-    from rabbit_msgs_py.conversions import phase_to_msg, stamp_from_ns, state_batch_to_msg
+    from rabbit_msgs_py.conversions import phase_to_msg, stamp_from_ns
     from rabbit_msgs_py.joints import JOINT_NAMES
 
     path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
+    signer = BatchSigner()
     with ros_context() as (context, executor):
         policy = PolicyNode(context=context, policy="learned", policy_file=path, hip_source=hip_source)
         user = context_node(context)
@@ -1191,9 +1193,8 @@ def test_a_body_state_policy_without_the_controllers_phase_gives_its_decisions_u
                 phase.publish(phase_to_msg(0.5, 2.0, stamp_from_ns((tick - 1) * 1_000_000), "left_foot"))
             position = [0.1 * tick / 1000, 0.8, 0.05, 0.2, 0.3, -0.2, 0.4]
             velocity = [1.0, 0.0, -0.1, 0.0, 0.0, 0.0, 0.0]
-            if hip_source == "state_batch":
-                batches.publish(state_batch_to_msg(array.array("d", [tick * 1_000_000] + position + velocity
-                                                               + [0.0] * 7), 1))
+            if hip_source == "state_batch":  # signed as a simulator started by hand signs them (the user's key)
+                batches.publish(signer.batch(array.array("d", [tick * 1_000_000] + position + velocity + [0.0] * 7), 1))
                 return
             states.publish(JointState(header=Header(stamp=stamp), name=list(JOINT_NAMES), position=position,
                                       velocity=velocity))
@@ -1227,6 +1228,7 @@ def test_a_body_state_policy_walks_on_through_resets(tmp_path):
     forgets the last walk's states, phases and waiting decisions, decides again on the new
     walk's, and gives none up."""
     path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
+    signer = BatchSigner()
     with ros_context() as (context, executor):
         import rclpy
 

@@ -223,11 +223,12 @@ class BatchState(NamedTuple):
     effort: Sequence[float]
 
 
-def state_batch_to_msg(rows: array.array, count: int) -> Float64MultiArray:
+def state_batch_to_msg(rows: array.array, count: int, label: str = BATCH_DIMENSIONS[0]) -> Float64MultiArray:
     """``count`` states, :data:`BATCH_FIELDS` values each (``rows``: float64, row after row)
-    -> the ``/sim/state_batch`` message (layout in the module docstring)."""
+    -> the ``/sim/state_batch`` message (layout in the module docstring); ``label``: its first
+    dimension's (``state``, or signed: ``PairingKey.batch_label``)."""
     layout = MultiArrayLayout(dim=[
-        MultiArrayDimension(label=BATCH_DIMENSIONS[0], size=count, stride=count * BATCH_FIELDS),
+        MultiArrayDimension(label=label, size=count, stride=count * BATCH_FIELDS),
         MultiArrayDimension(label=BATCH_DIMENSIONS[1], size=BATCH_FIELDS, stride=BATCH_FIELDS)], data_offset=0)
     return Float64MultiArray(layout=layout, data=rows)
 
@@ -236,7 +237,7 @@ def state_batch_from_msg(msg: Float64MultiArray) -> list[BatchState]:
     """A ``/sim/state_batch`` message -> its states, oldest first; raises
     :class:`MessageError` on a wrong layout, a stamp that is not a whole number of ns in
     [0, 2^53], or a value that is not finite."""
-    dims = [(d.label, d.size) for d in msg.layout.dim]
+    dims = [(d.label.partition(" ")[0], d.size) for d in msg.layout.dim]  # a signature follows a space
     data = msg.data
     count = len(data) // BATCH_FIELDS
     if dims != [(BATCH_DIMENSIONS[0], count), (BATCH_DIMENSIONS[1], BATCH_FIELDS)] or msg.layout.data_offset != 0 \
@@ -256,12 +257,18 @@ def state_batch_from_msg(msg: Float64MultiArray) -> list[BatchState]:
     return states
 
 
-def batch_states_or_log(msg: Float64MultiArray, topic: str, error: Callable[[str], None]) -> list[BatchState]:
+def batch_states_or_log(msg: Float64MultiArray, topic: str, error: Callable[[str], None],
+                        verify: Callable[[str, bytes], None] | None = None) -> list[BatchState]:
     """The states of a ``/sim/state_batch`` message from ``topic`` (its full name); for a
-    malformed one, none, and one line to ``error`` (the node's logger, throttled)."""
+    malformed one, or one ``verify`` refuses (called with the first dimension's label and the
+    values as float64 bytes, raising ``ValueError``: ``pairing.SignedBatches``), none, and
+    one line to ``error`` (the node's logger, throttled)."""
     try:
-        return state_batch_from_msg(msg)
-    except MessageError as exc:
+        states = state_batch_from_msg(msg)
+        if verify is not None:
+            verify(msg.layout.dim[0].label, array.array("d", msg.data).tobytes())
+        return states
+    except (MessageError, ValueError) as exc:
         error(f"ignoring {topic}: {exc}")
         return []
 

@@ -31,13 +31,16 @@ import os
 import secrets
 import stat
 import struct
+import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Callable, Mapping, Sequence
 
 from .decision_ticks import SIGNATURE_FIELD
 
 TAG_SEPARATOR = "#"
+BATCH_LABEL = "state"
+"""The first dimension's label of a ``/sim/state_batch`` (``conversions.BATCH_DIMENSIONS``)."""
 MIN_KEY_CHARS = 16
 MAX_KEY_BYTES = 64  # BLAKE2b's longest key
 NO_KEY = "none"
@@ -123,6 +126,30 @@ class PairingKey:
         if not hmac.compare_digest(tag, self._settings_tag(source, text)):
             raise ValueError(f"{what} from {source} is not signed with this stack's pairing key")
         return source, text
+
+    def batch_label(self, source: str, count: int, data: bytes) -> str:
+        """The first dimension's label of the ``count``-th state batch simulator instance
+        ``source`` sends, ``data`` its values (float64 bytes): ``state signed=<source>:<count>:<tag>``."""
+        return f"{BATCH_LABEL} {SIGNATURE_FIELD}{source}:{count}:{self._batch_tag(source, count, data)}"
+
+    def verify_batch(self, label: str, data: bytes) -> tuple[str, int]:
+        """(simulator instance, count) of a state batch signed with this key (``label``: its
+        first dimension's label, ``data``: its values as float64 bytes); ``ValueError``
+        saying why not (unsigned, malformed, another key, or changed since it was signed)."""
+        head, separator, field = label.partition(f" {SIGNATURE_FIELD}")
+        source, _colon, rest = field.rpartition(":")
+        source, colon, count = source.rpartition(":")
+        if head != BATCH_LABEL or not separator or not colon or not source or not count.isdigit():
+            raise ValueError("the state batch is not signed (its simulator runs without this stack's pairing key, or "
+                             "another node sent it)")
+        if not hmac.compare_digest(rest, self._batch_tag(source, int(count), data)):
+            raise ValueError(f"the state batch from {source} is not signed with this stack's pairing key, or was "
+                             "changed since")
+        return source, int(count)
+
+    def _batch_tag(self, source: str, count: int, data: bytes) -> str:
+        payload = struct.pack("<q", count) + source.encode() + b"\0" + data
+        return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-batch").hexdigest()
 
     def _settings_tag(self, source: str, text: str) -> str:
         payload = source.encode() + b"\0" + text.encode()
@@ -220,6 +247,43 @@ def resolve_key(text: str, environ: Mapping[str, str] | None = None, file: str =
         return PairingKey.parse(text), "torques signed with the pairing key it was given"
     path = user_key_file(environ)
     return user_key(path), f"torques signed with the user's pairing key ({path})"
+
+
+BATCH_SWITCH_AFTER = 1.0
+"""wall s: a batch of another simulator instance is taken once the one followed sent none
+for this long (a simulator restarted by hand); before, it is a replay or a second simulator."""
+
+
+class SignedBatches:
+    """The check of a keyed observer of ``/sim/state_batch`` (``conversions.batch_states_or_log``'s
+    ``verify``): a batch signed with ``key``, from one simulator instance, in order: its
+    batches with a count after the last one taken; another instance's only once the one
+    followed has been silent for :data:`BATCH_SWITCH_AFTER` wall s (``clock``: wall s)."""
+
+    def __init__(self, key: "PairingKey", clock: Callable[[], float] = time.monotonic) -> None:
+        self.key, self.clock = key, clock
+        self.source: str | None = None
+        self._count = 0
+        self._wall = 0.0
+        self.refused = 0  # batches refused (each logged, throttled)
+
+    def __call__(self, label: str, data: bytes) -> None:
+        """Take the batch whose first dimension is labelled ``label`` and whose values are
+        ``data`` (float64 bytes), or ``ValueError`` saying why not."""
+        try:
+            source, count = self.key.verify_batch(label, data)
+            now = self.clock()
+            if source == self.source:
+                if count <= self._count:
+                    raise ValueError(f"the state batch {count} from {source} came again after batch {self._count} "
+                                     "(a replay)")
+            elif self.source is not None and now - self._wall < BATCH_SWITCH_AFTER:
+                raise ValueError(f"the state batch is from simulator {source} while {self.source} runs (a replay "
+                                 "from another run, or a second simulator)")
+        except ValueError:
+            self.refused += 1
+            raise
+        self.source, self._count, self._wall = source, count, now
 
 
 class GaitOrder:

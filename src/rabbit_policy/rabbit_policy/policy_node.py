@@ -69,7 +69,7 @@ from rabbit_msgs_py.conversions import (MessageError, alpha_to_msg, controller_i
 from rabbit_msgs_py.decision_ticks import DecisionTiming, gait_timing
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
-from rabbit_msgs_py.pairing import KEY_FILE_HELP, resolve_key
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, SignedBatches, resolve_key
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -167,6 +167,7 @@ class PolicyNode(Node):
         forget_secrets(self, SECRET_PARAMS)
         try:
             self.pairing, key_source = resolve_key(values["pairing_key"], file=values["pairing_key_file"])
+            self._batches = SignedBatches(self.pairing) if self.pairing is not None else None  # keyed: signed only
             low = finite("min_speed", values["min_speed"], *POLICY_PARAMS["min_speed"].range)
             high = finite("max_speed", values["max_speed"], *POLICY_PARAMS["max_speed"].range)
             kind, policy_file = spec_choice(values["policy"], values["policy_file"], values["spec_file"])
@@ -280,7 +281,8 @@ class PolicyNode(Node):
         policy, its body state first), as one ``/hip_velocity`` and ``/joint_states`` each."""
         body = self.core.body is not None
         for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
-                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0)):
+                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0),
+                                         self._batches):
             if body:
                 self._do(self.core.on_body_state(state.stamp, state.position, state.velocity))
             try:

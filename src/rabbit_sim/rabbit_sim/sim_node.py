@@ -95,7 +95,9 @@ class SimNode(Node):
         """Publishers, subscriptions, services and timers: once no other simulator runs in
         this namespace (:class:`~rabbit_msgs_py.solo.SoloStart`)."""
         pub = self.create_publisher
-        self._states = StateTopics(self, self.settings.batch_ticks, self.settings.clock_ticks)
+        self.source = controller_id(self.get_name())  # this instance, in its signatures (batches, mode)
+        self._states = StateTopics(self, self.settings.batch_ticks, self.settings.clock_ticks,
+                                   self.driver.pairing.key, self.source)
         self._fallen_pub = pub(Bool, topics.FALLEN, qos.STATUS_QOS)
         self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
@@ -104,7 +106,7 @@ class SimNode(Node):
         pub(String, topics.ROBOT_DESCRIPTION, qos.STATUS_QOS).publish(String(data=urdf_from_model(self.sim.model)))
         key, mode = self.driver.pairing.key, self.settings.mode  # signed where keyed: a controller takes no other
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(
-            data=key.sign_settings(controller_id(self.get_name()), mode) if key is not None else mode))
+            data=key.sign_settings(self.source, mode) if key is not None else mode))
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
         # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
         # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)

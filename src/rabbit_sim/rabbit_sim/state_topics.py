@@ -16,9 +16,10 @@ from std_msgs.msg import Float64MultiArray, Header
 
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.cdr import JointStateWriter
-from rabbit_msgs_py.conversions import stamp_from_ns, state_batch_to_msg
+from rabbit_msgs_py.conversions import BATCH_DIMENSIONS, stamp_from_ns, state_batch_to_msg
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.pairing import PairingKey
 
 from .stepping import State
 from .stepping.batch import StateBatcher
@@ -26,9 +27,12 @@ from .stepping.batch import StateBatcher
 
 class StateTopics:
     """Publishers of a node for its states; ``batch_ticks`` and ``clock_ticks`` as in
-    :class:`~rabbit_sim.settings.SimSettings`."""
+    :class:`~rabbit_sim.settings.SimSettings`. With a pairing ``key`` every batch is signed by
+    simulator instance ``source``, counted from 1 (``PairingKey.batch_label``): keyed
+    observers take no other."""
 
-    def __init__(self, node, batch_ticks: int, clock_ticks: int) -> None:
+    def __init__(self, node, batch_ticks: int, clock_ticks: int, key: PairingKey | None = None,
+                 source: str = "") -> None:
         pub = node.create_publisher
         self._state_pub = pub(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
         self._batch_pub = pub(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
@@ -38,6 +42,7 @@ class StateTopics:
         self._clock_every = clock_ticks * TICK_NS  # ns of sim time between /clock messages
         self._joint_states = JointStateWriter(JOINT_NAMES)  # serialized: no message object per tick
         self._hip_msg = TwistStamped(header=Header(frame_id="world"))
+        self._key, self._source, self.batches_sent = key, source, 0
 
     def publish(self, state: State) -> None:
         """One state on every topic that takes it now."""
@@ -55,4 +60,8 @@ class StateTopics:
     def send_batch(self) -> None:
         """The states not yet batched, now (nothing if there are none)."""
         if self.batcher.count:
-            self._batch_pub.publish(state_batch_to_msg(*self.batcher.take()))
+            rows, count = self.batcher.take()
+            self.batches_sent += 1
+            label = (self._key.batch_label(self._source, self.batches_sent, rows.tobytes()) if self._key is not None
+                     else BATCH_DIMENSIONS[0])
+            self._batch_pub.publish(state_batch_to_msg(rows, count, label))

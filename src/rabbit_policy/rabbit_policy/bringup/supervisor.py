@@ -17,6 +17,7 @@ from std_srvs.srv import SetBool
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
+from rabbit_msgs_py.pairing import PairingKey, SignedBatches
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
 from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid, whole_ticks
@@ -104,6 +105,8 @@ class Supervisor(Node):
     def __init__(self, config: StackConfig, context=None) -> None:
         super().__init__("run_stack_supervisor", context=context, namespace=config.namespace or None)
         self.config = config
+        key = PairingKey.parse(config.pairing_key)
+        self._batches = SignedBatches(key) if key is not None else None  # keyed: the stack's simulator's only
         # sim times are integer ns of the stamps (seconds only in the result and the logs)
         # every distinct state's sim time (ns) and hip x (m), packed (16 bytes a tick: an hour is 58 MB)
         self._times = array.array("q")
@@ -270,7 +273,8 @@ class Supervisor(Node):
         """The simulator's states in a batch (``/sim/state_batch``), oldest first."""
         now = time.perf_counter()
         for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
-                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0)):
+                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0),
+                                         self._batches):
             self._on_state(state.stamp, state.position[0], state.effort, now)
 
     def _on_state(self, t: int, x: float, effort, now: float) -> None:
