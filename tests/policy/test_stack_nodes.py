@@ -1228,7 +1228,6 @@ def test_a_body_state_policy_walks_on_through_resets(tmp_path):
     forgets the last walk's states, phases and waiting decisions, decides again on the new
     walk's, and gives none up."""
     path = _residual_integral_policy_file(tmp_path / "body_kind.pt", features="body")
-    signer = BatchSigner()
     with ros_context() as (context, executor):
         import rclpy
 
