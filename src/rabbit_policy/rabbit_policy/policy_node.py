@@ -223,6 +223,7 @@ class PolicyNode(Node):
         self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
         if self._hip_source == "state_batch":
+            self._batch_topic = self.resolve_topic_name(topics.STATE_BATCH)
             self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS)
         else:
             self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
@@ -276,13 +277,18 @@ class PolicyNode(Node):
             self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}",
                                     throttle_duration_sec=1.0)
 
+    def _batch_refused(self, line: str) -> None:
+        """A refused ``/sim/state_batch``: counted, logged at most once a second with the
+        core's rejections (rclpy's own throttle costs more per call than a flood leaves)."""
+        text = self.core.rejections.line("state_batch", line)
+        if text is not None:
+            self.get_logger().error(text)
+
     def _on_state_batch(self, msg: Float64MultiArray) -> None:
         """The simulator's states, oldest first: each its hip speed (and, for a body-state
         policy, its body state first), as one ``/hip_velocity`` and ``/joint_states`` each."""
         body = self.core.body is not None
-        for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
-                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0),
-                                         self._batches):
+        for state in batch_states_or_log(msg, self._batch_topic, self._batch_refused, self._batches):
             if body:
                 self._do(self.core.on_body_state(state.stamp, state.position, state.velocity))
             try:

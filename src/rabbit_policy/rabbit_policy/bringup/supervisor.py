@@ -18,6 +18,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.pairing import PairingKey, SignedBatches
+from rabbit_msgs_py.rejections import RejectionLog
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
 from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid, whole_ticks
@@ -107,6 +108,8 @@ class Supervisor(Node):
         self.config = config
         key = PairingKey.parse(config.pairing_key)
         self._batches = SignedBatches(key) if key is not None else None  # keyed: the stack's simulator's only
+        self._rejections = RejectionLog()  # refused batches: counted, one line a second (cheap under a flood)
+        self._batch_topic = self.resolve_topic_name(topics.STATE_BATCH)
         # sim times are integer ns of the stamps (seconds only in the result and the logs)
         # every distinct state's sim time (ns) and hip x (m), packed (16 bytes a tick: an hour is 58 MB)
         self._times = array.array("q")
@@ -272,10 +275,15 @@ class Supervisor(Node):
     def _on_batch(self, msg: Float64MultiArray) -> None:
         """The simulator's states in a batch (``/sim/state_batch``), oldest first."""
         now = time.perf_counter()
-        for state in batch_states_or_log(msg, self.resolve_topic_name(topics.STATE_BATCH),
-                                         lambda line: self.get_logger().error(line, throttle_duration_sec=1.0),
-                                         self._batches):
+        for state in batch_states_or_log(msg, self._batch_topic, self._batch_refused, self._batches):
             self._on_state(state.stamp, state.position[0], state.effort, now)
+
+    def _batch_refused(self, line: str) -> None:
+        """A refused ``/sim/state_batch``: counted, logged at most once a second (rclpy's own
+        throttle costs more per call than a 10 kHz flood leaves the loop)."""
+        text = self._rejections.line("state_batch", line)
+        if text is not None:
+            self.get_logger().error(text)
 
     def _on_state(self, t: int, x: float, effort, now: float) -> None:
         """A state at ``t`` ns: hip x (m), the 7 joints' efforts (N m); ``now``: wall s it came."""
