@@ -539,3 +539,26 @@ def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on
             assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
             pushed += 1
     assert 6 <= pushed <= 18
+
+
+def test_rgb_array_on_a_headless_machine_picks_an_offscreen_backend_itself():
+    """No display and no MUJOCO_GL: importing the package picks EGL (or OSMesa) before mujoco
+    is imported, so ``render_mode="rgb_array"`` renders without GLFW's warnings; with neither
+    library the render is one clear error."""
+    import ctypes.util
+    import subprocess
+    import sys
+
+    code = ("import gymnasium as gym, rabbit_policy\n"
+            "env = gym.make('RabbitHZD-v0', render_mode='rgb_array'); env.reset(seed=0)\n"
+            "try:\n    print(env.render().shape)\n"
+            "except Exception as exc:\n    print(type(exc).__name__, exc)\n"
+            "env.close()\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL",
+                                                              "PYOPENGL_PLATFORM")}
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert run.returncode == 0 and "GLFW" not in run.stderr and "Traceback" not in run.stderr, run.stderr
+    if ctypes.util.find_library("EGL") or ctypes.util.find_library("OSMesa"):
+        assert run.stdout.strip() == "(240, 320, 3)"
+    else:
+        assert run.stdout.startswith("RenderingUnavailable")

@@ -252,7 +252,7 @@ assert Image.open(path).n_frames == 2
 def test_without_opengl_rendering_reports_itself_unavailable():
     code = """
 import os
-from rabbit_sim.gl_backend import choose_headless_gl
+from rabbit_msgs_py.gl_backend import choose_headless_gl
 assert choose_headless_gl() == "disable"  # the user's choice is kept
 import numpy as np
 from rabbit_sim.model import load_model

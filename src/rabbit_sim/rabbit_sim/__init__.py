@@ -2,3 +2,5 @@
 experiment steps (:mod:`.simulation`: ``Simulator``, fall and stall rules), the simulator
 node (:mod:`.sim_node`) over its ROS-free stepping rules (:mod:`.stepping`), recording and
 rendering. It knows no controller and no policy."""
+
+import rabbit_msgs_py  # noqa: F401  (first: on a headless machine it picks MuJoCo's OpenGL backend, gl_backend)

@@ -8,7 +8,7 @@ MuJoCo picks its OpenGL backend from ``MUJOCO_GL`` when ``mujoco`` is first impo
 ``egl`` (Mesa's EGL with the llvmpipe software rasteriser works without a GPU or a
 display; Debian packages ``libegl1 libegl-mesa0 libgl1-mesa-dri``) or ``osmesa``
 (``libosmesa6``); scripts that render call
-:func:`rabbit_sim.gl_backend.choose_headless_gl` before anything imports mujoco. Rendering needs no GPU: about 70-100 ms a 320 x 240 frame on one core here.
+:func:`rabbit_msgs_py.gl_backend.choose_headless_gl` before anything imports mujoco. Rendering needs no GPU: about 70-100 ms a 320 x 240 frame on one core here.
 """
 
 from __future__ import annotations

@@ -34,7 +34,7 @@ from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser, ensure_output_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
 from rabbit_policy.parallel import ProgressMap, add_backend_arguments, open_backend
-from rabbit_sim.gl_backend import choose_headless_gl
+from rabbit_msgs_py.gl_backend import choose_headless_gl
 
 # MuJoCo picks its OpenGL backend when it is first imported: headless EGL (or OSMesa)
 # unless the user chose one

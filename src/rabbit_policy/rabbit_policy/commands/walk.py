@@ -106,7 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     given = sys.argv[1:] if argv is None else argv
     if not os.environ.get("DISPLAY") and any(a == "--video" or a.startswith("--video=") for a in given):
-        from rabbit_sim.gl_backend import choose_headless_gl
+        from rabbit_msgs_py.gl_backend import choose_headless_gl
 
         choose_headless_gl()  # offscreen rendering: before anything imports mujoco (build_parser does)
     parser = build_parser()

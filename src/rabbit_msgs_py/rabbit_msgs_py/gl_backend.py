@@ -22,3 +22,18 @@ def choose_headless_gl() -> str:
         available = [name for name, lib in HEADLESS_BACKENDS.items() if ctypes.util.find_library(lib)]
         os.environ["MUJOCO_GL"] = available[0] if available else "disable"
     return os.environ["MUJOCO_GL"]
+
+
+def headless() -> bool:
+    """No display to open a window on (neither ``DISPLAY`` nor ``WAYLAND_DISPLAY`` set)."""
+    return not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def choose_gl_when_headless() -> str | None:
+    """On a headless machine, :func:`choose_headless_gl` (``egl`` where found) unless the user
+    set ``MUJOCO_GL``: MuJoCo's default, GLFW, needs a display and fails there with GLFW
+    warnings. With a display nothing is set (the viewer and GLFW work). Returns ``MUJOCO_GL``
+    as it stands. ``import rabbit_msgs_py`` calls it, before anything of ours imports mujoco."""
+    if headless():
+        return choose_headless_gl()
+    return os.environ.get("MUJOCO_GL")
