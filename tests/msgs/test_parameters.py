@@ -255,7 +255,7 @@ def test_importing_a_node_sets_nothing_and_starting_ros_sets_the_discovery_defau
     import sys
 
     code = ("import os, rabbit_sim.sim_node, rabbit_sim.recorder_node, rabbit_policy.policy_node, "
-            "rabbit_hzd_controller.hzd_controller_node, rabbit_policy.bringup.stack\n"
+            "rabbit_hzd_controller.hzd_controller_node, rabbit_policy.bringup.processes\n"
             "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'))\n"
             "from rabbit_msgs_py.runtime import init_context\n"
             "init_context().try_shutdown()\n"

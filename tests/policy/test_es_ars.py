@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rabbit_policy.learning.env import make_env
+from rabbit_policy.learning.spec_env import make_env
 from rabbit_policy.learning.es import ESConfig, EvolutionStrategy, _evaluate, stratified_episodes
 from rabbit_policy.parallel import LocalBackend
 from rabbit_policy.runtime.network import HZDPolicyNet

@@ -226,7 +226,9 @@ def test_a_second_node_of_a_kind_refuses_to_start_and_the_running_robot_is_not_d
 
     import numpy as np
 
-    from rabbit_policy.bringup.stack import StackConfig, run_in_process
+    from rabbit_policy.bringup.config import StackConfig
+
+    from rabbit_policy.bringup.in_process import run_in_process
     from rabbit_policy.experiment.loop import ClosedLoop
     from rabbit_policy.experiment.scenario import Scenario
     from rabbit_policy.spec.make import make_policy

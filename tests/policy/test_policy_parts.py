@@ -18,7 +18,7 @@ from rabbit_policy.spec.make import make_policy
 from rabbit_policy.runtime.commands import clamp_speed
 from rabbit_policy.runtime.speed_window import SpeedWindow
 from rabbit_policy.experiment.scenario import Push, Scenario, parse_pushes, parse_schedule
-from rabbit_policy.bringup.stack import StackConfig, ros_arguments
+from rabbit_policy.bringup.config import StackConfig, ros_arguments
 
 pytestmark = pytest.mark.unit
 

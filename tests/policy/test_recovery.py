@@ -267,7 +267,7 @@ def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
     """Through a push that makes the rule act: policy_node builds the body state, the
     controller node (started plain) takes the at-once settings the policy announces, and every
     state is the ROS-free loop's."""
-    from rabbit_policy.bringup.stack import StackConfig
+    from rabbit_policy.bringup.config import StackConfig
     from test_stack_nodes import _reference
 
     pushes = (Push(1.2, -90.0, 0.1),)
@@ -281,7 +281,7 @@ def test_lockstep_runs_the_recovery_controller_as_the_ros_free_loop():
 def _assert_lockstep_is(config, reference: np.ndarray) -> None:
     """The stack of ``config``, spun in this process in lockstep, publishes every state of
     ``reference`` (the ROS-free loop's) bit for bit, without a fall and with no decision given up."""
-    from rabbit_policy.bringup.stack import run_in_process
+    from rabbit_policy.bringup.in_process import run_in_process
     from test_stack_nodes import _recorder
 
     states: list = []
@@ -635,7 +635,7 @@ def test_lockstep_runs_the_learned_policy_with_the_overlay_as_the_ros_free_loop(
     policy_node builds the body state for it (the policy blend reads the phase and its rate
     too), run_stack's configuration gives the controller node the settings the checkpoint asks
     for, and every state is the ROS-free loop's."""
-    from rabbit_policy.bringup.stack import StackConfig
+    from rabbit_policy.bringup.config import StackConfig
     from rabbit_policy.spec.make import checkpoint_policy
     from test_stack_nodes import _reference
 
@@ -664,7 +664,7 @@ def test_deciding_once_per_step_the_policy_runs_without_its_overlay_and_says_so(
     its defaults, in the loops and in run_stack's configuration alike, though the checkpoint's
     rule (policy blend) asks for gaits at once: the two once disagreed by a touchdown 2 ms late."""
     from rabbit_msgs_py.decision_ticks import DecisionTiming
-    from rabbit_policy.bringup.stack import StackConfig
+    from rabbit_policy.bringup.config import StackConfig
     from rabbit_policy.spec.make import checkpoint_policy
 
     overlaid, _ = _overlay_file(tmp_path)

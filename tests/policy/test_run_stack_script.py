@@ -224,7 +224,9 @@ def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
     Ctrl-C at once) says what happened and prints no nan: no real-time factor, no mean."""
     import numpy as np
 
-    from rabbit_policy.bringup.stack import RunReport, StackConfig
+    from rabbit_policy.bringup.config import StackConfig
+
+    from rabbit_policy.bringup.supervisor import RunReport
     from rabbit_policy.experiment.result import WalkResult
     from rabbit_policy.experiment.scenario import Scenario
 

@@ -32,7 +32,7 @@ def test_the_statistics_are_pearson_and_cosine():
 
 @pytest.mark.sim
 def test_a_set_scored_twice_gives_the_same_differences_and_the_probe_repeats():
-    from rabbit_policy.learning.env import RabbitHZDEnv, make_env  # noqa: F401  (the env registry)
+    from rabbit_policy.learning.spec_env import make_env
     from rabbit_policy.runtime.network import HZDPolicyNet
 
     config = ESConfig(max_steps=5, distribution="paper", action="residual")

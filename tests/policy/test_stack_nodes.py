@@ -21,7 +21,9 @@ from rabbit_msgs_py.pairing import new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup import processes as processes_module
-from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
+from rabbit_policy.bringup.config import StackConfig
+from rabbit_policy.bringup.in_process import run_in_process
+from rabbit_policy.bringup.processes import run_multi_process
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.spec.make import make_policy

@@ -13,7 +13,9 @@ from pathlib import Path
 
 import pytest
 
-from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.bringup.config import StackConfig
+
+from rabbit_policy.bringup.in_process import run_in_process
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -20,7 +20,8 @@ from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS
 from rabbit_msgs_py.decision_ticks import PER_STEP
 from rabbit_msgs_py.runtime import NodeStartError
-from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.bringup.config import StackConfig
+from rabbit_policy.bringup.in_process import run_in_process
 from rabbit_policy.experiment.scenario import Push
 from rabbit_sim.bag import BagError, BagWriter, QosSpec, is_bag_directory
 

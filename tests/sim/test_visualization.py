@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rabbit_policy.bringup.stack import StackConfig, run_in_process
+from rabbit_policy.bringup.config import StackConfig
+
+from rabbit_policy.bringup.in_process import run_in_process
 from rabbit_policy.experiment.scenario import Push
 from rabbit_sim.marker_plot import render_png
 from rabbit_sim.markers import PUSH_ID, RobotShapes, marker_period_ticks

@@ -135,7 +135,9 @@ def stop_times(repeats: int = 3) -> dict[str, object]:
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
                  rtf: float = 1.0) -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
-    from rabbit_policy.bringup.stack import StackConfig, run_in_process, run_multi_process
+    from rabbit_policy.bringup.config import StackConfig
+    from rabbit_policy.bringup.in_process import run_in_process
+    from rabbit_policy.bringup.processes import run_multi_process
 
     if name == "floor":
         from rabbit_policy.commands.ping_pong import round_trips_per_s

@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # bad arguments: with --json the report too (every exit prints one)
         if exc.code == 2 and "--json" in (sys.argv[1:] if argv is None else argv):
-            from rabbit_policy.bringup.stack import StackConfig
+            from rabbit_policy.bringup.config import StackConfig
             from rabbit_policy.bringup.supervisor import RunReport
 
             unparsed = StackConfig(duration=parser.get_default("duration"), schedule=((0.0, parser.get_default("speed")),))
@@ -132,7 +132,10 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.runtime.policies import PolicyUnavailable
     from rabbit_policy.experiment.options import resolve_controller, schedule_from_args
     from rabbit_policy.experiment.scenario import parse_pushes
-    from rabbit_policy.bringup.stack import AnotherStack, StackConfig, other_stack, run_in_process, run_multi_process
+    from rabbit_policy.bringup.config import StackConfig
+    from rabbit_policy.bringup.in_process import run_in_process
+    from rabbit_policy.bringup.probe import AnotherStack, other_stack
+    from rabbit_policy.bringup.processes import run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
     from rabbit_msgs_py.runtime import NodeStartError
 

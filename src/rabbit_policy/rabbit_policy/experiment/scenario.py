@@ -1,6 +1,6 @@
 """What an experiment commands, ROS-free: a speed schedule, pushes on the torso, the model
 (with its errors), a torque delay and the stop rules; and the text forms the scripts use
-(``"0:0.8,10:1.2"``, ``"2:60:0.1,4:-80:0.2"``). The node stack (:mod:`..bringup.stack`)
+(``"0:0.8,10:1.2"``, ``"2:60:0.1,4:-80:0.2"``). The node stack (:mod:`..bringup`)
 and the fast path (:mod:`.loop`) read the same schedules; pushes live in
 :mod:`rabbit_msgs_py.pushes` because the simulator node parses them too."""
 

@@ -411,7 +411,7 @@ class EpisodeConfig:
 
     def env_kwargs(self) -> dict:
         """The env arguments of these episodes (ES and PPO build their envs from it:
-        :func:`make_env`): a spec's env (:class:`~.spec_env.SpecEnv`) with ``spec``, else
+        :func:`~.spec_env.make_env`): a spec's env (:class:`~.spec_env.SpecEnv`) with ``spec``, else
         :class:`RabbitHZDEnv`'s."""
         if self.spec:
             return {"spec": self.spec, "max_steps": self.max_steps, "distribution": self.distribution,
@@ -425,15 +425,6 @@ class EpisodeConfig:
                 "integral_band": self.integral_band, "integral_clip": self.integral_clip,
                 "integral_windup_decay": self.integral_windup_decay,
                 "rules": StopRules(roll_back_after=self.roll_back_after)}
-
-
-def make_env(kwargs: dict) -> "RabbitHZDEnv":
-    """The env of :meth:`EpisodeConfig.env_kwargs`: a controller spec's loop when they name one."""
-    if kwargs.get("spec"):
-        from rabbit_policy.learning.spec_env import SpecEnv
-
-        return SpecEnv(**kwargs)
-    return RabbitHZDEnv(**kwargs)
 
 
 def windup_decay_for(seconds: float) -> WindupDecay | None:

@@ -28,7 +28,8 @@ import numpy as np
 import torch
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv, make_env
+from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.spec_env import make_env
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
 from rabbit_policy.runtime.fixed_order import vecmat
 from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_network

@@ -42,7 +42,8 @@ import torch
 from torch import nn
 
 from rabbit_msgs_py.cli import option
-from rabbit_policy.learning.env import PRIVILEGED_STATE, EpisodeConfig, RabbitHZDEnv, make_env
+from rabbit_policy.learning.env import PRIVILEGED_STATE, EpisodeConfig, RabbitHZDEnv
+from rabbit_policy.learning.spec_env import make_env
 from rabbit_policy.runtime.actions import policy_bounds
 from rabbit_policy.learning.vector import make_vector_env
 from rabbit_policy.parallel import Backend, ignore_interrupts

@@ -158,3 +158,9 @@ class SpecEnv(RabbitHZDEnv):
     def _max_ticks(self) -> int:
         """Ticks a step may run at most: to its decision, which is due every period (a bound, not the rule)."""
         return 2 * self.decision_period + 1
+
+
+def make_env(kwargs: dict) -> RabbitHZDEnv:
+    """The env of :meth:`~rabbit_policy.learning.env.EpisodeConfig.env_kwargs`: a controller
+    spec's loop (:class:`SpecEnv`) when they name one, else :class:`RabbitHZDEnv`."""
+    return SpecEnv(**kwargs) if kwargs.get("spec") else RabbitHZDEnv(**kwargs)
