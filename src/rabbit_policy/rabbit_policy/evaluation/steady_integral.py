@@ -19,7 +19,7 @@ from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.speed_integral import IntegralFeedforward
-from rabbit_policy.spec import ControllerSpec, dump_spec, load_controller, load_spec
+from rabbit_policy.spec import ControllerSpec, build, dump_spec, load_controller, load_spec, packaged_spec
 
 
 class _IntegralRecorder:
@@ -74,8 +74,6 @@ def network_alone(policy: NetworkPolicy) -> NetworkPolicy:
     network's weights, without a feed-forward and without the overlay (the controller then
     as the spec's kind runs without one: the classic spec's timing), a residual on the
     recovery rule kept."""
-    from rabbit_policy.spec import build, load_spec, packaged_spec
-
     spec = policy.spec
     integral = replace(spec.speed_integral, feedforward=None)
     if spec.overlay is not None:

@@ -46,9 +46,28 @@ from typing import Any
 from multiprocessing import active_children
 from pathlib import Path
 
+import torch
+from tqdm import tqdm
+
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import option, positive_int
-from rabbit_policy.parallel import BackendConfig
+from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
+from rabbit_policy.experiment.provenance import provenance
+from rabbit_policy.learning.es import EvolutionStrategy
+from rabbit_policy.learning.ppo import PPOTrainer
+from rabbit_policy.learning.scalars import TrainingScalars
+from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
+from rabbit_policy.parallel import BackendConfig, BackendUnavailable, make_backend
+from rabbit_policy.runtime.actions import (RESIDUAL_SCALE, ActionBounds, ResidualAction, policy_bounds,
+                                           residual_sum_bounds)
+from rabbit_policy.runtime.gait_library import GaitLibrary
+from rabbit_policy.runtime.memory import INPUTS
+from rabbit_policy.runtime.network import (NetworkForward, PolicyCheckpoint, parameter_count, spec_network,
+                                           widen_inputs)
+from rabbit_policy.spec import build, load_controller, load_spec
+from rabbit_policy.spec.convert import trained_spec
+from rabbit_policy.spec.files import file_sha256
+from rabbit_policy.spec.make import policy_of_checkpoint
 
 
 @dataclass(frozen=True)
@@ -100,10 +119,8 @@ SPEC_DECIDES = ("features", "action", "residual_base", "integral_gain", "integra
 def make_trainer(args: TrainingConfig, net, backend=None):
     """The ES or PPO trainer for the configured algorithm, running its episodes on ``backend``."""
     if args.algo == "es":
-        from rabbit_policy.learning.es import EvolutionStrategy
 
         return EvolutionStrategy(net, args.trainer, backend)
-    from rabbit_policy.learning.ppo import PPOTrainer
 
     return PPOTrainer(net, args.trainer, backend)
 
@@ -130,20 +147,6 @@ def train(args: TrainingConfig) -> int:
         print(f"error: --resume: no {checkpoint_path}", file=sys.stderr)
         return 2
 
-    import torch
-    from tqdm import tqdm
-
-    from rabbit_policy.experiment.provenance import provenance
-    from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
-    from rabbit_policy.learning.scalars import TrainingScalars
-    from rabbit_policy.parallel import BackendUnavailable, make_backend
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.runtime.actions import RESIDUAL_SCALE, ResidualAction, policy_bounds, residual_sum_bounds
-    from rabbit_policy.runtime.memory import INPUTS
-    from rabbit_policy.runtime.network import PolicyCheckpoint, parameter_count, widen_inputs
-    from rabbit_policy.spec.make import policy_of_checkpoint
-    from rabbit_policy.learning.warm_start import initial_network, zero_residual_network
-
     if getattr(args.trainer, "spec", "") and args.algo != "es":
         print("error: --spec trains with ES (the spec's network in its deployed loop); PPO's sampler and critic "
               "are not wired to it", file=sys.stderr)
@@ -166,10 +169,6 @@ def train(args: TrainingConfig) -> int:
                 if action == "residual" else None)
     spec_file = getattr(args.trainer, "spec", "")
     if spec_file:  # the spec's network, in the spec's deployed loop (RabbitHZD-Learned-v1)
-        from rabbit_policy.runtime.actions import ActionBounds
-        from rabbit_policy.runtime.network import spec_network
-        from rabbit_policy.spec import load_controller
-        from rabbit_policy.spec.files import file_sha256
 
         deployed = load_controller(spec_file)
         spec_sha256 = file_sha256(spec_file)
@@ -234,7 +233,6 @@ def train(args: TrainingConfig) -> int:
         """OUT/NAME.pt, and for a spec's run OUT/NAME.yaml: the spec with these weights."""
         PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info(extra)).save(out / f"{name}.pt")
         if spec_file:
-            from rabbit_policy.spec.convert import trained_spec
 
             trained_spec(spec_file, net, out / f"{name}.yaml", {"trained_by": "scripts/train.py --spec",
                                                                "iteration": trainer.iteration,
@@ -252,8 +250,6 @@ def train(args: TrainingConfig) -> int:
     def evaluate() -> None:
         nonlocal best, first_pass
         if spec_file:  # the deployed controller with the weights now
-            from rabbit_policy.runtime.network import NetworkForward
-            from rabbit_policy.spec import build, load_spec
 
             forward = NetworkForward.of(net)
             policy = build(load_spec(spec_file), Path(spec_file).resolve().parent,
