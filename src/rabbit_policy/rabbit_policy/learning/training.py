@@ -136,189 +136,248 @@ def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) ->
             "slowest_reach_s": None if not reaches or None in reaches else round(max(reaches), 2)}
 
 
-def train(args: TrainingConfig) -> int:
-    """Run training as configured; returns the exit status (0, or 2 for an unusable --out/--resume)."""
-    out: Path = args.out
+def _refusal(args: TrainingConfig) -> str | None:
+    """Why ``args`` cannot run (an unusable --out or --resume, --spec with PPO), else None."""
+    out = args.out
     if out.exists() and not args.resume and any(out.iterdir()):
-        print(f"error: {out} is not empty; use --resume or another --out", file=sys.stderr)
-        return 2
-    checkpoint_path = out / "checkpoint.pt"
-    if args.resume and not checkpoint_path.is_file():
-        print(f"error: --resume: no {checkpoint_path}", file=sys.stderr)
-        return 2
-
+        return f"{out} is not empty; use --resume or another --out"
+    if args.resume and not (out / "checkpoint.pt").is_file():
+        return f"--resume: no {out / 'checkpoint.pt'}"
     if getattr(args.trainer, "spec", "") and args.algo != "es":
-        print("error: --spec trains with ES (the spec's network in its deployed loop); PPO's sampler and critic "
-              "are not wired to it", file=sys.stderr)
+        return ("--spec trains with ES (the spec's network in its deployed loop); PPO's sampler and critic are "
+                "not wired to it")
+    return None
+
+
+@dataclass
+class Start:
+    """The network a run trains and what it is: its action bounds, inputs (``features``), action
+    kind, memory and residual, and for a ``--spec`` run the spec's deployed controller."""
+
+    net: Any
+    bounds: ActionBounds
+    features: str
+    action: str
+    memory: Any = None
+    residual: ResidualAction | None = None
+    deployed: Any = None
+    spec_sha256: str = ""
+    mse: float | None = None
+
+
+def starting_network(args: TrainingConfig, library: GaitLibrary) -> Start:
+    """The network training starts from: the spec's (``--spec``), the zero residual (action
+    residual), or the warm start on the library (none on ``--resume``: the checkpoint's weights
+    replace it); the messages saying which are printed here."""
+    trainer = args.trainer
+    features, action = trainer.features, trainer.action
+    bounds = policy_bounds(action, library)
+    memory = trainer.memory_config(library.speed_range)
+    residual = (ResidualAction(library, residual_sum_bounds(library, trainer.residual_base),
+                               integral_gain=trainer.integral_gain) if action == "residual" else None)
+    spec_file = getattr(trainer, "spec", "")
+    if spec_file:  # the spec's network, in the spec's deployed loop (RabbitHZD-Learned-v1)
+        deployed = load_controller(spec_file)
+        net = spec_network(deployed.forward)
+        if not args.resume:
+            print(f"spec {spec_file}: starts from its network, in its deployed loop", flush=True)
+        return Start(net, ActionBounds(net.low.numpy().astype(float), net.high.numpy().astype(float)),
+                     deployed.spec.network.features, "spec", deployed=deployed, spec_sha256=file_sha256(spec_file))
+    if residual is not None:  # a zero residual: the classic controller (or the residual's base)
+        if args.warm_start != "none" and not args.resume:
+            print(f"action residual: starts from the zero residual (classic HZD); --warm-start {args.warm_start} "
+                  "is not used", flush=True)
+        return Start(zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), bounds, features,
+                     action, memory, residual)
+    net, mse = initial_network(bounds.low, bounds.high, library, args.seed, "none" if args.resume else args.warm_start)
+    if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
+        net = widen_inputs(net, INPUTS[features], memory.integral.limit)
+    return Start(net, bounds, features, action, memory, residual, mse=mse)
+
+
+class TrainingRun:
+    """One run of :func:`train`: the trainer on the start's network, and what it writes to OUT
+    (the module docstring). ``state``: a checkpoint's (``--resume``), else empty."""
+
+    def __init__(self, args: TrainingConfig, start: Start, trainer, backend, state: dict) -> None:
+        self.args, self.start, self.net, self.trainer, self.backend = args, start, start.net, trainer, backend
+        self.out = args.out
+        self.spec_file = getattr(args.trainer, "spec", "")
+        self.began = time.perf_counter()  # wall time includes the warm start and the evaluations
+        self.elapsed_before = state.get("wall_s", 0.0)
+        self.ran_on = provenance()  # the code and the machine's numerics, recorded with every checkpoint
+        self.best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
+        self.warm_start_result: dict = state.get("warm_start", {})  # its acceptance at iteration 0, if evaluated
+        self.first_pass = state.get("first_pass")
+        self.config = args.trainer.to_dict()
+        if self.spec_file:  # what the spec decides, not the options (which its deployed loop does not read)
+            for key in SPEC_DECIDES:
+                self.config.pop(key, None)
+        self.scalars = TrainingScalars(self.out / "tb", args.algo)
+        self.bar = tqdm(total=args.iterations, initial=trainer.iteration, unit="it", disable=args.no_progress,
+                        dynamic_ncols=True)
+        if args.no_progress:
+            self.bar.write = print  # type: ignore[method-assign]
+
+    def wall(self) -> float:
+        return self.elapsed_before + time.perf_counter() - self.began
+
+    def info(self, extra: dict | None = None) -> dict:
+        """The run's record, saved with every policy."""
+        args, start, trainer = self.args, self.start, self.trainer
+        return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
+                "env_steps": trainer.env_steps, "wall_s": round(self.wall(), 1), "config": self.config,
+                "warm_start": "none: the spec's network" if self.spec_file else args.warm_start,
+                "eval_every": args.eval_every,
+                "parameters": parameter_count(self.net), "features": start.features, "action": start.action,
+                "output": self.net.output,
+                **({"memory": start.memory.to_dict()} if start.memory is not None else {}),
+                **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": args.trainer.integral_gain,
+                    "residual_base": args.trainer.residual_base} if start.residual is not None else {}),
+                **({"spec": str(Path(self.spec_file).resolve()), "spec_sha256": start.spec_sha256,
+                    "decision_period": start.deployed.spec.decision.period_ticks} if self.spec_file else {}),
+                "provenance": self.ran_on, **(extra or {})}
+
+    def save_policy(self, name: str, extra: dict | None = None) -> None:
+        """OUT/NAME.pt, and for a spec's run OUT/NAME.yaml: the spec with these weights."""
+        bounds = self.start.bounds
+        PolicyCheckpoint(self.net.state_dict(), bounds.low, bounds.high, self.info(extra)).save(self.out / f"{name}.pt")
+        if self.spec_file:
+            trained_spec(self.spec_file, self.net, self.out / f"{name}.yaml",
+                         {"trained_by": "scripts/train.py --spec", "iteration": self.trainer.iteration,
+                          "env_steps": self.trainer.env_steps, "seed": self.args.seed})
+
+    def save_checkpoint(self) -> None:
+        torch.save({"algo": self.args.algo, "net": self.net.state_dict(), "trainer": self.trainer.state_dict(),
+                    "wall_s": self.wall(), "best": self.best, "first_pass": self.first_pass,
+                    "warm_start": self.warm_start_result}, self.out / "checkpoint.pt")
+        self.save_policy("policy")
+        (self.out / "summary.json").write_text(strict_json.dumps(
+            {"info": self.info(), "first_pass": self.first_pass, "best": self.best,
+             "warm_start": self.warm_start_result}, indent=2) + "\n")
+
+    def policy_now(self):
+        """The deterministic policy of the weights now, as it is deployed."""
+        trainer = self.trainer
+        if self.spec_file:  # the deployed controller with the weights now
+            forward = NetworkForward.of(self.net)
+            return build(load_spec(self.spec_file), Path(self.spec_file).resolve().parent,
+                         weights=(list(forward.weights), list(forward.biases)),
+                         source=f"{Path(self.spec_file).name}@{trainer.iteration}")
+        bounds = self.start.bounds
+        return policy_of_checkpoint(PolicyCheckpoint(self.net.state_dict(), bounds.low, bounds.high, self.info()),
+                                    f"{self.out.name}@{trainer.iteration}")
+
+    def evaluate(self) -> None:
+        """The acceptance checks of the policy now: eval.csv, best.pt, evaluated/ (the module docstring)."""
+        trainer = self.trainer
+        result = acceptance(self.policy_now(), map_fn=self.backend.map, recovery=self.args.validate_recovery)
+        row = evaluation_row(trainer.iteration, self.wall(), trainer.env_steps, result)
+        append_csv(self.out / "eval.csv", row)
+        self.scalars.evaluation(row)
+        baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
+        if baseline:
+            self.warm_start_result["passed"] = result["passed"]
+            self.warm_start_result["failures"] = result["failures"]
+        elif result["passed"] and self.first_pass is None:
+            self.first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
+        if not baseline and (self.best is None or list(acceptance_rank(result)) < self.best["rank"]):
+            self.best = {**row, "rank": list(acceptance_rank(result))}
+            self.save_policy("best", {"acceptance": result})
+        if self.args.keep_evaluated:
+            (self.out / "evaluated").mkdir(exist_ok=True)
+            self.save_policy(f"evaluated/{trainer.iteration:05d}", {"acceptance": result})
+        self.bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
+                       f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
+                       f"slowest reach {row['slowest_reach_s']} s)")
+
+    def iterate(self) -> None:
+        """One iteration: log.csv, the progress line, and the evaluation and checkpoint when due."""
+        args, trainer = self.args, self.trainer
+        stats = trainer.step()
+        append_csv(self.out / "log.csv", {"wall_s": round(self.wall(), 1), **stats})
+        self.scalars.iteration(stats, self.wall())
+        self.bar.update(1)
+        self.bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
+                             falls=f"{stats['fall_fraction']:.2f}")
+        if args.no_progress:
+            print(strict_json.dumps(stats), flush=True)
+        if args.eval_every and trainer.iteration % args.eval_every == 0:
+            self.evaluate()
+        if trainer.iteration % args.checkpoint_every == 0:
+            self.save_checkpoint()
+
+    def run(self) -> bool:
+        """Iterate to ``iterations`` (or the first pass with ``stop_when_passed``); returns
+        whether it was interrupted (Ctrl-C, SIGTERM: a checkpoint is written either way)."""
+        args, trainer = self.args, self.trainer
+        interrupted = False
+        try:
+            if args.eval_every and trainer.iteration == 0:
+                self.evaluate()  # the starting point (warm start) as a baseline
+            while trainer.iteration < args.iterations:
+                self.iterate()
+                if args.stop_when_passed and self.first_pass is not None and args.eval_every \
+                        and trainer.iteration % args.eval_every == 0:
+                    break
+        except KeyboardInterrupt:
+            interrupted = True
+            self.bar.write("interrupted: saving a checkpoint")
+        finally:
+            self.bar.close()
+            self.scalars.close()
+            self.save_checkpoint()
+            if not interrupted:
+                trainer.close()
+                self.backend.close()
+        best = self.best
+        print(strict_json.dumps({"out": str(self.out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
+                                 "wall_s": round(self.wall(), 1), "first_pass": self.first_pass,
+                                 "best": None if best is None else {k: best[k] for k in ("iteration", "failures",
+                                                                                         "total_error")}}))
+        return interrupted
+
+
+def train(args: TrainingConfig) -> int:
+    """Run training as configured (setup, the loop, evaluations, checkpoints: :class:`TrainingRun`);
+    returns the exit status (0, or 2 for an unusable --out/--resume or backend)."""
+    problem = _refusal(args)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     try:  # before anything slow: a backend that cannot start is a one-line error at once
         backend = make_backend(args.backend)
     except BackendUnavailable as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    start = time.perf_counter()  # wall time includes the warm start and the evaluations
+    began = time.perf_counter()
     torch.set_num_threads(1)
     torch.manual_seed(args.seed)
-    out.mkdir(parents=True, exist_ok=True)
-    library = GaitLibrary.load()
-    features, action = args.trainer.features, args.trainer.action
-    bounds = policy_bounds(action, library)
-    gain = args.trainer.integral_gain
-    memory = args.trainer.memory_config(library.speed_range)
-    residual = (ResidualAction(library, residual_sum_bounds(library, args.trainer.residual_base), integral_gain=gain)
-                if action == "residual" else None)
-    spec_file = getattr(args.trainer, "spec", "")
-    if spec_file:  # the spec's network, in the spec's deployed loop (RabbitHZD-Learned-v1)
-
-        deployed = load_controller(spec_file)
-        spec_sha256 = file_sha256(spec_file)
-        net, mse = spec_network(deployed.forward), None
-        bounds = ActionBounds(net.low.numpy().astype(float), net.high.numpy().astype(float))
-        features, action = deployed.spec.network.features, "spec"
-        memory, residual = None, None
-        if not args.resume:
-            print(f"spec {spec_file}: starts from its network, in its deployed loop", flush=True)
-    elif residual is not None:  # a zero residual: the classic controller (or the residual's base)
-        net, mse = zero_residual_network(bounds.low, bounds.high, INPUTS[features], args.seed), None
-        if args.warm_start != "none" and not args.resume:
-            print(f"action residual: starts from the zero residual (classic HZD); --warm-start {args.warm_start} "
-                  "is not used", flush=True)
-    else:
-        net, mse = initial_network(bounds.low, bounds.high, library, args.seed,
-                                   "none" if args.resume else args.warm_start)
-        if memory is not None:  # the warm start on the paper's three, the memory inputs at zero weight
-            net = widen_inputs(net, INPUTS[features], memory.integral.limit)
+    args.out.mkdir(parents=True, exist_ok=True)
+    start = starting_network(args, GaitLibrary.load())
     state: dict = {}
     if args.resume:
+        checkpoint_path = args.out / "checkpoint.pt"
         state = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
         if state["algo"] != args.algo:
             print(f"error: {checkpoint_path} is an {state['algo']} run, not {args.algo}", file=sys.stderr)
             backend.close()
             return 2
-        net.load_state_dict(state["net"])
-    elif mse is not None:
-        print(f"warm start ({args.warm_start}) on the classic gait library: mse {mse:.2e} "
+        start.net.load_state_dict(state["net"])
+    elif start.mse is not None:
+        print(f"warm start ({args.warm_start}) on the classic gait library: mse {start.mse:.2e} "
               "(normalised action units)", flush=True)
-    trainer = make_trainer(args, net, backend)
+    trainer = make_trainer(args, start.net, backend)
     if state:
         trainer.load_state_dict(state["trainer"])
-    elapsed_before = state.get("wall_s", 0.0)
-    ran_on = provenance()  # the code and the machine's numerics, recorded with every checkpoint
-    best = state.get("best")  # {"rank": [...], "iteration": ..., ...}
-    warm_start_result: dict = state.get("warm_start", {})  # its acceptance at iteration 0, if evaluated
-    first_pass = state.get("first_pass")
-
-    def wall() -> float:
-        return elapsed_before + time.perf_counter() - start
-
-    config = args.trainer.to_dict()
-    if spec_file:  # what the spec decides, not the options (which its deployed loop does not read)
-        for key in SPEC_DECIDES:
-            config.pop(key, None)
-
-    def info(extra: dict | None = None) -> dict:
-        return {"algorithm": args.algo, "seed": args.seed, "workers": args.workers, "iteration": trainer.iteration,
-                "env_steps": trainer.env_steps, "wall_s": round(wall(), 1), "config": config,
-                "warm_start": "none: the spec's network" if spec_file else args.warm_start,
-                "eval_every": args.eval_every,
-                "parameters": parameter_count(net), "features": features, "action": action, "output": net.output,
-                **({"memory": memory.to_dict()} if memory is not None else {}),
-                **({"residual_scale": list(RESIDUAL_SCALE), "integral_gain": gain,
-                    "residual_base": args.trainer.residual_base} if residual is not None else {}),
-                **({"spec": str(Path(spec_file).resolve()), "spec_sha256": spec_sha256,
-                    "decision_period": deployed.spec.decision.period_ticks} if spec_file else {}),
-                "provenance": ran_on, **(extra or {})}
-
-    def save_policy(name: str, extra: dict | None = None) -> None:
-        """OUT/NAME.pt, and for a spec's run OUT/NAME.yaml: the spec with these weights."""
-        PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info(extra)).save(out / f"{name}.pt")
-        if spec_file:
-
-            trained_spec(spec_file, net, out / f"{name}.yaml", {"trained_by": "scripts/train.py --spec",
-                                                               "iteration": trainer.iteration,
-                                                               "env_steps": trainer.env_steps, "seed": args.seed})
-
-    def save_checkpoint() -> None:
-        torch.save({"algo": args.algo, "net": net.state_dict(), "trainer": trainer.state_dict(), "wall_s": wall(),
-                    "best": best, "first_pass": first_pass, "warm_start": warm_start_result}, checkpoint_path)
-        save_policy("policy")
-        (out / "summary.json").write_text(strict_json.dumps({"info": info(), "first_pass": first_pass, "best": best,
-                                                      "warm_start": warm_start_result}, indent=2) + "\n")
-
-    scalars = TrainingScalars(out / "tb", args.algo)
-
-    def evaluate() -> None:
-        nonlocal best, first_pass
-        if spec_file:  # the deployed controller with the weights now
-
-            forward = NetworkForward.of(net)
-            policy = build(load_spec(spec_file), Path(spec_file).resolve().parent,
-                           weights=(list(forward.weights), list(forward.biases)),
-                           source=f"{Path(spec_file).name}@{trainer.iteration}")
-        else:
-            policy = policy_of_checkpoint(PolicyCheckpoint(net.state_dict(), bounds.low, bounds.high, info()),
-                                          f"{out.name}@{trainer.iteration}")
-        result = acceptance(policy, map_fn=backend.map, recovery=args.validate_recovery)
-        row = evaluation_row(trainer.iteration, wall(), trainer.env_steps, result)
-        append_csv(out / "eval.csv", row)
-        scalars.evaluation(row)
-        baseline = trainer.iteration == 0  # the warm start: logged, not a trained policy
-        if baseline:
-            warm_start_result["passed"] = result["passed"]
-            warm_start_result["failures"] = result["failures"]
-        elif result["passed"] and first_pass is None:
-            first_pass = {k: row[k] for k in ("iteration", "wall_s", "env_steps")}
-        if not baseline and (best is None or list(acceptance_rank(result)) < best["rank"]):
-            best = {**row, "rank": list(acceptance_rank(result))}
-            save_policy("best", {"acceptance": result})
-        if args.keep_evaluated:
-            (out / "evaluated").mkdir(exist_ok=True)
-            save_policy(f"evaluated/{trainer.iteration:05d}", {"acceptance": result})
-        bar.write(f"  acceptance @ {trainer.iteration}: {'PASSED' if result['passed'] else 'failed'} "
-                  f"({row['failures']} failed checks, worst speed error {row['worst_speed_error']}, "
-                  f"slowest reach {row['slowest_reach_s']} s)")
+    run = TrainingRun(args, start, trainer, backend, state)
+    run.began = began  # the warm start counts in the run's wall time
 
     def interrupt(_signum, _frame):
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, interrupt)  # SIGTERM saves a checkpoint like Ctrl-C
-    bar = tqdm(total=args.iterations, initial=trainer.iteration, unit="it", disable=args.no_progress,
-               dynamic_ncols=True)
-    if args.no_progress:
-        bar.write = print  # type: ignore[method-assign]
-    interrupted = False
-    try:
-        if args.eval_every and trainer.iteration == 0:
-            evaluate()  # the starting point (warm start) as a baseline
-        while trainer.iteration < args.iterations:
-            stats = trainer.step()
-            append_csv(out / "log.csv", {"wall_s": round(wall(), 1), **stats})
-            scalars.iteration(stats, wall())
-            bar.update(1)
-            bar.set_postfix(ret=f"{stats['episode_return']:.3f}", err=f"{stats['mean_abs_error']:.3f}",
-                            falls=f"{stats['fall_fraction']:.2f}")
-            if args.no_progress:
-                print(strict_json.dumps(stats), flush=True)
-            if args.eval_every and trainer.iteration % args.eval_every == 0:
-                evaluate()
-                if args.stop_when_passed and first_pass is not None:
-                    break
-            if trainer.iteration % args.checkpoint_every == 0:
-                save_checkpoint()
-    except KeyboardInterrupt:
-        interrupted = True
-        bar.write("interrupted: saving a checkpoint")
-    finally:
-        bar.close()
-        scalars.close()
-        save_checkpoint()
-        if not interrupted:
-            trainer.close()
-            backend.close()
-    print(strict_json.dumps({"out": str(out), "iteration": trainer.iteration, "env_steps": trainer.env_steps,
-                      "wall_s": round(wall(), 1), "first_pass": first_pass,
-                      "best": None if best is None else {k: best[k] for k in ("iteration", "failures", "total_error")}}))
-    if interrupted:
+    if run.run():
         stop_workers(trainer, backend)
     return 0
 
