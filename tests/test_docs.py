@@ -128,6 +128,8 @@ def test_one_spelling_per_flag_across_scripts():
 def test_the_documented_gymnasium_ids_make_an_environment():
     import gymnasium
 
+    import rabbit_policy  # noqa: F401  (registers the ids, as the docs' snippets do; not left to an earlier test)
+
     ids = {m for doc in DOCS for m in re.findall(r'gymnasium\.make\("([^"]+)"\)', doc.read_text())}
     assert ids
     for env_id in ids:

@@ -232,11 +232,10 @@ def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
     return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, trials, map_fn)}
 
 
-def main(argv: list[str] | None = None) -> int:
-    from rabbit_msgs_py.cli import ArgumentParser, ensure_output_dir
+def build_parser():
+    from rabbit_msgs_py.cli import ArgumentParser
     from rabbit_policy.experiment.options import add_allow_dirty_option
-    from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
-    from rabbit_policy.parallel import add_backend_arguments, open_backend
+    from rabbit_policy.parallel import add_backend_arguments
 
     parser = ArgumentParser(description=__doc__)
     parser.add_argument("--preset", required=True, help="config/reproduce/NAME.yaml (tiny, shipped) or a .yaml file")
@@ -244,6 +243,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--resume", action="store_true", help="continue the runs in --out and screen them again")
     add_allow_dirty_option(parser)
     add_backend_arguments(parser, progress=False, workers=True)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    from rabbit_msgs_py.cli import ensure_output_dir
+    from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
+    from rabbit_policy.parallel import open_backend
+
+    parser = build_parser()
     args = parser.parse_args(argv)
     ensure_output_dir(parser, args.out)  # before any work: one line, exit 2
     try:
