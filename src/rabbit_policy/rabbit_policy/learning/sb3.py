@@ -32,8 +32,17 @@ import torch
 
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import option, positive_int
+import rabbit_policy  # noqa: F401  (registers RabbitHZD-v0 for gym.make)
+from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
 from rabbit_policy.learning.env import EpisodeConfig
+from rabbit_policy.learning.scalars import TrainingScalars
+from rabbit_policy.learning.training import append_csv, evaluation_row
+from rabbit_policy.learning.warm_start import WARM_STARTS, warm_start
+from rabbit_policy.parallel import BackendConfig, make_backend
+from rabbit_policy.runtime.actions import RESIDUAL_SCALE, policy_bounds
+from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.network import HZDPolicyNet, PolicyCheckpoint
+from rabbit_policy.spec.make import checkpoint_policy
 
 ALGORITHMS = ("ppo", "sac")
 OUTPUT = {"ppo": "clip", "sac": "tanh"}
@@ -81,8 +90,6 @@ class SB3Config(EpisodeConfig):
     def policy_info(self) -> dict:
         """What a checkpoint of this run says so that ``checkpoint_policy`` rebuilds its inputs and
         outputs (as ``train.py`` writes them)."""
-        from rabbit_policy.runtime.actions import RESIDUAL_SCALE
-        from rabbit_policy.runtime.gait_library import GaitLibrary
 
         memory = self.memory_config(GaitLibrary.load().speed_range)
         return {"features": self.features, "action": self.action,
@@ -128,8 +135,6 @@ def warm_start_actor(model, config: SB3Config, low: np.ndarray, high: np.ndarray
     exactly the residual's base), the gait fitted to the classic library ("feedback", on the
     paper's three inputs, the others at zero weight); returns the fit's mean squared error in
     normalised action units (None for a residual)."""
-    from rabbit_policy.learning.warm_start import WARM_STARTS, warm_start
-    from rabbit_policy.runtime.gait_library import GaitLibrary
 
     layers = actor_layers(model)
     if config.action == "residual":
@@ -185,14 +190,6 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
     from tqdm import tqdm
 
-    import rabbit_policy  # noqa: F401  (registers RabbitHZD-v0)
-    from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
-    from rabbit_policy.learning.scalars import TrainingScalars
-    from rabbit_policy.learning.training import append_csv, evaluation_row
-    from rabbit_policy.parallel import BackendConfig, make_backend
-    from rabbit_policy.runtime.actions import policy_bounds
-    from rabbit_policy.runtime.gait_library import GaitLibrary
-    from rabbit_policy.spec.make import checkpoint_policy
 
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
