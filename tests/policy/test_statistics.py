@@ -67,3 +67,17 @@ def test_the_impulse_at_90_percent_is_read_off_the_curve_with_its_interval():
     assert at["low_Ns"] == 6.0  # 38/40's lower bound is under 0.9: only 40/40 is surely above it
     assert at["high_Ns"] == 15.0  # 33/40's upper bound (0.91) still allows 90 %, as does 36/40's
     assert impulse_at(0.9, impulses, [rate([False])] * 5)["impulse_Ns"] == 0.0
+
+
+def test_the_interquartile_mean_is_the_middle_halfs_and_its_bootstrap_interval_repeats():
+    """rliable's IQM (scipy's 25 %-trimmed mean where n is a multiple of 4) and a percentile
+    bootstrap interval from a fixed seed: the same numbers on every machine."""
+    from rabbit_policy.evaluation.statistics import bootstrap_interval, iqm
+
+    assert iqm([4, 1, 3, 2]) == 2.5 and iqm(range(8)) == 3.5 and iqm([7.0]) == 7.0
+    assert iqm([1, 2, 3]) == 2.0 and iqm([0, 0, 9]) == 2.25 / 1.5  # quartiles straddle the ends
+    low, high = bootstrap_interval([0.2, 0.5, 0.9, 0.4, 0.6], seed=3)
+    assert (low, high) == bootstrap_interval([0.2, 0.5, 0.9, 0.4, 0.6], seed=3) and 0.2 <= low < high <= 0.9
+    assert bootstrap_interval([0.5, 0.5, 0.5]) == (0.5, 0.5)
+    with pytest.raises(ValueError):
+        iqm([])
