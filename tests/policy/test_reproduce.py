@@ -53,7 +53,13 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     for row in screen["candidates"]:  # every candidate on the same paired trials
         assert {k: len(v) for k, v in row["outcomes"].items()} == {"forward": 2, "backward": 2, "changes": 2}
     assert screen["level"] == 0.05 / 2  # the best of two seeds' candidates
-    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025}
+    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025,
+                                     "over_seeds": screen["over_seeds"]}
+    seeds = screen["over_seeds"]  # rliable's IQM over the two seeds' candidates, with its bootstrap interval
+    trained = screen["candidates"][2:]
+    assert seeds["candidates"] == 2 and seeds["share"]["values"] == [r["passed"] / r["of"] for r in trained]
+    assert seeds["share"]["ci95"][0] <= seeds["share"]["iqm"] <= seeds["share"]["ci95"][1]
+    assert f"screen trials passed {seeds['share']['iqm']:.3f}" in card and "over the 2 seeds" in run.stdout
     assert provenance["shipped"] == screen["shipped"] == (screen["best"] if screen["beats_start"] else "start")
     shipped_row = next(r for r in screen["candidates"] if r["candidate"] == screen["shipped"])
     assert evaluation["rates"] == shipped_row["rates"] and f"**Shipped: `{screen['shipped']}`.**" in card

@@ -184,6 +184,11 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
         "against it, on all trials.", "",
         "| candidate | failed checks | forward pushes | backward pushes | changes | all | against the start |",
         "|---|---|---|---|---|---|---|", screened, "",
+        *([f"Over the seeds (rliable: the interquartile mean of the trained candidates, a 95 % bootstrap "
+           f"interval): screen trials passed {seeds['share']['iqm']:.3f} [{seeds['share']['ci95'][0]:.3f}, "
+           f"{seeds['share']['ci95'][1]:.3f}] against the start's {seeds['start_share']:.3f}; the paired gain "
+           f"over the start {seeds['gain_over_start']['iqm']:+.3f} [{seeds['gain_over_start']['ci95'][0]:+.3f}, "
+           f"{seeds['gain_over_start']['ci95'][1]:+.3f}].", ""] if (seeds := verdict.get("over_seeds")) else []),
         f"**Shipped: `{provenance['shipped']}`.** The best trained candidate, `{provenance['screened']}`, is "
         f"significantly better than the start (p below {verdict['level']:.3g}, no family significantly worse, no "
         f"more failed checks): **{'yes' if verdict['ships'] else 'no'}**"
@@ -273,7 +278,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_msgs_py import strict_json
     from rabbit_policy.commands.plot_training import plot
     from rabbit_policy.evaluation.acceptance import Criteria
-    from rabbit_policy.evaluation.shipping import ScreenTrials, pooled, screen_rank, verdict
+    from rabbit_policy.evaluation.shipping import ScreenTrials, over_seeds, pooled, screen_rank, verdict
     from rabbit_policy.evaluation.statistics import mcnemar_exact
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
     from rabbit_policy.spec.files import library_dir, library_hash
@@ -331,9 +336,14 @@ def main(argv: list[str] | None = None) -> int:
     chosen_name = best["candidate"] if ships else "start"
     chosen = dict(screened)[chosen_name]
     level = 0.05 / len(trained_rows)
+    seeds = over_seeds(trained_rows, rows[0])
+    print(f"  over the {seeds['candidates']} seeds: screen passed IQM {seeds['share']['iqm']:.3f} "
+          f"[{seeds['share']['ci95'][0]:.3f}, {seeds['share']['ci95'][1]:.3f}] (the start {seeds['start_share']:.3f}), "
+          f"gain over the start IQM {seeds['gain_over_start']['iqm']:+.3f} [{seeds['gain_over_start']['ci95'][0]:+.3f}, "
+          f"{seeds['gain_over_start']['ci95'][1]:+.3f}]", flush=True)
     (out / "screen.json").write_text(strict_json.dumps({
         "candidates": rows, "best": best["candidate"], "beats_start": ships, "why_not": why, "tests": tests,
-        "level": level, "shipped": chosen_name}, indent=2) + "\n")
+        "level": level, "shipped": chosen_name, "over_seeds": seeds}, indent=2) + "\n")
     spec = load_spec(chosen)
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
@@ -343,7 +353,7 @@ def main(argv: list[str] | None = None) -> int:
                   "runs": [{k: v for k, v in r.items() if k != "run"} for r in runs],
                   "evaluation": preset["evaluation"], "screen_trials": preset["screen"]["trials"],
                   "screened": best["candidate"], "shipped": chosen_name,
-                  "verdict": {"ships": ships, "why": why, "level": level}, "commands": commands}
+                  "verdict": {"ships": ships, "why": why, "level": level, "over_seeds": seeds}, "commands": commands}
     shipped = replace(spec, provenance=provenance)
     dump_spec(shipped, out / "learned.yaml", f"{spec.name}, reproduced by {portable(reproduce_line, out, root)}")
     print(f"[3/5] ship: {out / 'learned.yaml'} ({chosen_name}; {best['candidate']} significantly better than the "

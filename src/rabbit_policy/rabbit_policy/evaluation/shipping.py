@@ -28,7 +28,7 @@ from dataclasses import asdict, dataclass
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.evaluation.robustness import (MapFn, RobustnessConfig, phase_times, push_survived,
                                                  transition_outcome)
-from rabbit_policy.evaluation.statistics import mcnemar_exact, rate
+from rabbit_policy.evaluation.statistics import bootstrap_interval, iqm, mcnemar_exact, rate
 from rabbit_policy.experiment.result import REACH_WITHIN
 from rabbit_policy.runtime.gait_command import Policy
 
@@ -164,3 +164,14 @@ def verdict(candidate: dict, start: dict, screened: int = 1, alpha: float = ALPH
 def screen_rank(measured: dict) -> tuple:
     """Sort key, lower is better: most screen trials passed, then fewest failed acceptance checks."""
     return (-measured["passed"], measured["failures"])
+
+
+def over_seeds(trained: list[dict], start: dict) -> dict:
+    """The seeds' screen as rliable reports it: per trained candidate (one per seed) the share
+    of screen trials passed and its paired gain over the start (the same trials); the IQM of
+    each over the candidates with a seeded percentile bootstrap interval (95 %)."""
+    shares = [r["passed"] / r["of"] for r in trained]
+    gains = [(r["passed"] - start["passed"]) / r["of"] for r in trained]
+    return {"candidates": len(trained), "start_share": start["passed"] / start["of"],
+            "share": {"values": shares, "iqm": iqm(shares), "ci95": list(bootstrap_interval(shares))},
+            "gain_over_start": {"values": gains, "iqm": iqm(gains), "ci95": list(bootstrap_interval(gains))}}
