@@ -25,12 +25,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
+from rabbit_hzd_controller.alpha import reduce_alpha
 from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, seeded_analyses
+from rabbit_policy.evaluation.push_recovery import PushScenario, classic_margin, push_trial
+from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.result import REACH_WITHIN, SETTLE_TOLERANCE
-from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.experiment.scenario import PhasePush, Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
+from rabbit_policy.spec.make import make_policy
 from rabbit_sim.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
@@ -265,7 +268,6 @@ def beyond_classic_scenarios(classic_margins: list[dict], speed: float = 1.0, be
     large backward one at twice that. They are not the paper's scenarios, whose one
     definition (fixed impulses of 6, 6 and 15 N s) is
     :data:`~rabbit_policy.evaluation.push_recovery.PUSH_SCENARIOS`."""
-    from rabbit_policy.evaluation.push_recovery import PushScenario
 
     margin = {m["direction"]: m["largest_survived_Ns"] for m in classic_margins if m["speed"] == speed}
     forward = margin.get("forward", 0) + beyond
@@ -276,7 +278,6 @@ def beyond_classic_scenarios(classic_margins: list[dict], speed: float = 1.0, be
 
 
 def _scenario_job(job: tuple) -> dict:
-    from rabbit_policy.evaluation.push_recovery import push_trial
 
     policy, speed, scenario = job
     result = push_trial(policy, speed, scenario)
@@ -287,7 +288,6 @@ def _scenario_job(job: tuple) -> dict:
 def policy_outputs(policy: Policy) -> int:
     """How many numbers the policy decides: free Bezier coefficients (the impact equalities
     hold) + Kd; raises ``ValueError`` if its alpha breaks the equalities."""
-    from rabbit_hzd_controller.alpha import reduce_alpha
 
     command = first_command(policy, 1.0)  # what it starts on at 1 m/s (a body-state policy: no state yet)
     return len(reduce_alpha(command.alpha, atol=1e-6)) + 1
@@ -301,7 +301,6 @@ def stability_analyses(policy: Policy, samples: int, config=None,
     :class:`.robustness.RobustnessConfig`): ``{"0.70": analysis, "1.00": ..., "1.30": ...}``
     (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`.experiments.median_analysis`
     of ``StabilityAnalysis.to_dict()`` or ``{"error", "stable": False}``."""
-    from rabbit_policy.evaluation.robustness import RobustnessConfig
 
     model = (config or RobustnessConfig()).model_errors[0].model
     speeds = (0.7, 1.0, 1.3) if samples >= 100 else (1.0,)
@@ -336,7 +335,6 @@ def broad_acceptance(policy: Policy, classic: Policy, config=None, criteria: Bro
     ``classic_margins``: the reference's push margins under the same ``config`` when already
     measured (e.g. ``broad_acceptance(classic, classic, ...)["classic_push_margins"]``); by
     default they are measured here, or taken from ``policy``'s own when it is ``classic``."""
-    from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
 
     config = config or RobustnessConfig()
     robust = robustness(policy, config, map_fn, log)
@@ -363,8 +361,6 @@ def broad_comparison(policies: list[tuple[str, Policy]], quick: bool = False,
     20 ticks: the reference, measured once) and each named policy against it, yielded as they
     finish: ``("classic", result)`` first, then ``(name, result)`` per policy. ``quick``:
     ``RobustnessConfig.quick()`` and 30 Poincaré samples (a first look)."""
-    from rabbit_policy.evaluation.robustness import RobustnessConfig
-    from rabbit_policy.spec.make import make_policy
 
     classic = make_policy("classic")
     config = RobustnessConfig.quick() if quick else RobustnessConfig()
