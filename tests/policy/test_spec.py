@@ -498,3 +498,13 @@ def test_a_start_calibrated_to_itself_carries_its_own_steady_integrals(tmp_path)
     assert table.values == steady_integrals(load_controller(path), table.speeds).values
     assert max(abs(v) for v in table.values) < 0.1  # the zero residual's own integral stays near 0
     assert written.network == before.network and written.recovery_rule == before.recovery_rule
+
+
+def test_a_spec_that_is_not_yaml_is_one_line_naming_where(tmp_path):
+    """A YAML syntax error in a spec: one line with the line and column (from 1) and what is wrong."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("spec_version: 2\nname: x\nkind: [learned\n")
+    with pytest.raises(SpecError) as refused:
+        load_spec(bad)
+    text = str(refused.value)
+    assert "\n" not in text and "is not YAML: line 4, column 1: expected ',' or ']'" in text

@@ -135,3 +135,11 @@ def config_from_args(cls, args: argparse.Namespace, **given):
     values = {f.name: getattr(args, _dest(f)) for f in dataclasses.fields(cls)
               if f.name not in given and hasattr(args, _dest(f)) and f.metadata.get("cli", True)}
     return cls(**values, **given)
+
+
+def yaml_problem(exc) -> str:
+    """A YAML error in one line: what is wrong and where (line and column, from 1), e.g.
+    "line 3, column 7: expected ',' or ']', but got '<stream end>'"."""
+    mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
+    what = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    return f"line {mark.line + 1}, column {mark.column + 1}: {what}" if mark is not None else what

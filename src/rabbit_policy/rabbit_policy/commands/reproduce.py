@@ -43,6 +43,7 @@ import shutil
 import sys
 from pathlib import Path
 
+from rabbit_msgs_py.cli import yaml_problem
 from rabbit_policy.evaluation.statistics import format_rate
 
 PRESET_KEYS = ("start", "seeds", "train", "screen", "evaluation")
@@ -85,7 +86,10 @@ def load_preset(name: str) -> dict:
     if not path.is_file():
         known = sorted(p.stem for p in preset_dir().glob("*.yaml"))
         raise ValueError(f"no preset {name!r} (known: {', '.join(known)}, or a .yaml file)")
-    data = yaml.safe_load(path.read_text())
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        raise ValueError(f"preset {path} is not YAML: {yaml_problem(exc)}") from None
     if not isinstance(data, dict) or set(data) != set(PRESET_KEYS):
         raise ValueError(f"preset {path} must have exactly the keys {', '.join(PRESET_KEYS)}")
     if not isinstance(data["train"], dict) or data["evaluation"] not in EVALUATIONS:

@@ -11,6 +11,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from rabbit_msgs_py.cli import yaml_problem
+
 
 def parse_with_preset(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
     """Parse ``argv`` with ``parser`` after applying the preset named by ``--config`` (if any)
@@ -39,8 +41,10 @@ def apply_preset(parser: argparse.ArgumentParser, path: Path) -> None:
 
     try:
         values = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        parser.error(f"--config {path}: {str(exc).splitlines()[0]}")
+    except OSError as exc:
+        parser.error(f"--config {path}: {exc.strerror or exc}")
+    except yaml.YAMLError as exc:
+        parser.error(f"--config {path} is not YAML: {yaml_problem(exc)}")
     if not isinstance(values, dict):
         parser.error(f"--config {path}: a mapping of option names to values is expected")
     actions = {a.dest: a for a in parser._actions if a.option_strings}

@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_msgs_py.cli import yaml_problem
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
 from rabbit_policy.runtime.forward import OUTPUTS
@@ -450,7 +451,7 @@ def load_spec(path: str | Path) -> ControllerSpec:
     except OSError as exc:
         raise SpecError(f"cannot read controller spec {path}: {exc.strerror or exc}") from None
     except yaml.YAMLError as exc:
-        raise SpecError(f"controller spec {path} is not YAML: {str(exc).splitlines()[0]}") from None
+        raise SpecError(f"controller spec {path} is not YAML: {yaml_problem(exc)}") from None
     try:
         return parse_spec(data)
     except SpecError as exc:
