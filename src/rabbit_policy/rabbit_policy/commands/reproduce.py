@@ -247,7 +247,7 @@ def build_parser():
     from rabbit_policy.parallel import add_backend_arguments
 
     parser = ArgumentParser(description=__doc__)
-    parser.add_argument("--preset", required=True, help="config/reproduce/NAME.yaml (tiny, shipped) or a .yaml file")
+    parser.add_argument("--preset", required=True, help="config/reproduce/NAME.yaml (tiny, shipped, counted) or a .yaml file")
     parser.add_argument("--out", type=Path, required=True, help="a new directory for everything it writes")
     parser.add_argument("--resume", action="store_true", help="continue the runs in --out and screen them again")
     add_allow_dirty_option(parser)
