@@ -26,19 +26,23 @@ def _state(stamp_ns: int) -> JointState:
     return msg
 
 
+def _controller_and_state_publisher(context, executor):
+    """A controller node and a publisher of /joint_states (the test plays the simulator), spun by ``executor``."""
+    import rclpy
+
+    controller = HZDControllerNode(context=context)
+    sender = rclpy.create_node("state_sender", context=context)
+    for node in (controller, sender):
+        executor.add_node(node)
+    return controller, sender.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+
 def test_a_state_before_the_first_gait_is_a_start_not_a_warning(capfd, monkeypatch):
     """Every normal start sends the placed state before the policy's first gait arrives: the
     controller once warned "no gait yet" at each. It says so only once the gait has been
     missing for GAITLESS_WARNING_AFTER s (here made 0 to see the warning come)."""
-    import rclpy
-
     from rabbit_hzd_controller import hzd_controller_node
     with ros_context() as (context, executor):
-        controller = HZDControllerNode(context=context)
-        sender = rclpy.create_node("state_sender", context=context)
-        for node in (controller, sender):
-            executor.add_node(node)
-        pub = sender.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        controller, pub = _controller_and_state_publisher(context, executor)
         state = _state(0)
         pub.publish(state)
         assert spin_until(executor, lambda: controller.states_received >= 1)
@@ -55,14 +59,8 @@ def test_a_simulator_that_stops_sending_is_named_by_the_controller_within_two_se
     """The states stop (a hand-started sim_node killed with -9 sends nothing again): the
     controller's warning names the simulator (after SIM_SILENT_WALL s of wall time: the unit
     test times it on a fake clock) and counts the silence in its statistics."""
-    import rclpy
-
     with ros_context() as (context, executor):
-        controller = HZDControllerNode(context=context)
-        sender = rclpy.create_node("state_sender", context=context)
-        for node in (controller, sender):
-            executor.add_node(node)
-        pub = sender.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        controller, pub = _controller_and_state_publisher(context, executor)
         for tick in range(3):
             pub.publish(_state(tick * 1_000_000))
         assert spin_until(executor, lambda: controller.states_received >= 3)

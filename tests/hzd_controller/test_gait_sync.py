@@ -61,15 +61,22 @@ def test_decision_sync_holds_a_due_state_until_its_decision_and_applies_it_to_th
     assert answer.torques == reference.compute(q, dq)  # the decision applied to that very state
 
 
-def test_a_decision_that_never_comes_is_given_up_and_gaits_then_apply_on_arrival(gaits):
-    slow, fast, (q, dq) = gaits
+def _holding_a_due_state(alpha, q, dq) -> tuple[FakeClock, GaitSync]:
+    """A lockstep controller (decision_sync, a 2 s timeout, a fake clock) deciding every 20 ticks
+    on ``alpha``, Kd 50, after the states of ticks 0-20: the one of tick 20 is held for its decision."""
     clock = FakeClock()
     sync = GaitSync(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
-    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("alpha", alpha)
     sync.on_gait_part("kd", 50.0)
     sync.on_gait_timing("at_once", 20)
     for tick in range(0, 21):
         sync.on_state(tick * MS, q, dq)
+    return clock, sync
+
+
+def test_a_decision_that_never_comes_is_given_up_and_gaits_then_apply_on_arrival(gaits):
+    slow, fast, (q, dq) = gaits
+    clock, sync = _holding_a_due_state(slow, q, dq)
     for _ in range(4):  # the lockstep simulator sends the held state again while it waits (resend_timeout)
         clock.now += 0.5
         assert sync.on_state(20 * MS, q, dq) == [] and sync.check_held() == []
@@ -244,13 +251,7 @@ def test_a_silent_simulator_is_named_within_a_second_and_no_decision_is_waited_f
     one sends the held state every resend_timeout), so the controller names the simulator,
     not the policy, and counts no lost decision; a state again ends the silence."""
     slow, _fast, (q, dq) = gaits
-    clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
-    sync.on_gait_part("alpha", slow)
-    sync.on_gait_part("kd", 50.0)
-    sync.on_gait_timing("at_once", 20)
-    for tick in range(0, 21):
-        sync.on_state(tick * MS, q, dq)
+    clock, sync = _holding_a_due_state(slow, q, dq)
     clock.now += 0.9
     assert sync.check_held() == []
     clock.now += 0.2
