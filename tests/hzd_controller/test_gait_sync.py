@@ -246,6 +246,31 @@ def test_a_policy_back_after_a_reset_is_logged_without_a_negative_duration(gaits
     assert "placed again" in back.text
 
 
+def test_a_controller_that_never_gets_a_state_says_so_once(gaits):
+    """A gait is in but no state comes (no simulator, or one whose states do not reach this
+    controller): said once, FIRST_STATE_WAIT s after the start, with what it has; never once
+    a state came."""
+    from rabbit_hzd_controller.gait_sync import FIRST_STATE_WAIT
+
+    slow, _fast, (q, dq) = gaits
+    clock = FakeClock()
+    sync = GaitSync(ControllerConfig(), decision_sync=True, clock=clock)
+    sync.on_gait_part("alpha", slow)
+    sync.on_gait_part("kd", 50.0)
+    sync.on_gait_timing("at_once", 20)
+    clock.now += FIRST_STATE_WAIT - 0.1
+    assert sync.check_held() == []
+    clock.now += 0.2
+    (line,) = sync.check_held()
+    assert line.level == "info" and "no state on the joint states yet" in line.text and "a gait is in" in line.text
+    clock.now += 60.0
+    assert sync.check_held() == []  # once
+    other = GaitSync(ControllerConfig(), clock=clock)
+    other.on_state(0, q, dq)  # waits for its gait
+    clock.now += 2 * FIRST_STATE_WAIT
+    assert all("yet" not in a.text for a in other.check_held())  # (its simulator is silent: said as such)
+
+
 def test_a_silent_simulator_is_named_within_a_second_and_no_decision_is_waited_for_meanwhile(gaits):
     """A simulator killed while a state waits for its decision: it sends nothing again (a live
     one sends the held state every resend_timeout), so the controller names the simulator,

@@ -162,6 +162,14 @@ def test_a_rogue_publisher_does_not_keep_the_real_nodes_from_starting():
         assert efforts and all(abs(e - ROGUE_TORQUE) > 1e-9 for row in efforts for e in row)
 
 
+def _stuck(sim: SimNode, controller: HZDControllerNode) -> str:
+    """Where a lockstep walk that stopped stands: what each side received and sent."""
+    return (f"stuck at t = {sim.time:.3f} s; simulator: paired {sim.controller}, torques received "
+            f"{sim.torques_received}, refused {sim.torques_rejected}, states sent {sim.states_published}, re-sends "
+            f"{sim.resends}; controller {controller.source}: states received {controller.states_received}, "
+            f"missing {controller.sync.missing}, {controller.statistics()}")
+
+
 def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_once():
     """The controller is killed mid-walk, a rogue answering every state meanwhile; the stack
     starts a new instance with the key: the simulator pairs with it (logged), and it answers
@@ -178,14 +186,15 @@ def test_a_controller_the_stack_restarts_with_its_key_is_paired_and_answers_at_o
         with ros_context() as (ctx_a, ex_a):
             old = HZDControllerNode(context=ctx_a, pairing_key=key, decision_sync=True)
             ex_a.add_node(old)
-            assert spin_until((executor, ex_a, ex_r), lambda: sim.time >= 0.3, timeout=60.0)
+            assert spin_until((executor, ex_a, ex_r), lambda: sim.time >= 0.3, timeout=60.0), _stuck(sim, old)
         spin_for((executor, ex_r), 0.3)
         t_stopped = sim.time
         assert sim.controller == old.source
         with ros_context() as (ctx_b, ex_b):
             new = HZDControllerNode(context=ctx_b, pairing_key=key, decision_sync=True, decision_timeout=30.0)
             ex_b.add_node(new)
-            assert spin_until((executor, ex_b, ex_r), lambda: sim.time >= t_stopped + 0.1, timeout=60.0)
+            assert spin_until((executor, ex_b, ex_r), lambda: sim.time >= t_stopped + 0.1, timeout=60.0), \
+                _stuck(sim, new)
             assert sim.controller == new.source
             assert new.decisions_timed_out == 0  # (with a 30 s timeout, a wait would have stalled the test)
             assert new.decisions_waited > 0  # it follows the policy's decisions again

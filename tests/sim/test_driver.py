@@ -89,6 +89,34 @@ def test_with_a_pairing_key_only_signed_torques_move_the_robot_in_every_mode(ini
             assert _states(copied) == [] and f"a node that copied the paired controller's id {C}" in copied[-1].text
 
 
+def test_one_nodes_refused_torques_never_hide_anothers_in_the_log(initial_state):
+    """A rogue refused every tick and the real controller refused once (started with another
+    key): both refusals are logged, each throttled on its own; past REFUSED_NAMED sources
+    (a node inventing a name per reply) the rest share one line."""
+    from rabbit_msgs_py.log_lines import LineLogger
+    from rabbit_sim.stepping.rules import REFUSED_NAMED
+
+    class Lines(list):
+        def error(self, text):
+            self.append(text)
+
+    lines = Lines()
+    log = LineLogger(lines)
+    driver = _driver(initial_state, pairing_key=new_key())
+    other = PairingKey.parse(new_key())
+    for _ in range(3):
+        for action in driver.on_torques(0, "rogue/0000", [37.0] * 4, 100.0):
+            log(action)
+    for action in driver.on_torques(0, other.sign(C, 0, ZERO), ZERO, 100.0):
+        log(action)
+    assert len(lines) == 2 and "rogue/0000" in lines[0] and C in lines[1]
+    for n in range(3 * REFUSED_NAMED):
+        for action in driver.on_torques(0, f"made_up/{n:04d}", ZERO, 100.0):
+            log(action)
+    assert len(lines) == 2 + (REFUSED_NAMED - 2) + 1  # the named ones, then one line for all the rest
+    assert driver.stats.torques_rejected == 4 + 3 * REFUSED_NAMED  # every refusal counted
+
+
 def test_release_controller_pairs_the_next_to_answer_and_says_so(initial_state):
     driver = _driver(initial_state)
     driver.on_torques(0, C, ZERO, 100.0)

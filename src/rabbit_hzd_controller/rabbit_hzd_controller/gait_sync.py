@@ -92,6 +92,10 @@ silent: a live simulator sends the state whose reply it waits for again every
 ``resend_timeout`` (0.2 s by default) in lockstep and paced mode, and a new one every tick in
 realtime, so only a simulator that stopped, died or was paused goes this long without one."""
 
+FIRST_STATE_WAIT = 5.0
+"""wall s after the start without any state after which the controller says so, once (a
+simulator not started, in another namespace or domain, or one whose states do not reach it)."""
+
 SIM_MODE_WAIT = 2.0
 """wall s: a controller following the simulator's ``/sim/mode`` answers no state before it
 comes, for at most this long after the first state (a simulator that never says)."""
@@ -145,6 +149,8 @@ class GaitSync:
         self._state_stamp = 0  # ns: that state's stamp
         self._sim_silent_since: float | None = None  # the simulator is silent (logged): since this wall s
         self.simulator_silences = 0  # times the simulator was found silent (logged)
+        self._started_wall = clock()  # wall s (clock): no state before FIRST_STATE_WAIT past this is said
+        self._said_no_state = False
         self._out: list[Action] = []
 
     @property
@@ -278,11 +284,18 @@ class GaitSync:
                                  f"{', '.join(f'{a:.3f}' for a in (self.alpha or [])[:4])}, ...)")
 
     def check_held(self) -> list[Action]:
-        """Timer: a simulator that sent no state for :data:`SIM_SILENT_WALL` s (named, once per
+        """Timer: no state at all :data:`FIRST_STATE_WAIT` s after the start (said once); a
+        simulator that sent no state for :data:`SIM_SILENT_WALL` s (named, once per
         silence; while it lasts no decision is waited for, as none is waited on); a due
         decision that did not come within ``decision_timeout`` s; a simulator that did not say
         how it steps within :data:`SIM_MODE_WAIT` s of its first state."""
         self._out = []
+        if (self._state_wall is None and not self._said_no_state
+                and self.clock() - self._started_wall > FIRST_STATE_WAIT):
+            self._said_no_state = True
+            self._log("info", f"no state on the joint states yet, {FIRST_STATE_WAIT:g} s after the start "
+                              f"({'a gait is in' if not self.missing else 'waiting for ' + ', '.join(self.missing)}): "
+                              "is sim_node running in this namespace and domain?")
         if (self._state_wall is not None and self._sim_silent_since is None
                 and self.clock() - self._state_wall > SIM_SILENT_WALL):
             self._sim_silent_since = self._state_wall

@@ -34,6 +34,7 @@ from .rules import (
     FOLLOW_PATIENCE,
     RECORDER_LAG,
     RECORDER_RESEND,
+    REFUSED_NAMED,
     REPLY_GRACE,
     SILENCE_WARNING_AFTER,
     Admit,
@@ -155,6 +156,7 @@ class SimDriver:
         self._recorder_waits_since: float | None = None  # wall s the simulation began to wait for the recorder
         self._recorder_ignored = False  # a followed recorder did not keep up: none followed until all have left
         self._unpaired: str | None = None  # no key: the last controller refused since a reply was accepted
+        self._refused: dict[str, None] = {}  # sources refused so far (the first REFUSED_NAMED), each logged apart
         self._shapes = RobotShapes(sim.model) if shapes else None
         self._marker_period = marker_period_ticks(settings.markers_rate, sim.timestep) if shapes else 0
         self.markers_wanted: Callable[[], bool] = lambda: True  # the node: is anyone subscribed to the markers?
@@ -405,13 +407,23 @@ class SimDriver:
             else:
                 who = f"a node naming itself {source}" if source else "an unnamed publisher"
             self._log("error", f"ignoring torques from {who} on {self._topic(topics.JOINT_TORQUES)}: {why}", 5.0,
-                      "refused")
+                      self._refusal_key(source))
             return False
         self._unpaired = None
         if verdict is Admit.PAIR:
             self._log("info", f"paired with controller {source} at t = {self.sim.time:.3f} s"
                               + (" (signed with this stack's pairing key)" if self.pairing.key is not None else ""))
         return True
+
+    def _refusal_key(self, source: str) -> str:
+        """The throttle key of a refusal line: one per source for the first
+        :data:`REFUSED_NAMED` sources (a rogue's lines never hide another node's, the real
+        controller's with a wrong key included), one for all later ones (a node inventing a
+        name per reply cannot flood the log)."""
+        if source in self._refused or len(self._refused) < REFUSED_NAMED:
+            self._refused[source] = None
+            return f"refused {source}"
+        return "refused"
 
     def _must_hold(self) -> bool:
         """Lockstep/paced: the physics may not step now (paused, or a recorder lags)."""

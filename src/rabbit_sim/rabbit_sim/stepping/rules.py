@@ -51,6 +51,9 @@ SILENCE_WARNING_AFTER = 2.0
 """s (wall): lockstep says why no torque comes once the due state has waited this long (twice
 the controller's liveliness lease, so a stopped or killed one is named as such); the state
 goes out again every ``resend_timeout`` meanwhile."""
+REFUSED_NAMED = 8
+"""Sources of refused torque replies whose log lines are throttled apart (5 s each): one
+node's refusals never hide another's; the sources after these share one throttle."""
 REPLY_GRACE = 0.0006
 """s: a realtime tick whose reply is still on its way waits this long for it (the reply's
 callback then runs the tick) before stepping on the previous torque."""
