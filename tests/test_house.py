@@ -99,6 +99,13 @@ def test_the_readme_is_a_short_front_door():
     assert [n for n, line in enumerate(lines, 1) if len(line) > 120 and not line.startswith("| ")] == []
 
 
+def test_no_test_file_passes_600_lines():
+    """tests/ is laid out by concern: a file a reader can hold (issue 74)."""
+    long = {name: n for name in tracked("tests") if name.endswith(".py")
+            and (n := len((ROOT / name).read_text().splitlines())) > 600}
+    assert not long, f"test files over 600 lines (split them by concern): {long}"
+
+
 def test_nodes_are_thin_and_scripts_are_shims():
     sim_node = (ROOT / "src/rabbit_sim/rabbit_sim/sim_node.py").read_text()
     assert len(sim_node.splitlines()) <= 300 and "noqa: E402" not in sim_node
