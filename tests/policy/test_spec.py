@@ -347,7 +347,7 @@ def test_a_checkpoint_runs_as_its_spec_builds_it_a_residual_on_the_rule_included
     from rabbit_policy.runtime.network import PolicyCheckpoint
     from rabbit_policy.spec import dump_spec
     from rabbit_policy.spec.convert import learned_spec
-    from test_recovery import _zero_residual_on_recovery_file
+    from test_recovery_overlay import _zero_residual_on_recovery_file
 
     for base in ("recovery", "recovery_gated"):
         pt = tmp_path / f"{base}.pt"

@@ -50,6 +50,55 @@ def test_reset_service_puts_the_robot_back_on_the_gait():
         assert nodes["controller"].controller.steps >= 2  # restarted, walking again
 
 
+def test_a_strangers_reset_and_pause_are_logged_with_when_and_who(capfd):
+    """A node of another process (its own context) calls /sim/reset and /sim/pause: the
+    simulator logs each with the sim time and the nodes holding a client of the service (the
+    caller among them); a burst is one line a second, the next line counting the calls between
+    (every call counted, whatever the timing)."""
+    import re
+
+    import rclpy
+    from std_srvs.srv import SetBool
+
+    from fake_clock import FakeClock
+    from rabbit_msgs_py.service_callers import LOOKUP_EVERY, CallerLog, service_clients
+
+    with ros_context() as (context, executor), ros_context() as (ctx_s, ex_s):
+        sim = SimNode(context=context)
+        executor.add_node(sim)
+        stranger = rclpy.create_node("stranger", context=ctx_s)
+        ex_s.add_node(stranger)
+        reset = stranger.create_client(Trigger, topics.RESET_SERVICE)
+        pause = stranger.create_client(SetBool, topics.PAUSE_SERVICE)
+        assert spin_until((executor, ex_s), lambda: reset.service_is_ready() and pause.service_is_ready(), 30.0)
+        assert spin_until((executor, ex_s), lambda: all(service_clients(sim, s) == ["/stranger"] for s in (
+            topics.RESET_SERVICE, topics.PAUSE_SERVICE)), 30.0)  # the graph has the caller (the call may beat it)
+        for client, request in ((reset, Trigger.Request()), (reset, Trigger.Request()), (reset, Trigger.Request()),
+                                (pause, SetBool.Request(data=True))):
+            future = client.call_async(request)
+            assert spin_until((executor, ex_s), future.done, 30.0)
+        spin_for((executor, ex_s), LOOKUP_EVERY + 0.1)
+        future = reset.call_async(Trigger.Request())
+        assert spin_until((executor, ex_s), future.done, 30.0)
+        lines = [line for line in capfd.readouterr().err.splitlines() if " called (" in line]
+        resets = [line for line in lines if "/sim/reset called (reset)" in line]
+        (paused,) = [line for line in lines if "/sim/pause called (pause)" in line]
+        assert "at t = 0.000 s; nodes with a client of it: /stranger" in resets[0] and "/stranger" in paused
+        # every call counted, however fast this machine made the burst: a line each, or in the next line's count
+        more = [int(m.group(1)) if (m := re.search(r"\((\d+) more calls since the last line\)$", line)) else 0
+                for line in resets]
+        assert len(resets) + sum(more) == 4, resets
+        clock = FakeClock()  # the rule itself, on this node's graph: a line a second, the calls between counted
+        log = CallerLog(sim, clock)
+        for _ in range(3):
+            log(topics.RESET_SERVICE, "reset", 1.0)
+        clock.now += LOOKUP_EVERY
+        log(topics.RESET_SERVICE, "reset", 2.0)
+        lines = [line for line in capfd.readouterr().err.splitlines() if " called (" in line]
+        assert len(lines) == 2 and "t = 1.000 s" in lines[0] and "/stranger" in lines[0]
+        assert "t = 2.000 s" in lines[1] and lines[1].endswith("(2 more calls since the last line)")
+
+
 def test_resets_never_wedge_lockstep():
     """Back-to-back resets, and a reset while paused at t = 0 followed by unpausing: the
     placed state equals the one the controller already answered, yet it is answered (the

@@ -38,6 +38,7 @@ from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.service_callers import CallerLog
 from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
 from rabbit_msgs_py.timers import OneShot, wall_timer
@@ -78,6 +79,7 @@ class SimNode(Node):
         self._lock = threading.RLock()
         self._marker_builder = MarkerArrayBuilder()
         self._log = LineLogger(self.get_logger())  # the core's lines: throttled by key
+        self._callers = CallerLog(self)  # who called /sim/reset or /sim/pause, in the log
         self.viewer = None
         if self.settings.viewer:
             try:
@@ -226,6 +228,7 @@ class SimNode(Node):
         self._run(self.driver.on_recorded, stamp_to_ns(msg.clock))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._callers(topics.RESET_SERVICE, "reset", self.sim.time)
         with self._lock:
             source = self.resolve_topic_name(topics.INITIAL_STATE)
             response.success, response.message, actions = self.driver.on_reset(source)
@@ -233,6 +236,7 @@ class SimNode(Node):
         return response
 
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        self._callers(topics.PAUSE_SERVICE, "pause" if request.data else "resume", self.sim.time)
         with self._lock:
             response.message, actions = self.driver.on_pause(bool(request.data))
             self._do(actions)
