@@ -11,8 +11,8 @@ from typing import Callable
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 LOOKUP_EVERY = 1.0
-"""s (wall): the graph is read at most this often per service (a flood of calls costs no
-graph walk per call); calls in between are logged with the names read last."""
+"""s (wall): at most one line, and one read of the graph, this often per service (a flood of
+calls costs no graph walk per call); the calls in between are counted in the next line."""
 
 
 def service_clients(node, service: str) -> list[str]:
@@ -39,7 +39,6 @@ class CallerLog:
 
     def __init__(self, node, clock: Callable[[], float] = time.monotonic) -> None:
         self._node, self._clock = node, clock
-        self._read: dict[str, tuple[float, list[str]]] = {}  # service -> (wall s read, names)
         self._said: dict[str, float] = {}  # service -> wall s of its last line
         self._unsaid: dict[str, int] = {}  # service -> calls since then not in a line
 
@@ -48,10 +47,7 @@ class CallerLog:
         if now - self._said.get(service, -LOOKUP_EVERY) < LOOKUP_EVERY:
             self._unsaid[service] = self._unsaid.get(service, 0) + 1
             return
-        read_at, names = self._read.get(service, (-LOOKUP_EVERY, []))
-        if now - read_at >= LOOKUP_EVERY:
-            names = service_clients(self._node, service)
-            self._read[service] = (now, names)
+        names = service_clients(self._node, service)
         self._said[service] = now
         more = self._unsaid.pop(service, 0)
         full = self._node.resolve_service_name(service)
