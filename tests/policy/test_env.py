@@ -541,6 +541,26 @@ def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on
     assert 6 <= pushed <= 18
 
 
+def test_decided_episodes_push_every_one_where_the_screen_decides_forward_and_backward_alike():
+    from rabbit_policy.evaluation.push_recovery import classic_margin
+
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="decided")
+    directions = []
+    for seed in range(24):
+        env.reset(seed=seed)
+        scenario = env.loop.scenario
+        assert scenario.pushes == () and len(scenario.phase_pushes) == 1 and len(scenario.schedule) >= 2
+        push = scenario.phase_pushes[0]
+        command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
+        direction = 1 if push.impulse > 0 else -1
+        low, high = (0.8, 1.6) if direction > 0 else (1.2, 2.4)
+        assert low - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= high + 1e-9
+        directions.append(direction)
+    assert 6 <= directions.count(1) <= 18
+    with pytest.raises(ValueError, match="backward_scale must be > 0"):
+        replace(DISTRIBUTIONS["decided"], backward_scale=0.0)
+
+
 def test_rgb_array_on_a_headless_machine_picks_an_offscreen_backend_itself():
     """No display and no MUJOCO_GL: importing the package picks EGL (or OSMesa) before mujoco
     is imported, so ``render_mode="rgb_array"`` renders without GLFW's warnings; with neither

@@ -52,6 +52,11 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
                                                               "seed-1/run/evaluated/00001.yaml"]
     for row in screen["candidates"]:  # every candidate on the same paired trials
         assert {k: len(v) for k, v in row["outcomes"].items()} == {"forward": 2, "backward": 2, "changes": 2}
+    assert screen["select"] == "heldout"  # each seed's candidate picked on trials that are not the screen's
+    for seed in (0, 1):
+        [picked] = screen["selection"][f"seed-{seed}"]
+        assert picked["candidate"] == f"seed-{seed}/run/evaluated/00001.yaml" and picked["of"] == 6
+        assert f"select, seed {seed}: 1: {picked['passed']}/6 held-out trials passed" in run.stdout
     assert screen["level"] == 0.05 / 2  # the best of two seeds' candidates
     assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025,
                                      "over_seeds": screen["over_seeds"]}
@@ -85,6 +90,7 @@ def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
         preset = load_preset(name)
         assert preset["start"] == "zero" and preset["evaluation"] in ("quick", "full")
         assert preset["screen"]["trials"] in ("quick", "full") and preset["screen"]["candidates"] >= 1
+        assert preset["screen"]["select"] in ("acceptance", "heldout")
     shipped = load_preset("shipped")
     run = yaml.safe_load((ROOT / "config" / "train" / "shipped_es.yaml").read_text())
     for key in ("pairs", "episodes", "max_steps", "sigma", "lr", "weight_decay", "distribution", "fall_penalty"):
@@ -94,8 +100,11 @@ def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
                                                                                       "--keep-evaluated"]
     bad = tmp_path / "bad.yaml"
     bad.write_text("start: packaged\ntrain: {}\n")
-    good = "start: zero\nseeds: [0]\ntrain: {}\nscreen: {candidates: 1, trials: full}\nevaluation: quick\n"
-    cases = {"screen: {candidates: 0, trials: full}": "screen is {candidates: a whole number >= 1",
+    good = ("start: zero\nseeds: [0]\ntrain: {}\nscreen: {candidates: 1, trials: full, select: acceptance}\n"
+            "evaluation: quick\n")
+    cases = {"screen: {candidates: 0, trials: full, select: acceptance}": "screen is {candidates: a whole number >= 1",
+             "screen: {candidates: 1, trials: full, select: best}": "select: one of ('acceptance', 'heldout')",
+             "screen: {candidates: 1, trials: full}": "screen is {candidates",
              "seeds: [0, 0]": "seeds is a list of distinct whole numbers", "seeds: []": "seeds is a list",
              "train: {seed: 3}": "the seeds are the preset's seeds", "start: scratch": "start is one of"}
     presets = [("nonexistent", "no preset 'nonexistent'"), (str(bad), "must have exactly the keys")]
@@ -129,6 +138,32 @@ def test_the_screen_takes_the_candidates_the_training_ranks_best(tmp_path):
             (run / "evaluated" / f"{i:05d}.yaml").write_text("")
     assert [p.name for p in candidates(run, 3)] == ["00015.yaml", "00010.yaml", "00005.yaml"]
     assert candidates(tmp_path / "empty", 2) == [tmp_path / "empty" / "policy.yaml"]
+
+
+def test_heldout_selection_picks_the_evaluated_spec_passing_most_trials_then_fewest_failed_checks(tmp_path):
+    """``heldout_candidates``: every kept evaluated spec walks the held-out selection trials; the
+    most passed wins, a tie goes to fewer failed acceptance checks, then to the later one."""
+    import shutil
+
+    from rabbit_policy.commands.reproduce import heldout_candidates
+    from rabbit_policy.evaluation.shipping import ScreenTrials
+
+    run = tmp_path / "run"
+    (run / "evaluated").mkdir(parents=True)
+    learned = packaged_spec("learned")
+    weights = learned.parent / load_spec(learned).network.weights.file
+    shutil.copyfile(weights, run / "evaluated" / weights.name)
+    for i in (5, 10, 15):
+        shutil.copyfile(learned, run / "evaluated" / f"{i:05d}.yaml")
+    lines = ["iteration,wall_s,env_steps,passed,failures,total_error,worst_speed_error,falls,slowest_reach_s",
+             "0,1,0,True,0,1.0,0.01,0,3.0", "5,1,10,True,0,1.0,0.01,0,3.0", "10,1,20,False,1,0.5,0.01,0,3.0",
+             "15,1,30,True,0,1.2,0.01,0,3.0"]
+    (run / "eval.csv").write_text("\n".join(lines) + "\n")
+    trials = ScreenTrials.selection(quick=True)
+    picked, scored = heldout_candidates(run, 2, trials, map)
+    assert [s["iteration"] for s in scored] == [5, 10, 15] and len({s["passed"] for s in scored}) == 1  # one spec
+    assert [p.name for p in picked] == ["00015.yaml", "00005.yaml"]  # a tie: fewest failed checks, then the later
+    assert heldout_candidates(tmp_path / "empty", 1, trials, map) == ([tmp_path / "empty" / "policy.yaml"], [])
 
 
 def test_what_ships_from_a_checkout_with_uncommitted_changes_is_refused_or_records_the_diff(tmp_path):

@@ -46,13 +46,13 @@ def test_a_candidate_ships_only_when_significantly_better_after_the_bonferroni_d
 
 
 @pytest.mark.unit
-def test_the_trials_scale_their_pushes_to_classics_margin_and_count_700():
+def test_the_trials_scale_their_pushes_to_classics_margin_and_count_at_least_288_changes():
     trials = ScreenTrials()
     assert trials.impulses(1.0, "forward") == [round(1.0 * 16), round(1.3 * 16)]
     assert trials.impulses(1.0, "backward") == [-round(1.5 * 9), -round(2.0 * 9)]
     assert trials.impulses(1.05, "forward") == [round(classic_margin(1.05, 1)), round(1.3 * classic_margin(1.05, 1))]
-    assert (trials.count("forward"), trials.count("backward"), trials.count("changes")) == (320, 320, 60)
-    for bad in ({"phases": 0}, {"change_speeds": (1.0,)}, {"horizon": 0.0}):
+    assert (trials.count("forward"), trials.count("backward"), trials.count("changes")) == (320, 320, 300)
+    for bad in ({"phases": 0}, {"change_speeds": (1.0,)}, {"horizon": 0.0}, {"phase_offset": 1.0}):
         with pytest.raises(ValueError):
             ScreenTrials(**bad)
 
@@ -74,3 +74,22 @@ def test_each_trial_is_judged_by_the_margins_and_the_evaluations_rules_in_a_fixe
     assert counted["outcomes"] == expected
     assert counted["of"] == 4 + 2 + 2 and counted["passed"] == sum(map(sum, expected.values()))
     assert not all(expected["forward"])  # twice classic's margin is too much: the outcomes differ
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize("quick", [False, True])
+def test_the_selection_trials_share_no_trial_with_the_screen(quick):
+    """A seed's candidate is picked on trials none of which the screen walks: no (speed, phase)
+    push and no (from, to, phase) change in common."""
+    screen = ScreenTrials.quick() if quick else ScreenTrials()
+    selection = ScreenTrials.selection(quick=quick)
+
+    def pushes(t):
+        return {(v, round(p, 6)) for v in t.speeds for p in t.push_phases()}
+
+    def changes(t):
+        return {(a, b, p) for a in t.change_speeds for b in t.change_speeds if a != b for p in t.change_phases}
+
+    assert pushes(selection) and changes(selection)
+    assert not pushes(selection) & pushes(screen) and not changes(selection) & changes(screen)
+    assert selection.push_phases()[0] == 0.5 / selection.phases

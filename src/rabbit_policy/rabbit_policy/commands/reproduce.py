@@ -11,8 +11,10 @@ learned controller, everything under ``DIR`` (never into the package):
    run evaluates the acceptance checks every ``eval_every`` generations: its held-out
    learning curve (``DIR/curves.png``, every seed);
 2. **screen**: the start, the packaged learned controller (when it is not the start) and each
-   seed's ``screen.candidates`` evaluated specs its acceptance ranks best (else its last
-   ``policy.yaml``), each on the acceptance checks (``evaluation``: ``quick`` or ``full``) and
+   seed's ``screen.candidates`` evaluated specs (``screen.select``: ``acceptance``, those its
+   acceptance ranks best; ``heldout``, those that pass most of the held-out selection trials,
+   :meth:`~rabbit_policy.evaluation.shipping.ScreenTrials.selection`, none of them the screen's;
+   no evaluated spec: its last ``policy.yaml``), each on the acceptance checks (``evaluation``: ``quick`` or ``full``) and
    the paired screen trials (:mod:`rabbit_policy.evaluation.shipping`; ``screen.trials``:
    ``quick`` or ``full``), ``DIR/screen.json``; the candidate with most trials passed is
    chosen, and it ships only on a significant improvement over the start (McNemar's exact
@@ -47,8 +49,9 @@ from rabbit_msgs_py.cli import yaml_problem
 from rabbit_policy.evaluation.statistics import format_rate
 
 PRESET_KEYS = ("start", "seeds", "train", "screen", "evaluation")
-SCREEN_KEYS = ("candidates", "trials")
+SCREEN_KEYS = ("candidates", "trials", "select")
 EVALUATIONS = ("quick", "full")
+SELECTIONS = ("acceptance", "heldout")
 STARTS = ("zero", "calibrated", "packaged")
 
 
@@ -105,9 +108,9 @@ def load_preset(name: str) -> dict:
     screen = data["screen"]
     if (not isinstance(screen, dict) or set(screen) != set(SCREEN_KEYS) or screen["trials"] not in EVALUATIONS
             or not isinstance(screen["candidates"], int) or isinstance(screen["candidates"], bool)
-            or screen["candidates"] < 1):
+            or screen["candidates"] < 1 or screen["select"] not in SELECTIONS):
         raise ValueError(f"preset {path}: screen is {{candidates: a whole number >= 1 per seed, trials: one of "
-                         f"{EVALUATIONS}}}")
+                         f"{EVALUATIONS}, select: one of {SELECTIONS}}}")
     return {**data, "path": str(path)}
 
 
@@ -214,20 +217,41 @@ def _test_cell(test: dict | None) -> str:
     return f"+{test['only_a']} / -{test['only_b']}, p = {test['p_value']:.3g}"
 
 
+def evaluated(run: Path) -> list[dict]:
+    """The run's evaluated specs it kept, in training order: ``eval.csv``'s rows after the
+    start's, each with its ``path`` (``evaluated/ITERATION.yaml``)."""
+    import csv
+
+    if not (run / "eval.csv").is_file():
+        return []
+    with open(run / "eval.csv") as stream:
+        rows = [{**r, "path": run / "evaluated" / f"{int(r['iteration']):05d}.yaml"} for r in csv.DictReader(stream)]
+    return [r for r in rows if int(r["iteration"]) > 0 and r["path"].is_file()]
+
+
 def candidates(run: Path, count: int) -> list[Path]:
     """The run's candidate specs: the ``count`` evaluated ones its acceptance ranks best
     (``eval.csv``: fewest failed checks, then the smallest summed error; the start's row
     left out), else its last ``policy.yaml``."""
-    import csv
+    rows = sorted(evaluated(run), key=lambda r: (int(r["failures"]), float(r["total_error"]), -int(r["iteration"])))
+    return [r["path"] for r in rows[:count]] or [run / "policy.yaml"]
 
-    rows = []
-    if (run / "eval.csv").is_file():
-        with open(run / "eval.csv") as stream:
-            rows = [r for r in csv.DictReader(stream) if int(r["iteration"]) > 0
-                    and (run / "evaluated" / f"{int(r['iteration']):05d}.yaml").is_file()]
-    rows.sort(key=lambda r: (int(r["failures"]), float(r["total_error"]), -int(r["iteration"])))
-    chosen = [run / "evaluated" / f"{int(r['iteration']):05d}.yaml" for r in rows[:count]]
-    return chosen or [run / "policy.yaml"]
+
+def heldout_candidates(run: Path, count: int, trials, map_fn) -> tuple[list[Path], list[dict]]:
+    """The run's candidate specs picked on held-out ``trials``: the ``count`` evaluated ones
+    that pass most of them (then fewest failed acceptance checks, then the later), else its
+    last ``policy.yaml``; and each evaluated spec's counts (``candidate``, ``passed``, ``of``,
+    ``rates``, ``failures``), in training order."""
+    from rabbit_policy.evaluation.shipping import measure
+    from rabbit_policy.spec import load_controller
+
+    scored = []
+    for row in evaluated(run):
+        counted = measure(load_controller(row["path"]), trials, map_fn)
+        scored.append({"candidate": row["path"], "iteration": int(row["iteration"]), "failures": int(row["failures"]),
+                       **{k: counted[k] for k in ("passed", "of", "rates")}})
+    ranked = sorted(scored, key=lambda r: (-r["passed"], r["failures"], -r["iteration"]))
+    return [r["candidate"] for r in ranked[:count]] or [run / "policy.yaml"], scored
 
 
 def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
@@ -318,12 +342,24 @@ def main(argv: list[str] | None = None) -> int:
     screened = [("start", starts[0])]
     if preset["start"] != "packaged":
         screened.append(("packaged", packaged_spec("learned")))
-    screened += [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], preset["screen"]["candidates"])]
-    print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance and {trials.count('forward')} + "
-          f"{trials.count('backward')} pushes and {trials.count('changes')} changes, paired)", flush=True)
-    rows = []
+    rows, selection = [], {}
     backend = open_backend(parser, args)
     try:
+        count = preset["screen"]["candidates"]
+        if preset["screen"]["select"] == "acceptance":
+            screened += [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], count)]
+        else:
+            held_out = ScreenTrials.selection(quick=preset["screen"]["trials"] == "quick")
+            for r in runs:
+                picked, scored = heldout_candidates(r["run"], count, held_out, backend.map)
+                screened += [(str(p.relative_to(out)), p) for p in picked]
+                selection[f"seed-{r['seed']}"] = [{**s, "candidate": str(s["candidate"].relative_to(out))}
+                                                  for s in scored]
+                print(f"  select, seed {r['seed']}: " + ", ".join(
+                    f"{s['iteration']}: {s['passed']}/{s['of']}" for s in scored) + " held-out trials passed; "
+                    + ", ".join(str(p.relative_to(out)) for p in picked), flush=True)
+        print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance and {trials.count('forward')} + "
+              f"{trials.count('backward')} pushes and {trials.count('changes')} changes, paired)", flush=True)
         for name, path in screened:
             rows.append({"candidate": name, **measure_candidate(path, criteria, trials, backend.map)})
             row = rows[-1]
@@ -347,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
           f"{seeds['gain_over_start']['ci95'][1]:+.3f}]", flush=True)
     (out / "screen.json").write_text(strict_json.dumps({
         "candidates": rows, "best": best["candidate"], "beats_start": ships, "why_not": why, "tests": tests,
-        "level": level, "shipped": chosen_name, "over_seeds": seeds}, indent=2) + "\n")
+        "level": level, "shipped": chosen_name, "over_seeds": seeds, "select": preset["screen"]["select"],
+        "selection": selection}, indent=2) + "\n")
     spec = load_spec(chosen)
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)

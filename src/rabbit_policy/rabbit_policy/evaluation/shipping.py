@@ -23,7 +23,7 @@ checks. :func:`screen_rank` orders candidates (most trials passed, then fewest f
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.evaluation.robustness import (MapFn, RobustnessConfig, phase_times, push_survived,
@@ -41,34 +41,53 @@ ALPHA = 0.05
 @dataclass(frozen=True)
 class ScreenTrials:
     """The screen's trials. Pushes: at ``speeds`` (m/s), ``forward``/``backward`` multiples of
-    classic's margin, ``phases`` evenly spaced phases of the first step after ``settle`` s, each
-    push ``push_duration`` s long, survived when no fall or stall follows within ``horizon`` s.
-    Changes: every ordered pair of ``change_speeds`` (m/s) at each of ``change_phases`` of the
-    step after ``change_settle`` s, passed when reached within ``reach_within`` s."""
+    classic's margin, ``phases`` evenly spaced phases of the first step after ``settle`` s (the
+    k-th at ``(k + phase_offset) / phases``), each push ``push_duration`` s long, survived when
+    no fall or stall follows within ``horizon`` s. Changes: every ordered pair of
+    ``change_speeds`` (m/s) at each of ``change_phases`` of the step after ``change_settle`` s,
+    passed when reached within ``reach_within`` s. The default is the ship screen (640 pushes,
+    300 changes); :meth:`selection` the held-out trials a seed's candidate is picked on."""
 
     speeds: tuple[float, ...] = (0.75, 0.95, 1.05, 1.25, 1.35)
     forward: tuple[float, ...] = (1.0, 1.3)
     backward: tuple[float, ...] = (1.5, 2.0)
     phases: int = 32
+    phase_offset: float = 0.0
     settle: float = 3.0
     horizon: float = 5.0
     push_duration: float = 0.1
     change_speeds: tuple[float, ...] = (0.75, 0.85, 0.95, 1.15, 1.25, 1.45)
-    change_phases: tuple[float, ...] = (0.125, 0.625)
+    change_phases: tuple[float, ...] = tuple(round((k + 0.3) / 10, 2) for k in range(10))
     change_settle: float = 6.0
     change_horizon: float = 6.0
     reach_within: float = REACH_WITHIN
 
     def __post_init__(self) -> None:
         if (not self.speeds or self.phases < 1 or self.horizon <= 0 or self.push_duration <= 0
-                or len(self.change_speeds) == 1 or self.reach_within <= 0):
-            raise ValueError("screen trials need speeds, >= 1 phase, positive durations and no single change speed")
+                or len(self.change_speeds) == 1 or self.reach_within <= 0 or not 0.0 <= self.phase_offset < 1.0):
+            raise ValueError("screen trials need speeds, >= 1 phase, a phase offset in [0, 1), positive durations "
+                             "and no single change speed")
 
     @classmethod
     def quick(cls) -> ScreenTrials:
         """One speed, one multiple per direction, two phases, two changes (tests, the tiny preset)."""
         return cls(speeds=(1.05,), forward=(1.0,), backward=(1.5,), phases=2, horizon=2.0,
                    change_speeds=(0.85, 1.15), change_phases=(0.125,), change_settle=3.0, change_horizon=4.0)
+
+    @classmethod
+    def selection(cls, quick: bool = False) -> ScreenTrials:
+        """Held-out trials to pick a seed's candidate on, none of them the screen's (nor, with
+        ``quick``, :meth:`quick`'s): pushes at other speeds and between the screen's phases (96),
+        changes between other speeds at other phases (40); ``quick``: 4 pushes and 2 changes."""
+        if quick:
+            return replace(cls.quick(), speeds=(1.15,), phase_offset=0.5, change_speeds=(0.92, 1.08),
+                           change_phases=(0.375,))
+        return cls(speeds=(0.85, 1.15, 1.3), phases=8, phase_offset=0.5,
+                   change_speeds=(0.78, 0.92, 1.08, 1.22, 1.38), change_phases=(0.375, 0.875))
+
+    def push_phases(self) -> list[float]:
+        """The pushes' phases of a step (0-1)."""
+        return [(k + self.phase_offset) / self.phases for k in range(self.phases)]
 
     def impulses(self, speed: float, direction: str) -> list[int]:
         """The pushes' impulses (N s, signed, whole) at ``speed`` in ``direction``."""
@@ -87,7 +106,7 @@ def screen_outcomes(policy: Policy, trials: ScreenTrials = ScreenTrials(), map_f
     policy does not walk unpushed counts every trial that starts there as failed."""
     config = RobustnessConfig(push_duration=trials.push_duration, push_horizon=trials.horizon,
                               transition_horizon=trials.change_horizon, reach_within=trials.reach_within)
-    phases = [k / trials.phases for k in range(trials.phases)]
+    phases = trials.push_phases()
     jobs, slots = [], []
     outcomes: dict[str, list[bool]] = {family: [False] * trials.count(family) for family in FAMILIES}
     index = dict.fromkeys(FAMILIES, 0)

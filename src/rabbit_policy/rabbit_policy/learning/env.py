@@ -197,6 +197,9 @@ class EpisodeDistribution:
         a curriculum around the margin at every speed.
     backward_fraction: with ``relative_impulse``, the probability that the push is backward
         (else forward; otherwise either way is equally likely).
+    backward_scale: with ``relative_impulse``, a backward push's multiples of the margin are
+        ``backward_scale`` x [min, max] (the recovery rule carries backward pushes far beyond
+        classic's margin, so the pushes whose outcome is decided lie further out there).
     frictions, torso_mass_scales, variants, torque_delays: the model and the delay, each
         drawn uniformly from its tuple (repeat an entry to weight it; None friction: the
         packaged one).
@@ -211,6 +214,7 @@ class EpisodeDistribution:
     push_timing: str = "time"
     relative_impulse: bool = False
     backward_fraction: float = 0.5
+    backward_scale: float = 1.0
     frictions: tuple[float | None, ...] = (None,)
     torso_mass_scales: tuple[float, ...] = (1.0,)
     variants: tuple[str, ...] = ("paper",)
@@ -222,6 +226,8 @@ class EpisodeDistribution:
             raise ValueError(f"push_timing must be time or phase, got {self.push_timing!r}")
         if not 0.0 <= self.backward_fraction <= 1.0:
             raise ValueError(f"backward_fraction must be in [0, 1], got {self.backward_fraction}")
+        if not self.backward_scale > 0.0:
+            raise ValueError(f"backward_scale must be > 0, got {self.backward_scale}")
         if not 0.0 <= self.min_impulse <= self.max_impulse:
             raise ValueError(f"impulses must satisfy 0 <= min_impulse <= max_impulse, got {self.min_impulse}, "
                              f"{self.max_impulse}")
@@ -263,6 +269,14 @@ DISTRIBUTIONS = {
     # learning issue's measurement)
     "changes": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.5, push_timing="phase",
                                    relative_impulse=True, min_impulse=0.5, max_impulse=1.5,
+                                   torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
+    # changes' commands with a push in every episode where the screen decides its outcome:
+    # forward 0.8-1.6x classic's margin, backward 1.2-2.4x (the screen pushes at 1.0 / 1.3x and
+    # 1.5 / 2.0x), either way alike, at a phase of a step (the counted preset's seeds traded
+    # forward pushes for backward ones: in changes one episode in four is pushed forward and few
+    # of those are decided; docs/learning.md, 2026-12-02 (second))
+    "decided": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
+                                   relative_impulse=True, min_impulse=0.8, max_impulse=1.6, backward_scale=1.5,
                                    torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
 }
 """Named episode distributions (``scripts/train.py --episodes``)."""
@@ -324,7 +338,9 @@ class EpisodeConfig:
                                         "noisy speeds), pushes (a 6-20 N s push either way in every episode) or "
                                         "recovery (a push at a phase of a step in every episode, 0.8-2.2x classic's "
                                         "margin) or changes (commands every 2-5 s, half the episodes pushed at a "
-                                        "phase, 0.5-1.5x classic's margin, the nominal model); DISTRIBUTIONS",
+                                        "phase, 0.5-1.5x classic's margin, the nominal model) or decided (changes' "
+                                        "commands, every episode pushed at a phase, forward 0.8-1.6x and backward "
+                                        "1.2-2.4x classic's margin); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     reward: str = option("tracking", "tracking (the paper's: -(mean speed - v_d)^2 every env step) or evaluation "
@@ -650,7 +666,9 @@ class RabbitHZDEnv(gym.Env):
             if d.relative_impulse:
                 direction = -1 if rng.random() < d.backward_fraction else 1
                 command = next(v for t, v in reversed(schedule) if t <= time)
-                impulse = direction * float(rng.uniform(d.min_impulse, d.max_impulse)) * classic_margin(command, direction)
+                scale = d.backward_scale if direction < 0 else 1.0
+                impulse = (direction * scale * float(rng.uniform(d.min_impulse, d.max_impulse))
+                           * classic_margin(command, direction))
             elif d.min_impulse > 0.0:
                 impulse = float(rng.choice((-1.0, 1.0)) * rng.uniform(d.min_impulse, d.max_impulse))
             else:
