@@ -265,6 +265,42 @@ def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
     return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, trials, map_fn)}
 
 
+def pick_candidates(out: Path, preset: dict, runs: list[dict], map_fn) -> tuple[list[tuple[str, Path]], dict]:
+    """Each seed's ``screen.candidates`` specs as ``(name relative to out, path)``, picked as
+    ``screen.select`` says; with ``heldout`` also each seed's selection counts
+    (:func:`heldout_candidates`), printed a line per seed."""
+    from rabbit_policy.evaluation.shipping import ScreenTrials
+
+    count, picked, selection = preset["screen"]["candidates"], [], {}
+    if preset["screen"]["select"] == "acceptance":
+        return [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], count)], selection
+    held_out = ScreenTrials.selection(quick=preset["screen"]["trials"] == "quick")
+    for r in runs:
+        paths, scored = heldout_candidates(r["run"], count, held_out, map_fn)
+        picked += [(str(p.relative_to(out)), p) for p in paths]
+        selection[f"seed-{r['seed']}"] = [{**s, "candidate": str(s["candidate"].relative_to(out))} for s in scored]
+        print(f"  select, seed {r['seed']}: " + ", ".join(f"{s['iteration']}: {s['passed']}/{s['of']}" for s in scored)
+              + " held-out trials passed; " + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
+    return picked, selection
+
+
+def screen_candidates(screened: list[tuple[str, Path]], criteria, trials, map_fn) -> list[dict]:
+    """Each named spec's acceptance checks and screen trials (:func:`measure_candidate`), every
+    one after the first with its paired test against the first (the start), printed a line each."""
+    from rabbit_policy.evaluation.shipping import pooled
+    from rabbit_policy.evaluation.statistics import mcnemar_exact
+
+    rows = []
+    for name, path in screened:
+        row = {"candidate": name, **measure_candidate(path, criteria, trials, map_fn)}
+        if rows:
+            row["against_start"] = mcnemar_exact(pooled(row), pooled(rows[0]))
+        rows.append(row)
+        print(f"  {name}: {row['failures']} failed checks, " + ", ".join(
+            f"{f} {format_rate(r)}" for f, r in row["rates"].items()) + f", all {row['passed']}/{row['of']}", flush=True)
+    return rows
+
+
 def build_parser():
     from rabbit_msgs_py.cli import ArgumentParser
     from rabbit_policy.experiment.options import add_allow_dirty_option
@@ -306,8 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_msgs_py import strict_json
     from rabbit_policy.commands.plot_training import plot
     from rabbit_policy.evaluation.acceptance import Criteria
-    from rabbit_policy.evaluation.shipping import ScreenTrials, over_seeds, pooled, screen_rank, verdict
-    from rabbit_policy.evaluation.statistics import mcnemar_exact
+    from rabbit_policy.evaluation.shipping import ScreenTrials, over_seeds, screen_rank, verdict
     from rabbit_policy.spec import dump_spec, load_spec, packaged_spec
     from rabbit_policy.spec.files import library_dir, library_hash
 
@@ -342,32 +377,13 @@ def main(argv: list[str] | None = None) -> int:
     screened = [("start", starts[0])]
     if preset["start"] != "packaged":
         screened.append(("packaged", packaged_spec("learned")))
-    rows, selection = [], {}
     backend = open_backend(parser, args)
     try:
-        count = preset["screen"]["candidates"]
-        if preset["screen"]["select"] == "acceptance":
-            screened += [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], count)]
-        else:
-            held_out = ScreenTrials.selection(quick=preset["screen"]["trials"] == "quick")
-            for r in runs:
-                picked, scored = heldout_candidates(r["run"], count, held_out, backend.map)
-                screened += [(str(p.relative_to(out)), p) for p in picked]
-                selection[f"seed-{r['seed']}"] = [{**s, "candidate": str(s["candidate"].relative_to(out))}
-                                                  for s in scored]
-                print(f"  select, seed {r['seed']}: " + ", ".join(
-                    f"{s['iteration']}: {s['passed']}/{s['of']}" for s in scored) + " held-out trials passed; "
-                    + ", ".join(str(p.relative_to(out)) for p in picked), flush=True)
+        picked, selection = pick_candidates(out, preset, runs, backend.map)
+        screened += picked
         print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance and {trials.count('forward')} + "
               f"{trials.count('backward')} pushes and {trials.count('changes')} changes, paired)", flush=True)
-        for name, path in screened:
-            rows.append({"candidate": name, **measure_candidate(path, criteria, trials, backend.map)})
-            row = rows[-1]
-            if name != "start":
-                row["against_start"] = mcnemar_exact(pooled(row), pooled(rows[0]))
-            print(f"  {name}: {row['failures']} failed checks, " + ", ".join(
-                f"{f} {format_rate(r)}" for f, r in row["rates"].items()) + f", all {row['passed']}/{row['of']}",
-                flush=True)
+        rows = screen_candidates(screened, criteria, trials, backend.map)
     finally:
         backend.close()
     trained_rows = [r for r in rows if r["candidate"] not in ("start", "packaged")]

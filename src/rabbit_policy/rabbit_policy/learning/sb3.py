@@ -176,6 +176,41 @@ def build_model(config: SB3Config, env):
 CHECKPOINT, STATE = "sb3_checkpoint.zip", "sb3_state.json"
 
 
+def training_envs(config: SB3Config):
+    """The vectorised ``RabbitHZD-v0`` envs SB3 trains on: ``config.envs`` (one for SAC), in
+    forked subprocesses when more than one, seeded from ``config.seed``."""
+    import gymnasium as gym
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    envs = 1 if config.algo == "sac" else config.envs
+    return make_vec_env(lambda: gym.make("RabbitHZD-v0", **config.env_kwargs()), n_envs=envs, seed=config.seed,
+                        vec_env_cls=SubprocVecEnv if envs > 1 else DummyVecEnv,
+                        vec_env_kwargs={"start_method": "fork"} if envs > 1 else None)
+
+
+def rollout_row(iteration: int, env_steps: int, wall_s: float, returns: list[float], falls: list[bool],
+                errors: list[float]) -> dict:
+    """One ``log.csv`` row: the episodes ended since the last row (their mean return and fall
+    fraction) and the mean |v - v_d| (m/s) of the env steps; NaN where there were none."""
+    return {"wall_s": round(wall_s, 1), "iteration": iteration, "env_steps": env_steps, "episodes": len(returns),
+            "episode_return": float(np.mean(returns)) if returns else float("nan"),
+            "fall_fraction": float(np.mean(falls)) if falls else float("nan"),
+            "mean_abs_error": float(np.mean(errors)) if errors else float("nan")}
+
+
+def due(every: int, done: int) -> int:
+    """The next multiple of ``every`` env steps after ``done``."""
+    return (done // every + 1) * every
+
+
+def progress_line(row: dict) -> str:
+    """The console's line for a :func:`rollout_row` (one per iteration, on stderr)."""
+    return (f"iteration {row['iteration']}: {row['env_steps']} env steps, {row['episodes']} episodes, "
+            f"return {row['episode_return']:.2f}, falls {row['fall_fraction']:.2f}, |v - v_d| "
+            f"{row['mean_abs_error']:.3f} m/s, {row['wall_s']:.0f} s")
+
+
 def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_config=None, resume: bool = False) -> dict:
     """Train as configured into ``out`` (new or empty; with ``resume`` from its checkpoint, to
     ``config.timesteps`` in all), the acceptance evaluations on ``backend_config`` (a
@@ -183,21 +218,14 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
     returns the summary (also ``summary.json``). Ctrl-C saves a checkpoint, then stops."""
     import json
 
-    import gymnasium as gym
     from stable_baselines3 import PPO, SAC
     from stable_baselines3.common.callbacks import BaseCallback
-    from stable_baselines3.common.env_util import make_vec_env
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
     from tqdm import tqdm
-
 
     torch.set_num_threads(1)
     out.mkdir(parents=True, exist_ok=True)
     bounds = policy_bounds(config.action, GaitLibrary.load())
-    envs = 1 if config.algo == "sac" else config.envs
-    env = make_vec_env(lambda: gym.make("RabbitHZD-v0", **config.env_kwargs()), n_envs=envs, seed=config.seed,
-                       vec_env_cls=SubprocVecEnv if envs > 1 else DummyVecEnv,
-                       vec_env_kwargs={"start_method": "fork"} if envs > 1 else None)
+    env = training_envs(config)
     state = {"best": None, "iteration": 0, "wall_s": 0.0, "warm_start_mse": None}
     if resume:
         model = {"ppo": PPO, "sac": SAC}[config.algo].load(out / CHECKPOINT, env=env, device="cpu")
@@ -238,10 +266,6 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
             PolicyCheckpoint(checkpoint.state_dict, bounds.low, bounds.high,
                              {**checkpoint.info, "acceptance": result}).save(out / "best.pt")
 
-    def due(every: int, done: int) -> int:
-        """The next multiple of ``every`` env steps after ``done``."""
-        return (done // every + 1) * every
-
     class Logger(BaseCallback):
         """log.csv rows, TensorBoard scalars, evaluations and checkpoints every so many env steps."""
 
@@ -267,17 +291,12 @@ def train_sb3(config: SB3Config, out: Path, progress: bool = True, backend_confi
             if self.num_timesteps >= self.next_log:
                 self.next_log += config.log_every
                 state["iteration"] += 1
-                row = {"wall_s": round(time.perf_counter() - start, 1), "iteration": state["iteration"],
-                       "env_steps": int(self.num_timesteps), "episodes": len(self.returns),
-                       "episode_return": float(np.mean(self.returns)) if self.returns else float("nan"),
-                       "fall_fraction": float(np.mean(self.falls)) if self.falls else float("nan"),
-                       "mean_abs_error": float(np.mean(self.errors)) if self.errors else float("nan")}
+                row = rollout_row(state["iteration"], int(self.num_timesteps), time.perf_counter() - start,
+                                  self.returns, self.falls, self.errors)
                 append_csv(out / "log.csv", row)
                 scalars.iteration(row, row["wall_s"])
                 self.bar.set_postfix(ret=f"{row['episode_return']:.2f}", falls=f"{row['fall_fraction']:.2f}")
-                tqdm.write(f"iteration {row['iteration']}: {row['env_steps']} env steps, {row['episodes']} episodes, "
-                           f"return {row['episode_return']:.2f}, falls {row['fall_fraction']:.2f}, |v - v_d| "
-                           f"{row['mean_abs_error']:.3f} m/s, {row['wall_s']:.0f} s", file=sys.stderr)
+                tqdm.write(progress_line(row), file=sys.stderr)
                 self.returns, self.falls, self.errors = [], [], []
             if self.num_timesteps >= self.next_eval:
                 self.next_eval += config.eval_every
