@@ -192,18 +192,30 @@ def test_stacks_in_two_namespaces_run_side_by_side_and_a_second_in_one_namespace
     assert report["fell"] is False and report["duration"] > 1.0, err[-2000:]
 
 
-def test_a_run_stack_killed_outright_takes_its_nodes_with_it():
-    """SIGKILL to run_stack (no chance to stop its nodes, as a test's timeout or the OOM
-    killer does): its node processes end too, so no stack is left running in the domain
-    (every node its own process: the layout with the most to leave behind)."""
-    first = subprocess.Popen([sys.executable, str(SCRIPT), "--speed", "1.0", "--duration", "600", "--layout",
-                              "separate"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+@pytest.mark.parametrize("layout", ["separate", "composed"])
+def test_a_run_stack_killed_outright_takes_its_nodes_with_it_quietly(layout):
+    """SIGKILL to run_stack mid-walk (no chance to stop its nodes, as a test's timeout or the
+    OOM killer does): its node processes end too, so no stack is left running in the domain,
+    and they end quietly: nothing they write after the kill is a traceback or an abort
+    ("terminate called", "Fatal Python error"). Their stderr is run_stack's, so its end of
+    file is the last of them closing it."""
+    first = subprocess.Popen([sys.executable, str(SCRIPT), "--controller", "learned", "--speed", "1.0",
+                              "--duration", "600", "--layout", layout], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
+    lines: list[tuple[float, str]] = []
+    reader = threading.Thread(target=lambda: lines.extend((time.monotonic(), line) for line in first.stderr),
+                              daemon=True)
+    reader.start()
     deadline = time.monotonic() + 60
     nodes: list[str] = []
-    while len(nodes) < 3 and time.monotonic() < deadline:
+    while len(nodes) < NODE_PROCESSES[layout] and time.monotonic() < deadline:
         time.sleep(0.2)
         nodes = _node_processes(first.pid)
-    assert len(nodes) == 3
+    assert len(nodes) == NODE_PROCESSES[layout]
+    while not any("paired with controller" in line for _, line in list(lines)) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    time.sleep(2.0)  # the walk under way (a kill at any moment must be quiet; this one is mid-walk)
+    killed = time.monotonic()
     first.kill()
     first.wait()
 
@@ -217,6 +229,11 @@ def test_a_run_stack_killed_outright_takes_its_nodes_with_it():
     while any(running(pid) for pid in nodes) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not any(running(pid) for pid in nodes), [pid for pid in nodes if running(pid)]
+    reader.join(30)
+    assert not reader.is_alive()  # every child closed the stderr it shared with run_stack
+    after = "".join(line for t, line in list(lines) if t >= killed)
+    for trace in ("Traceback", "terminate called", "Fatal Python error", "Aborted"):
+        assert trace not in after, after[-3000:]
 
 
 def test_a_run_that_simulated_nothing_prints_no_nan(capsys):
