@@ -237,3 +237,34 @@ def test_the_node_loads_the_runtime_apart_from_learning_and_evaluation():
     assert {name for name in ours if name.startswith("rabbit_policy.experiment.")} <= {
         "rabbit_policy.experiment.scenario"}
     assert not {"torch", "gymnasium"} & set(loaded)
+
+
+LOCAL_IMPORTS_ALLOWED = 10
+"""Function-local imports of project modules in library code (the commands aside), at most."""
+
+
+def test_function_local_project_imports_are_few_and_each_says_why():
+    """A project module imported inside a function hides a tie from a reader and from the tools
+    (issue 74): library code keeps at most :data:`LOCAL_IMPORTS_ALLOWED`, each with a comment on
+    its line or its group's (an optional heavy dependency: torch, OpenGL, a display, rosbags)."""
+    import ast
+
+    ours = ("rabbit_policy", "rabbit_sim", "rabbit_hzd_controller", "rabbit_msgs_py")
+    found, silent = [], []
+    for name in tracked("src"):
+        if not name.endswith(".py") or "/commands/" in name:
+            continue
+        lines = (ROOT / name).read_text().splitlines()
+        for node in ast.walk(ast.parse("\n".join(lines))):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            for inner in ast.walk(node):
+                project = (isinstance(inner, ast.ImportFrom) and (inner.level > 0 or (inner.module or "").split(".")[0]
+                                                                  in ours)) or \
+                          (isinstance(inner, ast.Import) and any(a.name.split(".")[0] in ours for a in inner.names))
+                if project:
+                    found.append(f"{name}:{inner.lineno}")
+                    if not any("#" in lines[k] for k in range(max(0, inner.lineno - 3), inner.end_lineno)):
+                        silent.append(f"{name}:{inner.lineno}")
+    assert len(found) <= LOCAL_IMPORTS_ALLOWED, found
+    assert not silent, f"function-local project imports without a comment saying why: {silent}"

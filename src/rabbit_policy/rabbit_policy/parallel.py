@@ -28,6 +28,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
+from rabbit_msgs_py.cli import positive_int
+
 BACKENDS = ("local", "ray")
 
 
@@ -307,8 +309,6 @@ def add_backend_arguments(parser, progress: bool = False, workers: bool = True) 
     ``workers`` False the script declares ``--workers`` itself: train.py's is a
     ``TrainingConfig`` field); with ``progress`` also ``--no-progress`` (for :class:`ProgressMap`)."""
     if workers:
-        from rabbit_msgs_py.cli import positive_int
-
         parser.add_argument("--workers", type=positive_int, default=2,
                             help="processes (local) or Ray CPUs for the independent walks (default 2)")
     if progress:

@@ -129,7 +129,7 @@ def marker_frames(bag: Path, times: list[float], topic: str = "/rabbit/markers")
     markers, too late) with one line."""
     from rosbags.typesys import Stores, get_typestore
 
-    from .bag import open_bag
+    from .bag import open_bag  # rosbags' writer stack only when a bag is read (as the two imports above)
 
     store = get_typestore(Stores.ROS2_JAZZY)
     wanted = sorted(times)

@@ -12,7 +12,8 @@ from rabbit_msgs_py.pairing import new_key
 
 from rabbit_policy.experiment.scenario import (Push, Scenario, format_pushes, format_schedule, on_tick_grid,
                                                validate_schedule)
-from rabbit_policy.runtime.policies import controller_name
+from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name
+from rabbit_policy.spec.make import make_policy
 from rabbit_sim.model import ModelOptions
 from rabbit_sim.simulation import StopRules
 
@@ -99,8 +100,6 @@ class StackConfig:
         """The policy policy_node builds for this run (run_stack builds it once, to refuse a
         bad one with one line before any node starts and to name it in the report); raises
         ``PolicyUnavailable`` or ``ValueError``."""
-        from rabbit_policy.spec.make import make_policy
-
         return make_policy(self.controller, self.gait_dir or None, self.library_mode, self.policy_file or None,
                            decision=self.decision, speed_integral=self.speed_integral)
 
@@ -184,8 +183,6 @@ def ros_arguments(parameters: dict[str, object], namespace: str = "") -> list[st
 def policy_name(config: StackConfig) -> str | None:
     """The name of the policy policy_node runs for ``config`` (as the fast path names it);
     None if it cannot be built here (policy_node then said why)."""
-    from rabbit_policy.runtime.policies import PolicyUnavailable
-
     try:
         return config.build_policy().name
     except (PolicyUnavailable, ValueError, OSError):

@@ -6,7 +6,11 @@ import os
 import time
 from typing import Sequence
 
-from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, spin_timeout_of
+from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
+from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
+from rabbit_policy.policy_node import PolicyNode
+from rabbit_sim.recorder_node import RecorderNode
+from rabbit_sim.sim_node import SimNode
 
 from .config import StackConfig
 from .cpu import CpuMeter
@@ -22,8 +26,6 @@ def run_in_process(config: StackConfig, stall_timeout: float = 30.0, executor_ki
     ``config.build_policy()`` if the caller built it already (policy_node takes it, not
     building it again)."""
     import rclpy
-
-    from rabbit_msgs_py.runtime import make_executor
 
     context = init_context()
     nodes: dict[str, object] = {}
@@ -77,20 +79,12 @@ def compose(config: StackConfig, context, names: tuple[str, ...], nodes: dict[st
         if name not in names:
             continue
         if name == "policy_node":
-            from rabbit_policy.policy_node import PolicyNode
-
             nodes[name] = PolicyNode(context=context, namespace=ns, built_policy=policy, **params[name])
         elif name == "hzd_controller_node":
-            from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
-
             nodes[name] = HZDControllerNode(context=context, namespace=ns, **params[name])
         elif name == "sim_node":
-            from rabbit_sim.sim_node import SimNode
-
             nodes[name] = SimNode(context=context, namespace=ns, **params[name])
         else:
-            from rabbit_sim.recorder_node import RecorderNode
-
             nodes[name] = RecorderNode(context=context, namespace=ns, **params[name])
     return nodes
 

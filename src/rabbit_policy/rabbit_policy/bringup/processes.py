@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Callable
 
 from rabbit_msgs_py.pairing import write_key_file
-from rabbit_msgs_py.runtime import init_context
+from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
 
 from .config import COMPOSED_NODES, NODE_MODULES, StackConfig, policy_name, ros_arguments
 from .cpu import CpuMeter
@@ -122,8 +122,6 @@ def run_multi_process(config: StackConfig, stall_timeout: float = 30.0, log=sys.
     (:mod:`rabbit_msgs_py.quiet_start`); if it finds any, they are stopped unstarted and
     :class:`~.probe.AnotherStack` is raised."""
     import rclpy
-
-    from rabbit_msgs_py.runtime import freeze_start_up_objects, make_executor, spin_timeout_of
 
     if config.layout not in ("composed", "separate"):
         raise ValueError(f"run_multi_process runs the composed or separate layout, not {config.layout}")

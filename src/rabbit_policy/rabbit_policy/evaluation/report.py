@@ -3,6 +3,7 @@ figures and videos (file names relative to the report)."""
 
 from __future__ import annotations
 
+from rabbit_policy.evaluation.acceptance import broad_table
 from rabbit_policy.evaluation.figures import LABELS
 from rabbit_policy.evaluation.statistics import format_rate, mcnemar_exact, rate
 
@@ -420,8 +421,6 @@ def ablation_section(ablation: dict) -> list[str]:
     outputs), one column per controller, with its headline figures."""
     if not ablation:
         return []
-    from rabbit_policy.evaluation.acceptance import broad_table
-
     sources = sorted({c["source"] for c in ablation.values()})
     return ["## The ablation: checks 1-6 per trained row (the learning issue)", "",
             "Measured by `scripts/compare_policies.py` (every speed, every ordered change at every phase, 100 random "

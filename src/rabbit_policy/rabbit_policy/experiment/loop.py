@@ -36,17 +36,20 @@ import numpy as np
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, Leg
 from rabbit_hzd_controller.gait import Gait
 from rabbit_hzd_controller.gait_state import state_on_gait
+from rabbit_msgs_py.pushes import Push
 from rabbit_policy.experiment import ticks
 from rabbit_policy.experiment.result import Decision, Touchdown, WalkResult
 from rabbit_policy.experiment.scenario import Scenario, on_tick_grid, whole_ticks
+from rabbit_policy.runtime import exact_sum, fixed_order
 from rabbit_policy.runtime.body import body_state
 from rabbit_policy.runtime.policies import GaitCommand, Policy, controller_settings, first_command, reset_policy
 from rabbit_policy.runtime.policies import decision_period as policy_decision_period
 from rabbit_policy.runtime.decision_clock import DecisionClock
+from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_schedule import SpeedSchedule, stamp_of
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
-from rabbit_sim.simulation import Simulator, TorqueDelay
+from rabbit_sim.simulation import Simulator, StopRules, TorqueDelay
 
 CHUNK = 4096
 """Most ticks one compiled call runs (the size of its buffers)."""
@@ -399,12 +402,6 @@ def compile_kernels() -> float:
     walking 30 ms with a torque delay, a push and the early stall rule; returns the wall time
     (s). ``make setup`` and the test session call it, so no process compiles on its own."""
     from time import perf_counter
-
-    from rabbit_msgs_py.pushes import Push
-    from rabbit_sim.simulation import StopRules
-
-    from rabbit_policy.runtime import exact_sum, fixed_order
-    from rabbit_policy.runtime.gait_library import GaitLibrary
 
     start = perf_counter()
     gait = GaitLibrary.load().nearest(1.0)

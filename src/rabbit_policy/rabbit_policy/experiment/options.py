@@ -11,15 +11,17 @@ import argparse
 
 from rabbit_msgs_py.cli import non_negative, positive
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming, decision_ticks
+from rabbit_policy.experiment.scenario import parse_schedule
+from rabbit_policy.runtime.commands import clamp_schedule
+from rabbit_policy.runtime.policies import controller_argument, controller_name
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
+from rabbit_policy.spec.make import spec_kind
 from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
 
 
 def add_walk_options(parser: argparse.ArgumentParser) -> None:
     """``--controller`` or ``--spec``, ``--speed`` or ``--speed-schedule``, ``--duration``,
     ``--push`` (:func:`resolve_controller` settles the controller after parsing)."""
-    from rabbit_policy.runtime.policies import controller_argument
-
     parser.add_argument("--controller", type=controller_argument, default=None, metavar="{classic,learned,recovery}",
                         help="classic (the default): the HZD gait library; learned: the HZD-RL policy; recovery: "
                              "classic plus the model-based push-recovery rule")
@@ -109,9 +111,6 @@ def resolve_controller(args: argparse.Namespace) -> None:
     ``--spec FILE`` is the controller its file says (``--controller`` may name the same kind,
     ``--policy-file`` may not be given too); without it ``--controller`` or classic.
     ``ValueError`` / ``PolicyUnavailable`` with one line otherwise."""
-    from rabbit_policy.runtime.policies import controller_name
-    from rabbit_policy.spec.make import spec_kind
-
     named = controller_name(args.controller) if args.controller else None
     if not args.spec:
         args.controller = named or "classic"
@@ -130,9 +129,6 @@ def schedule_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], .
     policy_node applies to ``/cmd_speed``: ``rabbit_policy.runtime.commands``);
     ``ValueError`` for a schedule that is not one."""
     import sys
-
-    from rabbit_policy.experiment.scenario import parse_schedule
-    from rabbit_policy.runtime.commands import clamp_schedule
 
     schedule = parse_schedule(args.speed_schedule) if args.speed_schedule else ((0.0, args.speed),)
     schedule, lines = clamp_schedule(schedule)

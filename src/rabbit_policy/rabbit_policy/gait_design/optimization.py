@@ -57,6 +57,7 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_hzd_controller.gait import Gait
 from rabbit_policy.experiment.loop import ClosedLoop, walk
 from rabbit_policy.experiment.scenario import Scenario
+from rabbit_policy.parallel import LocalBackend
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand, LibraryPolicy
 from rabbit_sim.model import ModelOptions, load_model
@@ -336,8 +337,6 @@ def optimize_gait(
     """Minimise :func:`evaluate` over the decision vector with CMA-ES from ``x0``; the
     candidates of a generation are evaluated on ``backend`` (a :mod:`rabbit_policy.parallel`
     backend; None: a local pool of ``workers`` processes, started and stopped here)."""
-    from rabbit_policy.parallel import LocalBackend
-
     import cma  # imported here: only the optimizer needs it
 
     start = time.perf_counter()

@@ -12,6 +12,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from rabbit_policy.evaluation.robustness import phase_times, push_survived
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 
 MapFn = Callable[[Callable, Iterable], Iterable]
@@ -37,8 +38,6 @@ class TuningConfig:
 def push_cases(policy, config: TuningConfig) -> list[tuple[float, float, float]]:
     """(speed, push time s, impulse N s signed) for every grid point; the push times from the
     undisturbed walk (the recovery controller walks as classic does when nothing pushes)."""
-    from rabbit_policy.evaluation.robustness import phase_times
-
     cases = []
     for speed, margin in config.margins:
         times = phase_times(policy, speed, config.settle, config.phases)
@@ -50,8 +49,6 @@ def push_cases(policy, config: TuningConfig) -> list[tuple[float, float, float]]
 
 def survivals(policy: RecoveryPolicy, cases, config: TuningConfig, map_fn: MapFn = map) -> int:
     """How many of ``cases`` the controller survives (the push margin's rule)."""
-    from rabbit_policy.evaluation.robustness import push_survived
-
     return sum(map_fn(push_survived, [(policy, s, t, i, config) for s, t, i in cases]))
 
 

@@ -151,6 +151,7 @@ from rabbit_policy.runtime.speed_integral import WindupDecay, check_gain
 from rabbit_policy.runtime.policies import DEFAULT_DECISION_WINDOW, GaitCommand, controller_settings, reset_policy
 from rabbit_policy.runtime.recovery import RecoveryConfig
 from rabbit_policy.spec.build import residual_base as rule_base
+from rabbit_policy.spec.schema import load_spec
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_sim.model import ModelOptions, load_model
 from rabbit_sim.simulation import StopRules
@@ -386,8 +387,6 @@ class EpisodeConfig:
 
     def __post_init__(self) -> None:
         if self.spec:
-            from rabbit_policy.spec import load_spec
-
             spec = load_spec(self.spec)  # one line for a bad one
             if spec.kind != "learned" or spec.decision.period_ticks != self.decision_period:
                 raise ValueError(f"spec {self.spec}: a learned spec deciding every decision_period "
@@ -737,13 +736,13 @@ class RabbitHZDEnv(gym.Env):
         if self._loop is None:
             raise RuntimeError("call reset() before render()")
         if self.render_mode == "rgb_array":
-            from rabbit_sim.rendering import FrameRenderer
+            from rabbit_sim.rendering import FrameRenderer  # OpenGL only when a frame is asked for
 
             if self._view is None or self._view.model is not self._loop.model:
                 self.close()
                 self._view = FrameRenderer(self._loop.model)
             return self._view.render(self._loop.data)
-        from rabbit_sim.viewer import PassiveViewer
+        from rabbit_sim.viewer import PassiveViewer  # a display only when a window is asked for
 
         if self._view is None or self._view.data is not self._loop.data:  # a new episode: a new loop
             self.close()

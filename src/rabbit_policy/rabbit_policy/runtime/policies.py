@@ -27,6 +27,8 @@ import sys
 
 import numpy as np
 
+from rabbit_hzd_controller.alpha import N_FREE, expand_alpha, reduce_alpha
+from rabbit_policy.runtime.actions import residual_gate
 from rabbit_policy.runtime.forward import NetworkForward
 from rabbit_policy.runtime.classic import (CLASSIC_DECISION_PERIOD, DEFAULT_DECISION_WINDOW, LIBRARY_MODES,
                                            LibraryPolicy, PeriodicPolicy, RateLimitedPolicy)
@@ -178,15 +180,9 @@ class NetworkPolicy:
     def gait_from(self, observation: Observation, action: np.ndarray) -> GaitCommand:
         """The network's gait for its ``action`` (physical units; on its residual's base),
         before any overlay; the action remembered."""
-        from rabbit_hzd_controller.alpha import N_FREE, expand_alpha
-
         if self.memory is not None:
             self._remember(action)
         if self.base is not None:
-            from rabbit_hzd_controller.alpha import reduce_alpha
-
-            from rabbit_policy.runtime.actions import residual_gate
-
             base = self.base.act(observation)
             action = self.residual.compose_on(action * residual_gate(self.base), np.append(reduce_alpha(base.alpha),
                                                                                          base.kd))

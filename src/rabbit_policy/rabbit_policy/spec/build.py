@@ -19,6 +19,7 @@ from rabbit_policy.runtime.forward import NetworkForward
 from rabbit_policy.runtime.gait_command import Policy
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
+from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
@@ -132,8 +133,6 @@ def network_forward(spec: NetworkSpec, base: Path, weights: tuple[list, list] | 
 
 def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: IntegralConfig | None,
              weights: tuple[list, list] | None, source: str) -> Policy:
-    from rabbit_policy.runtime.policies import NetworkPolicy
-
     net = spec.network
     period, window = spec.decision.period_ticks, spec.decision.window_ticks
     if net.features not in INPUTS or INPUTS[net.features] != net.inputs:

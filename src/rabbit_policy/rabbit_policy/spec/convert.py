@@ -149,8 +149,8 @@ def restarted_spec(spec_file: str | Path, seed: int, path: Path) -> ControllerSp
     (:func:`rabbit_policy.learning.warm_start.restart_network`). A residual spec's network
     then adds exactly 0: the spec's rules acting on the library alone, a documented start
     for training (``reproduce.py``'s ``start: zero``)."""
-    from rabbit_policy.learning.warm_start import restart_network
-    from rabbit_policy.runtime.network import spec_network
+    from rabbit_policy.learning.warm_start import restart_network  # torch, only to restart a network
+    from rabbit_policy.runtime.network import spec_network  # torch, as above
 
     source = Path(spec_file).resolve()
     net = restart_network(spec_network(load_controller(source).forward), seed)
