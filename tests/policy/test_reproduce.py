@@ -57,9 +57,10 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
         [picked] = screen["selection"][f"seed-{seed}"]
         assert picked["candidate"] == f"seed-{seed}/run/evaluated/00001.yaml" and picked["of"] == 6
         assert f"select, seed {seed}: 1: {picked['passed']}/6 held-out trials passed" in run.stdout
-    assert screen["level"] == 0.05 / 2  # the best of two seeds' candidates
-    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.025,
-                                     "over_seeds": screen["over_seeds"]}
+    assert screen["level"] == 0.05 and screen["chosen_on"] == "selection"  # judged alone: chosen off the screen
+    assert provenance["verdict"] == {"ships": screen["beats_start"], "why": screen["why_not"], "level": 0.05,
+                                     "over_seeds": screen["over_seeds"], "chosen_on": "selection"}
+    assert "trained candidate that passed most held-out selection trials" in card
     seeds = screen["over_seeds"]  # rliable's IQM over the two seeds' candidates, with its bootstrap interval
     trained = screen["candidates"][2:]
     assert seeds["candidates"] == 2 and seeds["share"]["values"] == [r["passed"] / r["of"] for r in trained]
@@ -138,6 +139,21 @@ def test_the_screen_takes_the_candidates_the_training_ranks_best(tmp_path):
             (run / "evaluated" / f"{i:05d}.yaml").write_text("")
     assert [p.name for p in candidates(run, 3)] == ["00015.yaml", "00010.yaml", "00005.yaml"]
     assert candidates(tmp_path / "empty", 2) == [tmp_path / "empty" / "policy.yaml"]
+
+
+def test_the_verdict_judges_the_candidate_that_passed_most_selection_trials():
+    """``selected_best``: among the screened candidates, most selection trials passed, then fewest
+    failed checks, then the later; an unscreened one is never it; no selection: None."""
+    from rabbit_policy.commands.reproduce import selected_best
+
+    def scored(name, passed, failures, iteration):
+        return {"candidate": name, "passed": passed, "failures": failures, "iteration": iteration}
+
+    selection = {"seed-0": [scored("a", 300, 0, 10), scored("b", 305, 0, 20)],
+                 "seed-1": [scored("c", 305, 0, 10), scored("d", 309, 0, 30)]}
+    assert selected_best(selection, ["a", "b", "c"]) == "b"  # d was not screened; b and c tie, b is later
+    assert selected_best({"seed-0": [scored("a", 300, 1, 10), scored("b", 300, 0, 5)]}, ["a", "b"]) == "b"
+    assert selected_best({}, ["a"]) is None
 
 
 def test_heldout_selection_picks_the_evaluated_spec_passing_most_trials_then_fewest_failed_checks(tmp_path):

@@ -18,7 +18,9 @@ learned controller, everything under ``DIR`` (never into the package):
    the paired screen trials (:mod:`rabbit_policy.evaluation.shipping`; ``screen.trials``:
    ``quick`` or ``full``), ``DIR/screen.json``; the candidate with most trials passed is
    chosen, and it ships only on a significant improvement over the start (McNemar's exact
-   test, Bonferroni over the candidates screened: :func:`~rabbit_policy.evaluation.shipping.verdict`);
+   test, Bonferroni over the candidates screened: :func:`~rabbit_policy.evaluation.shipping.verdict`;
+   with ``heldout`` the candidate judged is the one that passed most selection trials, chosen off the
+   screen, so no correction: :func:`selected_best`);
 3. **ship**: the chosen candidate if it ships, else the start, as ``DIR/learned.yaml``, with
    its provenance (the code's commit, the gait library's hash, the preset, the verdict and
    the commands that ran);
@@ -196,7 +198,9 @@ def model_card(spec, evaluation: dict, screen: list[dict], provenance: dict) -> 
            f"{seeds['share']['ci95'][1]:.3f}] against the start's {seeds['start_share']:.3f}; the paired gain "
            f"over the start {seeds['gain_over_start']['iqm']:+.3f} [{seeds['gain_over_start']['ci95'][0]:+.3f}, "
            f"{seeds['gain_over_start']['ci95'][1]:+.3f}].", ""] if (seeds := verdict.get("over_seeds")) else []),
-        f"**Shipped: `{provenance['shipped']}`.** The best trained candidate, `{provenance['screened']}`, is "
+        f"**Shipped: `{provenance['shipped']}`.** The "
+        + ("trained candidate that passed most held-out selection trials" if verdict.get("chosen_on") == "selection"
+           else "best trained candidate") + f", `{provenance['screened']}`, is "
         f"significantly better than the start (p below {verdict['level']:.3g}, no family significantly worse, no "
         f"more failed checks): **{'yes' if verdict['ships'] else 'no'}**"
         + (", so it ships." if verdict["ships"] else "; " + "; ".join(verdict["why"]) + ", so the start ships."),
@@ -282,6 +286,16 @@ def pick_candidates(out: Path, preset: dict, runs: list[dict], map_fn) -> tuple[
         print(f"  select, seed {r['seed']}: " + ", ".join(f"{s['iteration']}: {s['passed']}/{s['of']}" for s in scored)
               + " held-out trials passed; " + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
     return picked, selection
+
+
+def selected_best(selection: dict, names: list[str]) -> str | None:
+    """Of the screened candidates ``names``, the one that passed most held-out selection
+    trials (then fewest failed acceptance checks, then the later); None without a selection.
+    The verdict judges it alone: chosen off the screen, no correction for a choice on it."""
+    scored = [s for seed in selection.values() for s in seed if s["candidate"] in names]
+    if not scored:
+        return None
+    return min(scored, key=lambda s: (-s["passed"], s["failures"], -s["iteration"]))["candidate"]
 
 
 def screen_candidates(screened: list[tuple[str, Path]], criteria, trials, map_fn) -> list[dict]:
@@ -387,11 +401,13 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         backend.close()
     trained_rows = [r for r in rows if r["candidate"] not in ("start", "packaged")]
-    best = min(trained_rows, key=screen_rank)
-    ships, why, tests = verdict(best, rows[0], screened=len(trained_rows))
+    on_selection = selected_best(selection, [r["candidate"] for r in trained_rows])
+    best = (next(r for r in trained_rows if r["candidate"] == on_selection) if on_selection
+            else min(trained_rows, key=screen_rank))
+    ships, why, tests = verdict(best, rows[0], screened=1 if on_selection else len(trained_rows))
     chosen_name = best["candidate"] if ships else "start"
     chosen = dict(screened)[chosen_name]
-    level = 0.05 / len(trained_rows)
+    level = 0.05 / (1 if on_selection else len(trained_rows))
     seeds = over_seeds(trained_rows, rows[0])
     print(f"  over the {seeds['candidates']} seeds: screen passed IQM {seeds['share']['iqm']:.3f} "
           f"[{seeds['share']['ci95'][0]:.3f}, {seeds['share']['ci95'][1]:.3f}] (the start {seeds['start_share']:.3f}), "
@@ -400,7 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     (out / "screen.json").write_text(strict_json.dumps({
         "candidates": rows, "best": best["candidate"], "beats_start": ships, "why_not": why, "tests": tests,
         "level": level, "shipped": chosen_name, "over_seeds": seeds, "select": preset["screen"]["select"],
-        "selection": selection}, indent=2) + "\n")
+        "chosen_on": "selection" if on_selection else "screen", "selection": selection}, indent=2) + "\n")
     spec = load_spec(chosen)
     weights = chosen.parent / spec.network.weights.file
     shutil.copyfile(weights, out / weights.name)
@@ -410,7 +426,8 @@ def main(argv: list[str] | None = None) -> int:
                   "runs": [{k: v for k, v in r.items() if k != "run"} for r in runs],
                   "evaluation": preset["evaluation"], "screen_trials": preset["screen"]["trials"],
                   "screened": best["candidate"], "shipped": chosen_name,
-                  "verdict": {"ships": ships, "why": why, "level": level, "over_seeds": seeds}, "commands": commands}
+                  "verdict": {"ships": ships, "why": why, "level": level, "over_seeds": seeds,
+                              "chosen_on": "selection" if on_selection else "screen"}, "commands": commands}
     shipped = replace(spec, provenance=provenance)
     dump_spec(shipped, out / "learned.yaml", f"{spec.name}, reproduced by {portable(reproduce_line, out, root)}")
     print(f"[3/5] ship: {out / 'learned.yaml'} ({chosen_name}; {best['candidate']} significantly better than the "

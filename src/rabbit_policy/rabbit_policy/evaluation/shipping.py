@@ -76,14 +76,15 @@ class ScreenTrials:
 
     @classmethod
     def selection(cls, quick: bool = False) -> ScreenTrials:
-        """Held-out trials to pick a seed's candidate on, none of them the screen's (nor, with
-        ``quick``, :meth:`quick`'s): pushes at other speeds and between the screen's phases (96),
-        changes between other speeds at other phases (40); ``quick``: 4 pushes and 2 changes."""
+        """Held-out trials to pick candidates on, none of them the screen's (nor, with ``quick``,
+        :meth:`quick`'s), in about the screen's proportions: pushes at other speeds and between
+        the screen's phases (192), changes between other speeds at six phases (120); ``quick``:
+        4 pushes and 2 changes."""
         if quick:
             return replace(cls.quick(), speeds=(1.15,), phase_offset=0.5, change_speeds=(0.92, 1.08),
                            change_phases=(0.375,))
-        return cls(speeds=(0.85, 1.15, 1.3), phases=8, phase_offset=0.5,
-                   change_speeds=(0.78, 0.92, 1.08, 1.22, 1.38), change_phases=(0.375, 0.875))
+        return cls(speeds=(0.85, 1.15, 1.3), phases=16, phase_offset=0.5,
+                   change_speeds=(0.78, 0.92, 1.08, 1.22, 1.38), change_phases=tuple((k + 0.5) / 6 for k in range(6)))
 
     def push_phases(self) -> list[float]:
         """The pushes' phases of a step (0-1)."""
