@@ -249,6 +249,34 @@ assert Image.open(path).n_frames == 2
     assert out.returncode == 0, out.stderr[-2000:]
 
 
+def test_captions_name_the_time_on_every_frame_and_a_push_only_while_it_acts():
+    """caption_frames: the sim time drawn top left on each frame; a push drawn in red top right
+    on the frames inside it (its direction's arrow), on no other; the frames given stay as they were."""
+    import numpy as np
+
+    from rabbit_msgs_py.pushes import Push
+    from rabbit_sim.rendering import caption_frames
+
+    frames = [np.full((120, 160, 3), 255, dtype=np.uint8) for _ in range(4)]
+    times = [0.9, 1.0, 1.05, 1.3]
+    captioned = caption_frames(frames, times, [Push(1.0, -150.0, 0.1)])
+
+    def red(frame):
+        return int(((frame[..., 0] > 150) & (frame[..., 1] < 80)).sum())
+
+    assert all((f == 255).all() for f in frames)  # untouched
+    assert all((c[:14, :70] < 128).any() for c in captioned)  # the time on every frame
+    assert [red(c) > 0 for c in captioned] == [False, True, True, False]
+    arrow = captioned[1][14:28, 100:]
+    left, right = (red(arrow[:, :30]), red(arrow[:, 30:]))
+    assert left > 0 and right > 0  # a backward push's arrow spans the corner, its head on the left:
+    heads = [int(((arrow[:, x, 0] > 150) & (arrow[:, x, 1] < 80)).sum()) for x in range(arrow.shape[1])]
+    tip = next(x for x, n in enumerate(heads) if n)
+    assert max(heads[tip:tip + 8]) > 3  # the head (a triangle) is at the arrow's left end
+    with pytest.raises(ValueError, match="4 frames but 3 times"):
+        caption_frames(frames, times[:3])
+
+
 def test_without_opengl_rendering_reports_itself_unavailable():
     code = """
 import os

@@ -22,6 +22,8 @@ from typing import Sequence
 import mujoco
 import numpy as np
 
+from rabbit_msgs_py.pushes import Push
+
 class RenderingUnavailable(RuntimeError):
     """No OpenGL context could be created (no EGL/OSMesa libraries, or a bad MUJOCO_GL)."""
 
@@ -106,6 +108,38 @@ def render_frames(model: mujoco.MjModel, qpos: np.ndarray, width: int = 320, hei
     finally:
         renderer.close()
     return frames
+
+
+def caption_frames(frames: Sequence[np.ndarray], times: Sequence[float], pushes: Sequence[Push] = ()) -> list[np.ndarray]:
+    """``frames`` with their sim time (s, top left) drawn in, and, on every frame inside one of
+    ``pushes`` (its impulse N s, + forward), the push named in red at the top right with an
+    arrow in its direction: a reader sees when a push lands and which way. New arrays; the
+    input is left alone."""
+    from PIL import Image, ImageDraw
+
+    if len(times) != len(frames):
+        raise ValueError(f"{len(frames)} frames but {len(times)} times")
+    out = []
+    for frame, t in zip(frames, times):
+        image = Image.fromarray(frame)
+        draw = ImageDraw.Draw(image)
+        width = image.width
+        label = f"t = {t:5.2f} s"
+        draw.rectangle((2, 2, 8 + 6 * len(label), 15), fill=(255, 255, 255))  # legible on the sky and the floor
+        draw.text((5, 3), label, fill=(0, 0, 0))
+        for push in pushes:
+            impulse = push.impulse
+            if push.time <= t <= push.time + max(push.duration, 0.1):  # a short push shows on one frame at least
+                text = f"push {impulse:+.0f} N s"
+                draw.rectangle((width - 6 * len(text) - 9, 2, width - 2, 27), fill=(255, 255, 255))
+                draw.text((width - 6 * len(text) - 6, 3), text, fill=(200, 0, 0))
+                y, x0, x1 = 20, width - 50, width - 10
+                tail, head = (x0, x1) if impulse > 0 else (x1, x0)
+                draw.line((tail, y, head, y), fill=(200, 0, 0), width=3)
+                sign = 1 if impulse > 0 else -1
+                draw.polygon(((head, y), (head - sign * 7, y - 5), (head - sign * 7, y + 5)), fill=(200, 0, 0))
+        out.append(np.asarray(image))
+    return out
 
 
 def save_gif(frames: Sequence[np.ndarray], path: str | Path, fps: float, hold_last: float = 0.0,

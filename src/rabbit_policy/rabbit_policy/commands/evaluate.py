@@ -61,7 +61,7 @@ def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, mo
     """One GIF per controller and push scenario, from the recorded walks; a rendering
     failure is reported in the entry, not raised."""
     from rabbit_sim.model import load_model
-    from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
+    from rabbit_sim.rendering import RenderingUnavailable, caption_frames, frame_indices, render_frames, save_gif
 
     model = load_model(model)
     width, height = config.video_size
@@ -71,7 +71,9 @@ def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, mo
             walk = by_scenario[scenario]
             entry = {"controller": name, "scenario": scenario}
             try:
-                frames = render_frames(model, walk.qpos[frame_indices(walk.times, config.video_fps)], width, height)
+                shown = frame_indices(walk.times, config.video_fps)
+                frames = caption_frames(render_frames(model, walk.qpos[shown], width, height), walk.times[shown],
+                                        walk.scenario.pushes)
                 file = f"{name}_{scenario}.gif"
                 save_gif(frames, out / file, config.video_fps, hold_last=1.5 if walk.failed else 0.0)
                 videos.append({**entry, "file": file, "frames": len(frames), "failed": walk.failed})

@@ -91,10 +91,12 @@ VIDEO_FPS = 25.0  # frames per s of sim time
 def write_video(result, scenario, path: Path) -> str:
     """The walk as an animated GIF at ``path`` (its fall held 1.5 s); an error line, or ''."""
     from rabbit_sim.model import load_model
-    from rabbit_sim.rendering import RenderingUnavailable, frame_indices, render_frames, save_gif
+    from rabbit_sim.rendering import RenderingUnavailable, caption_frames, frame_indices, render_frames, save_gif
 
+    shown = frame_indices(result.times, VIDEO_FPS)
     try:
-        frames = render_frames(load_model(scenario.model), result.qpos[frame_indices(result.times, VIDEO_FPS)])
+        frames = caption_frames(render_frames(load_model(scenario.model), result.qpos[shown]), result.times[shown],
+                                scenario.pushes)
     except RenderingUnavailable as exc:
         return f"--video: {exc}"
     save_gif(frames, path, VIDEO_FPS, hold_last=1.5 if result.failed else 0.0)
