@@ -360,20 +360,29 @@ def test_a_reset_whose_drawn_model_stalls_on_the_first_step_draws_again_and_star
     assert np.array_equal(again.reset(seed=1092)[0], obs) and again.loop.scenario == env.loop.scenario
 
 
-def test_recovery_episodes_push_at_a_phase_of_a_step_around_classics_margin_mostly_backward():
+def _one_phase_push_each(distribution: str, seeds: int = 24) -> list[tuple]:
+    """Each of ``seeds`` episodes of 500 decisions: its scenario (one phase push, no timed one),
+    its push, the push's direction (+1 forward) and its impulse over classic's margin at the
+    command in force."""
     from rabbit_policy.evaluation.push_recovery import classic_margin
 
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="recovery")
-    directions = []
-    for seed in range(24):
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution=distribution)
+    episodes = []
+    for seed in range(seeds):
         env.reset(seed=seed)
         scenario = env.loop.scenario
         assert scenario.pushes == () and len(scenario.phase_pushes) == 1
         (push,) = scenario.phase_pushes
-        assert 1.0 - 1e-9 <= push.after <= 9.0 + 1e-9 and 0.0 <= push.phase < 1.0
         command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
         direction = 1 if push.impulse > 0 else -1
-        ratio = abs(push.impulse) / classic_margin(command, direction)
+        episodes.append((scenario, push, direction, abs(push.impulse) / classic_margin(command, direction)))
+    return episodes
+
+
+def test_recovery_episodes_push_at_a_phase_of_a_step_around_classics_margin_mostly_backward():
+    directions = []
+    for _scenario, push, direction, ratio in _one_phase_push_each("recovery"):
+        assert 1.0 - 1e-9 <= push.after <= 9.0 + 1e-9 and 0.0 <= push.phase < 1.0
         assert 0.8 - 1e-9 <= ratio <= 2.2 + 1e-9
         directions.append(direction)
     assert 12 <= directions.count(-1) < 24 and directions.count(1) >= 1
@@ -542,19 +551,11 @@ def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on
 
 
 def test_decided_episodes_push_every_one_where_the_screen_decides_forward_and_backward_alike():
-    from rabbit_policy.evaluation.push_recovery import classic_margin
-
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="decided")
     directions = []
-    for seed in range(24):
-        env.reset(seed=seed)
-        scenario = env.loop.scenario
-        assert scenario.pushes == () and len(scenario.phase_pushes) == 1 and len(scenario.schedule) >= 2
-        push = scenario.phase_pushes[0]
-        command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
-        direction = 1 if push.impulse > 0 else -1
+    for scenario, _push, direction, ratio in _one_phase_push_each("decided"):
+        assert len(scenario.schedule) >= 2
         low, high = (0.8, 1.6) if direction > 0 else (1.2, 2.4)
-        assert low - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= high + 1e-9
+        assert low - 1e-9 <= ratio <= high + 1e-9
         directions.append(direction)
     assert 6 <= directions.count(1) <= 18
     with pytest.raises(ValueError, match="backward_scale must be > 0"):
