@@ -5,7 +5,8 @@ quietly, with status 128 + the signal's number, once the import is done, instead
 ``KeyboardInterrupt`` traceback. (It is not raised where it arrives: an exception raised
 inside a C extension's import comes out as that module's ImportError, a traceback again.)
 Once the node's ``main()`` runs, :func:`rabbit_msgs_py.runtime.run_node` takes the signals
-over and stops the node in order. run_stack starts its node processes through this module,
+over and stops the node in order; once it returned, the process exits with its status and
+ignores a signal that comes later. run_stack starts its node processes through this module,
 so Ctrl-C at any moment of its start-up prints no traceback.
 
 ``--hold``: once imported, wait for the line ``go`` on standard input before starting the
@@ -41,7 +42,10 @@ def main(argv: list[str] | None = None) -> int:
     if hold and sys.stdin.readline().strip() != "go":
         return 0
     sys.argv = [argv[0], *argv[1:]]
-    return module.main()
+    status = module.main()
+    for sig in (signal.SIGINT, signal.SIGTERM):  # the node is stopped: a late signal must not raise
+        signal.signal(sig, signal.SIG_IGN)  # into what the interpreter's exit frees (rclpy's C++)
+    return status
 
 
 def _exit_quietly(signum: int, _frame) -> None:

@@ -80,24 +80,37 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
 
     rclpy's own signal handlers are turned off: they shut the context down under a running
     callback (whose next publish then fails). Here a signal only sets a flag; the callback
-    in progress finishes, then the node is closed and destroyed in order.
+    in progress finishes, then the node is closed and destroyed in order. The handlers that
+    were there before come back only once every rclpy object of the run is freed: a handler
+    that raises (quiet_start's), run while a C++ destructor calls back into Python, aborts
+    the process ("terminate called ... SystemExit").
     Returns the process exit status (0, or 1 if the node could not be built or reports
     ``failed``)."""
     ensure_localhost_discovery()
+    stop: list[bool] = []
+    previous = {sig: signal.signal(sig, lambda *_: stop.append(True)) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        return _serve(factory, args, stop)
+    finally:
+        gc.unfreeze()  # freeze_start_up_objects kept the node out of the collector's reach
+        gc.collect()  # the run's objects (cycles included) freed while a signal only sets `stop`
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _serve(factory: Callable[..., object], args: Sequence[str] | None, stop: list[bool]) -> int:
+    """run_node's body: init, build, spin until ``stop`` holds an entry, close, destroy,
+    shut down. Its locals (node, executor, context) are freed when it returns."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
-    stop = []
-    previous = {sig: signal.signal(sig, lambda *_: stop.append(True)) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
     try:
         rclpy.init(args=args, context=context, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as exc:  # noqa: BLE001 - rclpy raises RCLError for a broken params file or bad --ros-args
         print(f"error: {one_line(str(exc))}", flush=True)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
         return 1
-    node = None
+    node = executor = None
     status = 0
     try:
         node = factory(context=context)
@@ -118,11 +131,13 @@ def run_node(factory: Callable[..., object], args: Sequence[str] | None = None) 
                 close()
             if getattr(node, "failed", False):  # the node could not do its job (a recording that failed)
                 status = 1
+            if executor is not None:
+                executor.remove_node(node)
             node.destroy_node()
+        if executor is not None:
+            executor.shutdown(timeout_sec=1.0)
         if context.ok():
             rclpy.shutdown(context=context)
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     return status
 
 
