@@ -1,0 +1,55 @@
+"""scripts/bench_soak.py runs run_stack as a child process for an hour: a bench_soak killed
+outright (SIGKILL, a job's timeout) must not leave that stack walking on in the domain."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench_soak.py"
+
+
+def _running(pid: str) -> bool:
+    """Alive and not a zombie waiting to be reaped."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def _run_stack_children(parent: int) -> list[str]:
+    out = subprocess.run(["ps", "-eo", "pid=,ppid=,args="], capture_output=True, text=True).stdout
+    rows = [line.split(None, 2) for line in out.splitlines()]
+    return [row[0] for row in rows if len(row) == 3 and row[1] == str(parent) and "run_stack" in row[2]]
+
+
+def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):
+    log = tmp_path / "stack.log"
+    soak = subprocess.Popen([sys.executable, str(SCRIPT), "--layout", "in-process", "--controller", "classic",
+                             "--duration", "600", "--log", str(log)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 60
+        stack: list[str] = []
+        while not stack and time.monotonic() < deadline:
+            time.sleep(0.2)
+            stack = _run_stack_children(soak.pid)
+        assert len(stack) == 1, "bench_soak started no run_stack"
+        while "simulation running" not in log.read_text() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        soak.kill()
+        soak.wait()
+        deadline = time.monotonic() + 60
+        while _running(stack[0]) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not _running(stack[0]), log.read_text()[-3000:]
+    finally:
+        for pid in _run_stack_children(soak.pid) + (stack if stack else []):
+            if _running(pid):
+                subprocess.run(["kill", "-9", pid])
