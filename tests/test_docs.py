@@ -233,7 +233,7 @@ def test_the_readme_running_it_commands_run(tmp_path):
     import os
     import subprocess
 
-    from rabbit_policy.experiment.provenance import code_commit
+    from rabbit_policy.spec.provenance import code_commit
 
     text = (ROOT / "README.md").read_text()
     block = FENCED.search(text, text.index("## Running it")).group(1)

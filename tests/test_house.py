@@ -268,3 +268,62 @@ def test_function_local_project_imports_are_few_and_each_says_why():
                         silent.append(f"{name}:{inner.lineno}")
     assert len(found) <= LOCAL_IMPORTS_ALLOWED, found
     assert not silent, f"function-local project imports without a comment saying why: {silent}"
+
+
+def folder_imports() -> dict[str, set[str]]:
+    """Which folder of the four packages imports which (``rabbit_policy/spec`` ->
+    ``rabbit_policy/runtime``), counting every import: module level, function-local and
+    relative. A package's top-level modules (its nodes, ``rabbit_sim/simulation.py``) are the
+    package itself, which holds its sub-folders: an import between them is not between folders."""
+    import ast
+
+    modules: dict[str, str] = {}
+    for name in tracked("src"):
+        path = Path(name)
+        if path.suffix == ".py" and len(path.parts) >= 4 and path.parts[1] == path.parts[2]:
+            dotted = list(path.parts[2:-1]) + ([] if path.stem == "__init__" else [path.stem])
+            modules[".".join(dotted)] = "/".join(path.parts[2:-1])
+    edges: dict[str, set[str]] = {}
+    for name in tracked("src"):
+        path = Path(name)
+        if path.suffix != ".py" or len(path.parts) < 4 or path.parts[1] != path.parts[2]:
+            continue
+        here = "/".join(path.parts[2:-1])
+        package = list(path.parts[2:-1])
+        for node in ast.walk(ast.parse((ROOT / name).read_text())):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    base = ".".join(package[:len(package) - node.level + 1] + ([base] if base else []))
+                targets = [base] + [f"{base}.{alias.name}" for alias in node.names]
+            for target in targets:
+                folder = modules.get(target)
+                if folder is not None and folder != here and not (folder + "/").startswith(here + "/") \
+                        and not (here + "/").startswith(folder + "/"):
+                    edges.setdefault(here, set()).add(folder)
+    return edges
+
+
+def test_no_two_folders_import_each_other_round_a_circle():
+    """Every folder on one floor (issue 74): following the imports between folders never comes
+    back to where it started, so each folder can be read knowing only those below it."""
+    edges = folder_imports()
+    assert edges.get("rabbit_policy/spec") and "rabbit_policy/runtime" in edges["rabbit_policy/spec"]
+    circles = []
+    for start in sorted(edges):
+        seen, path = set(), [start]
+
+        def walk(folder: str) -> None:
+            for nxt in sorted(edges.get(folder, ())):
+                if nxt == start:
+                    circles.append(" -> ".join(path + [start]))
+                elif nxt not in seen:
+                    seen.add(nxt)
+                    path.append(nxt)
+                    walk(nxt)
+                    path.pop()
+        walk(start)
+    assert not circles, f"folders importing round a circle: {circles[:5]}"

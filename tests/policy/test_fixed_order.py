@@ -62,7 +62,7 @@ import hashlib, json
 import numpy as np
 from rabbit_msgs_py.pushes import Push
 from rabbit_policy.experiment.loop import walk
-from rabbit_policy.experiment.provenance import machine_record
+from rabbit_policy.spec.provenance import machine_record
 from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.spec.make import make_policy
 

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from rabbit_policy.commands.reproduce import load_preset, train_arguments
-from rabbit_policy.experiment.provenance import DirtyTree, code_commit, shipping_provenance
+from rabbit_policy.spec.provenance import DirtyTree, code_commit, shipping_provenance
 from rabbit_policy.spec import load_controller, load_spec, packaged_spec, packaged_spec_dir
 
 pytestmark = pytest.mark.sim

@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation import figures
     from rabbit_policy.evaluation.report import headline_table, load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness
-    from rabbit_policy.experiment.provenance import provenance
+    from rabbit_policy.spec.provenance import provenance
     from rabbit_policy.evaluation.steady_integral import network_alone
     from rabbit_policy.runtime.policies import CONTROLLERS, NetworkPolicy, PolicyUnavailable
     from rabbit_policy.spec.make import make_policy

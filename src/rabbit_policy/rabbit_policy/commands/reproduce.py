@@ -66,7 +66,7 @@ def write_start(start: str, seed: int, path: Path) -> Path:
     if start not in ("zero", "calibrated"):
         return packaged_spec("learned") if start == "packaged" else Path(start).resolve()
     if not path.is_file():
-        from rabbit_policy.spec.convert import restarted_spec
+        from rabbit_policy.learning.trained_specs import restarted_spec
 
         scratch = path.with_name(path.stem + ".partial.yaml")
         restarted_spec(packaged_spec("learned"), seed, scratch)
@@ -331,7 +331,7 @@ def build_parser():
 
 def main(argv: list[str] | None = None) -> int:
     from rabbit_msgs_py.cli import ensure_output_dir
-    from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
+    from rabbit_policy.spec.provenance import DirtyTree, shipping_provenance
     from rabbit_policy.parallel import open_backend
 
     parser = build_parser()

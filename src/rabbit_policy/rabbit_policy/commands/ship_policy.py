@@ -499,7 +499,7 @@ def main(argv: list[str] | None = None) -> int:
                      "scripts/reproduce.py --preset shipped writes")
     ran_on: dict = {}
     if not args.dry_run:  # before the measurements: a refused tree costs nothing
-        from rabbit_policy.experiment.provenance import DirtyTree, shipping_provenance
+        from rabbit_policy.spec.provenance import DirtyTree, shipping_provenance
 
         try:
             ran_on = shipping_provenance(args.allow_dirty)

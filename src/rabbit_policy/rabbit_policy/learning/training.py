@@ -52,7 +52,7 @@ from tqdm import tqdm
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import option, positive_int
 from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
-from rabbit_policy.experiment.provenance import provenance
+from rabbit_policy.spec.provenance import provenance
 from rabbit_policy.learning.es import EvolutionStrategy
 from rabbit_policy.learning.ppo import PPOTrainer
 from rabbit_policy.learning.scalars import TrainingScalars
@@ -65,7 +65,7 @@ from rabbit_policy.runtime.memory import INPUTS
 from rabbit_policy.runtime.network import (NetworkForward, PolicyCheckpoint, parameter_count, spec_network,
                                            widen_inputs)
 from rabbit_policy.spec import build, load_controller, load_spec
-from rabbit_policy.spec.convert import trained_spec
+from rabbit_policy.learning.trained_specs import trained_spec
 from rabbit_policy.spec.files import file_sha256
 from rabbit_policy.spec.make import policy_of_checkpoint
 

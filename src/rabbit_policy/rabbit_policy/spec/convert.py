@@ -13,13 +13,12 @@ import numpy as np
 
 from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
-from rabbit_policy.experiment.provenance import code_commit
+from rabbit_policy.spec.provenance import code_commit
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
-from rabbit_policy.runtime.forward import NetworkForward
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
-from rabbit_policy.spec.build import integral_spec, load_controller
+from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
                                        LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec,
@@ -141,37 +140,3 @@ def upgrade_spec(path: str | Path) -> ControllerSpec:
                        for line in text.splitlines() if line.startswith("#"))
     dump_spec(spec, path, header)
     return spec
-
-
-def restarted_spec(spec_file: str | Path, seed: int, path: Path) -> ControllerSpec:
-    """Write the learned spec ``spec_file`` with its network restarted as ``path``: the same
-    stages and constants, fresh hidden layers drawn from ``seed`` and a zero last layer
-    (:func:`rabbit_policy.learning.warm_start.restart_network`). A residual spec's network
-    then adds exactly 0: the spec's rules acting on the library alone, a documented start
-    for training (``reproduce.py``'s ``start: zero``)."""
-    from rabbit_policy.learning.warm_start import restart_network  # torch, only to restart a network
-    from rabbit_policy.runtime.network import spec_network  # torch, as above
-
-    source = Path(spec_file).resolve()
-    net = restart_network(spec_network(load_controller(source).forward), seed)
-    return trained_spec(source, net, path, {"written_by": "rabbit_policy.spec.convert.restarted_spec",
-                                            "from": f"{source.name} with its network restarted (seed {seed}: fresh "
-                                                    "hidden layers, a zero last layer)"})
-
-
-def trained_spec(spec_file: str | Path, net, path: Path, provenance: dict) -> ControllerSpec:
-    """Write the spec ``spec_file`` with ``net``'s weights (a torch ``HZDPolicyNet`` trained
-    from it) as ``path``, its weights file beside it; the gait library by an absolute path
-    unless packaged. Returns the spec written."""
-    source = Path(spec_file).resolve()
-    spec = load_spec(source)
-    forward = NetworkForward.of(net)
-    file, sha = save_weights(list(forward.weights), list(forward.biases), path.parent, path.stem)
-    library = spec.gait_library
-    if library.source != PACKAGED:
-        library = replace(library, source=str(library_dir(library.source, source.parent)))
-    trained = replace(spec, gait_library=library,
-                      network=replace(spec.network, weights=WeightsSpec(file, sha)),
-                      provenance={**provenance, "from_spec": str(source), "code_commit": code_commit()})
-    dump_spec(trained, path, f"{spec.name}, trained from {source.name} (rabbit_policy.spec.convert.trained_spec)")
-    return trained
