@@ -15,6 +15,7 @@ from std_srvs.srv import Trigger
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.pairing import new_key
+from rabbit_msgs_py.service_callers import service_clients
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_policy.bringup import processes as processes_module
 from rabbit_policy.bringup.config import StackConfig
@@ -97,6 +98,34 @@ def test_a_strangers_reset_and_pause_are_logged_with_when_and_who(capfd):
         lines = [line for line in capfd.readouterr().err.splitlines() if " called (" in line]
         assert len(lines) == 2 and "t = 1.000 s" in lines[0] and "/stranger" in lines[0]
         assert "t = 2.000 s" in lines[1] and lines[1].endswith("(2 more calls since the last line)")
+
+
+def test_run_stacks_report_names_a_strangers_reset_with_when_and_who():
+    """A stranger (another process's context) resets the simulation under a run's supervisor:
+    the run is not complete, and its report says when and which nodes held a client of
+    /sim/reset then (the stranger among them), as its log line does."""
+    import rclpy
+
+    from rabbit_policy.bringup.supervisor import Supervisor
+
+    with ros_context() as (context, executor), ros_context() as (ctx_s, ex_s):
+        nodes = start_stack(context, executor, start_paused=True)  # placed at t = 0, paused
+        supervisor = Supervisor(StackConfig(duration=10.0, schedule=((0.0, 1.0),), pairing_key=""), context=context)
+        executor.add_node(supervisor)
+        stranger = rclpy.create_node("stranger", context=ctx_s)
+        ex_s.add_node(stranger)
+        reset = stranger.create_client(Trigger, topics.RESET_SERVICE)
+        assert spin_until((executor, ex_s), reset.service_is_ready, 30.0)
+        assert spin_until((executor, ex_s), lambda: supervisor._placements is not None, 30.0)  # the first placement
+        assert spin_until((executor, ex_s), lambda: "/stranger" in service_clients(supervisor, topics.RESET_SERVICE),
+                          30.0)
+        future = reset.call_async(Trigger.Request())
+        assert spin_until((executor, ex_s), lambda: future.done() and supervisor.resets == 1, 30.0)
+        report = supervisor.report()
+        assert not report.completed and report.error.startswith("the simulation was reset 1 time during the run")
+        assert "t = 0.000 s, by /stranger" in report.error, report.error
+        for node in (*nodes.values(), supervisor, stranger):
+            node.destroy_node()
 
 
 def test_resets_never_wedge_lockstep():

@@ -19,12 +19,16 @@ from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.pairing import PairingKey, SignedBatches
 from rabbit_msgs_py.rejections import RejectionLog
+from rabbit_msgs_py.service_callers import service_clients
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
 from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid, whole_ticks
 from rabbit_policy.runtime.commands import COMMAND_RANGE, clamp_speed
 
 from .config import StackConfig
+
+RESETS_NAMED = 8
+"""Resets a run's report names with when and by whom; any more are counted only."""
 
 
 @dataclass
@@ -138,6 +142,7 @@ class Supervisor(Node):
         self.live_commands: list[tuple[float, float]] = []  # (sim s, m/s): commands sent during the run, not scheduled
         self._placements: int | None = None  # /sim/resets when first heard (the placement before the run)
         self.resets = 0  # placements since: resets nobody in the run asked for (run_stack never resets)
+        self.reset_calls: list[str] = []  # each such reset heard: "t = S s, by NODES" (the nodes with a client then)
         self._pause_client = self.create_client(SetBool, topics.PAUSE_SERVICE, qos_profile=qos.SERVICE_QOS)
         self._recorded_ns = -1  # sim time (ns) of the newest state the recorder has written; -1: none yet
         if config.record:
@@ -264,8 +269,13 @@ class Supervisor(Node):
         elif msg.data > self._placements:
             self.resets += msg.data - self._placements
             self._placements = msg.data
+            if len(self.reset_calls) >= RESETS_NAMED:  # a flood: counted, the graph not read again
+                return
+            clients = service_clients(self, topics.RESET_SERVICE)
+            who = ", ".join(clients) if clients else "a node no longer in the graph"
+            self.reset_calls.append(f"t = {self.sim_time:.3f} s, by {who}")
             self.get_logger().error(f"the simulation was reset at t = {self.sim_time:.3f} s by a /sim/reset call this "
-                                    "run did not make: the run is not complete")
+                                    f"run did not make (nodes with a client of it: {who}): the run is not complete")
 
     def _on_fallen(self, msg: Bool) -> None:
         if msg.data and not self.fell:
@@ -342,7 +352,8 @@ class Supervisor(Node):
         )
         if error is None and self.resets:
             times = f"{self.resets} time" + ("s" if self.resets != 1 else "")
-            error = f"the simulation was reset {times} during the run (a /sim/reset run_stack did not make)"
+            error = (f"the simulation was reset {times} during the run (a /sim/reset run_stack did not make: "
+                     + "; ".join(self.reset_calls) + ("; ..." if self.resets > len(self.reset_calls) else "") + ")")
         return RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
                          completed=self.done and error is None, error=error)
 
