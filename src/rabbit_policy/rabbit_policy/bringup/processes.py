@@ -34,12 +34,18 @@ def _prepare_child() -> None:
     by SIGTERM, which ends it quietly); and (Linux) SIGTERM when run_stack's thread that
     started it ends, so a run_stack killed outright (SIGKILL, a test's timeout) leaves no
     stack running in the domain."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal_on_parent_death(signal.SIGTERM)
+
+
+def signal_on_parent_death(sig: int) -> None:
+    """In a child process before it starts (``preexec_fn``): on Linux, have the kernel send it
+    ``sig`` when the thread of the parent that started it ends (``PR_SET_PDEATHSIG``), so that
+    a parent killed outright leaves no child running; elsewhere nothing."""
     import ctypes
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
     try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # 1 = PR_SET_PDEATHSIG
+        ctypes.CDLL(None, use_errno=True).prctl(1, sig)  # 1 = PR_SET_PDEATHSIG
     except (OSError, AttributeError):
         pass
 

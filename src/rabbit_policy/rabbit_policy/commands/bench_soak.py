@@ -23,14 +23,19 @@ The scenario is drawn from ``--seed`` (commands uniform in 0.7-1.5 m/s, at most 
 one before; a push of
 ``--push-impulse`` N s over 0.1 s, backward or forward, every 20-40 s), the same on every
 machine. Results: docs/benchmarks.md ("Soak").
+
+Killed outright (SIGTERM, SIGKILL), it takes its run_stack with it: the child gets SIGINT and stops
+its nodes in order, as on Ctrl-C.
 """
 
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import random
+import signal
 import subprocess
 import sys
 import tempfile
@@ -145,6 +150,7 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
 
     from rabbit_msgs_py.runtime import init_context, make_executor
     from rabbit_policy.bringup.cpu import process_cpu_seconds
+    from rabbit_policy.bringup.processes import signal_on_parent_death
 
     schedule, pushes = soak_scenario(seed, duration, impulse)
     bag = Path(record) if record else None
@@ -171,7 +177,10 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
     with open(log, "w") as err, tempfile.TemporaryFile("w+") as report_file:
         # the report to a file, not a pipe: an hour's JSON is larger than a pipe holds, and a
         # run_stack writing into a full pipe nobody reads until it exits would never exit
-        proc = subprocess.Popen(command, stdout=report_file, stderr=err, text=True)
+        # a bench_soak killed outright (SIGTERM, SIGKILL) stops its run_stack as Ctrl-C would (SIGINT:
+        # the nodes stopped in order), instead of leaving the stack walking on in the domain
+        proc = subprocess.Popen(command, stdout=report_file, stderr=err, text=True,
+                                preexec_fn=functools.partial(signal_on_parent_death, signal.SIGINT))
         while proc.poll() is None:
             time.sleep(SAMPLE_EVERY)
             pids = process_tree(proc.pid)
