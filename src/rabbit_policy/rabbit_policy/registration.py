@@ -5,7 +5,10 @@ loop (:data:`SPEC_IDS`: ``RabbitHZD-Learned-v1``) in Gymnasium's registry once
 ``rabbit_policy`` is imported, at no cost to
 what does not use Gymnasium (``policy_node``): the id is registered by entry-point string
 (the env module is imported only by ``gymnasium.make``), at once if Gymnasium is imported
-already, else as soon as it is (a one-shot import hook on ``sys.meta_path``)."""
+already, else as soon as it is (a one-shot import hook on ``sys.meta_path``). Gymnasium 1.x reads
+no package entry points (its 0.x ``gymnasium.envs`` plugin group is gone; 1.4 has no
+``importlib.metadata`` lookup), so a package cannot register there; importing Gymnasium here
+instead would load it into every node."""
 
 from __future__ import annotations
 
