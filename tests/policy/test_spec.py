@@ -93,9 +93,12 @@ MODEL_OWNED = {"LegGeometry.femur", "LegGeometry.tibia", "ControllerConfig.tick"
 """Defaults that are the robot model's, not the controller's: a spec names the model by hash
 (``controller.model_sha256``) and is refused on another."""
 NOT_PERTURBED = {"GaitLibrary.calibration", "IntegralConfig.band", "IntegralConfig.clip", "IntegralConfig.windup_decay",
-                 "IntegralConfig.feedforward", "IntegralConfig.speed_range", "DecisionTiming.ticks", "Observation.body"}
+                 "IntegralConfig.feedforward", "IntegralConfig.speed_range", "DecisionTiming.ticks", "Observation.body",
+                 "WindupDecay.disturbance", "WindupDecaySpec.disturbance"}
 """Defaults of no number's kind (None: a stage off, or a record's empty slot), which build
-gives explicitly from the spec (``integral_config``, ``MemoryConfig(integral, body)``)."""
+gives explicitly from the spec (``integral_config``, ``MemoryConfig(integral, body)``). The
+windup decay's ``disturbance`` is the one optional key of a spec's rules: absent, the rule is off,
+as in every spec written before it."""
 
 
 def reachable_defaults() -> list[tuple[type, str, int]]:

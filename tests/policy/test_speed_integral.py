@@ -165,13 +165,47 @@ def test_the_windup_decay_drops_what_a_change_wound_up_once_the_hip_passes_the_n
         IntegralConfig(limit=1.0, dt=1.0, windup_decay={"seconds": 5.0})
     memory = MemoryConfig(IntegralConfig(limit=1.0, dt=0.02, gain=0.2, speed_range=(0.7, 1.5), windup_decay=WindupDecay()))
     recorded = memory.to_dict()  # as a checkpoint's info holds it: a plain dict
-    assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0, "at_start": False}
+    assert recorded["windup_decay"] == {"seconds": 5.0, "tau": 1.0, "at_start": False, "disturbance": None}
     assert MemoryConfig.from_dict({**recorded, "windup_decay": {"seconds": 5.0, "tau": 1.0}}) == memory  # a checkpoint from before
     assert MemoryConfig.from_dict(recorded) == memory and memory.integral.windup_decay == WindupDecay()
     with pytest.raises(ValueError, match="windup decay"):
         MemoryConfig.from_dict({**recorded, "windup_decay": {"seconds": 5.0, "speed": 1.0}})
     older = {k: v for k, v in recorded.items() if k != "windup_decay"}  # a checkpoint from before the rule
     assert MemoryConfig.from_dict(older).integral.windup_decay is None
+
+
+def test_a_disturbance_opens_the_windup_decay_as_a_change_its_way_does():
+    """WindupDecay.disturbance: at a constant command, an error beyond it (a push slowed the
+    hip) opens the decay's window anchored at I then; once the hip passes the command, what I
+    wound up meanwhile decays toward that anchor. Inside an open window the anchor is kept and
+    the window starts again. Errors within it, and no disturbance set, integrate as before."""
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, SpeedIntegral, WindupDecay
+
+    def integral(disturbance):
+        return SpeedIntegral(IntegralConfig(limit=10.0, dt=1.0, windup_decay=WindupDecay(4.0, 2.0, False, disturbance)))
+
+    plain, pushed = integral(None), integral(0.25)
+    steady = (0.1, -0.2, 0.25, -0.25, 0.0)  # within the disturbance: the same arithmetic as without the rule
+    assert [pushed.update(e, 1.0) for e in steady] == [plain.update(e, 1.0) for e in steady]
+    anchor = pushed.value
+    assert anchor == pytest.approx(-0.1)
+    assert pushed.update(0.4, 1.0) == pytest.approx(0.3)  # pushed back: winds up as before ...
+    assert pushed.update(0.3, 1.0) == pytest.approx(0.6)  # ... and again (the window starts again, same anchor)
+    assert pushed.update(-0.1, 1.0) == pytest.approx(anchor + 0.5 * (0.5 - anchor))  # passed: toward the anchor
+    assert pushed.update(0.0, 1.0) == pytest.approx(anchor + 0.25 * (0.5 - anchor))
+    assert [plain.update(e, 1.0) for e in (0.4, 0.3, -0.1, 0.0)] == pytest.approx([0.3, 0.6, 0.5, 0.5])  # kept
+    for _ in range(4):  # the window closes: plain integration again
+        pushed.update(0.0, 1.0)
+    value = pushed.value
+    assert pushed.update(0.1, 1.0) == pytest.approx(value + 0.1)
+    fast = integral(0.25)  # pushed forward: a negative error opens it the other way
+    assert fast.update(-0.5, 1.0) == -0.5  # a walk's first decision is no disturbance: no window
+    assert fast.update(0.2, 1.0) == pytest.approx(-0.3)
+    assert fast.update(-0.5, 1.0) == pytest.approx(-0.8)  # now it is: anchored at -0.3
+    assert fast.update(0.2, 1.0) == pytest.approx(-0.3 + 0.5 * (-0.6 + 0.3))  # passed: toward -0.3
+    for bad in (0.0, -0.1, math.nan, True, "0.2"):
+        with pytest.raises(ValueError, match="windup decay disturbance"):
+            WindupDecay(disturbance=bad)
 
 
 def test_the_integral_feedforward_shifts_by_the_steady_values_difference_at_a_change_and_may_start_there():

@@ -82,11 +82,21 @@ class WindupDecay:
     walk's start counts as a change of the command up to v_d (from rest): every walk's first
     steps run slow, and what I winds up over them decays once the hip has passed v_d. Off, a
     walk is the same walk bit for bit as before the option existed (what each choice
-    measured: docs/learning.md, 2026-11-27 (sixth) and 2026-11-28 (second))."""
+    measured: docs/learning.md, 2026-11-27 (sixth) and 2026-11-28 (second)).
+
+    ``disturbance`` (m/s): an error larger than it at a constant command (a push, a stumble)
+    opens the window as a change its way does (v_d - v̄ > 0, the hip slowed: as a change up):
+    what I winds up while the hip is off decays once the hip has passed the command. Its
+    anchor is I as the disturbance is first seen; inside a window already open (a change,
+    an earlier disturbance) the anchor is kept and the window starts again. None: no such
+    rule, a walk the same bit for bit as before the option existed. Why: after a push the
+    integral wound up to its bound while the hip was slow, and the overshoot it left lasted
+    for seconds (docs/learning.md, 2026-12-07)."""
 
     seconds: float = 5.0
     tau: float = 1.0
     at_start: bool = False
+    disturbance: float | None = None
 
     def __post_init__(self) -> None:
         for name in ("seconds", "tau"):
@@ -96,6 +106,11 @@ class WindupDecay:
                                  f"got {value!r}")
         if not isinstance(self.at_start, bool):
             raise ValueError(f"the speed integral's windup decay at_start must be True or False, got {self.at_start!r}")
+        if self.disturbance is not None and not (isinstance(self.disturbance, (int, float))
+                                                 and not isinstance(self.disturbance, bool)
+                                                 and isfinite(self.disturbance) and self.disturbance > 0.0):
+            raise ValueError("the speed integral's windup decay disturbance must be a finite number > 0 (m/s) or "
+                             f"None, got {self.disturbance!r}")
 
 
 @dataclass(frozen=True)
@@ -263,6 +278,10 @@ class SpeedIntegral:
             if not self._decaying:  # (a change during a decay keeps the value it decays toward)
                 self._anchor = self.value
             self._looking, self._direction, self._decaying, self._since = self._window, desired_speed - previous, False, 0
+        elif self._disturbed(previous, error):  # as a change its way
+            if not (self._looking > 0 or self._decaying):  # no window open: anchored here (else the open one's anchor)
+                self._anchor = self.value
+            self._looking, self._direction, self._decaying, self._since = self._window, float(error), False, 0
         self._since += 1
         if self._since > self._window:
             self._decaying = False
@@ -274,6 +293,12 @@ class SpeedIntegral:
         if self._decaying:
             self.value = value = self._anchor + (value - self._anchor) * self._keep
         return value
+
+    def _disturbed(self, previous: float | None, error: float) -> bool:
+        """At a constant command (not a walk's first decision), an error beyond the windup
+        decay's ``disturbance``."""
+        limit = self.config.windup_decay.disturbance
+        return limit is not None and previous is not None and abs(error) > limit
 
     def _integrate(self, error: float, desired_speed: float) -> float:
         """The integral's step without the windup decay (band, clip, range gate, bound)."""

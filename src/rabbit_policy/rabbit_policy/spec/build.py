@@ -89,7 +89,8 @@ def integral_spec(config: IntegralConfig) -> IntegralSpec:
     """The spec's ``speed_integral`` for ``config``: :func:`integral_config`'s inverse."""
     decay, ff = config.windup_decay, config.feedforward
     return IntegralSpec(config.gain, config.limit, config.dt, config.speed_range, config.band, config.clip,
-                        WindupDecaySpec(decay.seconds, decay.tau, decay.at_start) if decay is not None else None,
+                        WindupDecaySpec(decay.seconds, decay.tau, decay.at_start, decay.disturbance) if decay is not None
+                        else None,
                         FeedforwardSpec(ff.speeds, ff.values, ff.start) if ff is not None else None)
 
 

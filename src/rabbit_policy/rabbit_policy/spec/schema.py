@@ -98,11 +98,13 @@ class DecisionSpec:
 
 @dataclass(frozen=True)
 class WindupDecaySpec:
-    """:class:`~rabbit_policy.runtime.speed_integral.WindupDecay`: s, s, bool."""
+    """:class:`~rabbit_policy.runtime.speed_integral.WindupDecay`: s, s, bool, and m/s or null
+    (``disturbance``: optional, null when absent)."""
 
     seconds: float
     tau: float
     at_start: bool
+    disturbance: float | None = None
 
 
 @dataclass(frozen=True)
