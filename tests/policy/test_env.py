@@ -485,9 +485,11 @@ def test_the_integral_band_clip_and_windup_decay_reach_the_env_memory_and_bad_on
     assert (off.integral.band, off.integral.clip, off.integral.windup_decay) == (None, None, None)
     # what a run with the shipped preset and the decay trains on; the feed-forward is a table measured on the trained
     # network (ship_policy --integral-feedforward), and the decay at a walk's start goes with its start
-    # (--integral-windup-at-start): both are set on the shipped copy, not part of training
+    # (--integral-windup-at-start), as does its opening by a push (the spec's windup_decay.disturbance): all three are
+    # set on the shipped copy, not part of this env's training
     shipped = make_policy("learned").memory.config
-    shipped = shipped.with_integral(feedforward=None, windup_decay=replace(shipped.integral.windup_decay, at_start=False))
+    shipped = shipped.with_integral(feedforward=None, windup_decay=replace(shipped.integral.windup_decay, at_start=False,
+                                                                           disturbance=None))
     assert RabbitHZDEnv(**replace(config, integral_band=0.0, integral_clip=0.0).env_kwargs()).memory.config == shipped
     for bad, message in (({"integral_band": -0.1}, "integral_band must be a finite number >= 0"),
                          ({"integral_clip": float("nan")}, "integral_clip must be a finite number >= 0"),
