@@ -27,9 +27,20 @@ def _running(pid: str) -> bool:
 
 
 def _run_stack_children(parent: int) -> list[str]:
-    out = subprocess.run(["ps", "-eo", "pid=,ppid=,args="], capture_output=True, text=True).stdout
-    rows = [line.split(None, 2) for line in out.splitlines()]
-    return [row[0] for row in rows if len(row) == 3 and row[1] == str(parent) and "run_stack" in row[2]]
+    """The pids of ``parent``'s children running run_stack, read from /proc (``ps`` cuts its lines
+    at 80 columns under pytest, which cut "run_stack" off a long checkout path: CI's failure)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            command = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except (OSError, ValueError, IndexError):  # it ended while read
+            continue
+        if ppid == parent and "run_stack" in command:
+            found.append(proc.name)
+    return found
 
 
 def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):

@@ -89,6 +89,14 @@ def _walk(env: dict[str, str]) -> dict:
     return json.loads(done.stdout)
 
 
+def _dispatched() -> list[str]:
+    """NumPy's SIMD dispatch targets this CPU runs (NumPy 2.4: X86_V3, X86_V4, AVX512_ICL and, on
+    Sapphire Rapids and later, AVX512_SPR)."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    return [name for name in __cpu_dispatch__ if __cpu_features__.get(name)]
+
+
 def _avx512() -> bool:
     try:
         return " avx512f" in Path("/proc/cpuinfo").read_text()
@@ -101,13 +109,16 @@ def _avx512() -> bool:
 def test_the_three_controllers_walk_the_same_bits_under_every_kernel_and_simd_target():
     """The demo scenario and large_backward, for classic, recovery and learned, under OpenBLAS's
     Haswell, SkylakeX (where the CPU has AVX-512) and Prescott kernels and with NumPy's AVX-512
-    and AVX2 dispatch off (NumPy 2.4 names them X86_V4/AVX512_ICL and X86_V3): every tick's
+    and AVX2 dispatch off (every target the CPU has: NumPy 2.4 names them X86_V4/AVX512_ICL/
+    AVX512_SPR and X86_V3; before, the fixed names missed AVX512_SPR on a Xeon): every tick's
     state, every decision, bit for bit. Before the fixed-order forward pass, learned fell in
     large_backward under SkylakeX and walked under the others."""
     kernels = ["Haswell", "Prescott"] + (["SkylakeX"] if _avx512() else [])
     settings = [{"OPENBLAS_CORETYPE": k} for k in kernels]
-    settings += [{"NPY_DISABLE_CPU_FEATURES": "X86_V4,AVX512_ICL"},
-                 {"NPY_DISABLE_CPU_FEATURES": "X86_V3,X86_V4,AVX512_ICL", "OPENBLAS_CORETYPE": "Prescott"}]
+    dispatched = _dispatched()  # every target this CPU has, so the names fit an AMD EPYC and a Sapphire Rapids alike
+    wide = [name for name in dispatched if name == "X86_V4" or name.startswith("AVX512")]
+    settings += [{"NPY_DISABLE_CPU_FEATURES": ",".join(wide)} if wide else {},
+                 {"NPY_DISABLE_CPU_FEATURES": ",".join(dispatched), "OPENBLAS_CORETYPE": "Prescott"}]
     runs = [(env, _walk(env)) for env in settings]
     machines = [run.pop("machine") for _env, run in runs]
     assert len({m["openblas_kernel"] for m in machines[:len(kernels)]}) == len(kernels), machines  # each its own
