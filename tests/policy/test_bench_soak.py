@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 import pytest
+from proc_helpers import children
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -27,20 +28,8 @@ def _running(pid: str) -> bool:
 
 
 def _run_stack_children(parent: int) -> list[str]:
-    """The pids of ``parent``'s children running run_stack, read from /proc (``ps`` cuts its lines
-    at 80 columns under pytest, which cut "run_stack" off a long checkout path: CI's failure)."""
-    found = []
-    for proc in Path("/proc").iterdir():
-        if not proc.name.isdigit():
-            continue
-        try:
-            ppid = int((proc / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            command = (proc / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except (OSError, ValueError, IndexError):  # it ended while read
-            continue
-        if ppid == parent and "run_stack" in command:
-            found.append(proc.name)
-    return found
+    """``parent``'s children running run_stack (from /proc: ps cut "run_stack" off CI's long path)."""
+    return children(parent, "run_stack")
 
 
 def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from proc_helpers import children
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -21,9 +22,7 @@ SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "run_stack.py"
 def _node_processes(parent: int) -> list[str]:
     """Command lines of the node processes run_stack (pid ``parent``) started, or of any
     still alive that it had started (``started``)."""
-    out = subprocess.run(["ps", "-eo", "pid=,ppid=,args="], capture_output=True, text=True).stdout
-    rows = [line.split(None, 2) for line in out.splitlines()]
-    return [row[0] for row in rows if len(row) == 3 and row[1] == str(parent) and "-m rabbit_" in row[2]]
+    return children(parent, "-m rabbit_")
 
 
 NODE_PROCESSES = {"composed": 1, "separate": 3}
