@@ -165,6 +165,8 @@ def network_text(info: dict) -> list[str]:
                          f"wound up since the change decays with time constant {decay.tau:g} s until "
                          f"{decay.seconds:g} s after it"
                          + (" (a walk's start counts as a change up to v_d)" if decay.at_start else "")
+                         + (f"; an error beyond {decay.disturbance:g} m/s at a constant v_d (a push) counts as a "
+                            "change its way" if decay.disturbance else "")
                          if decay else "")
                       + ("; when v_d changes it moves by the difference of its steady values for the old and "
                          + ("the new v_d, and it starts a walk at its steady value for v_d" if table.start
