@@ -60,3 +60,4 @@ def test_probe_signal_prints_one_json_object_for_a_preset(tmp_path):
     assert run.returncode == 0, run.stderr
     report = json.loads(run.stdout)
     assert report == json.loads(out.read_text()) and report["probes"][0]["sigma"] == 0.2
+    assert report["preset"] == "config/reproduce/tiny.yaml"  # the repository's path, not this machine's

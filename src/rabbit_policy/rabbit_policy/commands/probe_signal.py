@@ -52,7 +52,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.pairs < 2 or args.episodes < 0:
         parser.error("--pairs must be >= 2 and --episodes >= 1")
-    from rabbit_policy.commands.reproduce import load_preset, write_start
+    from rabbit_policy.commands.reproduce import load_preset, preset_dir, write_start
 
     try:
         preset = load_preset(args.preset)
@@ -87,7 +87,8 @@ def main(argv: list[str] | None = None) -> int:
                 results.append(row)
         finally:
             backend.close()
-    report = {"preset": preset["path"], "start": preset["start"], "distribution": config.distribution,
+    root, path = preset_dir().parents[1], Path(preset["path"]).resolve()  # the repository's path, not this machine's
+    report = {"preset": str(path.relative_to(root) if path.is_relative_to(root) else path), "start": preset["start"], "distribution": config.distribution,
               "reward": config.reward, "fall_penalty": config.fall_penalty, "max_steps": config.max_steps, "probes": results}
     text = strict_json.dumps(report)
     if args.out is not None:
