@@ -16,7 +16,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "bench_soak.py"
 START_WAIT = 300.0
 """s (wall): how long bench_soak may take to start its walk (its imports and run_stack's on a busy
-2-core machine: 60 s was too short under CI's load, 2026-12-02)."""
+2-core machine)."""
 
 
 def _running(pid: str) -> bool:
@@ -25,11 +25,6 @@ def _running(pid: str) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
     except OSError:
         return False
-
-
-def _run_stack_children(parent: int) -> list[str]:
-    """``parent``'s children running run_stack (from /proc: ps cut "run_stack" off CI's long path)."""
-    return children(parent, "run_stack")
 
 
 def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):
@@ -42,7 +37,7 @@ def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):
         deadline = time.monotonic() + START_WAIT
         while not stack and soak.poll() is None and time.monotonic() < deadline:
             time.sleep(0.2)
-            stack = _run_stack_children(soak.pid)
+            stack = children(soak.pid, "run_stack")
         assert len(stack) == 1, f"bench_soak started no run_stack in {START_WAIT:.0f} s (exit status {soak.poll()})"
         while "simulation running" not in log.read_text() and _running(stack[0]) and time.monotonic() < deadline:
             time.sleep(0.2)
@@ -54,7 +49,7 @@ def test_a_bench_soak_killed_outright_stops_its_run_stack(tmp_path):
             time.sleep(0.2)
         assert not _running(stack[0]), log.read_text()[-3000:]
     finally:  # nothing of it left in the domain, whatever failed (a stack left walking fails other tests)
-        stack += _run_stack_children(soak.pid)
+        stack += children(soak.pid, "run_stack")
         if soak.poll() is None:
             soak.kill()
             soak.wait()
