@@ -155,6 +155,10 @@ def test_the_verdict_judges_the_candidate_that_passed_most_selection_trials():
     assert selected_best(selection, ["a", "b", "c"]) == "b"  # d was not screened; b and c tie, b is later
     assert selected_best({"seed-0": [scored("a", 300, 1, 10), scored("b", 300, 0, 5)]}, ["a", "b"]) == "b"
     assert selected_best({}, ["a"]) is None
+    # a snapshot significantly worse than the start on a family ranks after every one that is not
+    worse = {**scored("e", 311, 0, 40), "worse": ["forward"]}
+    assert selected_best({**selection, "seed-2": [worse]}, ["a", "b", "e"]) == "b"
+    assert selected_best({"start": {"passed": 312}, "seed-2": [worse]}, ["e"]) == "e"  # the start's counts are no candidate
 
 
 def test_heldout_selection_picks_the_evaluated_spec_passing_most_trials_then_fewest_failed_checks(tmp_path):
@@ -163,7 +167,8 @@ def test_heldout_selection_picks_the_evaluated_spec_passing_most_trials_then_few
     import shutil
 
     from rabbit_policy.commands.reproduce import heldout_candidates
-    from rabbit_policy.evaluation.shipping import ScreenTrials
+    from rabbit_policy.evaluation.shipping import ScreenTrials, measure
+    from rabbit_policy.spec import load_controller
 
     run = tmp_path / "run"
     (run / "evaluated").mkdir(parents=True)
@@ -177,8 +182,9 @@ def test_heldout_selection_picks_the_evaluated_spec_passing_most_trials_then_few
              "15,1,30,True,0,1.2,0.01,0,3.0"]
     (run / "eval.csv").write_text("\n".join(lines) + "\n")
     trials = ScreenTrials.selection(quick=True)
-    picked, scored = heldout_candidates(run, 2, trials, map)
+    picked, scored = heldout_candidates(run, 2, trials, map, measure(load_controller(learned), trials))
     assert [s["iteration"] for s in scored] == [5, 10, 15] and len({s["passed"] for s in scored}) == 1  # one spec
+    assert all(s["worse"] == [] for s in scored)  # the start itself: no family worse
     assert [p.name for p in picked] == ["00015.yaml", "00005.yaml"]  # a tie: fewest failed checks, then the later
     assert heldout_candidates(tmp_path / "empty", 1, trials, map) == ([tmp_path / "empty" / "policy.yaml"], [])
 

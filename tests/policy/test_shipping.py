@@ -7,7 +7,8 @@ import pytest
 
 from rabbit_policy.evaluation.push_recovery import classic_margin
 from rabbit_policy.evaluation.robustness import RobustnessConfig, phase_times, push_survived, transition_outcome
-from rabbit_policy.evaluation.shipping import ScreenTrials, measure, screen_rank, verdict
+from rabbit_policy.evaluation.shipping import (ScreenTrials, family_tests, measure, screen_rank, verdict,
+                                               worse_families)
 from rabbit_policy.evaluation.statistics import rate
 from rabbit_policy.spec import load_packaged
 
@@ -38,6 +39,8 @@ def test_a_candidate_ships_only_when_significantly_better_after_the_bonferroni_d
     ships, why, tests = verdict(traded, start, screened=1)
     assert not ships and len(why) == 1 and why[0].startswith("changes significantly worse: 40 against 50 of 50")
     assert tests["changes"]["only_b"] == 10
+    assert worse_families(family_tests(traded, start)) == ["changes"]  # the rule the selection ranks by
+    assert worse_families(family_tests(start, traded)) == ["forward"]  # better on changes is not worse there
     ships, why, _ = verdict(measured([True] * 20 + [False] * 180, [True] * 200, [True] * 50, failures=1), start)
     assert not ships and why == ["fails 1 acceptance checks, the start 0"]
     ranked = sorted([measured([True], [True], [False], failures=0), measured([True], [True], [True], failures=1),
@@ -93,3 +96,5 @@ def test_the_selection_trials_share_no_trial_with_the_screen(quick):
     assert pushes(selection) and changes(selection)
     assert not pushes(selection) & pushes(screen) and not changes(selection) & changes(screen)
     assert selection.push_phases()[0] == 0.5 / selection.phases
+    if not quick:  # beside the screen's slowest and fastest speeds, where forward pushes were lost first
+        assert min(selection.speeds) < min(screen.speeds) + 0.05 and max(selection.speeds) > max(screen.speeds)

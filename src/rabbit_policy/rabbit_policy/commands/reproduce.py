@@ -12,15 +12,16 @@ learned controller, everything under ``DIR`` (never into the package):
    learning curve (``DIR/curves.png``, every seed);
 2. **screen**: the start, the packaged learned controller (when it is not the start) and each
    seed's ``screen.candidates`` evaluated specs (``screen.select``: ``acceptance``, those its
-   acceptance ranks best; ``heldout``, those that pass most of the held-out selection trials,
+   acceptance ranks best; ``heldout``, those that pass most of the held-out selection trials
+   among those no family of which is significantly worse there than the start's,
    :meth:`~rabbit_policy.evaluation.shipping.ScreenTrials.selection`, none of them the screen's;
    no evaluated spec: its last ``policy.yaml``), each on the acceptance checks (``evaluation``: ``quick`` or ``full``) and
    the paired screen trials (:mod:`rabbit_policy.evaluation.shipping`; ``screen.trials``:
    ``quick`` or ``full``), ``DIR/screen.json``; the candidate with most trials passed is
    chosen, and it ships only on a significant improvement over the start (McNemar's exact
    test, Bonferroni over the candidates screened: :func:`~rabbit_policy.evaluation.shipping.verdict`;
-   with ``heldout`` the candidate judged is the one that passed most selection trials, chosen off the
-   screen, so no correction: :func:`selected_best`);
+   with ``heldout`` the candidate judged is the one that ranks best on the selection trials, chosen
+   off the screen, so no correction: :func:`selected_best`);
 3. **ship**: the chosen candidate if it ships, else the start, as ``DIR/learned.yaml``, with
    its provenance (the code's commit, the gait library's hash, the preset, the verdict and
    the commands that ran);
@@ -241,20 +242,29 @@ def candidates(run: Path, count: int) -> list[Path]:
     return [r["path"] for r in rows[:count]] or [run / "policy.yaml"]
 
 
-def heldout_candidates(run: Path, count: int, trials, map_fn) -> tuple[list[Path], list[dict]]:
+def selection_key(scored: dict) -> tuple:
+    """Sort key of a snapshot's selection counts, lower is better: no family significantly worse
+    than the start's on the selection trials (``worse`` empty), then most trials passed, then fewest
+    failed acceptance checks, then the later."""
+    return (bool(scored.get("worse")), -scored["passed"], scored["failures"], -scored["iteration"])
+
+
+def heldout_candidates(run: Path, count: int, trials, map_fn, start: dict | None = None) -> tuple[list[Path], list[dict]]:
     """The run's candidate specs picked on held-out ``trials``: the ``count`` evaluated ones
-    that pass most of them (then fewest failed acceptance checks, then the later), else its
-    last ``policy.yaml``; and each evaluated spec's counts (``candidate``, ``passed``, ``of``,
-    ``rates``, ``failures``), in training order."""
-    from rabbit_policy.evaluation.shipping import measure
+    that rank best by :func:`selection_key`, else its last ``policy.yaml``; and each evaluated
+    spec's counts (``candidate``, ``passed``, ``of``, ``rates``, ``failures``; with ``start``,
+    the start's :func:`~rabbit_policy.evaluation.shipping.measure` on the same trials, also
+    ``worse``: the families significantly worse than the start's), in training order."""
+    from rabbit_policy.evaluation.shipping import family_tests, measure, worse_families
     from rabbit_policy.spec import load_controller
 
     scored = []
     for row in evaluated(run):
         counted = measure(load_controller(row["path"]), trials, map_fn)
+        worse = worse_families(family_tests(counted, start)) if start is not None else []
         scored.append({"candidate": row["path"], "iteration": int(row["iteration"]), "failures": int(row["failures"]),
-                       **{k: counted[k] for k in ("passed", "of", "rates")}})
-    ranked = sorted(scored, key=lambda r: (-r["passed"], r["failures"], -r["iteration"]))
+                       **{k: counted[k] for k in ("passed", "of", "rates")}, "worse": worse})
+    ranked = sorted(scored, key=selection_key)
     return [r["candidate"] for r in ranked[:count]] or [run / "policy.yaml"], scored
 
 
@@ -269,33 +279,38 @@ def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
     return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, trials, map_fn)}
 
 
-def pick_candidates(out: Path, preset: dict, runs: list[dict], map_fn) -> tuple[list[tuple[str, Path]], dict]:
+def pick_candidates(out: Path, preset: dict, runs: list[dict], start: Path, map_fn) -> tuple[list[tuple[str, Path]], dict]:
     """Each seed's ``screen.candidates`` specs as ``(name relative to out, path)``, picked as
-    ``screen.select`` says; with ``heldout`` also each seed's selection counts
-    (:func:`heldout_candidates`), printed a line per seed."""
-    from rabbit_policy.evaluation.shipping import ScreenTrials
+    ``screen.select`` says; with ``heldout`` also each seed's selection counts against the
+    ``start`` spec's on the same trials (:func:`heldout_candidates`), printed a line per seed."""
+    from rabbit_policy.evaluation.shipping import ScreenTrials, measure
+    from rabbit_policy.spec import load_controller
 
     count, picked, selection = preset["screen"]["candidates"], [], {}
     if preset["screen"]["select"] == "acceptance":
         return [(str(p.relative_to(out)), p) for r in runs for p in candidates(r["run"], count)], selection
     held_out = ScreenTrials.selection(quick=preset["screen"]["trials"] == "quick")
+    start_counted = measure(load_controller(start), held_out, map_fn)
+    selection["start"] = {k: start_counted[k] for k in ("passed", "of", "rates")}
+    print(f"  select, the start: {start_counted['passed']}/{start_counted['of']} held-out trials passed", flush=True)
     for r in runs:
-        paths, scored = heldout_candidates(r["run"], count, held_out, map_fn)
+        paths, scored = heldout_candidates(r["run"], count, held_out, map_fn, start_counted)
         picked += [(str(p.relative_to(out)), p) for p in paths]
         selection[f"seed-{r['seed']}"] = [{**s, "candidate": str(s["candidate"].relative_to(out))} for s in scored]
-        print(f"  select, seed {r['seed']}: " + ", ".join(f"{s['iteration']}: {s['passed']}/{s['of']}" for s in scored)
-              + " held-out trials passed; " + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
+        print(f"  select, seed {r['seed']}: " + ", ".join(
+            f"{s['iteration']}: {s['passed']}/{s['of']}" + (f" ({', '.join(s['worse'])} worse)" if s["worse"] else "")
+            for s in scored) + " held-out trials passed; " + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
     return picked, selection
 
 
 def selected_best(selection: dict, names: list[str]) -> str | None:
-    """Of the screened candidates ``names``, the one that passed most held-out selection
-    trials (then fewest failed acceptance checks, then the later); None without a selection.
-    The verdict judges it alone: chosen off the screen, no correction for a choice on it."""
-    scored = [s for seed in selection.values() for s in seed if s["candidate"] in names]
+    """Of the screened candidates ``names``, the one that ranks best on the held-out selection
+    trials (:func:`selection_key`); None without a selection. The verdict judges it alone:
+    chosen off the screen, no correction for a choice on it."""
+    scored = [s for seed, rows in selection.items() if seed != "start" for s in rows if s["candidate"] in names]
     if not scored:
         return None
-    return min(scored, key=lambda s: (-s["passed"], s["failures"], -s["iteration"]))["candidate"]
+    return min(scored, key=selection_key)["candidate"]
 
 
 def screen_candidates(screened: list[tuple[str, Path]], criteria, trials, map_fn) -> list[dict]:
@@ -393,7 +408,7 @@ def main(argv: list[str] | None = None) -> int:
         screened.append(("packaged", packaged_spec("learned")))
     backend = open_backend(parser, args)
     try:
-        picked, selection = pick_candidates(out, preset, runs, backend.map)
+        picked, selection = pick_candidates(out, preset, runs, starts[0], backend.map)
         screened += picked
         print(f"[2/5] screen: {', '.join(name for name, _ in screened)} (acceptance and {trials.count('forward')} + "
               f"{trials.count('backward')} pushes and {trials.count('changes')} changes, paired)", flush=True)

@@ -78,12 +78,13 @@ class ScreenTrials:
     def selection(cls, quick: bool = False) -> ScreenTrials:
         """Held-out trials to pick candidates on, none of them the screen's (nor, with ``quick``,
         :meth:`quick`'s), in about the screen's proportions: pushes at other speeds and between
-        the screen's phases (192), changes between other speeds at six phases (120); ``quick``:
-        4 pushes and 2 changes."""
+        the screen's phases (320, the slowest and the fastest beside the screen's own: trained networks
+        lost forward pushes there first), changes between other speeds at six phases (120);
+        ``quick``: 4 pushes and 2 changes."""
         if quick:
             return replace(cls.quick(), speeds=(1.15,), phase_offset=0.5, change_speeds=(0.92, 1.08),
                            change_phases=(0.375,))
-        return cls(speeds=(0.85, 1.15, 1.3), phases=16, phase_offset=0.5,
+        return cls(speeds=(0.78, 0.85, 1.15, 1.3, 1.4), phases=16, phase_offset=0.5,
                    change_speeds=(0.78, 0.92, 1.08, 1.22, 1.38), change_phases=tuple((k + 0.5) / 6 for k in range(6)))
 
     def push_phases(self) -> list[float]:
@@ -162,8 +163,7 @@ def verdict(candidate: dict, start: dict, screened: int = 1, alpha: float = ALPH
     checks failed, **measure(...)}`` on the same trials; ``screened`` candidates were compared
     with the start. Ships on a significant improvement (the module docstring); ``tests`` holds
     McNemar's test in all and per family."""
-    tests = {"all": mcnemar_exact(pooled(candidate), pooled(start)),
-             **{f: mcnemar_exact(candidate["outcomes"][f], start["outcomes"][f]) for f in FAMILIES}}
+    tests = {"all": mcnemar_exact(pooled(candidate), pooled(start)), **family_tests(candidate, start)}
     level = alpha / max(1, screened)
     reasons = []
     if candidate["failures"] > start["failures"]:
@@ -172,13 +172,23 @@ def verdict(candidate: dict, start: dict, screened: int = 1, alpha: float = ALPH
     if not (overall["only_a"] > overall["only_b"] and overall["p_value"] < level):
         reasons.append(f"not significantly better in all: {candidate['passed']} of {candidate['of']} against the "
                        f"start's {start['passed']} (p = {overall['p_value']:.3g}, needs < {level:.3g})")
-    for family in FAMILIES:
-        test = tests[family]
-        if test["only_b"] > test["only_a"] and test["p_value"] < alpha:
-            reasons.append(f"{family} significantly worse: {sum(candidate['outcomes'][family])} against "
-                           f"{sum(start['outcomes'][family])} of {len(start['outcomes'][family])} "
-                           f"(p = {test['p_value']:.3g})")
+    for family in worse_families(tests, alpha):
+        reasons.append(f"{family} significantly worse: {sum(candidate['outcomes'][family])} against "
+                       f"{sum(start['outcomes'][family])} of {len(start['outcomes'][family])} "
+                       f"(p = {tests[family]['p_value']:.3g})")
     return not reasons, reasons, tests
+
+
+def family_tests(candidate: dict, start: dict) -> dict:
+    """McNemar's exact test of ``candidate`` against ``start`` (each :func:`measure`'s result on
+    the same trials) per family: ``only_a`` the trials only the candidate passed."""
+    return {f: mcnemar_exact(candidate["outcomes"][f], start["outcomes"][f]) for f in FAMILIES}
+
+
+def worse_families(tests: dict, alpha: float = ALPHA) -> list[str]:
+    """The families of ``tests`` (:func:`family_tests`) on which the candidate is significantly
+    worse than the start: more trials only the start passed, p below ``alpha``."""
+    return [f for f in FAMILIES if tests[f]["only_b"] > tests[f]["only_a"] and tests[f]["p_value"] < alpha]
 
 
 def screen_rank(measured: dict) -> tuple:
