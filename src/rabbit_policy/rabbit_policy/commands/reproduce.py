@@ -31,7 +31,8 @@ learned controller, everything under ``DIR`` (never into the package):
 
 The last lines say one verdict (the console's ``verdict:`` line, the JSON's ``passed`` and
 ``beats_start``, the card's "Shipped" and "Acceptance"); the exit status is 0 when what ships
-passes its acceptance checks, 1 when it fails them (or a training failed), 2 for bad arguments.
+passes its acceptance checks, 1 when it fails them (or a training failed), 2 for bad arguments,
+128 + the signal when a training was interrupted (Ctrl-C, SIGTERM: ``--resume`` continues it).
 
 Presets are data (``config/reproduce/NAME.yaml``: ``start``, ``seeds``, ``train``,
 ``screen``, ``evaluation``, every key required; the seed is ``seeds``', not ``train``'s).
@@ -392,7 +393,15 @@ def main(argv: list[str] | None = None) -> int:
         train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
         commands.append(train_line)
         print(f"[1/5] train, seed {seed} ({index + 1} of {len(preset['seeds'])}): {train_line}", flush=True)
-        trained = subprocess.run([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
+        trained = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
+        try:
+            trained.wait()
+        except KeyboardInterrupt:  # Ctrl-C reached the training too: it writes its checkpoint, then stops
+            trained.wait()
+        if trained.returncode in (128 + 2, 128 + 15):  # Ctrl-C, SIGTERM: a checkpoint was written
+            print(f"interrupted: training seed {seed} stopped with its checkpoint; --resume continues it",
+                  file=sys.stderr)
+            return trained.returncode
         if trained.returncode != 0:
             print(f"error: training seed {seed} failed with status {trained.returncode} (its output is above; {run} "
                   "holds the run)", file=sys.stderr)

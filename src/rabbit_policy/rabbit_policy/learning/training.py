@@ -340,7 +340,8 @@ class TrainingRun:
 
 def train(args: TrainingConfig) -> int:
     """Run training as configured (setup, the loop, evaluations, checkpoints: :class:`TrainingRun`);
-    returns the exit status (0, or 2 for an unusable --out/--resume or backend)."""
+    returns the exit status (0, or 2 for an unusable --out/--resume or backend; interrupted by
+    Ctrl-C or SIGTERM it leaves with 128 + the signal once its checkpoint is written)."""
     problem = _refusal(args)
     if problem:
         print(f"error: {problem}", file=sys.stderr)
@@ -373,19 +374,23 @@ def train(args: TrainingConfig) -> int:
     run = TrainingRun(args, start, trainer, backend, state)
     run.began = began  # the warm start counts in the run's wall time
 
-    def interrupt(_signum, _frame):
+    received = [signal.SIGINT]  # Ctrl-C raises KeyboardInterrupt itself
+
+    def interrupt(signum, _frame):
+        received[0] = signum
         raise KeyboardInterrupt
 
     signal.signal(signal.SIGTERM, interrupt)  # SIGTERM saves a checkpoint like Ctrl-C
     if run.run():
-        stop_workers(trainer, backend)
+        stop_workers(trainer, backend, 128 + received[0])
     return 0
 
 
-def stop_workers(trainer, backend) -> None:
+def stop_workers(trainer, backend, status: int) -> None:
     """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
     them from starting replacement workers), kill and reap whatever worker is left, and
-    leave without multiprocessing's exit handlers. ``Pool.terminate()`` can block on a
+    leave without multiprocessing's exit handlers, with exit ``status`` (128 + the signal, the
+    shell's convention: an interrupted training is not a finished one, ``--resume`` continues it). ``Pool.terminate()`` can block on a
     queue lock held by an interrupted worker (runs hung after ``pkill -f train.py``, which
     signals the workers too), so it gets a few seconds in a thread and the kill does not
     depend on it."""
@@ -408,7 +413,7 @@ def stop_workers(trainer, backend) -> None:
         time.sleep(0.2)
     sys.stdout.flush()
     sys.stderr.flush()
-    os._exit(0)
+    os._exit(status)
 
 
 def append_csv(path: Path, row: dict) -> None:
