@@ -87,6 +87,42 @@ def test_the_tiny_preset_runs_the_chain_end_to_end_and_walk_py_walks_what_it_wro
     assert load_spec(out / "learned.yaml").provenance["commands"][0].endswith(" --resume")
 
 
+@pytest.mark.slow
+def test_a_training_stopped_by_sigterm_stops_reproduce_before_its_screen(tmp_path):
+    """A seed's training killed with SIGTERM writes its checkpoint and exits 143; reproduce.py
+    says so in one line and exits 143 too, training no other seed and screening nothing (an
+    interrupted run is not a finished one: ``--resume`` continues it)."""
+    import os
+    import signal
+    import time
+
+    from proc_helpers import children
+
+    preset = yaml.safe_load((ROOT / "config/reproduce/tiny.yaml").read_text())
+    preset["train"].update(iterations=100000, eval_every=100000)
+    (tmp_path / "long.yaml").write_text(yaml.safe_dump(preset))
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "scripts/reproduce.py", "--preset", str(tmp_path / "long.yaml"),
+                             "--out", str(out), "--allow-dirty"], cwd=ROOT, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not (out / "seed-0" / "run" / "log.csv").is_file():
+            assert time.monotonic() < deadline and proc.poll() is None, proc.communicate()[1][-2000:]
+            time.sleep(0.2)
+        training = children(proc.pid, "rabbit_policy.commands.train")
+        assert len(training) == 1
+        os.kill(int(training[0]), signal.SIGTERM)
+        _out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    assert "interrupted: training seed 0 stopped with its checkpoint; --resume continues it" in err
+    assert (out / "seed-0" / "run" / "checkpoint.pt").is_file()
+    assert not (out / "seed-1").exists() and not (out / "screen.json").exists()
+
+
 def test_presets_are_data_with_every_key_and_bad_ones_are_one_line(tmp_path):
     for name in ("tiny", "shipped"):
         preset = load_preset(name)
