@@ -23,7 +23,7 @@ from checkpoints import SHIPPED_BEFORE
 from rabbit_policy.spec.make import checkpoint_policy, make_policy
 from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryPolicy
 from rabbit_policy.spec import SpecError, build, load_controller, load_packaged, load_spec, packaged_spec
-from rabbit_policy.spec.schema import KINDS
+from rabbit_policy.spec.schema import KINDS, parse_spec
 
 pytestmark = pytest.mark.sim
 
@@ -94,9 +94,9 @@ MODEL_OWNED = {"LegGeometry.femur", "LegGeometry.tibia", "ControllerConfig.tick"
 (``controller.model_sha256``) and is refused on another."""
 NOT_PERTURBED = {"GaitLibrary.calibration", "IntegralConfig.band", "IntegralConfig.clip", "IntegralConfig.windup_decay",
                  "IntegralConfig.feedforward", "IntegralConfig.speed_range", "DecisionTiming.ticks", "Observation.body",
-                 "WindupDecay.disturbance", "WindupDecaySpec.disturbance"}
+                 "WindupDecay.disturbance"}
 """Defaults of no number's kind (None: a stage off, or a record's empty slot), which build
-gives explicitly from the spec (``integral_config``, ``MemoryConfig(integral, body)``). The
+gives explicitly from the spec (its ``speed_integral`` section, ``MemoryConfig(integral, body)``). The
 windup decay's ``disturbance`` is the one optional key of a spec's rules: absent, the rule is off,
 as in every spec written before it."""
 
@@ -185,7 +185,7 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["gait_library"].update(sha256="1" * 64), "the library changed since the spec was written"),
     (lambda d: d.update(spec_version=3), "spec_version 3 is not supported"),
     (lambda d: d.update(spec_version=1), "spec_version 1 names only the controller's blends: upgrade the file with"),
-    (lambda d: d["speed_integral"].update(limit=-1.0), "speed_integral.limit must be a finite number > 0, got -1.0"),
+    (lambda d: d["speed_integral"].update(limit=-1.0), "spec.speed_integral: the speed integral's limit must be a finite number > 0, got -1.0"),
     # values checked by meaning, each refusal naming its field
     (lambda d: d["network"]["low"].__setitem__(0, 5.0), "network.low[0] (5.0) must be below network.high[0]"),
     (lambda d: d["network"]["residual"].update(kd_bounds=[150.0, 20.0]),
@@ -194,7 +194,7 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["network"].update(input_offset=[0.0]), "network.input_offset needs 25 numbers (network.inputs), got 1"),
     (lambda d: d["speed_integral"].update(dt=0.5), "speed_integral.dt (0.5 s) must be the time between decisions, "
                                                    "0.02 s (decision.period_ticks 20)"),
-    (lambda d: d["speed_integral"].update(speed_range=[1.5, 0.7]), "speed_integral.speed_range must be ordered"),
+    (lambda d: d["speed_integral"].update(speed_range=[1.5, 0.7]), "spec.speed_integral: the speed integral's speed range needs low < high"),
     (lambda d: d["controller"].update(within_step_until=1.5), "controller.within_step_until must be a finite number "
                                                               ">= 0 and <= 1, got 1.5"),
     (lambda d: d["blend"].update(length=-0.1), "blend.length must be a finite number >= 0 and <= 1"),
@@ -372,18 +372,29 @@ def test_a_spec_round_trips_through_its_file(tmp_path):
     assert build(spec, packaged_spec("learned").parent).spec == spec
 
 
-@pytest.mark.slow
-def test_a_speed_integral_converts_between_its_spec_and_its_configuration_both_ways():
-    """The spec's ``speed_integral`` and the runtime's ``IntegralConfig`` carry the same
-    fields: the packaged learned one (every rule set) and one with none, there and back."""
-    from rabbit_policy.runtime.speed_integral import IntegralConfig
-    from rabbit_policy.spec.build import integral_config, integral_spec
+def test_a_rules_section_is_its_runtime_class_read_strictly():
+    """A spec's ``speed_integral`` and ``recovery_rule`` are the runtime's ``IntegralConfig`` and
+    ``RecoveryConfig`` themselves (no mirror class, no translator), read by the spec's strict
+    loader: a key missing is refused although the class has a code default for it, except the
+    windup decay's ``disturbance`` (its ``OPTIONAL_KEYS``); an unknown key or a bad value is one line."""
+    from rabbit_policy.runtime.recovery import RecoveryConfig
+    from rabbit_policy.runtime.speed_integral import IntegralConfig, WindupDecay
 
-    shipped = load_spec(packaged_spec("learned")).speed_integral
-    assert shipped.windup_decay is not None and shipped.feedforward is not None
-    assert integral_spec(integral_config(shipped)) == shipped
-    plain = IntegralConfig(0.2, 0.02)
-    assert integral_config(integral_spec(plain)) == plain
+    shipped = load_spec(packaged_spec("learned"))
+    assert type(shipped.speed_integral) is IntegralConfig and type(shipped.recovery_rule) is RecoveryConfig
+    assert type(shipped.speed_integral.windup_decay) is WindupDecay
+    data = shipped.to_dict()
+    for section, key in (("speed_integral", "gain"), ("recovery_rule", "bins")):
+        broken = {**data, section: {k: v for k, v in data[section].items() if k != key}}
+        with pytest.raises(SpecError, match=f"missing key '{key}' in spec.{section}"):
+            parse_spec(broken)
+    decay = {k: v for k, v in data["speed_integral"]["windup_decay"].items() if k != "disturbance"}
+    assert parse_spec({**data, "speed_integral": {**data["speed_integral"], "windup_decay": decay}}
+                      ).speed_integral.windup_decay.disturbance is None
+    with pytest.raises(SpecError, match="unknown key 'gian' in spec.speed_integral"):
+        parse_spec({**data, "speed_integral": {**data["speed_integral"], "gian": 1.0}})
+    with pytest.raises(SpecError, match="spec.speed_integral: the speed integral's gain must be a finite number >= 0"):
+        parse_spec({**data, "speed_integral": {**data["speed_integral"], "gain": -1.0}})
 
 
 def test_the_learned_spec_env_is_the_deployed_loop_with_the_network_as_the_agent():

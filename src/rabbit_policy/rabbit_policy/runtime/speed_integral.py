@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from bisect import bisect_right
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 from math import isfinite
 
 NOMINAL_STEP_S = 0.6
@@ -97,6 +98,8 @@ class WindupDecay:
     tau: float = 1.0
     at_start: bool = False
     disturbance: float | None = None
+    OPTIONAL_KEYS: ClassVar[tuple[str, ...]] = ("disturbance",)
+    """A controller spec may leave these out (absent: None, the rule off, as in every spec written before it)."""
 
     def __post_init__(self) -> None:
         for name in ("seconds", "tau"):
@@ -200,6 +203,8 @@ class IntegralConfig:
         if decay is not None and not decay.tau >= self.dt:
             raise ValueError(f"the speed integral's windup decay tau must be at least dt ({self.dt:g} s), got "
                              f"{decay.tau!r}")
+        if not (isfinite(self.gain) and self.gain >= 0.0):
+            raise ValueError(f"the speed integral's gain must be a finite number >= 0 (1/s), got {self.gain!r}")
         for name in ("limit", "dt"):
             value = getattr(self, name)
             if not (isfinite(value) and value > 0.0):

@@ -6,7 +6,6 @@ the stack apply it)."""
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -21,10 +20,9 @@ from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import NetworkPolicy
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
-from rabbit_policy.runtime.speed_integral import IntegralConfig, IntegralFeedforward, WindupDecay
+from rabbit_policy.runtime.speed_integral import IntegralConfig
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
-from rabbit_policy.spec.schema import (ControllerSpec, FeedforwardSpec, IntegralSpec, NetworkSpec, SpecError,
-                                       WindupDecaySpec, load_spec)
+from rabbit_policy.spec.schema import ControllerSpec, NetworkSpec, SpecError, load_spec
 from rabbit_sim.model import model_sha256
 
 
@@ -52,14 +50,14 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
                         f"robot model than rabbit_sim's ({model_sha256()[:12]}), whose geometry the controller assumes")
     library = GaitLibrary.load(checked_library_dir(spec.gait_library.source, spec.gait_library.sha256, base))
     period, window = spec.decision.period_ticks, spec.decision.window_ticks  # checked by DecisionSpec
-    integral = integral_config(spec.speed_integral)
+    integral = spec.speed_integral  # the runtime's IntegralConfig, read from its section
     try:
         if spec.kind == "learned":
             policy = _learned(spec, base, library, integral, weights, source)
         else:
             classic = LibraryPolicy(library, spec.gait_library.mode, integral)
             if spec.kind == "recovery":
-                policy = RecoveryPolicy(classic, rule_config(spec), period, window)
+                policy = RecoveryPolicy(classic, spec.recovery_rule, period, window)
             else:
                 policy = PeriodicPolicy(classic, period, window) if period else classic
     except SpecError:
@@ -69,37 +67,6 @@ def build(spec: ControllerSpec, base: Path | None = None, weights: tuple[list, l
     policy.controller_settings = spec.controller.settings()
     policy.spec, policy.spec_base = spec, base
     return policy
-
-
-def integral_config(spec: IntegralSpec | None) -> IntegralConfig | None:
-    """The speed integral's configuration, every field from the spec."""
-    if spec is None:
-        return None
-    decay = WindupDecay(**asdict(spec.windup_decay)) if spec.windup_decay is not None else None
-    feedforward = (IntegralFeedforward(tuple(spec.feedforward.speeds), tuple(spec.feedforward.values),
-                                       spec.feedforward.start) if spec.feedforward is not None else None)
-    try:
-        return IntegralConfig(spec.limit, spec.dt, spec.gain, spec.speed_range, spec.band, spec.clip, decay,
-                              feedforward)
-    except ValueError as exc:
-        raise SpecError(f"speed_integral: {exc}") from None
-
-
-def integral_spec(config: IntegralConfig) -> IntegralSpec:
-    """The spec's ``speed_integral`` for ``config``: :func:`integral_config`'s inverse."""
-    decay, ff = config.windup_decay, config.feedforward
-    return IntegralSpec(config.gain, config.limit, config.dt, config.speed_range, config.band, config.clip,
-                        WindupDecaySpec(decay.seconds, decay.tau, decay.at_start, decay.disturbance) if decay is not None
-                        else None,
-                        FeedforwardSpec(ff.speeds, ff.values, ff.start) if ff is not None else None)
-
-
-def rule_config(spec: ControllerSpec) -> RecoveryConfig:
-    """The recovery rule's constants, every one from the spec."""
-    try:
-        return RecoveryConfig(**asdict(spec.recovery_rule))
-    except ValueError as exc:
-        raise SpecError(f"recovery_rule: {exc}") from None
 
 
 def residual_base(base: str, library: GaitLibrary, rule: RecoveryConfig, decision_period: int,
@@ -156,7 +123,7 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
             if period < 1:
                 raise SpecError(f"a residual on base {net.residual.base} decides within the step: "
                                 "decision.period_ticks must be >= 1")
-            on_rule = residual_base(net.residual.base, library, rule_config(spec), period, window)
+            on_rule = residual_base(net.residual.base, library, spec.recovery_rule, period, window)
     overlay = None
     if spec.overlay is not None:
         at_once = spec.controller.within_step_blend == 0.0 and spec.controller.within_step_until == 1.0
@@ -165,7 +132,7 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
                             "gaits at once (controller.within_step_blend 0, within_step_until 1)")
         config = OverlayConfig(spec.overlay.fast_gate, spec.overlay.hold, at_once=at_once,
                                policy_blend=spec.blend is not None, rise_until=spec.overlay.rise_until)
-        rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), rule_config(spec), period, window)
+        rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), spec.recovery_rule, period, window)
         blend = (AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
                  if spec.blend is not None else None)
         overlay = RecoveryOverlay(config, period, rule, blend)

@@ -18,10 +18,9 @@ from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
-from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
-                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, RuleSpec, WeightsSpec,
+                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, WeightsSpec,
                                        dump_spec, load_spec, parse_spec)
 from rabbit_sim.model import model_sha256
 
@@ -41,10 +40,6 @@ def _settings(values: dict) -> ControllerSettingsSpec:
     config = replace(ControllerConfig(), **values)
     return ControllerSettingsSpec(**{f.name: getattr(config, f.name) for f in fields(ControllerSettingsSpec)
                                      if f.name != "model_sha256"}, model_sha256=model_sha256())
-
-
-def _rule(config: RecoveryConfig) -> RuleSpec:
-    return RuleSpec(**asdict(config))
 
 
 def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, np.ndarray]]:
@@ -93,18 +88,18 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
     memory = info.get("memory")
     decision_period = decision.resolve(int(info.get("config", {}).get("decision_period", 0)))
     if memory is not None:  # its dt is the time between decisions, at the timing asked for
-        integral = replace(integral_spec(MemoryConfig.from_dict(memory).integral), dt=decision_dt(decision_period))
+        integral = replace(MemoryConfig.from_dict(memory).integral, dt=decision_dt(decision_period))
     overlay = blend = rule = None
     settings: dict = {}
     if residual is not None and residual_base != "classic":
-        rule, settings = _rule(RecoveryConfig()), CONTROLLER_SETTINGS
+        rule, settings = RecoveryConfig(), CONTROLLER_SETTINGS
     if info.get("recovery_overlay") is not None and decision_period:
         values = info["recovery_overlay"]
         overlay = OverlaySpec(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
         if values.get("policy_blend"):
             defaults = ControllerConfig()
             blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)
-        rule = _rule(RecoveryConfig())
+        rule = RecoveryConfig()
         settings = CONTROLLER_SETTINGS if values.get("at_once") else {}
     return ControllerSpec(SPEC_VERSION, name, "learned", _library(source, base),
                           DecisionSpec(decision_period, DEFAULT_DECISION_WINDOW), integral, network, blend, rule,

@@ -8,20 +8,23 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
 2. ``decision``: when the policy decides (every ``period_ticks`` control ticks of 1 ms; 0:
    once per step, at the touchdown) and its moving-average window;
 3. ``speed_integral``: the integral of the mean speed error with every rule it runs by (its
-   bound, gate, windup decay, feed-forward table), or null;
+   bound, gate, windup decay, feed-forward table), or null: the runtime's own
+   :class:`~rabbit_policy.runtime.speed_integral.IntegralConfig`, read straight from its section;
 4. ``network``: the HZD-RL network (architecture, input normalisation, action bounds, the
    residual it adds to the library's gait; its weights in a weights-only file named by
    hash), or null;
 5. ``blend``: the network's gaits blended in alpha before the rule acts
    (:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`), or null;
-6. ``recovery_rule``: the push-recovery rule's constants
-   (:class:`~rabbit_policy.runtime.recovery.RecoveryConfig`), or null; ``overlay``: how it
+6. ``recovery_rule``: the push-recovery rule's constants (the runtime's own
+   :class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, read straight from its section), or null; ``overlay``: how it
    sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
 7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (every
    ``ControllerConfig`` field but the robot model's geometry and tick, and that model's hash).
 
 ``provenance`` is free text for people (what made it, from which commit); it is not read.
-Every other key is required, none more is allowed: a spec with an unknown or missing key,
+A section that is a runtime class is read by the same strict loader as the spec's own:
+every field a key, none absent but those the class names in ``OPTIONAL_KEYS`` (its code
+defaults are never read for a spec). Every other key is required, none more is allowed: a spec with an unknown or missing key,
 a value of the wrong kind, or a file whose hash differs fails with one line
 (:class:`SpecError`).
 """
@@ -30,7 +33,7 @@ from __future__ import annotations
 
 import math
 import typing
-from dataclasses import MISSING, asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +42,8 @@ from rabbit_msgs_py.cli import yaml_problem
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
 from rabbit_policy.runtime.forward import OUTPUTS
-from rabbit_policy.runtime.speed_integral import decision_dt
+from rabbit_policy.runtime.recovery import RecoveryConfig
+from rabbit_policy.runtime.speed_integral import IntegralConfig, decision_dt
 
 SPEC_VERSION = 2
 """2: the ``controller`` section names every 1 kHz controller constant and the robot model (1: its blends alone)."""
@@ -94,55 +98,6 @@ class DecisionSpec:
             check_ticks(self.window_ticks, "decision.window_ticks")
         except ValueError as exc:
             raise SpecError(str(exc)) from None
-
-
-@dataclass(frozen=True)
-class WindupDecaySpec:
-    """:class:`~rabbit_policy.runtime.speed_integral.WindupDecay`: s, s, bool, and m/s or null
-    (``disturbance``: optional, null when absent)."""
-
-    seconds: float
-    tau: float
-    at_start: bool
-    disturbance: float | None = None
-
-
-@dataclass(frozen=True)
-class FeedforwardSpec:
-    """:class:`~rabbit_policy.runtime.speed_integral.IntegralFeedforward`: the integral's
-    steady value (m) at each speed (m/s), and whether a walk starts at it."""
-
-    speeds: tuple[float, ...]
-    values: tuple[float, ...]
-    start: bool
-
-
-@dataclass(frozen=True)
-class IntegralSpec:
-    """:class:`~rabbit_policy.runtime.speed_integral.IntegralConfig`: ``gain`` 1/s (the
-    offset ``gain * I`` m/s added to the commanded speed), ``limit`` m (|I| bound), ``dt`` s
-    between updates, ``speed_range`` m/s where the commanded gait must stay (null: no such
-    gate), ``band``/``clip`` m/s (null: none), ``windup_decay`` and ``feedforward`` (null:
-    none)."""
-
-    gain: float
-    limit: float
-    dt: float
-    speed_range: tuple[float, float] | None
-    band: float | None
-    clip: float | None
-    windup_decay: WindupDecaySpec | None
-    feedforward: FeedforwardSpec | None
-
-    def __post_init__(self) -> None:
-        _number(self.gain, "speed_integral.gain", 0.0)
-        _number(self.limit, "speed_integral.limit", 0.0, above=True)
-        _number(self.dt, "speed_integral.dt", 0.0, above=True)
-        if self.speed_range is not None:
-            _ordered(self.speed_range, "speed_integral.speed_range", 0.0)
-        for name in ("band", "clip"):
-            if getattr(self, name) is not None:
-                _number(getattr(self, name), f"speed_integral.{name}", 0.0, above=True)
 
 
 @dataclass(frozen=True)
@@ -237,23 +192,6 @@ class BlendSpec:
 
 
 @dataclass(frozen=True)
-class RuleSpec:
-    """:class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, every field."""
-
-    offsets: tuple[float, float, float, float]
-    threshold: float
-    full: float
-    command_rate: float
-    hold_from: float
-    bins: int
-    forget_weight: float
-    forget_steps: int
-    forget_after: float
-    memory_steps: int
-    ramp_floor: float
-
-
-@dataclass(frozen=True)
 class OverlaySpec:
     """How the rule sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`
     with ``at_once`` when the spec's controller applies every gait at once, and
@@ -319,13 +257,14 @@ class ControllerSpec:
     kind: str
     gait_library: LibrarySpec
     decision: DecisionSpec
-    speed_integral: IntegralSpec | None
+    speed_integral: IntegralConfig | None
     network: NetworkSpec | None
     blend: BlendSpec | None
-    recovery_rule: RuleSpec | None
+    recovery_rule: RecoveryConfig | None
     overlay: OverlaySpec | None
     controller: ControllerSettingsSpec
     provenance: dict = field(default_factory=dict)
+    OPTIONAL_KEYS: typing.ClassVar[tuple[str, ...]] = ("provenance",)
 
     def __post_init__(self) -> None:
         if self.spec_version != SPEC_VERSION:
@@ -390,7 +329,7 @@ def _parse(cls, data: Any, where: str):
     values = {}
     for f in fields(cls):
         if f.name not in data:
-            if f.default is not MISSING or f.default_factory is not MISSING:
+            if f.name in getattr(cls, "OPTIONAL_KEYS", ()):  # absent: the field's default
                 continue
             raise SpecError(f"missing key {f.name!r} in {where}")
         values[f.name] = _value(hints[f.name], data[f.name], f"{where}.{f.name}")

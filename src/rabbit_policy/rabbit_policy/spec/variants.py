@@ -11,7 +11,6 @@ from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.runtime.classic import classic_integral
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_integral import DEFAULT_OFFSET_LIMIT, decision_dt
-from rabbit_policy.spec.build import integral_spec
 from rabbit_policy.spec.files import library_dir, library_hash, packaged_spec
 from rabbit_policy.spec.schema import ControllerSpec, LibrarySpec, SpecError, load_spec
 
@@ -48,7 +47,7 @@ def controller_spec(kind: str, gait_dir: str | Path | None = None, mode: str = "
     if speed_integral:
         speeds = GaitLibrary.load(library_dir(spec.gait_library.source, base)).speed_range
         config = classic_integral(speed_integral, decision_dt(period), speeds, offset_limit)
-        spec = replace(spec, speed_integral=integral_spec(config))
+        spec = replace(spec, speed_integral=config)
     return spec, base, path.name
 
 
