@@ -393,9 +393,10 @@ class HZDController:
         w = dw = h = dh = 0.0
         offsets = rates = (0.0,) * 4
         if s[law.HAS_BLEND]:
-            start, length = s[law.BLEND], s[law.BLEND + 9]
+            start, length = s[law.BLEND + law.B_START], s[law.BLEND + law.B_LENGTH]
             w, dw, h, dh = law.blend_shape(min((t - start) / length, 1.0), length)
-            offsets, rates = s[law.BLEND + 1:law.BLEND + 5], s[law.BLEND + 5:law.BLEND + 9]
+            record = s[law.BLEND:law.BLEND + law.BLEND_SIZE]
+            offsets, rates = record[law.B_OFFSET:law.B_RATE], record[law.B_RATE:law.B_LENGTH]
         coeffs = g[law.ACTIVE, :law.COEFFS].reshape(4, 6)
         yd = [bezier(c, t) + off * w + rate * h for c, off, rate in zip(coeffs, offsets, rates)]
         dyd = [(bezier_derivative(c, t) + off * dw + rate * dh) * dtau

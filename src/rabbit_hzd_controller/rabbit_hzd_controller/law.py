@@ -49,6 +49,9 @@ REPLACED_BLEND = 22
 """The replaced gait's blend, in the same layout."""
 BLEND_SIZE = 10
 STATE_SIZE = 32
+# within a blend record (from BLEND or REPLACED_BLEND): its start phase, the 4 position offsets
+# (rad), the 4 rate offsets (rad per unit phase), its length (phase)
+B_START, B_OFFSET, B_RATE, B_LENGTH = 0, 1, 5, 9
 
 # gait slots
 ACTIVE, PENDING, REPLACED = range(3)
@@ -105,6 +108,22 @@ def bezier5_derivative(g: np.ndarray, slot: int, j: int, t: float) -> float:
     acc += 5 * (g[slot, base + 4] - g[slot, base + 3]) * (_COMB4[3] * tp3 * sp1)
     acc += 5 * (g[slot, base + 5] - g[slot, base + 4]) * (_COMB4[4] * tp4 * 1.0)
     return acc
+
+
+@njit(cache=True)
+def bernstein_bases(t: float) -> tuple[float, float, float, float, float, float, float, float, float, float, float]:
+    """The Bernstein bases at phase ``t`` that every tick's outputs are evaluated on: degree 5
+    (b0 ... b5, the outputs' values) and degree 4 (c0 ... c4, their derivative in phase, on the
+    coefficients' differences times 5). :func:`bezier5` and :func:`bezier5_derivative` (the
+    blends' offsets, at a gait change only) multiply their powers in ``bezier.bezier``'s order
+    instead: the two orders round apart, and each path keeps the bits it has always had."""
+    u = 1.0 - t
+    t2 = t * t
+    t3 = t2 * t
+    u2 = u * u
+    u3 = u2 * u
+    return (u3 * u2, 5.0 * t * u2 * u2, 10.0 * t2 * u3, 10.0 * t3 * u2, 5.0 * t3 * t * u, t3 * t2,
+            u2 * u2, 4.0 * t * u3, 6.0 * t2 * u2, 4.0 * t3 * u, t2 * t2)
 
 
 @njit(cache=True)
@@ -169,22 +188,23 @@ def _start_blend(s: np.ndarray, g: np.ndarray, tau: float, p_hip: float) -> None
     t_old = 0.0 if s_old < 0.0 else 1.0 if s_old > 1.0 else s_old
     w = dw = h = dh = 0.0
     if had_old_blend:
-        w, dw, h, dh = blend_shape((t_old - s[REPLACED_BLEND]) / s[REPLACED_BLEND + 9], s[REPLACED_BLEND + 9])
+        w, dw, h, dh = blend_shape((t_old - s[REPLACED_BLEND + B_START]) / s[REPLACED_BLEND + B_LENGTH],
+                                     s[REPLACED_BLEND + B_LENGTH])
     rates_matched = within_step and 0.0 < s_old < 1.0
     ratio = g[ACTIVE, SPAN] / g[REPLACED, SPAN]
     for j in range(4):
-        off = s[REPLACED_BLEND + 1 + j] if had_old_blend else 0.0
-        rate = s[REPLACED_BLEND + 5 + j] if had_old_blend else 0.0
+        off = s[REPLACED_BLEND + B_OFFSET + j] if had_old_blend else 0.0
+        rate = s[REPLACED_BLEND + B_RATE + j] if had_old_blend else 0.0
         offset = bezier5(g, REPLACED, j, t_old) + off * w + rate * h - bezier5(g, ACTIVE, j, tau)
         if rates_matched:  # d/dtau_new = d/dtau_old * span_new / span_old
             new_rate = ((bezier5_derivative(g, REPLACED, j, t_old) + off * dw + rate * dh) * ratio
                         - bezier5_derivative(g, ACTIVE, j, tau))
         else:
             new_rate = 0.0
-        s[BLEND + 1 + j] = offset
-        s[BLEND + 5 + j] = new_rate
-    s[BLEND] = tau
-    s[BLEND + 9] = s[NEXT_BLEND_LENGTH]
+        s[BLEND + B_OFFSET + j] = offset
+        s[BLEND + B_RATE + j] = new_rate
+    s[BLEND + B_START] = tau
+    s[BLEND + B_LENGTH] = s[NEXT_BLEND_LENGTH]
     s[HAS_BLEND] = 1.0
 
 
@@ -247,23 +267,7 @@ def control(cfg: np.ndarray, s: np.ndarray, g: np.ndarray, q: np.ndarray, dq: np
     if s[HAS_REPLACED] != 0.0:
         _start_blend(s, g, t, p_hip)
 
-    # Bernstein bases of degree 5 (values) and 4 (derivative).
-    u = 1.0 - t
-    t2 = t * t
-    t3 = t2 * t
-    u2 = u * u
-    u3 = u2 * u
-    b0 = u3 * u2
-    b1 = 5.0 * t * u2 * u2
-    b2 = 10.0 * t2 * u3
-    b3 = 10.0 * t3 * u2
-    b4 = 5.0 * t3 * t * u
-    b5 = t3 * t2
-    c0 = u2 * u2
-    c1 = 4.0 * t * u3
-    c2 = 6.0 * t2 * u2
-    c3 = 4.0 * t3 * u
-    c4 = t2 * t2
+    b0, b1, b2, b3, b4, b5, c0, c1, c2, c3, c4 = bernstein_bases(t)
 
     kp = cfg[KP]
     kd = s[KD]
@@ -271,8 +275,8 @@ def control(cfg: np.ndarray, s: np.ndarray, g: np.ndarray, q: np.ndarray, dq: np
     blending = s[HAS_BLEND] != 0.0
     w = dw = h = dh = 0.0
     if blending:
-        length = s[BLEND + 9]
-        r = (t - s[BLEND]) / length
+        length = s[BLEND + B_LENGTH]
+        r = (t - s[BLEND + B_START]) / length
         if r >= 1.0:
             s[HAS_BLEND] = 0.0
         w, dw, h, dh = blend_shape(r, length)
@@ -295,8 +299,8 @@ def control(cfg: np.ndarray, s: np.ndarray, g: np.ndarray, q: np.ndarray, dq: np
         else:
             y, dy = wk, dwk
         if blending:
-            off = s[BLEND + 1 + j]
-            rt = s[BLEND + 5 + j]
+            off = s[BLEND + B_OFFSET + j]
+            rt = s[BLEND + B_RATE + j]
             yd = a0 * b0 + a1 * b1 + a2 * b2 + a3 * b3 + a4 * b4 + a5 * b5 + off * w + rt * h
             dyd = (d0 * c0 + d1 * c1 + d2 * c2 + d3 * c3 + d4 * c4 + off * dw + rt * dh) * dtau
         else:

@@ -331,6 +331,44 @@ def screen_candidates(screened: list[tuple[str, Path]], criteria, trials, map_fn
     return rows
 
 
+def train_seeds(preset: dict, out: Path, root: Path, resume: bool, commands: list[str]) -> tuple[list, list] | int:
+    """Step 1: each seed's start spec and training (``scripts/train.py``, its line appended to
+    ``commands``), one after another; (the runs, the start specs), or the exit status when a
+    training failed (1) or was interrupted (128 + the signal: ``--resume`` continues it)."""
+    import subprocess
+
+    runs, starts = [], []
+    for index, seed in enumerate(preset["seeds"]):
+        seed_dir = out / f"seed-{seed}"
+        seed_dir.mkdir(parents=True, exist_ok=True)
+        start = write_start(preset["start"], seed, seed_dir / "start.yaml")
+        starts.append(start)
+        run = seed_dir / "run"
+        train_argv = ["--algo", "es", "--spec", str(start), "--out", str(run), "--no-progress", "--seed", str(seed),
+                      *train_arguments(preset["train"]),
+                      *(["--resume"] if resume and (run / "checkpoint.pt").is_file() else [])]
+        train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
+        commands.append(train_line)
+        print(f"[1/5] train, seed {seed} ({index + 1} of {len(preset['seeds'])}): {train_line}", flush=True)
+        trained = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
+        try:
+            trained.wait()
+        except KeyboardInterrupt:  # Ctrl-C reached the training too: it writes its checkpoint, then stops
+            trained.wait()
+        if trained.returncode in (128 + 2, 128 + 15):  # Ctrl-C, SIGTERM: a checkpoint was written
+            print(f"interrupted: training seed {seed} stopped with its checkpoint; --resume continues it",
+                  file=sys.stderr)
+            return trained.returncode
+        if trained.returncode != 0:
+            print(f"error: training seed {seed} failed with status {trained.returncode} (its output is above; {run} "
+                  "holds the run)", file=sys.stderr)
+            return 1
+        info = json.loads((run / "summary.json").read_text())["info"]
+        runs.append({"seed": seed, "run": run, "iterations": info["iteration"], "env_steps": info["env_steps"],
+                     "wall_s": info["wall_s"]})
+    return runs, starts
+
+
 def build_parser():
     from rabbit_msgs_py.cli import ArgumentParser
     from rabbit_policy.experiment.options import add_allow_dirty_option
@@ -366,7 +404,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: --resume: {out} holds no training to continue", file=sys.stderr)
         return 2
 
-    import subprocess
     from dataclasses import replace
 
     from rabbit_msgs_py import strict_json
@@ -380,35 +417,11 @@ def main(argv: list[str] | None = None) -> int:
     reproduce_line = (f"scripts/reproduce.py --preset {shlex.quote(args.preset)} --out {shlex.quote(str(out))}"
                       + (f" --workers {args.workers}" if args.workers != 2 else "")
                       + (" --resume" if args.resume else ""))
-    commands, runs, starts = [reproduce_line, "# which ran:"], [], []
-    for index, seed in enumerate(preset["seeds"]):
-        seed_dir = out / f"seed-{seed}"
-        seed_dir.mkdir(parents=True, exist_ok=True)
-        start = write_start(preset["start"], seed, seed_dir / "start.yaml")
-        starts.append(start)
-        run = seed_dir / "run"
-        train_argv = ["--algo", "es", "--spec", str(start), "--out", str(run), "--no-progress", "--seed", str(seed),
-                      *train_arguments(preset["train"]),
-                      *(["--resume"] if args.resume and (run / "checkpoint.pt").is_file() else [])]
-        train_line = "scripts/train.py " + " ".join(shlex.quote(a) for a in train_argv)
-        commands.append(train_line)
-        print(f"[1/5] train, seed {seed} ({index + 1} of {len(preset['seeds'])}): {train_line}", flush=True)
-        trained = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.train", *train_argv], cwd=root)
-        try:
-            trained.wait()
-        except KeyboardInterrupt:  # Ctrl-C reached the training too: it writes its checkpoint, then stops
-            trained.wait()
-        if trained.returncode in (128 + 2, 128 + 15):  # Ctrl-C, SIGTERM: a checkpoint was written
-            print(f"interrupted: training seed {seed} stopped with its checkpoint; --resume continues it",
-                  file=sys.stderr)
-            return trained.returncode
-        if trained.returncode != 0:
-            print(f"error: training seed {seed} failed with status {trained.returncode} (its output is above; {run} "
-                  "holds the run)", file=sys.stderr)
-            return 1
-        info = json.loads((run / "summary.json").read_text())["info"]
-        runs.append({"seed": seed, "run": run, "iterations": info["iteration"], "env_steps": info["env_steps"],
-                     "wall_s": info["wall_s"]})
+    commands = [reproduce_line, "# which ran:"]
+    trained = train_seeds(preset, out, root, args.resume, commands)
+    if isinstance(trained, int):  # a training failed or was interrupted: its status
+        return trained
+    runs, starts = trained
     plot([(f"seed {r['seed']}", r["run"]) for r in runs], out / "curves.png")
     criteria = Criteria.quick() if preset["evaluation"] == "quick" else Criteria()
     trials = ScreenTrials.quick() if preset["screen"]["trials"] == "quick" else ScreenTrials()
