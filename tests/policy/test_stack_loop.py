@@ -346,13 +346,17 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
         loop.tick()
         reference.append(loop.data.qpos.tolist() + loop.data.qvel.tolist())
     typestore = get_typestore(Stores.ROS2_JAZZY)
-    states = {}
+    states, steps = {}, []
     with Reader(tmp_path / "bag") as reader:
-        connections = [c for c in reader.connections if c.topic == topics.resolve(topics.JOINT_STATES)]
-        for connection, _t, raw in reader.messages(connections):
+        wanted = {topics.resolve(topics.JOINT_STATES), topics.resolve(topics.STEP)}
+        for connection, _t, raw in reader.messages([c for c in reader.connections if c.topic in wanted]):
             msg = typestore.deserialize_cdr(raw, connection.msgtype)
-            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
+            header = msg.header if connection.topic != topics.resolve(topics.STEP) else msg
+            stamp = header.stamp.sec * 1_000_000_000 + header.stamp.nanosec
+            if connection.topic == topics.resolve(topics.STEP):
+                steps.append(stamp)
+            else:
+                states[round(stamp / 1e6)] = list(msg.position) + list(msg.velocity)
     assert sorted(states) == list(range(2001))
     assert np.array_equal(np.array([states[i] for i in range(2001)]), np.array(reference))
     # the supervisor took every state from the batches from its first on (the placed state may go out
@@ -360,6 +364,9 @@ def test_across_processes_the_recorded_walk_is_the_fast_path_bit_for_bit(tmp_pat
     seen = np.round(report.result.times * 1000).astype(int)
     assert seen[0] <= 2 and np.array_equal(seen, np.arange(seen[0], 2001))
     assert [t.time for t in report.result.touchdowns] == [t.time for t in loop.touchdowns]
+    # one touchdown time on every path: /hzd/step's stamps are the touchdowns of both JSONs
+    assert steps and [s / 1e9 for s in sorted(steps)] == report.result.summary()["touchdowns"]
+    assert loop.result().summary()["touchdowns"] == report.result.summary()["touchdowns"]
 
 
 @pytest.mark.slow

@@ -26,8 +26,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.strict_json import finite_or_none
 from rabbit_policy.experiment.scenario import Scenario, first_tick_at, whole_ticks
+
+TICK_S = TICK_NS / 1e9
+"""The control tick (s)."""
 
 REACH_TOLERANCE = 0.05
 """m/s: a speed is "reached" when a whole step's mean is this close to the command."""
@@ -39,11 +43,21 @@ SETTLE_TOLERANCE = 0.03
 
 @dataclass(frozen=True)
 class Touchdown:
-    """One stance switch: sim time (s), new stance foot x (m), hip x (m), world frame."""
+    """One stance switch: sim time (s), new stance foot x (m), hip x (m), world frame. ``time``
+    is the first state on the new stance, one tick after the state the controller switched on
+    (what the loop's stall rule and a step's phases count from); :attr:`stamp` is that state's
+    time, the one number a touchdown is reported by (``/hzd/step``'s stamp, walk.py's and
+    run_stack's JSON)."""
 
     time: float
     foot_x: float
     hip_x: float
+
+    @property
+    def stamp(self) -> float:
+        """Sim time (s) of the state on which the controller switched the stance: ``time`` less
+        one tick, on the ms grid."""
+        return round(self.time - TICK_S, 6)
 
 
 @dataclass(frozen=True)
@@ -231,7 +245,7 @@ class WalkResult:
             "mean_speed": None if self.failed else json_number(self.mean_speed(half)),
             "peak_torque": self.peak_torque,
             "rejected": self.rejected,
-            "touchdowns": [round(td.time, 6) for td in self.touchdowns],
+            "touchdowns": [td.stamp for td in self.touchdowns],  # as /hzd/step stamps them
             "segments": self.segments(tolerance),
             "last_command_reached": self.last_command_reached(tolerance),
         }
