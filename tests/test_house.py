@@ -93,10 +93,11 @@ def test_the_module_map_is_the_tree():
 
 
 def test_the_readme_is_a_short_front_door():
-    """At most 150 lines, and none over 120 characters but the headline table's rendered rows."""
+    """At most 150 lines, and none over 120 characters (the headline table's rows included: short
+    labels, its legend under it)."""
     lines = (ROOT / "README.md").read_text().splitlines()
     assert len(lines) <= 150
-    assert [n for n, line in enumerate(lines, 1) if len(line) > 120 and not line.startswith("| ")] == []
+    assert [n for n, line in enumerate(lines, 1) if len(line) > 120] == []
 
 
 def test_no_test_file_passes_600_lines():

@@ -265,30 +265,65 @@ def paired_section(results: dict) -> list[str]:
     return lines + [""]
 
 
+SHORT_LABELS = (("ordered speed changes", "speed changes"), ("random one-minute", "1-min sequences"),
+                ("model cases", "model cases"), ("backward pushes survived", "backward pushes"),
+                ("forward pushes survived", "forward pushes"), ("repeated pushes", "repeated pushes"))
+"""A headline claim's row label in README's table: the claim's opening words, then its label (the
+paper's scenarios are labelled by their names); the legend under the table gives each claim in full."""
+
+
+def short_label(claim: str) -> str:
+    """The row label of the headline ``claim`` (:data:`SHORT_LABELS`; a paper scenario: its name)."""
+    if claim.startswith("the paper's `"):
+        return claim.split("`")[1]
+    return next((label for start, label in SHORT_LABELS if claim.startswith(start)), claim)
+
+
+def compact_rate(r: dict) -> str:
+    """``k/n [low-high]``: a rate and its 95 % interval in %, as README's table prints it."""
+    low, high = r["ci95"]
+    return f"{r['k']}/{r['n']} [{100 * low:.0f}-{100 * high:.0f}]"
+
+
 def headline_table(results: dict) -> list[str]:
     """README's results table, rendered from ``results.json`` (a docs test holds README to it):
-    the headline rates with their 95 % intervals, then the push margins."""
+    the headline rates with their 95 % intervals, then the push margins, each row by a short label
+    (no line over 120 characters), and under it the legend that says each row in full."""
+    import textwrap
+
     claims = headline_rates(results)
     names = list(results["meta"]["controllers"])
     lines = ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    said: dict[str, list[str]] = {}  # a claim in full (its direction or scenario left out) -> its rows
     for claim, by_name in claims.items():
-        lines.append(f"| {claim} | " + " | ".join(format_rate(by_name[n]) for n in names) + " |")
+        label = short_label(claim)
+        lines.append(f"| {label} | " + " | ".join(compact_rate(by_name[n]) for n in names) + " |")
+        general = claim.replace(f" `{label}`", "").removeprefix("backward ").removeprefix("forward ")
+        said.setdefault(general, []).append(label)
+    legend = [f"*{' / '.join(labels)}*: {general}" for general, labels in said.items()]
     robustness = results.get("robustness") or {}
     if robustness and all(r.get("survival") for r in robustness.values()):
         for direction in ("backward", "forward"):
             at = {n: next(c for c in r["survival"] if c["direction"] == direction)["at_90"] for n, r in robustness.items()}
-            lines.append(f"| {direction} push survived in 90 % of trials (N s, range from the 95 % intervals) | "
+            lines.append(f"| {direction} at 90 % | "
                          + " | ".join(f"{at[n]['impulse_Ns']:g} [{at[n]['low_Ns']:g}-{at[n]['high_Ns']:g}]"
                                       for n in names) + " |")
+        legend.append("*backward / forward at 90 %*: the push (N s) survived in 90 % of trials, its range from the "
+                      "95 % intervals")
     if robustness:
+        speeds = []
         for direction in ("backward", "forward"):
             margins = {n: {m["speed"]: m for m in r["push_margins"] if m["direction"] == direction}
                        for n, r in robustness.items()}
             speeds = sorted(margins[names[0]])
-            lines.append(f"| {direction} push margin at {' / '.join(f'{v:g}' for v in speeds)} m/s (N s) | " + " | ".join(
+            lines.append(f"| {direction} margins | " + " | ".join(
                 " / ".join(f"{margins[n][v]['largest_survived_Ns']:g}" + ("+" if margins[n][v]["capped"] else "")
                            for v in speeds) for n in names) + " |")
-    return lines
+        legend.append(f"*backward / forward margins*: the largest push (N s) survived at every phase, at "
+                      f"{' / '.join(f'{v:g}' for v in speeds)} m/s")
+    text = ("Rows: " + "; ".join(legend) + ". Each rate is trials passed of trials run [its 95 % Wilson interval, "
+            "in %].")
+    return lines + [""] + textwrap.wrap(text, 110, break_on_hyphens=False)
 
 
 def summary_section(results: dict) -> list[str]:
