@@ -11,7 +11,7 @@ from typing import Callable, Iterator
 import rclpy
 from rclpy.node import Node
 
-from rabbit_msgs_py.runtime import make_executor
+from rabbit_msgs_py.node_runner import make_executor
 
 # Every node the tests create, until destroyed: a node left alive stays in the test worker's
 # ROS domain for the rest of the session (nothing collects it in time), and every later

@@ -16,7 +16,7 @@ from rclpy.parameter import Parameter
 
 from rabbit_hzd_controller.hzd_controller_node import CONTROLLER_PARAMS, NODE_PARAMS, HZDControllerNode
 from rabbit_msgs_py.parameters import declare
-from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_msgs_py.node_runner import NodeStartError
 from rabbit_policy.policy_node import POLICY_PARAMS
 from rabbit_sim.recorder_node import RECORDER_PARAMS
 from rabbit_sim.sim_node import SIM_PARAMS, SimNode

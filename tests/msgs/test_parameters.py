@@ -11,7 +11,7 @@ from rclpy.parameter import Parameter
 
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py.parameters import coerce
-from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_msgs_py.node_runner import NodeStartError
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_sim.sim_node import SimNode
 
@@ -257,7 +257,7 @@ def test_importing_a_node_sets_nothing_and_starting_ros_sets_the_discovery_defau
     code = ("import os, rabbit_sim.sim_node, rabbit_sim.recorder_node, rabbit_policy.policy_node, "
             "rabbit_hzd_controller.hzd_controller_node, rabbit_policy.bringup.processes\n"
             "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'))\n"
-            "from rabbit_msgs_py.runtime import init_context\n"
+            "from rabbit_msgs_py.node_runner import init_context\n"
             "init_context().try_shutdown()\n"
             "print(os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'))\n")
     env = {k: v for k, v in os.environ.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_msgs_py.node_runner import NodeStartError
 from rabbit_policy.experiment.loop import ClosedLoop
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv

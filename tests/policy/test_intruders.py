@@ -213,7 +213,7 @@ def test_the_pairing_key_cannot_be_read_back_from_the_nodes():
 
 
 def test_a_bad_pairing_key_stops_the_node_with_one_line():
-    from rabbit_msgs_py.runtime import NodeStartError
+    from rabbit_msgs_py.node_runner import NodeStartError
 
     with ros_context() as (context, _executor):
         for cls in (SimNode, HZDControllerNode):

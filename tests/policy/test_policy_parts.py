@@ -15,7 +15,7 @@ from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import LibraryPolicy, PolicyUnavailable
 from rabbit_policy.spec.make import make_policy
-from rabbit_policy.runtime.commands import clamp_speed
+from rabbit_policy.runtime.speed_command import clamp_speed
 from rabbit_policy.runtime.speed_window import SpeedWindow
 from rabbit_policy.experiment.scenario import Push, Scenario, parse_pushes, parse_schedule
 from rabbit_policy.bringup.config import StackConfig, ros_arguments
@@ -251,14 +251,14 @@ def test_rate_limited_policy_moves_the_command_by_at_most_its_step():
 
 
 def test_a_huge_command_logs_a_short_line():
-    from rabbit_policy.runtime.commands import clamp_message
+    from rabbit_policy.runtime.speed_command import clamp_message
 
     line = clamp_message(1e308, 0.7, 1.5, 1.5, "/cmd_speed")
     assert "1e+308" in line and len(line) < 100
 
 
 def test_a_schedule_outside_the_command_range_is_clamped_and_said_once_per_entry():
-    from rabbit_policy.runtime.commands import clamp_schedule
+    from rabbit_policy.runtime.speed_command import clamp_schedule
 
     schedule, lines = clamp_schedule(((0.0, 0.3), (5.0, 1.0), (9.0, 2.0)))
     assert schedule == ((0.0, 0.7), (5.0, 1.0), (9.0, 1.5))

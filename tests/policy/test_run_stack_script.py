@@ -67,7 +67,7 @@ def test_a_lone_publisher_of_our_topics_does_not_stop_a_start():
     a stack: run_stack starts beside it and walks."""
     tool = subprocess.Popen([sys.executable, "-c", (
         "import rclpy, time\n"
-        "from rabbit_msgs_py.runtime import init_context\n"
+        "from rabbit_msgs_py.node_runner import init_context\n"
         "from sensor_msgs.msg import JointState\n"
         "context = init_context()\n"
         "node = rclpy.create_node('torque_tool', context=context)\n"

@@ -569,7 +569,7 @@ def test_a_composed_node_that_cannot_start_ends_the_run_with_its_line_and_leaves
     """run_stack's default layout builds the simulator in its own process: one that cannot start
     (here its viewer without a display) raises its one line after the policy process started,
     and that process is stopped (nothing of the stack is left in the domain)."""
-    from rabbit_msgs_py.runtime import NodeStartError
+    from rabbit_msgs_py.node_runner import NodeStartError
 
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)

@@ -48,7 +48,7 @@ def test_bad_speed_commands_are_clamped_or_rejected():
 
 
 def test_the_classic_speed_integral_is_a_policy_node_parameter_and_refused_for_the_learned_one():
-    from rabbit_msgs_py.runtime import NodeStartError
+    from rabbit_msgs_py.node_runner import NodeStartError
 
     with ros_context() as (context, _executor):
         node = PolicyNode(context=context, speed_integral=0.3)

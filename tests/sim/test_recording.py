@@ -19,7 +19,7 @@ from mcap_ros2.decoder import DecoderFactory
 from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS
 from rabbit_msgs_py.decision_ticks import PER_STEP
-from rabbit_msgs_py.runtime import NodeStartError
+from rabbit_msgs_py.node_runner import NodeStartError
 from rabbit_policy.bringup.config import StackConfig
 from rabbit_policy.bringup.in_process import run_in_process
 from rabbit_policy.experiment.scenario import Push
@@ -414,7 +414,7 @@ def test_a_recorder_started_by_hand_beside_a_walking_stack_loses_nothing_and_sto
     from ros_helpers import ros_context, spin_for, spin_until
 
     from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
-    from rabbit_msgs_py.runtime import drain
+    from rabbit_msgs_py.node_runner import drain
     from rabbit_policy.policy_node import PolicyNode
     from rabbit_sim.recorder_node import RecorderNode
     from rabbit_sim.sim_node import SimNode

@@ -52,7 +52,7 @@ from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
 from rabbit_msgs_py.pairing import KEY_FILE_HELP, GaitOrder, resolve_key
 from rabbit_msgs_py.rejections import RejectionLog
-from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 

@@ -30,7 +30,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayou
 
 from .cdr import CdrError, read_joint_state
 from .joints import ACTUATED_JOINTS, JOINT_NAMES, N_JOINTS
-from .runtime import one_line
+from .node_runner import one_line
 
 ALPHA_OUTPUTS = 4
 ALPHA_COEFFICIENTS = 6
@@ -171,7 +171,7 @@ def phase_from_msg(msg: JointState) -> tuple[int, float, float]:
 
 def short(value: object, limit: int = 120) -> str:
     """A string as it is, anything else as ``repr``, on one line cut to ``limit`` characters:
-    for log messages about bad input (:func:`rabbit_msgs_py.runtime.one_line`)."""
+    for log messages about bad input (:func:`rabbit_msgs_py.node_runner.one_line`)."""
     return one_line(value if isinstance(value, str) else repr(value), limit)
 
 

@@ -2,7 +2,7 @@
 (units, range) and whether they may change at run time, an integer accepted where a double
 is meant (``-p kp:=3000``, ``ros2 param set ... kp 3000``, as most ROS nodes do), and
 anything else of the wrong type a one-line
-:class:`~rabbit_msgs_py.runtime.NodeStartError` instead of a traceback.
+:class:`~rabbit_msgs_py.node_runner.NodeStartError` instead of a traceback.
 
 A number is declared with its type fixed (``ros2 param describe`` says "double" or
 "integer") and its range (``floating_point_range`` / ``integer_range``). An integer given
@@ -25,7 +25,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.parameter import Parameter
 
-from .runtime import NodeStartError
+from .node_runner import NodeStartError
 
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "a string"}
 

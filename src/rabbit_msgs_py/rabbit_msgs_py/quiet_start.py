@@ -4,7 +4,7 @@ importing (3-4 s on a slow machine: MuJoCo, NumPy, rclpy) is noted and ends the 
 quietly, with status 128 + the signal's number, once the import is done, instead of a
 ``KeyboardInterrupt`` traceback. (It is not raised where it arrives: an exception raised
 inside a C extension's import comes out as that module's ImportError, a traceback again.)
-Once the node's ``main()`` runs, :func:`rabbit_msgs_py.runtime.run_node` takes the signals
+Once the node's ``main()`` runs, :func:`rabbit_msgs_py.node_runner.run_node` takes the signals
 over and stops the node in order; once it returned, the process exits with its status and
 ignores a signal that comes later. run_stack starts its node processes through this module,
 so Ctrl-C at any moment of its start-up prints no traceback.

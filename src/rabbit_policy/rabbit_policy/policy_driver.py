@@ -27,7 +27,7 @@ from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_policy.experiment.scenario import parse_schedule, validate_schedule
 from rabbit_policy.runtime import exact_sum, fixed_order
 from rabbit_policy.runtime.body import BodyStateBuffer
-from rabbit_policy.runtime.commands import clamp_message, clamp_speed
+from rabbit_policy.runtime.speed_command import clamp_message, clamp_speed
 from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.gait_command import GaitCommand, Policy
 from rabbit_policy.runtime.policies import DEFAULT_DECISION_WINDOW, decision_period, first_command, reset_policy

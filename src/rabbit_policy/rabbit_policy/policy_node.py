@@ -71,11 +71,11 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.pairing import KEY_FILE_HELP, SignedBatches, resolve_key
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
-from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 from rabbit_policy.policy_driver import Gait, Log, PolicyDriver, PolicySettings, Scheduled
-from rabbit_policy.runtime.commands import COMMAND_RANGE
+from rabbit_policy.runtime.speed_command import COMMAND_RANGE
 from rabbit_policy.runtime.policies import CONTROLLER_CHOICES, LIBRARY_MODES, Policy, PolicyUnavailable, controller_name, controller_settings
 from rabbit_policy.spec.make import make_policy, spec_kind
 

@@ -22,7 +22,7 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 
-from rabbit_msgs_py.runtime import destroyed_if_start_fails
+from rabbit_msgs_py.node_runner import destroyed_if_start_fails
 
 from .bag import BagError, open_bag
 

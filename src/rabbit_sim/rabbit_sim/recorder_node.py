@@ -37,7 +37,7 @@ from rabbit_msgs_py import topics as topic_names
 from rabbit_msgs_py.catalog import STACK_TOPICS, TopicSpec
 from rabbit_msgs_py.conversions import stamp_to_ns
 from rabbit_msgs_py.parameters import Param, declare
-from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 
 from .bag import COMPRESSIONS, BagError, BagWriter, QosSpec
 

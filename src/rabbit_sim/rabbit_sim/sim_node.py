@@ -37,7 +37,7 @@ from rabbit_msgs_py.conversions import (
 from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
-from rabbit_msgs_py.runtime import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.service_callers import CallerLog
 from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart

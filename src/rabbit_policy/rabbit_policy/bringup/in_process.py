@@ -7,7 +7,7 @@ import time
 from typing import Sequence
 
 from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
-from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
+from rabbit_msgs_py.node_runner import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_sim.recorder_node import RecorderNode
 from rabbit_sim.sim_node import SimNode

@@ -6,7 +6,7 @@ import time
 from typing import Callable
 
 from rabbit_msgs_py import topics
-from rabbit_msgs_py.runtime import init_context
+from rabbit_msgs_py.node_runner import init_context
 
 
 class AnotherStack(RuntimeError):

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Callable
 
 from rabbit_msgs_py.pairing import write_key_file
-from rabbit_msgs_py.runtime import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
+from rabbit_msgs_py.node_runner import freeze_start_up_objects, init_context, make_executor, spin_timeout_of
 
 from .config import COMPOSED_NODES, NODE_MODULES, StackConfig, policy_name, ros_arguments
 from .cpu import CpuMeter

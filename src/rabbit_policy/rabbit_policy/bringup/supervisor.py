@@ -23,7 +23,7 @@ from rabbit_msgs_py.service_callers import service_clients
 
 from rabbit_policy.experiment.result import Touchdown, WalkResult, run_summary
 from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid, whole_ticks
-from rabbit_policy.runtime.commands import COMMAND_RANGE, clamp_speed
+from rabbit_policy.runtime.speed_command import COMMAND_RANGE, clamp_speed
 
 from .config import StackConfig
 

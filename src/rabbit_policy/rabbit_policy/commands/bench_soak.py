@@ -148,7 +148,7 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
     """One soak run; see the module docstring."""
     import rclpy
 
-    from rabbit_msgs_py.runtime import init_context, make_executor
+    from rabbit_msgs_py.node_runner import init_context, make_executor
     from rabbit_policy.bringup.cpu import process_cpu_seconds
     from rabbit_policy.bringup.processes import signal_on_parent_death
 

@@ -46,7 +46,7 @@ def round_trips_per_s(seconds: float = 3.0, same_process: bool = False, warm_up:
     import rclpy
     from std_msgs.msg import UInt64
 
-    from rabbit_msgs_py.runtime import init_context, make_executor
+    from rabbit_msgs_py.node_runner import init_context, make_executor
 
     topic = f"/ping_pong_{os.getpid()}"
     context = init_context()
@@ -94,7 +94,7 @@ def _spin_for(executor, seconds: float) -> None:
 def main(argv: list[str] | None = None) -> int:
     """``--echo TOPIC``: run the echoing node until SIGTERM or SIGINT."""
     from rabbit_msgs_py.cli import ArgumentParser
-    from rabbit_msgs_py.runtime import run_node
+    from rabbit_msgs_py.node_runner import run_node
 
     parser = ArgumentParser(description=__doc__)
     parser.add_argument("--echo", required=True, metavar="TOPIC", help="answer TOPIC/ping on TOPIC/pong")

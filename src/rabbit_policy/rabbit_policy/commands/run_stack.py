@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.bringup.probe import AnotherStack, other_stack
     from rabbit_policy.bringup.processes import run_multi_process
     from rabbit_policy.bringup.supervisor import RunReport
-    from rabbit_msgs_py.runtime import NodeStartError
+    from rabbit_msgs_py.node_runner import NodeStartError
 
     def refused(error: str) -> None:
         """--json: the report of a run refused before it started (every exit prints one)."""

@@ -12,7 +12,7 @@ import argparse
 from rabbit_msgs_py.cli import non_negative, positive
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming, decision_ticks
 from rabbit_policy.experiment.scenario import parse_schedule
-from rabbit_policy.runtime.commands import clamp_schedule
+from rabbit_policy.runtime.speed_command import clamp_schedule
 from rabbit_policy.runtime.policies import controller_argument, controller_name
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 from rabbit_policy.spec.make import spec_kind
@@ -126,7 +126,7 @@ def resolve_controller(args: argparse.Namespace) -> None:
 def schedule_from_args(args: argparse.Namespace) -> tuple[tuple[float, float], ...]:
     """The speed schedule of ``--speed`` / ``--speed-schedule``: parsed, each speed outside
     the controllers' range clamped into it with one ``warning:`` line on stderr (the rule
-    policy_node applies to ``/cmd_speed``: ``rabbit_policy.runtime.commands``);
+    policy_node applies to ``/cmd_speed``: ``rabbit_policy.runtime.speed_command``);
     ``ValueError`` for a schedule that is not one."""
     import sys
 

@@ -1,4 +1,4 @@
-"""rabbit_msgs_py.runtime.run_node, the body of every node process's ``main()``: the signal
+"""rabbit_msgs_py.node_runner.run_node, the body of every node process's ``main()``: the signal
 handlers it found come back only once the run's rclpy objects are freed. A handler that
 raises (quiet_start's, before run_node takes over), run while a C++ destructor of rclpy calls
 back into Python, aborted node processes killed with their run_stack ("terminate called after
@@ -19,7 +19,7 @@ WATCHED_RUN = '''
 import json, signal, weakref
 import rclpy.node
 from std_msgs.msg import Bool
-from rabbit_msgs_py import runtime
+from rabbit_msgs_py import node_runner
 
 def found(*_):
     raise SystemExit(3)
@@ -45,7 +45,7 @@ class Probe(rclpy.node.Node):
 real_signal(signal.SIGTERM, found)
 real_signal(signal.SIGINT, found)
 signal.signal = watching
-status = runtime.run_node(Probe)
+status = node_runner.run_node(Probe)
 print(json.dumps({"status": status, "alive_at_restore": alive_at_restore,
                   "restored": signal.getsignal(signal.SIGTERM) is found, "built": len(built)}))
 '''
