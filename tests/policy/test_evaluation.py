@@ -330,7 +330,9 @@ def test_evaluate_quick_writes_report_results_figures_and_videos(tmp_path):
     assert "### The scenarios over their neighbourhoods" in report and "## Paired comparisons" in report
     headline = (tmp_path / "headline.md").read_text()
     assert headline.startswith("| | classic | classic_integral | recovery | network_alone | learned |")
-    assert "push survived in 90 % of trials" in headline and "[" in headline
+    assert "| backward at 90 % |" in headline and "| forward margins |" in headline and "[" in headline
+    assert "survived in 90 % of trials" in " ".join(headline.split())  # the legend says each row in full
+    assert max(len(line) for line in headline.splitlines()) <= 120  # README quotes it as it is
     machine = results["meta"]["provenance"]["machine"]
     assert {"cpu", "numpy_simd", "openblas_kernel", "openblas", "numpy", "mujoco", "numba"} <= set(machine)
     assert all(r["trials"] == 2 and r["by_speed"]["1.00"]["3"] == 1 and r["by_speed"]["1.00"]["40"] in (0, 1)
