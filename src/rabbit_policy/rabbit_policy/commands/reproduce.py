@@ -246,7 +246,8 @@ def candidates(run: Path, count: int) -> list[Path]:
 def selection_key(scored: dict) -> tuple:
     """Sort key of a snapshot's selection counts, lower is better: no family significantly worse
     than the start's on the selection trials (``worse`` empty), then most trials passed, then fewest
-    failed acceptance checks, then the later."""
+    failed acceptance checks, then the later (snapshots of two seeds that tie on all of it: the seed
+    trained first)."""
     return (bool(scored.get("worse")), -scored["passed"], scored["failures"], -scored["iteration"])
 
 
