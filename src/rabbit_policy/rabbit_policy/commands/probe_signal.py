@@ -88,8 +88,9 @@ def main(argv: list[str] | None = None) -> int:
         finally:
             backend.close()
     root, path = preset_dir().parents[1], Path(preset["path"]).resolve()  # the repository's path, not this machine's
-    report = {"preset": str(path.relative_to(root) if path.is_relative_to(root) else path), "start": preset["start"], "distribution": config.distribution,
-              "reward": config.reward, "fall_penalty": config.fall_penalty, "max_steps": config.max_steps, "probes": results}
+    report = {"preset": str(path.relative_to(root) if path.is_relative_to(root) else path), "start": preset["start"],
+              "distribution": config.distribution, "reward": config.reward, "fall_penalty": config.fall_penalty,
+              "max_steps": config.max_steps, "probes": results}
     text = strict_json.dumps(report)
     if args.out is not None:
         args.out.write_text(text + "\n")

@@ -251,7 +251,8 @@ def selection_key(scored: dict) -> tuple:
     return (bool(scored.get("worse")), -scored["passed"], scored["failures"], -scored["iteration"])
 
 
-def heldout_candidates(run: Path, count: int, trials, map_fn, start: dict | None = None) -> tuple[list[Path], list[dict]]:
+def heldout_candidates(run: Path, count: int, trials, map_fn,
+                       start: dict | None = None) -> tuple[list[Path], list[dict]]:
     """The run's candidate specs picked on held-out ``trials``: the ``count`` evaluated ones
     that rank best by :func:`selection_key`, else its last ``policy.yaml``; and each evaluated
     spec's counts (``candidate``, ``passed``, ``of``, ``rates``, ``failures``; with ``start``,
@@ -281,7 +282,8 @@ def measure_candidate(path: Path, criteria, trials, map_fn) -> dict:
     return {"failures": accepted["failures"], "acceptance": accepted, **measure(policy, trials, map_fn)}
 
 
-def pick_candidates(out: Path, preset: dict, runs: list[dict], start: Path, map_fn) -> tuple[list[tuple[str, Path]], dict]:
+def pick_candidates(out: Path, preset: dict, runs: list[dict], start: Path,
+                    map_fn) -> tuple[list[tuple[str, Path]], dict]:
     """Each seed's ``screen.candidates`` specs as ``(name relative to out, path)``, picked as
     ``screen.select`` says; with ``heldout`` also each seed's selection counts against the
     ``start`` spec's on the same trials (:func:`heldout_candidates`), printed a line per seed."""
@@ -299,9 +301,10 @@ def pick_candidates(out: Path, preset: dict, runs: list[dict], start: Path, map_
         paths, scored = heldout_candidates(r["run"], count, held_out, map_fn, start_counted)
         picked += [(str(p.relative_to(out)), p) for p in paths]
         selection[f"seed-{r['seed']}"] = [{**s, "candidate": str(s["candidate"].relative_to(out))} for s in scored]
-        print(f"  select, seed {r['seed']}: " + ", ".join(
-            f"{s['iteration']}: {s['passed']}/{s['of']}" + (f" ({', '.join(s['worse'])} worse)" if s["worse"] else "")
-            for s in scored) + " held-out trials passed; " + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
+        counts = ", ".join(f"{s['iteration']}: {s['passed']}/{s['of']}"
+                           + (f" ({', '.join(s['worse'])} worse)" if s["worse"] else "") for s in scored)
+        print(f"  select, seed {r['seed']}: {counts} held-out trials passed; "
+              + ", ".join(str(p.relative_to(out)) for p in paths), flush=True)
     return picked, selection
 
 
@@ -336,6 +339,7 @@ def train_seeds(preset: dict, out: Path, root: Path, resume: bool, commands: lis
     """Step 1: each seed's start spec and training (``scripts/train.py``, its line appended to
     ``commands``), one after another; (the runs, the start specs), or the exit status when a
     training failed (1) or was interrupted (128 + the signal: ``--resume`` continues it)."""
+    import signal
     import subprocess
 
     runs, starts = [], []
@@ -356,7 +360,7 @@ def train_seeds(preset: dict, out: Path, root: Path, resume: bool, commands: lis
             trained.wait()
         except KeyboardInterrupt:  # Ctrl-C reached the training too: it writes its checkpoint, then stops
             trained.wait()
-        if trained.returncode in (128 + 2, 128 + 15):  # Ctrl-C, SIGTERM: a checkpoint was written
+        if trained.returncode in (128 + signal.SIGINT, 128 + signal.SIGTERM):  # a checkpoint was written
             print(f"interrupted: training seed {seed} stopped with its checkpoint; --resume continues it",
                   file=sys.stderr)
             return trained.returncode

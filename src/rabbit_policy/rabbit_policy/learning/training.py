@@ -390,7 +390,8 @@ def stop_workers(trainer, backend, status: int) -> None:
     """After Ctrl-C/SIGTERM, with the checkpoint written: stop the pools (which also stops
     them from starting replacement workers), kill and reap whatever worker is left, and
     leave without multiprocessing's exit handlers, with exit ``status`` (128 + the signal, the
-    shell's convention: an interrupted training is not a finished one, ``--resume`` continues it). ``Pool.terminate()`` can block on a
+    shell's convention: an interrupted training is not a finished one, ``--resume`` continues it).
+    ``Pool.terminate()`` can block on a
     queue lock held by an interrupted worker (runs hung after ``pkill -f train.py``, which
     signals the workers too), so it gets a few seconds in a thread and the kill does not
     depend on it."""

@@ -16,17 +16,18 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
 5. ``blend``: the network's gaits blended in alpha before the rule acts
    (:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`), or null;
 6. ``recovery_rule``: the push-recovery rule's constants (the runtime's own
-   :class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, read straight from its section), or null; ``overlay``: how it
-   sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
+   :class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, read straight from its section), or
+   null; ``overlay``: how it sits on a network's gait
+   (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
 7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (every
    ``ControllerConfig`` field but the robot model's geometry and tick, and that model's hash).
 
 ``provenance`` is free text for people (what made it, from which commit); it is not read.
 A section that is a runtime class is read by the same strict loader as the spec's own:
 every field a key, none absent but those the class names in ``OPTIONAL_KEYS`` (its code
-defaults are never read for a spec). Every other key is required, none more is allowed: a spec with an unknown or missing key,
-a value of the wrong kind, or a file whose hash differs fails with one line
-(:class:`SpecError`).
+defaults are never read for a spec). Every other key is required, none more is allowed: a
+spec with an unknown or missing key, a value of the wrong kind, or a file whose hash differs
+fails with one line (:class:`SpecError`).
 """
 
 from __future__ import annotations
