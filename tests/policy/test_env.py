@@ -552,6 +552,24 @@ def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on
     assert 6 <= pushed <= 18
 
 
+def test_forward_episodes_push_three_in_four_two_thirds_of_them_forward_around_classics_margin():
+    from rabbit_policy.evaluation.push_recovery import classic_margin
+
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="forward")
+    directions = []
+    for seed in range(48):
+        env.reset(seed=seed)
+        scenario = env.loop.scenario
+        assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
+        for push in scenario.phase_pushes:
+            command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
+            direction = 1 if push.impulse > 0 else -1
+            assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
+            directions.append(direction)
+    assert 28 <= len(directions) <= 44  # 36 expected of 48
+    assert directions.count(1) >= 1.4 * directions.count(-1)  # two to one expected
+
+
 def test_decided_episodes_push_every_one_where_the_screen_decides_forward_and_backward_alike():
     directions = []
     for scenario, _push, direction, ratio in _one_phase_push_each("decided"):
