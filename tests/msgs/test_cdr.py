@@ -1,6 +1,7 @@
 """The 1 kHz streams' JointState bytes (rabbit_msgs_py.cdr) are what rclpy writes and reads:
 random messages round-trip against rclpy's own serialization both ways, and bytes that are
-not a JointState are refused with one line."""
+not a JointState are refused with one line. The state batch's Float64MultiArray is read from
+rclpy's bytes alike."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import random
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from rabbit_msgs_py.cdr import CdrError, JointStateWriter, read_joint_state
+from rabbit_msgs_py.cdr import CdrError, JointStateWriter, read_float64_multi_array, read_joint_state
 from rabbit_msgs_py.conversions import MessageError, joint_state_from_bytes, torques_from_bytes
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
 
@@ -52,3 +54,20 @@ def test_bytes_that_are_not_a_joint_state_are_refused_in_one_line():
     nan = JointStateWriter(ACTUATED_JOINTS).bytes(7_000_000, "x", (), (), [1.0, float("nan"), 3.0, 4.0])
     with pytest.raises(MessageError, match="NaN"):
         torques_from_bytes(nan)
+
+
+def test_float64_multi_array_bytes_read_as_rclpy_wrote_them_and_others_refused():
+    rng = random.Random(11)
+    for _ in range(300):
+        dims = [("".join(rng.choice("ab é=:") for _ in range(rng.randint(0, 40))), rng.randint(0, 2 ** 32 - 1),
+                 rng.randint(0, 2 ** 32 - 1)) for _ in range(rng.randint(0, 3))]
+        values = [rng.uniform(-1e9, 1e9) for _ in range(rng.choice([0, 1, 22, rng.randint(0, 70)]))]
+        msg = Float64MultiArray(data=values)
+        msg.layout.dim = [MultiArrayDimension(label=label, size=size, stride=stride) for label, size, stride in dims]
+        msg.layout.data_offset = rng.randint(0, 9)
+        raw = serialize_message(msg)
+        read, offset, data = read_float64_multi_array(raw)
+        assert (read, offset, data) == (dims, msg.layout.data_offset, msg.data.tobytes())
+        for bad in (raw[:-9], raw[:7], b"\x00\x00" + raw[2:], raw + bytes(8)):
+            with pytest.raises(CdrError):
+                read_float64_multi_array(bad)

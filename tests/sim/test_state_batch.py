@@ -67,11 +67,48 @@ def test_a_batch_message_round_trips_and_a_malformed_one_is_refused_in_one_line(
 
 
 def test_a_malformed_batch_gives_no_state_and_one_line():
+    """Observers subscribe raw: a batch is read from its bytes, and a refused one (bad
+    layout, not a Float64MultiArray, NaN) gives no state and one line."""
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import Float64MultiArray
+
     from rabbit_msgs_py.conversions import batch_states_or_log
 
     lines: list[str] = []
-    good = state_batch_to_msg(array.array("d", [MS] + [0.0] * 21), 1)
+    good = serialize_message(state_batch_to_msg(array.array("d", [MS] + [0.0] * 21), 1))
     assert [s.stamp for s in batch_states_or_log(good, "/sim/state_batch", lines.append)] == [MS] and lines == []
-    bad = state_batch_to_msg(array.array("d", [MS] + [0.0] * 20), 1)
+    bad = serialize_message(state_batch_to_msg(array.array("d", [MS] + [0.0] * 20), 1))
     assert batch_states_or_log(bad, "/sim/state_batch", lines.append) == []
     assert len(lines) == 1 and lines[0].startswith("ignoring /sim/state_batch: a state batch is n x 22")
+    flood = serialize_message(Float64MultiArray(data=[math.nan] * 30))  # the hostile suite's flood
+    nan = serialize_message(state_batch_to_msg(array.array("d", [MS] + [math.nan] * 21), 1))
+    for refused, why in ((flood, "not a state batch"), (b"\x00\x01\x00\x00\xff", "not a state batch"),
+                         (good[:-9], "do not fill"), (nan, "NaN")):
+        assert batch_states_or_log(refused, "/sim/state_batch", lines.append) == []
+        assert why in lines[-1]
+
+
+def test_a_signed_batch_is_verified_on_its_bytes_before_its_values_are_read():
+    from rclpy.serialization import serialize_message
+
+    from rabbit_msgs_py.conversions import batch_states_or_log
+    from rabbit_msgs_py.pairing import PairingKey, new_key
+
+    key, other = PairingKey.parse(new_key()), PairingKey.parse(new_key())
+    rows = array.array("d", [MS] + [0.5] * 21)
+    checked: list[tuple[str, bytes]] = []
+
+    def verify(label: str, data: bytes) -> None:
+        checked.append((label, data))
+        key.verify_batch(label, data)
+
+    lines: list[str] = []
+    signed = serialize_message(state_batch_to_msg(rows, 1, key.batch_label("sim/a", 1, rows.tobytes())))
+    assert [s.stamp for s in batch_states_or_log(signed, "/sim/state_batch", lines.append, verify)] == [MS]
+    assert checked[-1][1] == rows.tobytes() and lines == []
+    forged = serialize_message(state_batch_to_msg(rows, 1, other.batch_label("sim/a", 1, rows.tobytes())))
+    nan = array.array("d", [MS] + [math.nan] * 21)  # signed with another key: refused before its NaN is read
+    forged_nan = serialize_message(state_batch_to_msg(nan, 1, other.batch_label("sim/a", 2, nan.tobytes())))
+    for refused in (forged, forged_nan):
+        assert batch_states_or_log(refused, "/sim/state_batch", lines.append, verify) == []
+        assert "not signed with this stack's pairing key" in lines[-1]

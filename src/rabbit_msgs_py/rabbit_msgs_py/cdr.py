@@ -2,6 +2,9 @@
 writes and reads them), for the two 1 kHz streams: a node publishes these bytes and takes
 the bytes it subscribes to (rclpy's serialized publish and take), so no Python message
 object is built or converted per tick. Every other node sees an ordinary JointState.
+std_msgs/Float64MultiArray is read the same way (:func:`read_float64_multi_array`) for
+``/sim/state_batch``: its observers check a batch's layout and signature on the bytes, so a
+flood of messages they refuse costs no message object either.
 
 Layout: the 4-byte encapsulation header (``00 01 00 00``), then the fields in order, each
 primitive aligned to its size counted from the end of that header: ``header.stamp`` (int32
@@ -96,3 +99,34 @@ def read_joint_state(data: bytes) -> tuple[int, str, list[str], tuple[float, ...
     except (struct.error, UnicodeDecodeError) as exc:
         raise CdrError(f"not a JointState: {exc}") from None
     return sec * 1_000_000_000 + nanosec, frame_id, names, arrays[0], arrays[1], arrays[2]
+
+
+_DIM = struct.Struct("<II")
+
+
+def read_float64_multi_array(data: bytes) -> tuple[list[tuple[str, int, int]], int, bytes]:
+    """Float64MultiArray bytes -> (its dimensions as (label, size, stride), data_offset, its
+    values as little-endian float64 bytes, 8 a value); :class:`CdrError` for bytes that are not
+    one (truncated, another encoding). The values are not converted: a caller checks the
+    layout (and a signature on these bytes) first."""
+    if data[:2] != ENCAPSULATION[:2]:
+        raise CdrError(f"not little-endian CDR (encapsulation {bytes(data[:4]).hex()})")
+    try:
+        (count,) = _U32.unpack_from(data, 4)
+        if count > len(data):
+            raise CdrError("more dimensions than bytes")
+        at, dims = 8, []
+        for _ in range(count):
+            label, at = _read_string(data, at)
+            size, stride = _DIM.unpack_from(data, at)
+            dims.append((label, size, stride))
+            at += 8
+        offset, n = _DIM.unpack_from(data, at)
+        at += 8
+        if n:
+            at += -(at - 4) % 8
+        if not 0 <= len(data) - (at + 8 * n) < 8:  # the serializer may pad the end
+            raise CdrError(f"{n} values do not fill the {len(data) - at} bytes after the layout")
+    except (struct.error, UnicodeDecodeError) as exc:
+        raise CdrError(f"not a Float64MultiArray: {exc}") from None
+    return dims, offset, bytes(data[at:at + 8 * n])

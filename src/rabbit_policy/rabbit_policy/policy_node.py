@@ -224,7 +224,8 @@ class PolicyNode(Node):
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
         if self._hip_source == "state_batch":
             self._batch_topic = self.resolve_topic_name(topics.STATE_BATCH)
-            self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS)
+            self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS,
+                                     raw=True)
         else:
             self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, lambda msg: self._do(self.core.on_step(stamp_to_ns(msg.stamp))),
@@ -284,11 +285,12 @@ class PolicyNode(Node):
         if text is not None:
             self.get_logger().error(text)
 
-    def _on_state_batch(self, msg: Float64MultiArray) -> None:
-        """The simulator's states, oldest first: each its hip speed (and, for a body-state
-        policy, its body state first), as one ``/hip_velocity`` and ``/joint_states`` each."""
+    def _on_state_batch(self, raw: bytes) -> None:
+        """The simulator's states (the batch's serialized bytes), oldest first: each its hip
+        speed (and, for a body-state policy, its body state first), as one ``/hip_velocity``
+        and ``/joint_states`` each."""
         body = self.core.body is not None
-        for state in batch_states_or_log(msg, self._batch_topic, self._batch_refused, self._batches):
+        for state in batch_states_or_log(raw, self._batch_topic, self._batch_refused, self._batches):
             if body:
                 self._do(self.core.on_body_state(state.stamp, state.position, state.velocity))
             try:

@@ -134,7 +134,7 @@ class Supervisor(Node):
         self.last_state_wall: float | None = None
         self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
-        self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS)
+        self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS, raw=True)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
@@ -282,10 +282,10 @@ class Supervisor(Node):
             self.fell = True
             self.fall_time = self.sim_time
 
-    def _on_batch(self, msg: Float64MultiArray) -> None:
-        """The simulator's states in a batch (``/sim/state_batch``), oldest first."""
+    def _on_batch(self, raw: bytes) -> None:
+        """The simulator's states in a batch (``/sim/state_batch``, its serialized bytes), oldest first."""
         now = time.perf_counter()
-        for state in batch_states_or_log(msg, self._batch_topic, self._batch_refused, self._batches):
+        for state in batch_states_or_log(raw, self._batch_topic, self._batch_refused, self._batches):
             self._on_state(state.stamp, state.position[0], state.effort, now)
 
     def _batch_refused(self, line: str) -> None:
