@@ -216,3 +216,37 @@ def test_a_forged_or_replayed_state_batch_moves_no_verdict_and_no_decision(capfd
     assert nodes["supervisor"]._batches.refused == nodes["policy_node"]._batches.refused == 2  # the forgery, the replay
     assert nodes["policy_node"].decisions_given_up == 0
     assert "the state batch is not signed" in capfd.readouterr().err  # (the replay's line: throttled, 1 a second)
+
+
+@pytest.mark.ros
+def test_a_state_batch_flood_wakes_no_supervisor_callback_and_loses_no_real_batch():
+    """The supervisor takes ``/sim/state_batch`` in bulk (``rabbit_msgs_py.polled``): the topic
+    is on no subscription of its node (no executor callback a message, however many come), and
+    a burst of 1,500 malformed batches around a real (signed) one, taken together, leaves the
+    real state taken and every other refused and counted."""
+    import array
+    import math
+
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from rabbit_msgs_py.conversions import state_batch_to_msg
+    from rabbit_msgs_py.pairing import PairingKey
+    from rabbit_policy.bringup.supervisor import BATCH_TAKE_QOS, Supervisor
+
+    text = new_key()
+    with ros_context() as (context, executor):
+        supervisor = Supervisor(StackConfig(duration=10.0, schedule=((0.0, 1.0),), pairing_key=text), context=context)
+        assert supervisor.resolve_topic_name(topics.STATE_BATCH) not in {s.topic_name for s in supervisor.subscriptions}
+        flooder = rclpy.create_node("flooder", context=context)
+        executor.add_node(supervisor)
+        executor.add_node(flooder)
+        publisher = flooder.create_publisher(Float64MultiArray, topics.STATE_BATCH, BATCH_TAKE_QOS)
+        assert spin_until(executor, lambda: publisher.get_subscription_count() == 1)
+        flood = Float64MultiArray(data=[math.nan] * 30)
+        row = array.array("d", [5_000_000, 0.25] + [0.0] * 20)
+        real = state_batch_to_msg(row, 1, PairingKey.parse(text).batch_label("sim_node/a", 1, row.tobytes()))
+        for message in [flood] * 750 + [real] + [flood] * 750:
+            publisher.publish(message)
+        assert spin_until(executor, lambda: supervisor._rejections.counts.get("state_batch", 0) == 1500)
+        assert supervisor.sim_stamp == 5_000_000 and supervisor._start == (5_000_000, 0.25)

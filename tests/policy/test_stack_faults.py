@@ -453,13 +453,16 @@ def test_many_callers_of_reset_and_pause_at_once_are_each_answered():
         assert spin_until(executor, lambda: sim.time >= start + 0.3) and not sim.fallen
 
 
-def _state(t: float, x: float):
-    """A one-state ``/sim/state_batch`` message: the state at ``t`` s with the hip at ``x`` m."""
+def _state(t: float, x: float) -> bytes:
+    """A one-state ``/sim/state_batch`` message as the supervisor takes it (serialized): the
+    state at ``t`` s with the hip at ``x`` m."""
     import array
+
+    from rclpy.serialization import serialize_message
 
     from rabbit_msgs_py.conversions import state_batch_to_msg
 
-    return state_batch_to_msg(array.array("d", [round(t * 1e9), x, 0.75] + [0.0] * 19), 1)
+    return serialize_message(state_batch_to_msg(array.array("d", [round(t * 1e9), x, 0.75] + [0.0] * 19), 1))
 
 
 def _step(t: float):

@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Bool, Float64, Float64MultiArray, Header, UInt32
 from std_srvs.srv import SetBool
@@ -18,6 +19,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.pairing import PairingKey, SignedBatches
+from rabbit_msgs_py.polled import PolledSubscription
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.service_callers import service_clients
 
@@ -26,6 +28,13 @@ from rabbit_policy.experiment.scenario import MIN_SCHEDULE_SPACING, on_tick_grid
 from rabbit_policy.runtime.speed_command import COMMAND_RANGE, clamp_speed
 
 from .config import StackConfig
+
+BATCH_TAKE_PERIOD = 0.02
+"""s (wall): how often the supervisor takes the state batches waiting (a run's end, a stall and
+the RTF are seen this much late at most)."""
+BATCH_TAKE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000, reliability=ReliabilityPolicy.RELIABLE)
+"""The supervisor's state batches: reliable, and deep enough that a period's batches stay
+while a 10 kHz flood of refused ones fills the history between takes (up to 100 kHz)."""
 
 RESETS_NAMED = 8
 """Resets a run's report names with when and by whom; any more are counted only."""
@@ -113,7 +122,6 @@ class Supervisor(Node):
         key = PairingKey.parse(config.pairing_key)
         self._batches = SignedBatches(key) if key is not None else None  # keyed: the stack's simulator's only
         self._rejections = RejectionLog()  # refused batches: counted, one line a second (cheap under a flood)
-        self._batch_topic = self.resolve_topic_name(topics.STATE_BATCH)
         # sim times are integer ns of the stamps (seconds only in the result and the logs)
         # every distinct state's sim time (ns) and hip x (m), packed (16 bytes a tick: an hour is 58 MB)
         self._times = array.array("q")
@@ -134,7 +142,10 @@ class Supervisor(Node):
         self.last_state_wall: float | None = None
         self.last_progress_wall: float | None = None  # when sim time last moved (re-sent states do not count)
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)
-        self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_batch, qos.BATCH_QOS, raw=True)
+        # the states are taken in bulk (every BATCH_TAKE_PERIOD s, and before any event that reads the newest),
+        # never one callback a message: a flood of /sim/state_batch costs the loop's executor nothing per message
+        self._states = PolledSubscription(self, Float64MultiArray, topics.STATE_BATCH, BATCH_TAKE_QOS, self._on_batch,
+                                          BATCH_TAKE_PERIOD)
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
@@ -222,6 +233,7 @@ class Supervisor(Node):
         self.get_logger().warning(f"t = {t:.2f} s: no touchdown for {self.config.rules.stall_after} s, stalled")
 
     def _count_step(self, msg: Header) -> None:
+        self._states.take_all()  # the states up to now: is the one after the switch here already?
         t = stamp_to_ns(msg.stamp)  # the sim time of the state on which the stance switched
         self._touchdown_times.append(t)
         if t < self._sim_ns:  # the state after it is here already: the touchdown's time (see result())
@@ -244,6 +256,7 @@ class Supervisor(Node):
             value = clamp_speed(msg.data, *COMMAND_RANGE)
         except ValueError:
             return
+        self._states.take_all()
         now = self.sim_time
         if self._start is None or any(abs(t - now) < 1.0 and v == value for t, v in self.config.schedule):
             return  # before the walk (run_stack's own first command), or a scheduled change's echo
@@ -264,6 +277,7 @@ class Supervisor(Node):
 
     def _on_resets(self, msg: UInt32) -> None:
         """``/sim/resets``: a placement after the first is a reset this run did not ask for."""
+        self._states.take_all()  # the newest state: when it was reset
         if self._placements is None:
             self._placements = msg.data
         elif msg.data > self._placements:
@@ -278,6 +292,7 @@ class Supervisor(Node):
                                     f"run did not make (nodes with a client of it: {who}): the run is not complete")
 
     def _on_fallen(self, msg: Bool) -> None:
+        self._states.take_all()  # the newest state: the fall's time
         if msg.data and not self.fell:
             self.fell = True
             self.fall_time = self.sim_time
@@ -285,8 +300,12 @@ class Supervisor(Node):
     def _on_batch(self, raw: bytes) -> None:
         """The simulator's states in a batch (``/sim/state_batch``, its serialized bytes), oldest first."""
         now = time.perf_counter()
-        for state in batch_states_or_log(raw, self._batch_topic, self._batch_refused, self._batches):
+        for state in batch_states_or_log(raw, self._states.topic, self._batch_refused, self._batches):
             self._on_state(state.stamp, state.position[0], state.effort, now)
+
+    def destroy_node(self) -> None:
+        self._states.destroy()
+        super().destroy_node()
 
     def _batch_refused(self, line: str) -> None:
         """A refused ``/sim/state_batch``: counted, logged at most once a second (rclpy's own

@@ -41,6 +41,14 @@
   s from SIGINT to the group to the process's exit, once it has started (the recorder with
   its bag closed), the median of 3.
 
+* ``flood_*``: what a flood costs the lockstep loop, per layout (in-process, composed,
+  multi-process): ``flood_<layout>_rtf`` with a process publishing 30 NaN values as a
+  ``Float64MultiArray`` on ``/sim/state_batch`` at 10 kHz (reliable, as the observers
+  subscribe; every one is refused), ``flood_<layout>_baseline_rtf`` with one busy loop in its
+  place (the flooder's own CPU, so the ratio is what the stack pays), their ratio
+  (``_ratio``; issue 75's bar: at least 0.5), ``flood_<layout>_sent_per_s`` (as sent) and
+  whether the flooded walk completed.
+
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
 """
@@ -61,7 +69,12 @@ from rabbit_msgs_py.environment import ensure_localhost_discovery
 
 SCENARIOS = ("floor", "startup", "stop", "lockstep_in_process", "lockstep_composed", "lockstep_multi_process",
              "paced_multi_process", "paced_recording",
-             "realtime_multi_process", "realtime_in_process", "realtime_recording")
+             "realtime_multi_process", "realtime_in_process", "realtime_recording",
+             "flood_in_process", "flood_composed", "flood_multi_process")
+
+FLOOD_RATE = 10_000.0
+"""Hz: the flood scenarios' messages a second (issue 75's hostile user)."""
+FLOOD_LAYOUTS = {"flood_in_process": "in-process", "flood_composed": "composed", "flood_multi_process": "separate"}
 
 
 def rounded(value: float | None, digits: int) -> float | None:
@@ -172,6 +185,8 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         report = run_multi_process(StackConfig(duration=duration, schedule=schedule, layout=layout), log=sys.stderr)
         return {f"lockstep_rtf_{name[9:]}": round(report.rtf, 3), f"{name}_fell": report.fell,
                 f"{name}_cpu_us_per_tick": report.cpu_us_per_tick}
+    if name in FLOOD_LAYOUTS:
+        return flood(name, StackConfig(duration=duration, schedule=schedule, layout=FLOOD_LAYOUTS[name]))
     if name == "realtime_in_process":
         report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
         stats = nodes["sim_node"].statistics()
@@ -221,6 +236,66 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
     }
 
 
+def flood(name: str, config) -> dict[str, object]:
+    """The lockstep walk of ``config`` beside a busy loop, then beside a 10 kHz flooder (see
+    the module docstring)."""
+    import signal
+
+    from rabbit_policy.bringup.in_process import run_in_process
+    from rabbit_policy.bringup.processes import run_multi_process
+
+    def walk():
+        return run_in_process(config)[0] if config.layout == "in-process" else run_multi_process(config, log=sys.stderr)
+
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        baseline = walk()
+    finally:
+        busy.kill()
+    flooder = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--flooder"],
+                               stdout=subprocess.PIPE, text=True)
+    try:
+        flooded = walk()
+    finally:
+        flooder.send_signal(signal.SIGINT)
+        sent = json.loads(flooder.communicate(timeout=30)[0].strip().splitlines()[-1])
+    return {f"{name}_baseline_rtf": round(baseline.rtf, 3), f"{name}_rtf": round(flooded.rtf, 3),
+            f"{name}_ratio": round(flooded.rtf / baseline.rtf, 3), f"{name}_sent_per_s": sent["per_s"],
+            f"{name}_completed": flooded.completed and not flooded.fell and not flooded.stalled}
+
+
+def flooder(rate: float = FLOOD_RATE) -> dict[str, float]:
+    """Publish 30 NaN values on ``/sim/state_batch`` at ``rate`` Hz until SIGINT; returns
+    what was sent (``sent``, ``per_s``)."""
+    import math
+    import time
+
+    import rclpy
+    from std_msgs.msg import Float64MultiArray
+
+    from rabbit_msgs_py import qos
+    from rabbit_msgs_py.node_runner import init_context
+
+    context = init_context()
+    node = rclpy.create_node("bench_flooder", context=context)
+    publisher = node.create_publisher(Float64MultiArray, "/sim/state_batch", qos.BATCH_QOS)
+    message = Float64MultiArray(data=[math.nan] * 30)
+    sent, start = 0, time.monotonic()
+    try:
+        while True:
+            publisher.publish(message)
+            sent += 1
+            ahead = start + sent / rate - time.monotonic()
+            if ahead > 0:
+                time.sleep(ahead)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+    return {"sent": sent, "per_s": round(sent / (time.monotonic() - start), 1)}
+
+
 FLOOR_RATIOS = {"lockstep_in_process_to_floor": ("lockstep_rtf_in_process", "in_process"),
                 "lockstep_multi_process_to_floor": ("lockstep_rtf_multi_process", "multi_process"),
                 "lockstep_composed_to_floor": ("lockstep_rtf_composed", "multi_process"),
@@ -246,11 +321,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--realtime-duration", type=positive, default=10.0, help="realtime runs, s")
     parser.add_argument("--speed", type=positive, default=1.0, help="commanded speed (m/s)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--flooder", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--rtf", type=positive, default=1.0, help="paced runs: target real-time factor")
     parser.add_argument("--busy", type=int, default=0, metavar="N", help="busy loops beside every scenario")
     parser.add_argument("--only", choices=SCENARIOS, action="append",
                         help="run only this scenario (repeatable)")
     args = parser.parse_args(argv)
+    if args.flooder:
+        print(strict_json.dumps(flooder()))
+        return 0
     if args.child:
         print(strict_json.dumps(run_scenario(args.only[0], args.duration, args.realtime_duration, args.speed,
                                              args.rtf)))
