@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from rabbit_policy.learning.env import DISTRIBUTIONS, RabbitHZDEnv
+from rabbit_policy.learning.env import RabbitHZDEnv
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
 pytestmark = pytest.mark.sim
@@ -253,52 +253,6 @@ def test_decisions_every_n_ticks_step_the_env_by_n_ticks_and_apply_at_once():
         RabbitHZDEnv(decision_period=-1)
 
 
-def test_broad_episodes_draw_commands_pushes_models_and_delays():
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
-    drawn = []
-    for seed in range(12):
-        env.reset(seed=seed)
-        drawn.append(env.loop.scenario)
-    for scenario in drawn:
-        times = [t for t, _ in scenario.schedule]
-        assert all(2.0 - 1e-9 <= b - a <= 5.0 + 1e-9 for a, b in zip(times, times[1:]))
-        assert all(0.7 <= v <= 1.5 for _, v in scenario.schedule)
-        assert all(abs(p.impulse) <= 15.0 + 1e-9 for p in scenario.pushes)
-    assert any(s.pushes for s in drawn) and any(not s.pushes for s in drawn)
-    assert {s.model.variant for s in drawn} == {"paper", "drives"}
-    assert len({s.torque_delay for s in drawn}) > 1 and len({s.model.friction for s in drawn}) > 1
-    again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="broad")
-    again.reset(seed=3)
-    assert again.loop.scenario == drawn[3]  # seeded
-
-
-def test_push_episodes_push_every_episode_between_the_least_and_the_largest_impulse_both_ways():
-    env = RabbitHZDEnv(max_steps=250, decision_period=20, distribution="pushes")
-    impulses = []
-    for seed in range(16):
-        env.reset(seed=seed)
-        (push,) = env.loop.scenario.pushes
-        assert 1.0 - 1e-9 <= push.time <= 4.0 + 1e-9  # inside the 5 s episode, 1 s from either end
-        impulses.append(push.impulse)
-    assert all(6.0 - 1e-9 <= abs(i) <= 20.0 + 1e-9 for i in impulses)
-    assert min(impulses) < 0.0 < max(impulses)
-
-
-def test_robust_episodes_add_noise_to_the_measured_inputs_only_and_reward_the_true_speed():
-    noisy = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
-    clean = RabbitHZDEnv(max_steps=500, decision_period=20,
-                         distribution=replace(DISTRIBUTIONS["robust"], observation_noise=0.0))
-    obs_noisy, _ = noisy.reset(seed=5)
-    obs_clean, _ = clean.reset(seed=5)
-    assert obs_noisy[0] == obs_clean[0]  # the command is not measured: no noise
-    assert not np.allclose(obs_noisy[1:], obs_clean[1:])
-    action = np.zeros(21, np.float32)
-    for _ in range(3):
-        _, reward_noisy, _, _, info_noisy = noisy.step(action)
-        _, reward_clean, _, _, info_clean = clean.step(action)
-        assert reward_noisy == reward_clean and info_noisy["mean_speed"] == info_clean["mean_speed"]
-
-
 def test_memory_features_integrate_the_speed_error_with_anti_windup_and_carry_the_last_action():
     from rabbit_policy.runtime.memory import MemoryConfig, SpeedMemory
     from rabbit_policy.runtime.speed_integral import IntegralConfig
@@ -358,34 +312,6 @@ def test_a_reset_whose_drawn_model_stalls_on_the_first_step_draws_again_and_star
     assert info["desired_speed"] == pytest.approx(0.716, abs=1e-3)
     again = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="robust")
     assert np.array_equal(again.reset(seed=1092)[0], obs) and again.loop.scenario == env.loop.scenario
-
-
-def _one_phase_push_each(distribution: str, seeds: int = 24) -> list[tuple]:
-    """Each of ``seeds`` episodes of 500 decisions: its scenario (one phase push, no timed one),
-    its push, the push's direction (+1 forward) and its impulse over classic's margin at the
-    command in force."""
-    from rabbit_policy.evaluation.push_recovery import classic_margin
-
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution=distribution)
-    episodes = []
-    for seed in range(seeds):
-        env.reset(seed=seed)
-        scenario = env.loop.scenario
-        assert scenario.pushes == () and len(scenario.phase_pushes) == 1
-        (push,) = scenario.phase_pushes
-        command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
-        direction = 1 if push.impulse > 0 else -1
-        episodes.append((scenario, push, direction, abs(push.impulse) / classic_margin(command, direction)))
-    return episodes
-
-
-def test_recovery_episodes_push_at_a_phase_of_a_step_around_classics_margin_mostly_backward():
-    directions = []
-    for _scenario, push, direction, ratio in _one_phase_push_each("recovery"):
-        assert 1.0 - 1e-9 <= push.after <= 9.0 + 1e-9 and 0.0 <= push.phase < 1.0
-        assert 0.8 - 1e-9 <= ratio <= 2.2 + 1e-9
-        directions.append(direction)
-    assert 12 <= directions.count(-1) < 24 and directions.count(1) >= 1
 
 
 def test_the_survival_term_pays_every_step_survived_and_is_checked():
@@ -533,53 +459,6 @@ def test_the_evaluation_reward_pays_the_walks_graded_reach_and_settling_at_its_e
         RabbitHZDEnv(reward="evaluation", fall_penalty=0.0)
     with pytest.raises(ValueError, match="reward must be one of"):
         RabbitHZDEnv(reward="speed")
-
-
-def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on_the_nominal_model():
-    from rabbit_policy.evaluation.push_recovery import classic_margin
-
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="changes")
-    pushed = 0
-    for seed in range(24):
-        env.reset(seed=seed)
-        scenario = env.loop.scenario
-        assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
-        for push in scenario.phase_pushes:
-            command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
-            direction = 1 if push.impulse > 0 else -1
-            assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
-            pushed += 1
-    assert 6 <= pushed <= 18
-
-
-def test_forward_episodes_push_three_in_four_two_thirds_of_them_forward_around_classics_margin():
-    from rabbit_policy.evaluation.push_recovery import classic_margin
-
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="forward")
-    directions = []
-    for seed in range(48):
-        env.reset(seed=seed)
-        scenario = env.loop.scenario
-        assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
-        for push in scenario.phase_pushes:
-            command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
-            direction = 1 if push.impulse > 0 else -1
-            assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
-            directions.append(direction)
-    assert 28 <= len(directions) <= 44  # 36 expected of 48
-    assert directions.count(1) >= 1.4 * directions.count(-1)  # two to one expected
-
-
-def test_decided_episodes_push_every_one_where_the_screen_decides_forward_and_backward_alike():
-    directions = []
-    for scenario, _push, direction, ratio in _one_phase_push_each("decided"):
-        assert len(scenario.schedule) >= 2
-        low, high = (0.8, 1.6) if direction > 0 else (1.2, 2.4)
-        assert low - 1e-9 <= ratio <= high + 1e-9
-        directions.append(direction)
-    assert 6 <= directions.count(1) <= 18
-    with pytest.raises(ValueError, match="backward_scale must be > 0"):
-        replace(DISTRIBUTIONS["decided"], backward_scale=0.0)
 
 
 def test_rgb_array_on_a_headless_machine_picks_an_offscreen_backend_itself():
