@@ -18,9 +18,10 @@ from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS
 from test_recovery import DEFAULT_SETTINGS, assert_lockstep_is, timing
 
 
-def _overlay(config, period: int = 20):
-    """A RecoveryOverlay with the rule's constants as RecoveryConfig's and, for policy_blend,
-    the controller's default blend (a spec names both; these tests use the defaults)."""
+def _overlay(config, period: int = 20, policy_blend: bool = False):
+    """A RecoveryOverlay with the rule's constants as RecoveryConfig's and, with
+    ``policy_blend``, the controller's default blend, gaits applied at once (a spec names
+    both; these tests use the defaults)."""
     from rabbit_hzd_controller.controller import ControllerConfig
     from rabbit_policy.runtime.alpha_blend import AlphaBlend
     from rabbit_policy.runtime.classic import LibraryPolicy
@@ -30,8 +31,8 @@ def _overlay(config, period: int = 20):
     rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=max(period, 1))
     defaults = ControllerConfig()
     blend = (AlphaBlend(defaults.within_step_blend, defaults.within_step_until, period * defaults.tick)
-             if config.policy_blend else None)
-    return RecoveryOverlay(config, period, rule, blend)
+             if policy_blend else None)
+    return RecoveryOverlay(config, period, rule, blend, at_once=policy_blend)
 
 
 def _zero_residual_on_recovery_file(path, base: str = "recovery", scale_weights: float = 0.0) -> None:
@@ -136,13 +137,10 @@ def test_an_overlay_configuration_is_checked_where_it_enters():
             OverlayConfig(**bad)
     with pytest.raises(ValueError, match="within the step"):
         _overlay(OverlayConfig(), period=0)
-    with pytest.raises(ValueError, match="policy_blend needs the blend"):
-        RecoveryOverlay(OverlayConfig(at_once=True, policy_blend=True), 20, _overlay(OverlayConfig()).rule, None)
-    with pytest.raises(ValueError, match="recovery_overlay: .*unexpected keyword argument 'gate'"):
-        OverlayConfig.from_dict({"gate": 0.1})
-    assert OverlayConfig.from_dict({"at_once": True}).controller_settings == CONTROLLER_SETTINGS
-    with pytest.raises(ValueError, match="policy_blend needs at_once"):
-        OverlayConfig(policy_blend=True)
+    blending = _overlay(OverlayConfig(), policy_blend=True)
+    assert blending.controller_settings == CONTROLLER_SETTINGS and _overlay(OverlayConfig()).controller_settings == {}
+    with pytest.raises(ValueError, match="only when the controller applies them at once"):
+        RecoveryOverlay(OverlayConfig(), 20, blending.rule, blending._blend, at_once=False)
     for bad in (0.0, 1.5, float("nan")):
         with pytest.raises(ValueError, match="rise_until"):
             OverlayConfig(rise_until=bad)
@@ -311,7 +309,7 @@ def test_ship_policy_records_the_overlay_and_the_policy_reads_it(tmp_path):
         " --recovery-overlay --recovery-overlay-at-once")
     assert "no blend, no queue" in " ".join(network_text(policy.checkpoint.info))
     blending = make_policy("learned", policy_file=with_recovery_overlay(plain, tmp_path / "pb.pt", policy_blend=True))
-    assert blending.overlay.config == OverlayConfig(at_once=True, policy_blend=True, rise_until=0.6)
+    assert blending.overlay.config == OverlayConfig(rise_until=0.6) and blending.overlay._blend is not None
     assert timing(blending) == CONTROLLER_SETTINGS
     assert rules_set_after_training(blending.checkpoint.info)[0].endswith(
         " --recovery-overlay --recovery-overlay-policy-blend")

@@ -373,18 +373,19 @@ def test_a_spec_round_trips_through_its_file(tmp_path):
 
 
 def test_a_rules_section_is_its_runtime_class_read_strictly():
-    """A spec's ``speed_integral`` and ``recovery_rule`` are the runtime's ``IntegralConfig`` and
-    ``RecoveryConfig`` themselves (no mirror class, no translator), read by the spec's strict
+    """A spec's ``speed_integral``, ``recovery_rule`` and ``overlay`` are the runtime's
+    ``IntegralConfig``, ``RecoveryConfig`` and ``OverlayConfig`` themselves (no mirror class, no
+    translator), read by the spec's strict
     loader: a key missing is refused although the class has a code default for it, except the
     windup decay's ``disturbance`` (its ``OPTIONAL_KEYS``); an unknown key or a bad value is one line."""
-    from rabbit_policy.runtime.recovery import RecoveryConfig
+    from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig
     from rabbit_policy.runtime.speed_integral import IntegralConfig, WindupDecay
 
     shipped = load_spec(packaged_spec("learned"))
     assert type(shipped.speed_integral) is IntegralConfig and type(shipped.recovery_rule) is RecoveryConfig
-    assert type(shipped.speed_integral.windup_decay) is WindupDecay
+    assert type(shipped.speed_integral.windup_decay) is WindupDecay and type(shipped.overlay) is OverlayConfig
     data = shipped.to_dict()
-    for section, key in (("speed_integral", "gain"), ("recovery_rule", "bins")):
+    for section, key in (("speed_integral", "gain"), ("recovery_rule", "bins"), ("overlay", "rise_until")):
         broken = {**data, section: {k: v for k, v in data[section].items() if k != key}}
         with pytest.raises(SpecError, match=f"missing key '{key}' in spec.{section}"):
             parse_spec(broken)

@@ -285,7 +285,7 @@ def rules_set_after_training(info: dict) -> tuple[str, str]:
 def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False, policy_blend: bool = False) -> Path:
     """A copy of the checkpoint ``policy`` at ``out`` that carries the recovery rule on top of
     its gait (``info["recovery_overlay"]``: :class:`~rabbit_policy.runtime.recovery.OverlayConfig`'s
-    defaults, ``at_once`` as given: the loops and the stack then apply its gaits at once;
+    defaults, and ``at_once`` as given: the loops and the stack then apply its gaits at once;
     ``policy_blend``: at once, the overlay blending the network's own gaits in, and the rule's
     weight not rising from the phase where the controller's defaults queue a gait, 0.6).
     ``ValueError`` for a policy that does not decide within the step or already has the
@@ -302,9 +302,9 @@ def with_recovery_overlay(policy: Path, out: Path, at_once: bool = False, policy
         raise ValueError(f"--recovery-overlay: {policy} decides once per step; the rule acts within the step")
     if info.get("residual_base", "classic") != "classic":
         raise ValueError(f"--recovery-overlay: {policy} is already a residual on {info['residual_base']!r}")
-    info["recovery_overlay"] = asdict(OverlayConfig(at_once=at_once or policy_blend, policy_blend=policy_blend,
-                                                    rise_until=ControllerConfig().within_step_until if policy_blend
-                                                    else 1.0))
+    rise_until = ControllerConfig().within_step_until if policy_blend else 1.0
+    info["recovery_overlay"] = {**asdict(OverlayConfig(rise_until=rise_until)), "at_once": at_once or policy_blend,
+                                "policy_blend": policy_blend}
     checkpoint.save(out)
     return out
 
@@ -487,7 +487,7 @@ def main(argv: list[str] | None = None) -> int:
                         help="with --recovery-overlay: the controller applies every gait at once and the overlay "
                              "blends the network's own gaits in itself, as the controller's defaults would (rabbit_policy."
                              "runtime.alpha_blend.AlphaBlend), so only the rule's offsets act at once "
-                             "(OverlayConfig.policy_blend)")
+                             "(the spec's blend section)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="write the checkpoint, card, evaluation and spec here (needed unless --dry-run: the "
                              "package's learned controller is what scripts/reproduce.py --preset shipped writes)")

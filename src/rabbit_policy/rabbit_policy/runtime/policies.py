@@ -117,8 +117,8 @@ class NetworkPolicy:
         self.needs_body = self._network_needs_body or overlay is not None
         if base is not None and controller_settings(base):
             self.controller_settings = controller_settings(base)
-        if overlay is not None and overlay.config.controller_settings:
-            self.controller_settings = overlay.config.controller_settings
+        if overlay is not None and overlay.controller_settings:
+            self.controller_settings = overlay.controller_settings
         if decision_period:
             self.decision_period = decision_period
             self.decision_window = DEFAULT_DECISION_WINDOW

@@ -270,20 +270,13 @@ class RecoveryPolicy:
 
 @dataclass(frozen=True)
 class OverlayConfig:
-    """The recovery rule on top of another policy (:class:`RecoveryOverlay`).
+    """How the recovery rule sits on top of another policy (:class:`RecoveryOverlay`): a
+    controller spec's ``overlay`` section, read straight into this class (every field a key).
 
     fast_gate: the rule is held off while the hip's mean speed over the policy's window
         (its observation, m/s) exceeds the command by more than this fraction of it.
     hold: from this weight on, the gait under the offsets is the policy's last one chosen
         with the rule off (w = 0), not its answer now.
-    at_once: the controller applies every gait at once (:data:`CONTROLLER_SETTINGS`, as the
-        recovery controller); False: with its default blend and queue, as the network was
-        trained.
-    policy_blend: with ``at_once``, the overlay blends the policy's own gaits in itself, as
-        the controller's defaults would (:class:`~.alpha_blend.AlphaBlend`: over
-        ``ControllerConfig.within_step_blend`` of phase, a new gait restarting the blend from
-        the one in progress with its rate; from ``within_step_until`` of phase queued for the
-        touchdown), so that only the rule's offsets act at once.
     rise_until: from this phase until the touchdown the rule's weight may fall but not rise
         above its value at the last decision before it (1: no limit): offsets that rise late
         in the step, applied at once, move the swing leg's path just before it lands
@@ -292,8 +285,6 @@ class OverlayConfig:
 
     fast_gate: float = 0.1
     hold: float = 0.5
-    at_once: bool = False
-    policy_blend: bool = False
     rise_until: float = 1.0
 
     def __post_init__(self) -> None:
@@ -301,27 +292,8 @@ class OverlayConfig:
             raise ValueError(f"OverlayConfig.fast_gate must be finite and >= 0 (a fraction), got {self.fast_gate}")
         if not (np.isfinite(self.hold) and 0.0 < self.hold <= 1.0):
             raise ValueError(f"OverlayConfig.hold must be a weight in (0, 1], got {self.hold}")
-        if not isinstance(self.at_once, bool):
-            raise ValueError(f"OverlayConfig.at_once must be true or false, got {self.at_once!r}")
-        if not isinstance(self.policy_blend, bool):
-            raise ValueError(f"OverlayConfig.policy_blend must be true or false, got {self.policy_blend!r}")
         if not (np.isfinite(self.rise_until) and 0.0 < self.rise_until <= 1.0):
             raise ValueError(f"OverlayConfig.rise_until must be a phase in (0, 1], got {self.rise_until}")
-        if self.policy_blend and not self.at_once:
-            raise ValueError("OverlayConfig.policy_blend needs at_once: the controller would blend the gaits again")
-
-    @classmethod
-    def from_dict(cls, values: dict) -> "OverlayConfig":
-        """From a checkpoint's ``info["recovery_overlay"]``; ``ValueError`` naming what is wrong."""
-        try:
-            return cls(**values)
-        except TypeError as exc:
-            raise ValueError(f"the checkpoint's recovery_overlay: {exc}") from None
-
-    @property
-    def controller_settings(self) -> dict[str, float]:
-        """The ``ControllerConfig`` fields the policy with this overlay needs."""
-        return dict(CONTROLLER_SETTINGS) if self.at_once else {}
 
 
 class RecoveryOverlay:
@@ -340,24 +312,28 @@ class RecoveryOverlay:
       rule off (a network answers a backward push by asking for speed, which works against
       the rule); below ``hold`` the policy keeps deciding.
 
-    ``at_once``: the controller applies every gait at once (else it blends them in);
-    ``policy_blend``: with ``at_once``, the overlay blends the policy's own gaits in itself
-    (:class:`~.alpha_blend.AlphaBlend`), so that only the offsets act at once; ``rise_until``:
-    w does not rise from that phase of the step on. Undisturbed, w stays 0 and the walk is the
+    ``at_once``: the controller applies every gait at once (:data:`CONTROLLER_SETTINGS`, as the
+    recovery controller; else it blends them in with its defaults, as the network was trained);
+    ``blend``: with ``at_once``, the overlay blends the policy's own gaits in itself
+    (:class:`~.alpha_blend.AlphaBlend`, as the controller's defaults would), so that only the
+    offsets act at once; ``rise_until``: w does not rise from that phase of the step on. Undisturbed, w stays 0 and the walk is the
     policy's own. What each choice measured: docs/learning.md, "2026-11-27 (eighth)" and
     "2026-11-28"; the shipped controller's figures: docs/results.md."""
 
     def __init__(self, config: OverlayConfig, decision_period: int, rule: "RecoveryPolicy",
-                 blend: AlphaBlend | None) -> None:
-        """``rule``: the recovery controller whose weight is used; ``blend``: ``policy_blend``'s
-        (None without it). A controller spec gives every one (:func:`rabbit_policy.spec.build`)."""
+                 blend: AlphaBlend | None = None, at_once: bool = False) -> None:
+        """``rule``: the recovery controller whose weight is used; ``blend``: the policy's gaits
+        blended in by the overlay (None: not). A controller spec gives every one
+        (:func:`rabbit_policy.spec.build`: ``at_once`` from its controller section)."""
         if decision_period < 1:
             raise ValueError("the recovery overlay acts within the step: its policy must decide every N >= 1 ticks")
-        if config.policy_blend and blend is None:
-            raise ValueError("OverlayConfig.policy_blend needs the blend it blends the policy's gaits with")
+        if blend is not None and not at_once:
+            raise ValueError("the overlay blends the policy's gaits only when the controller applies them at once "
+                             "(else the controller would blend them again)")
         self.config = config
+        self.controller_settings = dict(CONTROLLER_SETTINGS) if at_once else {}
         self.rule = rule
-        self._blend = blend  # policy_blend: the policy's gaits blended in
+        self._blend = blend  # the policy's gaits blended in (None: not)
         self._held = None
         self._cap: float | None = None  # rise_until: the weight w may not rise above until the touchdown
         self.last_weight = 0.0
@@ -371,12 +347,12 @@ class RecoveryOverlay:
         self.last_weight = 0.0
 
     def start(self, command) -> None:
-        """The gait the walk starts on (``policy_blend`` blends from it)."""
+        """The gait the walk starts on (a blend starts from it)."""
         if self._blend is not None:
             self._blend.start(command.alpha, command.kd)
 
     def blended(self, observation: Observation, command):
-        """``policy_blend``: the policy's gait for the next decision period, as the controller's
+        """With a blend: the policy's gait for the next decision period, as the controller's
         defaults would bring it in (:class:`~.alpha_blend.AlphaBlend`: blended over 0.2 of
         phase, its rate kept when a new gait restarts the blend; from 0.6 of phase queued for
         the touchdown, its Kd too)."""
@@ -387,7 +363,7 @@ class RecoveryOverlay:
     def apply(self, observation: Observation, command):
         """The gait for this decision: ``command`` (the policy's, a ``GaitCommand``) with the
         rule on it (needs ``observation.body``)."""
-        if self.config.policy_blend:
+        if self._blend is not None:
             command = self.blended(observation, command)
         self.rule.act(observation)
         w = self.rule.last_weight

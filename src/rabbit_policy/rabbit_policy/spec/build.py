@@ -19,7 +19,7 @@ from rabbit_policy.runtime.gait_command import Policy
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.memory import INPUTS, MemoryConfig, SpeedMemory
 from rabbit_policy.runtime.policies import NetworkPolicy
-from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig, RecoveryOverlay, RecoveryPolicy
+from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryOverlay, RecoveryPolicy
 from rabbit_policy.runtime.speed_integral import IntegralConfig
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
 from rabbit_policy.spec.schema import ControllerSpec, NetworkSpec, SpecError, load_spec
@@ -130,12 +130,10 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
         if spec.blend is not None and not at_once:
             raise SpecError("blend: the network's gaits are blended by the overlay only when the controller applies "
                             "gaits at once (controller.within_step_blend 0, within_step_until 1)")
-        config = OverlayConfig(spec.overlay.fast_gate, spec.overlay.hold, at_once=at_once,
-                               policy_blend=spec.blend is not None, rise_until=spec.overlay.rise_until)
         rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), spec.recovery_rule, period, window)
         blend = (AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
                  if spec.blend is not None else None)
-        overlay = RecoveryOverlay(config, period, rule, blend)
+        overlay = RecoveryOverlay(spec.overlay, period, rule, blend, at_once)
     name = f"learned/{source or spec.name}" + (f"@{period}ticks" if period else "")
     policy = NetworkPolicy(forward, name, period, memory, residual, on_rule, overlay)
     if period:

@@ -16,11 +16,11 @@ from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.spec.provenance import code_commit
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
 from rabbit_policy.runtime.memory import MemoryConfig
-from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, RecoveryConfig
+from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, OverlayConfig, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
 from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
-                                       LibrarySpec, NetworkSpec, OverlaySpec, ResidualSpec, WeightsSpec,
+                                       LibrarySpec, NetworkSpec, ResidualSpec, WeightsSpec,
                                        dump_spec, load_spec, parse_spec)
 from rabbit_sim.model import model_sha256
 
@@ -95,7 +95,7 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
         rule, settings = RecoveryConfig(), CONTROLLER_SETTINGS
     if info.get("recovery_overlay") is not None and decision_period:
         values = info["recovery_overlay"]
-        overlay = OverlaySpec(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
+        overlay = OverlayConfig(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
         if values.get("policy_blend"):
             defaults = ControllerConfig()
             blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)

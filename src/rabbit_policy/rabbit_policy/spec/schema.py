@@ -17,8 +17,10 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
    (:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`), or null;
 6. ``recovery_rule``: the push-recovery rule's constants (the runtime's own
    :class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, read straight from its section), or
-   null; ``overlay``: how it sits on a network's gait
-   (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`), or null;
+   null; ``overlay``: how it sits on a network's gait (the runtime's own
+   :class:`~rabbit_policy.runtime.recovery.OverlayConfig`; whether the controller applies
+   gaits at once follows from the ``controller`` section, whether the overlay blends the
+   network's gaits from ``blend``), or null;
 7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (every
    ``ControllerConfig`` field but the robot model's geometry and tick, and that model's hash).
 
@@ -43,7 +45,7 @@ from rabbit_msgs_py.cli import yaml_problem
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
 from rabbit_policy.runtime.forward import OUTPUTS
-from rabbit_policy.runtime.recovery import RecoveryConfig
+from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import IntegralConfig, decision_dt
 
 SPEC_VERSION = 2
@@ -193,17 +195,6 @@ class BlendSpec:
 
 
 @dataclass(frozen=True)
-class OverlaySpec:
-    """How the rule sits on a network's gait (:class:`~rabbit_policy.runtime.recovery.OverlayConfig`
-    with ``at_once`` when the spec's controller applies every gait at once, and
-    ``policy_blend`` when the spec has a ``blend``: the network's gaits blended by it)."""
-
-    fast_gate: float
-    hold: float
-    rise_until: float
-
-
-@dataclass(frozen=True)
 class ControllerSettingsSpec:
     """The 1 kHz HZD controller this controller runs on: every ``ControllerConfig`` field
     (units as there: N m/rad, N m, m, rad, N m s/rad, phase, 1/s) but the leg geometry and
@@ -262,7 +253,7 @@ class ControllerSpec:
     network: NetworkSpec | None
     blend: BlendSpec | None
     recovery_rule: RecoveryConfig | None
-    overlay: OverlaySpec | None
+    overlay: OverlayConfig | None
     controller: ControllerSettingsSpec
     provenance: dict = field(default_factory=dict)
     OPTIONAL_KEYS: typing.ClassVar[tuple[str, ...]] = ("provenance",)
