@@ -23,14 +23,14 @@ def _overlay(config, period: int = 20, policy_blend: bool = False):
     ``policy_blend``, the controller's default blend, gaits applied at once (a spec names
     both; these tests use the defaults)."""
     from rabbit_hzd_controller.controller import ControllerConfig
-    from rabbit_policy.runtime.alpha_blend import AlphaBlend
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend, BlendConfig
     from rabbit_policy.runtime.classic import LibraryPolicy
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.recovery import RecoveryOverlay, RecoveryPolicy
 
     rule = RecoveryPolicy(LibraryPolicy(GaitLibrary.load(), "interpolate"), decision_period=max(period, 1))
     defaults = ControllerConfig()
-    blend = (AlphaBlend(defaults.within_step_blend, defaults.within_step_until, period * defaults.tick)
+    blend = (AlphaBlend(BlendConfig(defaults.within_step_blend, defaults.within_step_until), period * defaults.tick)
              if policy_blend else None)
     return RecoveryOverlay(config, period, rule, blend, at_once=policy_blend)
 
@@ -153,10 +153,10 @@ def test_the_alpha_blend_keeps_alpha_and_its_rate_continuous_when_each_decision_
     it replaces (a blend restarted from rest at each decision, the first policy blend, drops
     the rate and came in about 3x slower); the gait held for the period is the blend at the
     period's middle; a gait kept reaches its own alpha within 0.2 of phase."""
-    from rabbit_policy.runtime.alpha_blend import AlphaBlend
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend, BlendConfig
 
     rng = np.random.default_rng(3)
-    blend = AlphaBlend(0.2, 0.6, 0.02)
+    blend = AlphaBlend(BlendConfig(0.2, 0.6), 0.02)
     blend.start(rng.uniform(-1.0, 1.0, 24), 5.0)
     for k, tau in enumerate(np.arange(0.05, 0.5, 0.03)):
         before, rate_before = blend.at(tau)
@@ -176,9 +176,9 @@ def test_the_alpha_blend_queues_a_late_gait_and_its_kd_for_the_touchdown():
     """From 0.6 of phase a new gait (and Kd) waits: the blend in force goes on; at the
     touchdown (the phase falling back) the queued gait blends in from the one it replaced,
     over 0.2 of phase from the step's start, at rest."""
-    from rabbit_policy.runtime.alpha_blend import AlphaBlend
+    from rabbit_policy.runtime.alpha_blend import AlphaBlend, BlendConfig
 
-    blend = AlphaBlend(0.2, 0.6, 0.02)
+    blend = AlphaBlend(BlendConfig(0.2, 0.6), 0.02)
     blend.start([0.0] * 24, 5.0)
     first, _ = blend.step(0.3, 2.0, [1.0] * 24, 6.0)
     r = 0.5 * 2.0 * 0.02 / 0.2  # the middle of the period: 0.02 of phase into the blend
@@ -189,8 +189,8 @@ def test_the_alpha_blend_queues_a_late_gait_and_its_kd_for_the_touchdown():
     landed, kd = blend.step(0.01, 2.0, [3.0] * 24, 7.0)
     r = (0.01 + 0.02) / 0.2  # the middle of the period after the touchdown
     assert kd == 7.0 and landed == pytest.approx([1.0 + 2.0 * r * r * (3.0 - 2.0 * r)] * 24, abs=1e-12)
-    with pytest.raises(ValueError, match="AlphaBlend"):
-        AlphaBlend(0.0, 0.6, 0.02)
+    with pytest.raises(ValueError, match="alpha blend needs a length and until in"):
+        BlendConfig(0.0, 0.6)
 
 
 @pytest.mark.unit

@@ -197,7 +197,7 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["speed_integral"].update(speed_range=[1.5, 0.7]), "spec.speed_integral: the speed integral's speed range needs low < high"),
     (lambda d: d["controller"].update(within_step_until=1.5), "controller.within_step_until must be a finite number "
                                                               ">= 0 and <= 1, got 1.5"),
-    (lambda d: d["blend"].update(length=-0.1), "blend.length must be a finite number >= 0 and <= 1"),
+    (lambda d: d["blend"].update(length=-0.1), "spec.blend: an alpha blend needs a length and until in"),
     (lambda d: d["gait_library"].update(mode="nearest"), "gait_library.mode 'nearest': a learned controller's gaits"),
     (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),
     (lambda d: d["decision"].update(period_ticks=-1), "decision.period_ticks must be a whole number of ticks >= 0"),

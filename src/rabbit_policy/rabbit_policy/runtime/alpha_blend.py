@@ -32,23 +32,38 @@ the controller, and its forward push margin at 0.7 m/s was 18 N s; with this ble
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from rabbit_hzd_controller.law import blend_shape
 from rabbit_policy.runtime.body import touched_down
 
 
+@dataclass(frozen=True)
+class BlendConfig:
+    """An alpha blend's constants (a controller spec's ``blend`` section, read straight into
+    this class): ``length``, the phase the blend takes; ``until``, the phase from which a new
+    gait is queued for the touchdown. Both in (0, 1]."""
+
+    length: float
+    until: float
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.length <= 1.0 and 0.0 < self.until <= 1.0):
+            raise ValueError(f"an alpha blend needs a length and until in (0, 1], got {self.length}, {self.until}")
+
+
 class AlphaBlend:
     """The blend state in alpha: the gait blended into (``target``), the offsets from it at the
     blend's start (rad) and their rate (rad per unit of phase), the start phase; the gait and
-    Kd queued for the touchdown. ``length``: the blend's length (phase); ``until``: the phase
-    from which a new gait is queued; ``period_s``: the time a returned gait is held (s)."""
+    Kd queued for the touchdown. ``config``: its length and until (:class:`BlendConfig`);
+    ``period_s``: the time a returned gait is held (s)."""
 
-    def __init__(self, length: float, until: float, period_s: float) -> None:
-        if not (0.0 < length <= 1.0 and 0.0 < until <= 1.0 and period_s > 0.0):
-            raise ValueError(f"AlphaBlend needs a length and until in (0, 1] and a period > 0 s, got "
-                             f"{length}, {until}, {period_s}")
-        self.length, self.until, self.period_s = length, until, period_s
+    def __init__(self, config: BlendConfig, period_s: float) -> None:
+        if not period_s > 0.0:
+            raise ValueError(f"AlphaBlend needs a period > 0 s, got {period_s}")
+        self.length, self.until, self.period_s = config.length, config.until, period_s
         self.target: np.ndarray | None = None
 
     def reset(self) -> None:

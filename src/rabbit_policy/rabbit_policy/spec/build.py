@@ -131,7 +131,7 @@ def _learned(spec: ControllerSpec, base: Path, library: GaitLibrary, integral: I
             raise SpecError("blend: the network's gaits are blended by the overlay only when the controller applies "
                             "gaits at once (controller.within_step_blend 0, within_step_until 1)")
         rule = RecoveryPolicy(LibraryPolicy(library, "interpolate"), spec.recovery_rule, period, window)
-        blend = (AlphaBlend(spec.blend.length, spec.blend.until, period * ControllerConfig.tick)
+        blend = (AlphaBlend(spec.blend, period * ControllerConfig.tick)
                  if spec.blend is not None else None)
         overlay = RecoveryOverlay(spec.overlay, period, rule, blend, at_once)
     name = f"learned/{source or spec.name}" + (f"@{period}ticks" if period else "")

@@ -15,11 +15,12 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.spec.provenance import code_commit
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
+from rabbit_policy.runtime.alpha_blend import BlendConfig
 from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, OverlayConfig, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
-from rabbit_policy.spec.schema import (SPEC_VERSION, BlendSpec, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
+from rabbit_policy.spec.schema import (SPEC_VERSION, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
                                        LibrarySpec, NetworkSpec, ResidualSpec, WeightsSpec,
                                        dump_spec, load_spec, parse_spec)
 from rabbit_sim.model import model_sha256
@@ -98,7 +99,7 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
         overlay = OverlayConfig(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
         if values.get("policy_blend"):
             defaults = ControllerConfig()
-            blend = BlendSpec(defaults.within_step_blend, defaults.within_step_until)
+            blend = BlendConfig(defaults.within_step_blend, defaults.within_step_until)
         rule = RecoveryConfig()
         settings = CONTROLLER_SETTINGS if values.get("at_once") else {}
     return ControllerSpec(SPEC_VERSION, name, "learned", _library(source, base),

@@ -13,8 +13,8 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
 4. ``network``: the HZD-RL network (architecture, input normalisation, action bounds, the
    residual it adds to the library's gait; its weights in a weights-only file named by
    hash), or null;
-5. ``blend``: the network's gaits blended in alpha before the rule acts
-   (:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`), or null;
+5. ``blend``: the network's gaits blended in alpha before the rule acts (the runtime's own
+   :class:`~rabbit_policy.runtime.alpha_blend.BlendConfig`), or null;
 6. ``recovery_rule``: the push-recovery rule's constants (the runtime's own
    :class:`~rabbit_policy.runtime.recovery.RecoveryConfig`, read straight from its section), or
    null; ``overlay``: how it sits on a network's gait (the runtime's own
@@ -44,6 +44,7 @@ from rabbit_hzd_controller.controller import ControllerConfig
 from rabbit_msgs_py.cli import yaml_problem
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
+from rabbit_policy.runtime.alpha_blend import BlendConfig
 from rabbit_policy.runtime.forward import OUTPUTS
 from rabbit_policy.runtime.recovery import OverlayConfig, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import IntegralConfig, decision_dt
@@ -182,19 +183,6 @@ class NetworkSpec:
 
 
 @dataclass(frozen=True)
-class BlendSpec:
-    """:class:`~rabbit_policy.runtime.alpha_blend.AlphaBlend`: ``length`` (phase the blend
-    takes), ``until`` (phase from which a new gait waits for the touchdown)."""
-
-    length: float
-    until: float
-
-    def __post_init__(self) -> None:
-        _number(self.length, "blend.length", 0.0, 1.0)
-        _number(self.until, "blend.until", 0.0, 1.0)
-
-
-@dataclass(frozen=True)
 class ControllerSettingsSpec:
     """The 1 kHz HZD controller this controller runs on: every ``ControllerConfig`` field
     (units as there: N m/rad, N m, m, rad, N m s/rad, phase, 1/s) but the leg geometry and
@@ -251,7 +239,7 @@ class ControllerSpec:
     decision: DecisionSpec
     speed_integral: IntegralConfig | None
     network: NetworkSpec | None
-    blend: BlendSpec | None
+    blend: BlendConfig | None
     recovery_rule: RecoveryConfig | None
     overlay: OverlayConfig | None
     controller: ControllerSettingsSpec
