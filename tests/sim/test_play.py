@@ -16,6 +16,7 @@ import pytest
 from rabbit_policy.bringup.config import StackConfig
 
 from rabbit_policy.bringup.in_process import run_in_process
+from ros_helpers import ros_context
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -73,6 +74,19 @@ def test_replay_recorded_again_is_the_same_bag(bag, tmp_path):
     for topic, messages in original.items():
         assert len(replayed[topic]) == len(messages), topic
         assert all(_same_payload(a, b) for a, b in zip(messages, replayed[topic])), topic
+
+
+def test_every_publisher_of_a_replay_keeps_what_a_reliable_reader_has_not_acknowledged(bag):
+    """A replay behind its pace publishes in bursts; a publisher keeping fewer samples than a
+    burst overwrites ones a loaded reader has not acknowledged yet (the ``/clock`` publisher
+    kept 10: a replay under load once recorded 59 of its 64 clocks)."""
+    from rabbit_sim.player import MIN_DEPTH, BagPlayer
+
+    with ros_context() as (context, executor):
+        player = BagPlayer(bag, ["/joint_states"], 2.0, 100.0, context=context)
+        executor.add_node(player)
+        assert player._clock_pub is not None
+        assert all(pub.qos_profile.depth >= MIN_DEPTH for pub in player._played_publishers())
 
 
 def test_replay_of_chosen_topics_with_a_clock(bag, tmp_path):

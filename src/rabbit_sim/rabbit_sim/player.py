@@ -27,6 +27,7 @@ from rabbit_msgs_py.node_runner import destroyed_if_start_fails
 from .bag import BagError, open_bag
 
 MIN_DEPTH = 1000
+"""Keep-last depth of every publisher a replay makes (its topics and its ``/clock``) at least."""
 CLOCK_TOPIC = "/clock"
 
 
@@ -121,7 +122,11 @@ class BagPlayer(Node):
                 continue
             self.topics[topic.name] = topic
             self._topic_pubs[topic.name] = self.create_publisher(cls, topic.name, topic.qos())
-        self._clock_pub = self.create_publisher(Clock, CLOCK_TOPIC, 10) if clock_rate > 0.0 else None
+        # as deep as the played topics: a burst of clocks (a replay behind its pace on a loaded
+        # machine) never overwrites one a reliable reader has not acknowledged yet
+        self._clock_pub = (self.create_publisher(Clock, CLOCK_TOPIC, QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=MIN_DEPTH, reliability=ReliabilityPolicy.RELIABLE))
+            if clock_rate > 0.0 else None)
         self.published: dict[str, int] = {name: 0 for name in self.topics}
         self.clocks_published = 0
 
