@@ -274,7 +274,8 @@ DISTRIBUTIONS = {
     # changes' episodes with as many forward pushes again: three episodes in four pushed, two
     # thirds of the pushes forward (changes: one episode in four pushed forward, as many backward).
     # Every counted network traded forward pushes at the slowest and fastest speeds for backward
-    # pushes and changes; here the return sees twice the forward falls (docs/learning.md, 2026-12-07 (fourth))
+    # pushes and changes; here the return sees twice the forward falls (docs/learning.md,
+    # 2026-12-07 (fourth): the forward losses grew)
     "forward": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=0.75, push_timing="phase",
                                    relative_impulse=True, min_impulse=0.5, max_impulse=1.5, backward_fraction=1 / 3,
                                    torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
@@ -346,8 +347,9 @@ class EpisodeConfig:
                                         "noisy speeds), pushes (a 6-20 N s push either way in every episode) or "
                                         "recovery (a push at a phase of a step in every episode, 0.8-2.2x classic's "
                                         "margin) or changes (commands every 2-5 s, half the episodes pushed at a "
-                                        "phase, 0.5-1.5x classic's margin, the nominal model), forward (changes with three "
-                                        "episodes in four pushed, two thirds of the pushes forward) or decided (changes' "
+                                        "phase, 0.5-1.5x classic's margin, the nominal model), forward (changes "
+                                        "with three episodes in four pushed, two thirds of the pushes forward) or "
+                                        "decided (changes' "
                                         "commands, every episode pushed at a phase, forward 0.8-1.6x and backward "
                                         "1.2-2.4x classic's margin); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))

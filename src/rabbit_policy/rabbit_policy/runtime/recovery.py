@@ -316,8 +316,8 @@ class RecoveryOverlay:
     recovery controller; else it blends them in with its defaults, as the network was trained);
     ``blend``: with ``at_once``, the overlay blends the policy's own gaits in itself
     (:class:`~.alpha_blend.AlphaBlend`, as the controller's defaults would), so that only the
-    offsets act at once; ``rise_until``: w does not rise from that phase of the step on. Undisturbed, w stays 0 and the walk is the
-    policy's own. What each choice measured: docs/learning.md, "2026-11-27 (eighth)" and
+    offsets act at once; ``rise_until``: w does not rise from that phase of the step on.
+    Undisturbed, w stays 0 and the walk is the policy's own. What each choice measured: docs/learning.md, "2026-11-27 (eighth)" and
     "2026-11-28"; the shipped controller's figures: docs/results.md."""
 
     def __init__(self, config: OverlayConfig, decision_period: int, rule: "RecoveryPolicy",
