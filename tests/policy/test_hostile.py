@@ -250,3 +250,26 @@ def test_a_state_batch_flood_wakes_no_supervisor_callback_and_loses_no_real_batc
             publisher.publish(message)
         assert spin_until(executor, lambda: supervisor._rejections.counts.get("state_batch", 0) == 1500)
         assert supervisor.sim_stamp == 5_000_000 and supervisor._start == (5_000_000, 0.25)
+
+
+@pytest.mark.ros
+def test_bench_stacks_flooder_stops_on_sigterm_when_started_in_the_background():
+    """A process started in the background inherits SIGINT ignored (a nohup'd bench_stack's
+    flood scenarios left their flooders running so): the flooder stops on SIGTERM, whatever
+    SIGINT is, and says what it sent."""
+    import json
+    import signal
+    import subprocess
+    import sys
+
+    flooder = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--flooder"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    try:
+        assert "until SIGTERM" in flooder.stderr.readline()  # publishing
+        flooder.send_signal(signal.SIGINT)  # ignored, as in a background job
+        flooder.terminate()
+        out = flooder.communicate(timeout=60)[0]
+    finally:
+        flooder.kill()
+    assert flooder.returncode == 0 and set(json.loads(out.strip().splitlines()[-1])) == {"sent", "per_s"}

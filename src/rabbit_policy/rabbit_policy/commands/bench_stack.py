@@ -239,8 +239,6 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
 def flood(name: str, config) -> dict[str, object]:
     """The lockstep walk of ``config`` beside a busy loop, then beside a 10 kHz flooder (see
     the module docstring)."""
-    import signal
-
     from rabbit_policy.bringup.in_process import run_in_process
     from rabbit_policy.bringup.processes import run_multi_process
 
@@ -257,17 +255,24 @@ def flood(name: str, config) -> dict[str, object]:
     try:
         flooded = walk()
     finally:
-        flooder.send_signal(signal.SIGINT)
-        sent = json.loads(flooder.communicate(timeout=30)[0].strip().splitlines()[-1])
+        flooder.terminate()
+        try:
+            out = flooder.communicate(timeout=30)[0]
+        except subprocess.TimeoutExpired:
+            flooder.kill()
+            raise
+    sent = json.loads(out.strip().splitlines()[-1])
     return {f"{name}_baseline_rtf": round(baseline.rtf, 3), f"{name}_rtf": round(flooded.rtf, 3),
             f"{name}_ratio": round(flooded.rtf / baseline.rtf, 3), f"{name}_sent_per_s": sent["per_s"],
             f"{name}_completed": flooded.completed and not flooded.fell and not flooded.stalled}
 
 
 def flooder(rate: float = FLOOD_RATE) -> dict[str, float]:
-    """Publish 30 NaN values on ``/sim/state_batch`` at ``rate`` Hz until SIGINT; returns
-    what was sent (``sent``, ``per_s``)."""
+    """Publish 30 NaN values on ``/sim/state_batch`` at ``rate`` Hz until SIGTERM (a handler of
+    its own: a process started in the background inherits SIGINT ignored); returns what was
+    sent (``sent``, ``per_s``)."""
     import math
+    import signal
     import time
 
     import rclpy
@@ -280,16 +285,17 @@ def flooder(rate: float = FLOOD_RATE) -> dict[str, float]:
     node = rclpy.create_node("bench_flooder", context=context)
     publisher = node.create_publisher(Float64MultiArray, "/sim/state_batch", qos.BATCH_QOS)
     message = Float64MultiArray(data=[math.nan] * 30)
+    stopped: list[int] = []
+    signal.signal(signal.SIGTERM, lambda signum, _frame: stopped.append(signum))
+    print(f"flooding {publisher.topic_name} at {rate:g} Hz until SIGTERM", file=sys.stderr, flush=True)
     sent, start = 0, time.monotonic()
     try:
-        while True:
+        while not stopped:
             publisher.publish(message)
             sent += 1
             ahead = start + sent / rate - time.monotonic()
             if ahead > 0:
                 time.sleep(ahead)
-    except KeyboardInterrupt:
-        pass
     finally:
         node.destroy_node()
         rclpy.shutdown(context=context)
