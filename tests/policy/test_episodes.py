@@ -87,29 +87,15 @@ def test_recovery_episodes_push_at_a_phase_of_a_step_around_classics_margin_most
     assert 12 <= directions.count(-1) < 24 and directions.count(1) >= 1
 
 
-def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on_the_nominal_model():
+def _margin_pushes(distribution: str, seeds: int) -> list[int]:
+    """The directions (+1 forward) of the pushes in ``seeds`` episodes of ``distribution``,
+    each checked to be at a phase, 0.5-1.5x classic's margin at the command in force, on the
+    nominal model with changing commands."""
     from rabbit_policy.evaluation.push_recovery import classic_margin
 
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="changes")
-    pushed = 0
-    for seed in range(24):
-        env.reset(seed=seed)
-        scenario = env.loop.scenario
-        assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
-        for push in scenario.phase_pushes:
-            command = next(v for t, v in reversed(scenario.schedule) if t <= push.after)
-            direction = 1 if push.impulse > 0 else -1
-            assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
-            pushed += 1
-    assert 6 <= pushed <= 18
-
-
-def test_forward_episodes_push_three_in_four_two_thirds_of_them_forward_around_classics_margin():
-    from rabbit_policy.evaluation.push_recovery import classic_margin
-
-    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="forward")
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution=distribution)
     directions = []
-    for seed in range(48):
+    for seed in range(seeds):
         env.reset(seed=seed)
         scenario = env.loop.scenario
         assert scenario.pushes == () and scenario.model == env.model_options and len(scenario.schedule) >= 2
@@ -118,6 +104,15 @@ def test_forward_episodes_push_three_in_four_two_thirds_of_them_forward_around_c
             direction = 1 if push.impulse > 0 else -1
             assert 0.5 - 1e-9 <= abs(push.impulse) / classic_margin(command, direction) <= 1.5 + 1e-9
             directions.append(direction)
+    return directions
+
+
+def test_changes_episodes_push_half_of_them_at_a_phase_around_classics_margin_on_the_nominal_model():
+    assert 6 <= len(_margin_pushes("changes", 24)) <= 18
+
+
+def test_forward_episodes_push_three_in_four_two_thirds_of_them_forward_around_classics_margin():
+    directions = _margin_pushes("forward", 48)
     assert 28 <= len(directions) <= 44  # 36 expected of 48
     assert directions.count(1) >= 1.4 * directions.count(-1)  # two to one expected
 
