@@ -127,3 +127,9 @@ def test_decided_episodes_push_every_one_where_the_screen_decides_forward_and_ba
     assert 6 <= directions.count(1) <= 18
     with pytest.raises(ValueError, match="backward_scale must be > 0"):
         replace(DISTRIBUTIONS["decided"], backward_scale=0.0)
+
+
+def test_forward_guard_episodes_push_every_one_forward_at_a_phase_near_classics_margin():
+    for scenario, push, direction, ratio in _one_phase_push_each("forward_guard"):
+        assert direction == 1 and 0.9 - 1e-9 <= ratio <= 1.4 + 1e-9
+        assert 0.0 <= push.phase < 1.0 and len(scenario.schedule) >= 2

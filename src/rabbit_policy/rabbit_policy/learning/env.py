@@ -284,6 +284,14 @@ DISTRIBUTIONS = {
     # 1.5 / 2.0x), either way alike, at a phase of a step (the counted preset's seeds traded
     # forward pushes for backward ones: in changes one episode in four is pushed forward and few
     # of those are decided; docs/learning.md, 2026-12-02 (second))
+    # the forward-push guard of an ES run (ESConfig.guard): changes' commands, every episode pushed
+    # forward at a phase of a step, 0.9-1.4x classic's margin (the screen pushes forward at 1.0x and
+    # 1.3x), the nominal model; an update that falls more often on a fixed set of these than the start
+    # is not taken (a constraint, not a reward term: docs/learning.md, 2026-12-07 (fifth))
+    "forward_guard": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
+                                         relative_impulse=True, min_impulse=0.9, max_impulse=1.4,
+                                         backward_fraction=0.0, torque_delays=(0.0, 0.0, 0.001, 0.002),
+                                         observation_noise=0.02),
     "decided": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
                                    relative_impulse=True, min_impulse=0.8, max_impulse=1.6, backward_scale=1.5,
                                    torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
@@ -351,7 +359,8 @@ class EpisodeConfig:
                                         "with three episodes in four pushed, two thirds of the pushes forward) or "
                                         "decided (changes' "
                                         "commands, every episode pushed at a phase, forward 0.8-1.6x and backward "
-                                        "1.2-2.4x classic's margin); DISTRIBUTIONS",
+                                        "1.2-2.4x classic's margin) or forward_guard (every episode pushed "
+                                        "forward at a phase, 0.9-1.4x: ES's guard set); DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     reward: str = option("tracking", "tracking (the paper's: -(mean speed - v_d)^2 every env step) or evaluation "

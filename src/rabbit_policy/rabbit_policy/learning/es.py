@@ -14,6 +14,12 @@ Per generation, from the current parameters theta (flat vector of the network's 
    (Mania, Guy, Recht 2018) instead theta += lr (sum_i (R+_i - R-_i) eps_i / (b std R) - decay
    theta): raw returns, the step scaled by the std of the 2b returns, no Adam (which turns a
    noise gradient into full steps: docs/learning.md).
+With ``guard`` = n > 0 an update is a constrained step: the new parameters are rolled out on a
+fixed set of n episodes each pushed forward (:data:`GUARD_DISTRIBUTION`, drawn once from the
+seed) and taken only if they fall no more often there than the start did (plus
+``guard_slack``); otherwise theta stays where it was and the next generation draws new
+directions. Forward pushes are what every trained network traded for backward pushes and
+changes (docs/learning.md): the guard keeps them out of the trade without a reward term.
 Evaluations run on a :mod:`rabbit_policy.parallel` backend (a local process pool of
 ``workers``, or Ray); every evaluation is a pure function of (parameters, episodes) and
 results come back in order, so a run is deterministic for a given seed whatever the
@@ -36,6 +42,11 @@ from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_net
 
 
 OPTIMIZERS = ("adam", "ars")
+GUARD_DISTRIBUTION = "forward_guard"
+"""The guard set's episodes (:data:`~rabbit_policy.learning.env.DISTRIBUTIONS`)."""
+GUARD_STREAM = 1
+"""The guard set is drawn from the generator seeded (seed, GUARD_STREAM): the same set for a
+seed on every machine and after a resume, apart from the generations' draws."""
 
 
 @dataclass(frozen=True)
@@ -51,6 +62,9 @@ class ESConfig(EpisodeConfig):
     optimizer: str = option("adam", "adam (centred ranks, an Adam step) or ars (ARS V2-t: the return differences "
                                     "over the returns' std, a plain step of lr; Mania et al. 2018)",
                             choices=OPTIMIZERS)
+    guard: int = option(0, "episodes in the forward-push guard set: an update that falls there more often than the "
+                           "start (+ guard_slack) is not taken (0: no guard)")
+    guard_slack: int = option(0, "falls on the guard set an update may add to the start's, >= 0")
     workers: int = option(1, "processes or Ray CPUs for the rollouts (the run's --workers)", cli=False)
 
     def __post_init__(self) -> None:
@@ -61,6 +75,8 @@ class ESConfig(EpisodeConfig):
             raise ValueError(f"top must be in [0, pairs], got {self.top}")
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if min(self.guard, self.guard_slack) < 0:
+            raise ValueError(f"guard and guard_slack must be >= 0, got {self.guard}, {self.guard_slack}")
         if not (self.sigma > 0.0 and self.lr > 0.0 and self.weight_decay >= 0.0):
             raise ValueError("sigma and lr must be > 0, weight_decay >= 0")
 
@@ -199,17 +215,33 @@ class EvolutionStrategy:
         self.env_key: EnvKey = tuple(sorted(config.env_kwargs().items()))
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
+        self.guard_key: EnvKey = tuple(sorted({**config.env_kwargs(), "distribution": GUARD_DISTRIBUTION}.items()))
+        self.guard_episodes = (stratified_episodes(np.random.default_rng((config.seed, GUARD_STREAM)), config.guard,
+                                                   (0.7, 1.5)) if config.guard else [])
+        self.guard_reference: int | None = None  # the start's falls on the guard set (measured at the first step)
 
     def close(self, terminate: bool = False) -> None:
         """Stop the workers if this optimiser started them (``terminate``: at once; after Ctrl-C)."""
         if self._own_backend:
             self.backend.close(terminate)
 
+    def guard_falls(self, theta: np.ndarray) -> int:
+        """Falls of ``theta`` on the guard set (its episodes split over the workers)."""
+        chunks = [c for c in np.array_split(np.arange(len(self.guard_episodes)), self.config.workers) if len(c)]
+        results = self.backend.map(_evaluate, [(self.guard_key, theta, [self.guard_episodes[i] for i in c])
+                                               for c in chunks])
+        self.env_steps += sum(r.steps for part in results for r in part)
+        return sum(r.fell for part in results for r in part)
+
     def step(self) -> dict[str, float]:
         """One generation; returns statistics: mean/best population return; return, fall
         fraction and mean |v̄ - v_d| per step of the parameters the generation started
-        from (same episodes); env steps so far."""
+        from (same episodes); env steps so far; with a guard, its falls for the update and
+        whether the update was taken."""
         cfg = self.config
+        if cfg.guard and self.guard_reference is None:
+            self.guard_reference = self.guard_falls(self.theta)
+        before = self.theta
         seeds = stratified_episodes(self.rng, cfg.episodes, (0.7, 1.5))
         eps = self.rng.standard_normal((cfg.pairs, self.theta.size))
         candidates = [self.theta + cfg.sigma * e for e in eps] + [self.theta - cfg.sigma * e for e in eps]
@@ -232,6 +264,13 @@ class EvolutionStrategy:
             grad = vecmat(plus[chosen] - minus[chosen], eps[chosen]) / (2 * len(chosen) * cfg.sigma)  # BLAS-free: same bits on every CPU
             grad -= cfg.weight_decay * self.theta
             self.theta = self.adam.step(self.theta, grad)
+        guard = {}
+        if cfg.guard:
+            falls = self.guard_falls(self.theta)
+            taken = falls <= self.guard_reference + cfg.guard_slack
+            if not taken:
+                self.theta = before
+            guard = {"guard_falls": falls, "guard_reference": self.guard_reference, "update_taken": int(taken)}
         set_flat(self.net, self.theta)
         self.generation += 1
         return {
@@ -242,13 +281,14 @@ class EvolutionStrategy:
             "episode_return": float(np.mean([r.total for r in centre])),
             "fall_fraction": float(np.mean([r.fell for r in centre])),
             "mean_abs_error": sum(r.abs_error for r in centre) / sum(r.steps for r in centre),
+            **guard,
         }
 
     def state_dict(self) -> dict:
         """Everything :meth:`load_state_dict` needs to continue exactly where this left off."""
         return {"theta": self.theta.tolist(), "rng": self.rng.bit_generator.state,
                 "adam": {"lr": self.adam.lr, "t": self.adam.t, "m": self.adam.m, "v": self.adam.v},
-                "generation": self.generation, "env_steps": self.env_steps}
+                "generation": self.generation, "env_steps": self.env_steps, "guard_reference": self.guard_reference}
 
     def load_state_dict(self, state: dict) -> None:
         self.theta = np.asarray(state["theta"])
@@ -256,6 +296,7 @@ class EvolutionStrategy:
         self.rng.bit_generator.state = state["rng"]
         self.adam = Adam(**state["adam"])
         self.generation, self.env_steps = state["generation"], state["env_steps"]
+        self.guard_reference = state.get("guard_reference")  # (a checkpoint written before the guard: None)
 
     @property
     def iteration(self) -> int:
