@@ -190,7 +190,10 @@ class HZDControllerNode(Node):
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         if "decision_sync" not in self._given:  # hold for due decisions as the simulator's stepping asks
             self.create_subscription(String, topics.SIM_MODE, self._on_sim_mode, qos.STATUS_QOS)
-        wall_timer(self, 0.05, lambda: self._do(self.sync.check_held()))  # decision_timeout
+        self._lost_pub = self.create_publisher(UInt32, topics.DECISIONS_LOST, qos.STATUS_QOS)
+        self._lost_said: int | None = None
+        self._say_lost()
+        wall_timer(self, 0.05, self._check)  # decision_timeout
         self.get_logger().info(f"HZD controller {self.source} (Kp = {self.config.kp:.0f} N m/rad) waiting for a gait")
         (self.get_logger().info if self.pairing else self.get_logger().warning)(f"pairing: {self._key_source}")
 
@@ -201,6 +204,21 @@ class HZDControllerNode(Node):
     replies_repeated = property(lambda self: self.sync.replies_repeated, doc="Replies sent again for a re-sent state.")
     decisions_waited = property(lambda self: self.sync.decisions_waited, doc="Due states answered with their decision.")
     decisions_timed_out = property(lambda self: self.sync.decisions_timed_out)
+
+    @property
+    def decisions_lost(self) -> int:
+        """Times the policy was found not deciding: due decisions that timed out, and silences."""
+        return self.sync.decisions_timed_out + self.sync.silences
+
+    def _check(self) -> None:
+        """Every 50 ms (wall): a held decision that timed out, and the lost count if it changed."""
+        self._do(self.sync.check_held())
+        self._say_lost()
+
+    def _say_lost(self) -> None:
+        if self.decisions_lost != self._lost_said:
+            self._lost_said = self.decisions_lost
+            self._lost_pub.publish(UInt32(data=self._lost_said))
 
     @property
     def config(self) -> ControllerConfig:

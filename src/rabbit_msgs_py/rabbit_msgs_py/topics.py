@@ -74,6 +74,13 @@ TRACKING_ERROR = "hzd/tracking_error"
 ``velocity`` = dy/dt - dy_d/dt (rad/s), what the PD law acts on (torque = -Kp e - Kd de/dt
 before saturation)."""
 
+DECISIONS_LOST = "hzd/decisions_lost"
+"""std_msgs/UInt32 (transient local), published by hzd_controller_node at its start and within
+50 ms of every change: the times it found the policy not deciding since it started (a due
+decision that timed out, or a silence; its stats_file's ``decisions_timed_out`` plus
+``policy_silences``). ``run_stack --attach`` reports a hand-started stack's lost decisions
+from it. Unsigned: a stranger can make a run look lost, never a lost one look complete."""
+
 INITIAL_STATE = "sim/initial_state"
 """sensor_msgs/JointState (transient local), the 7 joints' positions and velocities the
 simulator starts from and returns to on ``/sim/reset``: the state at phase 0 of the gait in

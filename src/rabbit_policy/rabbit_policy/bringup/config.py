@@ -24,10 +24,11 @@ NODE_MODULES = {
     "sim_node": "rabbit_sim.sim_node",
     "recorder_node": "rabbit_sim.recorder_node",
 }
-LAYOUTS = ("composed", "separate", "in-process")
+LAYOUTS = ("composed", "separate", "in-process", "attach")
 """Where the nodes run: ``composed`` (simulator, controller and supervisor in run_stack's
 process, on one executor; the policy and a recorder processes of their own), ``separate``
-(every node its own process) or ``in-process`` (every node in run_stack's process)."""
+(every node its own process), ``in-process`` (every node in run_stack's process) or
+``attach`` (started by hand, not by this run: only the supervisor is run_stack's)."""
 COMPOSED_NODES = ("hzd_controller_node", "sim_node")
 """The nodes the ``composed`` layout runs in run_stack's process: the 1 kHz loop."""
 

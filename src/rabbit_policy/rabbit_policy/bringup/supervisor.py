@@ -94,7 +94,11 @@ class RunReport:
         if counts is None:
             return
         self.rejected = int(counts.get("rejected_gaits", 0))
-        self.decisions_lost = int(counts.get("decisions_timed_out", 0)) + int(counts.get("policy_silences", 0))
+        self.take_decisions_lost(int(counts.get("decisions_timed_out", 0)) + int(counts.get("policy_silences", 0)))
+
+    def take_decisions_lost(self, lost: int) -> None:
+        """The times the controller found the policy not deciding: a run with any is not complete."""
+        self.decisions_lost = lost
         if self.decisions_lost and self.completed:
             self.completed = False
             self.error = (f"the policy stopped deciding: the controller waited in vain {self.decisions_lost} times "
@@ -117,8 +121,15 @@ class Supervisor(Node):
     """Runs the experiment: speed schedule, segment statistics, falls and stalls, end of run."""
 
     def __init__(self, config: StackConfig, context=None) -> None:
+        """``config.layout`` ``attach``: the stack is not this run's (started by hand): its
+        schedule's times count from the first state this node sees, and this node sends the
+        schedule's commands on ``/cmd_speed`` as the stack's sim time reaches them."""
         super().__init__("run_stack_supervisor", context=context, namespace=config.namespace or None)
         self.config = config
+        self.attached = config.layout == "attach"
+        self._offset_ns = 0  # attached: the first state's stamp (the run's t = 0); else 0
+        self._to_send: list[tuple[int, float]] = []  # attached: the schedule's commands not sent yet (ns, m/s), by time
+        self._lost: tuple[int, int] | None = None  # attached: the controller's lost decisions (first heard, newest)
         key = PairingKey.parse(config.pairing_key)
         self._batches = SignedBatches(key) if key is not None else None  # keyed: the stack's simulator's only
         self._rejections = RejectionLog()  # refused batches: counted, one line a second (cheap under a flood)
@@ -158,6 +169,21 @@ class Supervisor(Node):
         self._recorded_ns = -1  # sim time (ns) of the newest state the recorder has written; -1: none yet
         if config.record:
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
+        if self.attached:
+            self.create_subscription(UInt32, topics.DECISIONS_LOST, self._on_lost, qos.STATUS_QOS)
+
+    def _on_lost(self, msg: UInt32) -> None:
+        self._lost = (msg.data if self._lost is None else self._lost[0], msg.data)
+
+    @property
+    def decisions_lost(self) -> int | None:
+        """Attached: the times the stack's controller found the policy not deciding since this
+        node first heard its count (None: it never said; a controller older than the topic)."""
+        return None if self._lost is None else max(0, self._lost[1] - self._lost[0])
+
+    def schedule(self) -> tuple[tuple[float, float], ...]:
+        """The run's schedule on the stack's clock (s): attached, shifted to the first state."""
+        return tuple((round(t + self._offset_ns / 1e9, 9), v) for t, v in self.config.schedule)
 
     def _on_recorded(self, msg: Clock) -> None:
         self._recorded_ns = stamp_to_ns(msg.clock)
@@ -258,7 +284,7 @@ class Supervisor(Node):
             return
         self._states.take_all()
         now = self.sim_time
-        if self._start is None or any(abs(t - now) < 1.0 and v == value for t, v in self.config.schedule):
+        if self._start is None or any(abs(t - now) < 1.0 and v == value for t, v in self.schedule()):
             return  # before the walk (run_stack's own first command), or a scheduled change's echo
         last = self.live_commands[-1] if self.live_commands else None
         if last is not None and now - last[0] < MIN_SCHEDULE_SPACING:
@@ -269,7 +295,7 @@ class Supervisor(Node):
     def walked_schedule(self) -> tuple[tuple[float, float], ...]:
         """The schedule the robot walked: the run's, with the live commands merged in by time
         (a scheduled change within 0.1 s of a live one is kept, the live one left out)."""
-        merged = list(self.config.schedule)
+        merged = list(self.schedule())
         for t, v in self.live_commands:
             if all(abs(t - s) >= MIN_SCHEDULE_SPACING for s, _ in merged):
                 merged.append((t, v))
@@ -302,6 +328,8 @@ class Supervisor(Node):
         now = time.perf_counter()
         for state in batch_states_or_log(raw, self._states.topic, self._batch_refused, self._batches):
             self._on_state(state.stamp, state.position[0], state.effort, now)
+        while self._to_send and self._to_send[0][0] <= self._sim_ns:  # attached: the commands now due
+            self._speed_pub.publish(Float64(data=self._to_send.pop(0)[1]))
 
     def destroy_node(self) -> None:
         self._states.destroy()
@@ -324,6 +352,10 @@ class Supervisor(Node):
         self._sim_ns = t
         if self._start is None:
             self._start = (t, x)
+            if self.attached:  # the run starts here: its schedule and end from this state on, no touchdown yet
+                self._offset_ns = self._last_step_ns = t
+                self._end_ns += t
+                self._to_send = [(t + whole_ticks(at) * TICK_NS, v) for at, v in self.config.schedule[1:]]
         elif t > (self._times[-1] if self._times else self._start[0]):  # a state sent again is one state
             self._times.append(t)
             self._xs.append(x)
@@ -340,11 +372,16 @@ class Supervisor(Node):
         """The walk so far, as the fast path reports one. A touchdown is dated as
         :class:`~rabbit_policy.experiment.loop.ClosedLoop` dates it: the state after the
         tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
-        with that state's hip x; the foot's x is on no topic (NaN)."""
+        with that state's hip x; the foot's x is on no topic (NaN). Attached, every time
+        counts from the first state seen (the run's t = 0; :attr:`attached_at` on the stack's clock)."""
         config = self.config
-        scenario = replace(config.scenario(), schedule=self.walked_schedule())
+        off = self._offset_ns
+        schedule = self.walked_schedule()
+        if off:
+            schedule = tuple((round(t - off / 1e9, 9), v) for t, v in schedule)
+        scenario = replace(config.scenario(), schedule=schedule)
         t0_ns, x0 = self._start or (0, 0.0)
-        t0 = t0_ns / 1e9
+        t0 = (t0_ns - off) / 1e9
         times, xs = np.array(self._times, dtype=np.int64), np.array(self._xs, dtype=float)
         if self.stalled:  # the walk ended at the stall, as the fast path's does (later states came in the grace)
             keep = times <= round(self.stall_time * 1e9)  # stall_time: on the ns grid
@@ -355,13 +392,21 @@ class Supervisor(Node):
             # from the first state seen from then on (this subscriber may miss states)
             i = int(np.searchsorted(times, stamp, side="right"))
             if i < len(times):  # (a switch on the last state: that tick was never simulated)
-                touchdowns.append(Touchdown((stamp + TICK_NS) / 1e9, float("nan"), float(xs[i])))
+                touchdowns.append(Touchdown((stamp + TICK_NS - off) / 1e9, float("nan"), float(xs[i])))
         # the physics halts at the fall: the last state received (the newest always arrives) is the fall's
         fall_time = max(self.fall_time, self.sim_time) if self.fell and self.fall_time is not None else self.fall_time
+        stall_time = self.stall_time
+        if off:
+            fall_time, stall_time = ((None if t is None else round(t - off / 1e9, 9)) for t in (fall_time, stall_time))
         return WalkResult(scenario=scenario, fell=self.fell, fall_time=fall_time, stalled=self.stalled,
-                          stall_time=self.stall_time, start_time=t0, start_x=x0, times=times / 1e9, hip_x=xs,
+                          stall_time=stall_time, start_time=t0, start_x=x0, times=(times - off) / 1e9, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,
                           planned_duration=round(on_tick_grid(config.duration) - t0, 9))  # t0: the first state seen
+
+    @property
+    def attached_at(self) -> float | None:
+        """Attached: the stack's sim time (s) of the first state seen, the run's t = 0 (None before it)."""
+        return self._offset_ns / 1e9 if self.attached and self._start is not None else None
 
     def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
         wall = (
@@ -373,8 +418,11 @@ class Supervisor(Node):
             times = f"{self.resets} time" + ("s" if self.resets != 1 else "")
             error = (f"the simulation was reset {times} during the run (a /sim/reset run_stack did not make: "
                      + "; ".join(self.reset_calls) + ("; ..." if self.resets > len(self.reset_calls) else "") + ")")
-        return RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
-                         completed=self.done and error is None, error=error)
+        report = RunReport(controller=self.config.controller, policy=policy, result=self.result(), wall_time=wall,
+                           completed=self.done and error is None, error=error)
+        if self.attached and self.decisions_lost is not None:  # (a run of its own: the controller's stats file)
+            report.take_decisions_lost(self.decisions_lost)
+        return report
 
 
 REALTIME_HALT_TIMEOUT = 3.0

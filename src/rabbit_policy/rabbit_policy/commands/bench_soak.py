@@ -4,7 +4,12 @@ a random command every 5-20 s and small pushes; prints one JSON object.
     scripts/bench_soak.py --layout composed --controller learned [--duration 3600] [--record DIR]
 
 It runs ``run_stack.py --json`` (``--layout`` composed, separate or in-process) as a
-process and, beside it in this process, an observer node on ``/clock`` and a sampler of the
+process; ``--layout hand`` starts the three nodes as ``ros2 run`` would (``python -m <node>
+--ros-args -p ...``, the user's pairing key; the simulator paused, with the pushes as its
+``push_schedule`` and the hour as its ``stop_time``; the controller's ``stats_file``) and
+watches them with ``run_stack.py --attach --json``, which sends the commands; at the end it
+stops the nodes as Ctrl-C would and adds the controller's own count of lost decisions. Beside
+it, in this process, an observer node on ``/clock`` and a sampler of the
 stack's processes (``/proc``: resident memory and CPU time of run_stack and its children,
 every 2 s of wall time, with the sim time then). What it reports:
 
@@ -35,6 +40,7 @@ import functools
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -46,6 +52,7 @@ from pathlib import Path
 from rabbit_msgs_py import strict_json
 from rabbit_msgs_py.cli import ArgumentParser, positive, unwritable_dir
 from rabbit_msgs_py.environment import ensure_localhost_discovery
+from rabbit_policy.bringup.processes import controller_counts
 from rabbit_policy.runtime.policies import controller_argument
 
 CLOCK_RATE = 100.0
@@ -143,6 +150,31 @@ def cpu_per_tick_us(part: list[Sample]) -> float | None:
     return round(spent / ((t1 - t0) * 1000.0) * 1e6, 1)
 
 
+def hand_started(controller: str, duration: float, pushes: str, stats_file: Path) -> list[list[str]]:
+    """The three nodes' command lines as a user would start them by hand (what ``ros2 run``
+    executes), for a watched run: the simulator paused until the watcher runs it, halting at
+    ``duration`` s, with ``pushes``; the controller writing its counts to ``stats_file``."""
+    from rabbit_policy.bringup.config import NODE_MODULES, ros_arguments
+
+    params = {"sim_node": {"start_paused": True, "stop_time": float(duration), "push_schedule": pushes},
+              "hzd_controller_node": {"stats_file": str(stats_file)},
+              "policy_node": {"policy": controller}}
+    return [[sys.executable, "-m", NODE_MODULES[name], *ros_arguments(values)] for name, values in params.items()]
+
+
+def stop_nodes(procs: list[subprocess.Popen], timeout: float = 10.0) -> None:
+    """SIGINT (Ctrl-C) to each, then SIGKILL to any still running after ``timeout`` s."""
+    for proc in procs:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGINT)
+    for proc in procs:
+        try:
+            proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
 def soak(layout: str, controller: str, duration: float, seed: int, impulse: float, record: str,
          log: Path) -> dict[str, object]:
     """One soak run; see the module docstring."""
@@ -154,12 +186,15 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
 
     schedule, pushes = soak_scenario(seed, duration, impulse)
     bag = Path(record) if record else None
-    command = [sys.executable, "-m", "rabbit_policy.commands.run_stack", "--controller", controller,
-               "--layout", layout, "--speed-schedule", schedule, "--duration", str(duration), "--json"]
-    if pushes:
+    command = [sys.executable, "-m", "rabbit_policy.commands.run_stack", "--speed-schedule", schedule,
+               "--duration", str(duration), "--json"]
+    command += ["--attach"] if layout == "hand" else ["--controller", controller, "--layout", layout]
+    if pushes and layout != "hand":
         command += ["--push", pushes]
     if bag is not None:
         command += ["--record", str(bag)]
+    scratch = Path(tempfile.mkdtemp(prefix="rabbit_soak_"))
+    nodes: list[subprocess.Popen] = []
     context = init_context()
     observer = ClockObserver(context)
     executor = make_executor(context)
@@ -179,17 +214,24 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
         # run_stack writing into a full pipe nobody reads until it exits would never exit
         # a bench_soak killed outright (SIGTERM, SIGKILL) stops its run_stack as Ctrl-C would (SIGINT:
         # the nodes stopped in order), instead of leaving the stack walking on in the domain
+        if layout == "hand":  # the nodes killed with this process, as run_stack's are
+            nodes = [subprocess.Popen(line, stdout=err, stderr=err, stdin=subprocess.DEVNULL,
+                                      preexec_fn=functools.partial(signal_on_parent_death, signal.SIGINT))
+                     for line in hand_started(controller, duration, pushes, scratch / "controller.json")]
         proc = subprocess.Popen(command, stdout=report_file, stderr=err, text=True,
                                 preexec_fn=functools.partial(signal_on_parent_death, signal.SIGINT))
         while proc.poll() is None:
             time.sleep(SAMPLE_EVERY)
-            pids = process_tree(proc.pid)
+            pids = [pid for root in [proc.pid] + [n.pid for n in nodes] for pid in process_tree(root)]
             cpu = {p: process_cpu_seconds(p) for p in pids}
             sim = observer.stamps[-1] / 1e9 if observer.stamps else 0.0
             samples.append((sim, sum(rss_mb(p) for p in pids), {p: c for p, c in cpu.items() if c is not None}))
         report_file.seek(0)
         out = report_file.read()
+        stop_nodes(nodes)
     wall = time.perf_counter() - start
+    counts = controller_counts(str(scratch / "controller.json")) if layout == "hand" else None
+    shutil.rmtree(scratch, ignore_errors=True)
     stop.set()
     spinner.join(timeout=5.0)
     executor.shutdown()
@@ -216,6 +258,9 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
         "completed": report["completed"], "error": report["error"], "fell": report["fell"],
         "stalled": report["stalled"], "sim_s": report["duration"], "wall_s": round(wall, 1),
         "real_time_factor": report["real_time_factor"], "decisions_lost": report["decisions_lost"],
+        # hand: the controller's own count at its close (the watcher's is from /hzd/decisions_lost); None: no file
+        "decisions_lost_stats_file": None if counts is None else
+        int(counts.get("decisions_timed_out", 0)) + int(counts.get("policy_silences", 0)),
         "commands": len(segments), "commands_reached": len(segments) - len(unreached), "unreached": unreached,
         "last_command_reached": report["last_command_reached"],
         "clock_fraction_by_tenth": [round(n / due, 3) for n in per_tenth],
@@ -229,7 +274,9 @@ def soak(layout: str, controller: str, duration: float, seed: int, impulse: floa
 
 def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--layout", choices=("composed", "separate", "in-process"), default="composed")
+    parser.add_argument("--layout", choices=("composed", "separate", "in-process", "hand"), default="composed",
+                        help="run_stack's layouts, or hand: three nodes started as by ros2 run, watched by "
+                             "run_stack --attach (default composed)")
     parser.add_argument("--controller", type=controller_argument, default="learned",
                         metavar="{classic,learned,recovery}")
     parser.add_argument("--duration", type=positive, default=3600.0, help="sim s (default 3600: an hour)")
@@ -246,6 +293,8 @@ def main(argv: list[str] | None = None) -> int:
     ensure_localhost_discovery()
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.record and args.layout == "hand":
+        parser.error("--record: a stack started by hand records with its own recorder_node (--layout hand runs none)")
     problem = unwritable_dir(Path(args.record).resolve().parent) if args.record else None
     if problem:
         parser.error(f"--record {args.record}: {problem}")

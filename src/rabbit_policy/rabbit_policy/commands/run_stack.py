@@ -17,7 +17,9 @@ the speed schedule on ``/cmd_speed`` at its sim times (the pushes are sim_node's
 the segment's second half, the steps, whether RABBIT fell, and the real-time factor
 (sim time / wall time). ``--layout in-process`` (or ``--in-process``) runs every node in
 this process on one EventsExecutor (the fastest; docs/benchmarks.md measures each layout).
-Ctrl-C stops the nodes cleanly and prints what was measured so far.
+Ctrl-C stops the nodes cleanly and prints what was measured so far. ``--attach`` starts no
+node: it supervises a stack started by hand (``ros2 run``) in the namespace, sending the
+schedule on ``/cmd_speed`` from the first state it sees (docs/ros2-cli.md).
 
 With ``--json``: one object, the same keys as ``walk.py --json`` for the same scenario
 (``rabbit_policy.experiment.result.run_summary``: ``fell``, ``steps``, ``segments`` with
@@ -73,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "(default); separate: every node its own process; in-process: every node here")
     parser.add_argument("--in-process", dest="layout", action="store_const", const="in-process",
                         help="the same as --layout in-process")
+    parser.add_argument("--attach", dest="layout", action="store_const", const="attach",
+                        help="start no node: supervise the stack started by hand (ros2 run) in the namespace, send "
+                             "the schedule on /cmd_speed from its newest state on, and report as for any run (the "
+                             "same as --layout attach; pushes: sim_node's push_schedule)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--viewer", action="store_true", help="sim_node opens MuJoCo's viewer (needs a display)")
     parser.add_argument("--reference-rate", type=float, default=0.0, metavar="HZ",
@@ -84,7 +90,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def print_report(report, config) -> None:
-    print(f"controller   {config.controller}, {config.mode} mode, {'ok' if report.completed else 'incomplete'}"
+    print(f"controller   {report.controller}, {config.mode} mode, {'ok' if report.completed else 'incomplete'}"
           + (f" ({report.error})" if report.error else ""))
     print(f"fell         {report.fell}" + (f" at t = {report.fall_time:.3f} s" if report.fell else ""))
     if report.stalled:
@@ -133,6 +139,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.experiment.options import resolve_controller, schedule_from_args
     from rabbit_policy.experiment.scenario import parse_pushes
     from rabbit_policy.bringup.config import StackConfig
+    from rabbit_policy.bringup.attached import NothingToAttach, run_attached
     from rabbit_policy.bringup.in_process import run_in_process
     from rabbit_policy.bringup.probe import AnotherStack, other_stack
     from rabbit_policy.bringup.processes import run_multi_process
@@ -173,6 +180,12 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"error: {exc}", file=sys.stderr)
                 refused(str(exc))
                 return 2
+        if args.layout == "attach":
+            given = [name for name, value in (("--record", args.record), ("--push", args.push),
+                                              ("--viewer", args.viewer)) if value]
+            if given:
+                raise ValueError(f"--attach starts no node: {', '.join(given)} belong to the stack's own nodes "
+                                 "(recorder_node, sim_node's push_schedule and viewer parameters)")
         if args.record and os.path.exists(args.record):
             from rabbit_sim.bag import is_bag_directory
 
@@ -183,8 +196,8 @@ def main(argv: list[str] | None = None) -> int:
         problem = unwritable_dir(Path(os.path.abspath(args.record)).parent) if args.record else None
         if problem:
             raise ValueError(f"--record {args.record}: {problem}")
-        built = config.build_policy()  # once: a bad one is refused before any node starts
-        policy = built.name
+        built = config.build_policy() if config.layout != "attach" else None  # once: refused before any node starts
+        policy = built.name if built is not None else None
     except ValueError as exc:
         refused(str(exc))
         parser.error(str(exc))
@@ -198,7 +211,9 @@ def main(argv: list[str] | None = None) -> int:
     stop = lambda: bool(interrupted)  # noqa: E731
     probe = lambda: other_stack(namespace=config.namespace, stop=stop)  # noqa: E731
     try:
-        if config.layout == "in-process":
+        if config.layout == "attach":
+            report, config = run_attached(config, stop=stop)
+        elif config.layout == "in-process":
             found = probe()
             if found and not interrupted:
                 raise AnotherStack(found)
@@ -215,6 +230,10 @@ def main(argv: list[str] | None = None) -> int:
               f"domain (ROS_DOMAIN_ID={(int(domain) + 1) % 101 if domain.isdigit() else 1} scripts/run_stack.py ...)",
               file=sys.stderr)
         refused(found)
+        return 2
+    except NothingToAttach as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        refused(str(exc))
         return 2
     except NodeStartError as exc:  # a node run in this process could not start: its one line, the report
         print(f"error: {exc}", file=sys.stderr)
@@ -233,7 +252,9 @@ def _report_and_exit(report, config, as_json: bool) -> int:
     if as_json:
         from rabbit_policy.spec.make import spec_record
 
-        print(strict_json.dumps({**summary, "spec": spec_record(config.controller, config.policy_file or None)}))
+        known = report.controller == config.controller  # (attached: unknown when policy_node did not answer)
+        print(strict_json.dumps({**summary, "spec": spec_record(config.controller, config.policy_file or None)
+                                 if known else None}))
     else:
         print_report(report, config)
     return exit_status(summary)
