@@ -183,6 +183,7 @@ class HZDControllerNode(Node):
         if self._reference_every:
             self._reference_pub = self.create_publisher(JointState, topics.REFERENCE, qos.STREAM_QOS)
             self._error_pub = self.create_publisher(JointState, topics.TRACKING_ERROR, qos.STREAM_QOS)
+        self._state_topic = self.resolve_topic_name(topics.JOINT_STATES)
         self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS, raw=True)
         self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
         self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
@@ -448,10 +449,11 @@ class HZDControllerNode(Node):
         """A state, serialized (taken raw: the 1 kHz path builds no message object)."""
         try:
             stamp, q, dq = joint_state_from_bytes(msg)
-        except MessageError as exc:
+        except MessageError as exc:  # counted, one line a second: a 10 kHz flood costs the loop little
             self.rejected_states += 1
-            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
-                                    throttle_duration_sec=1.0)
+            line = self._rejections.line("joint_states", f"ignoring malformed {self._state_topic}: {exc}")
+            if line is not None:
+                self.get_logger().error(line)
             return
         self._do(self.sync.on_state(stamp, q, dq))
         missing = self.sync.missing

@@ -190,7 +190,10 @@ class PolicyDriver:
 
     def on_hip_velocity(self, stamp: int, speed: float) -> list[Action]:
         """A state's hip velocity (m/s, world x) stamped ``stamp`` ns: a scheduled change due
-        then, the sample, and the decisions that fall due."""
+        then, the sample, and the decisions that fall due; ``ValueError`` for a speed that is not
+        finite (nothing taken)."""
+        if not math.isfinite(speed):
+            raise ValueError(f"hip velocity {speed} is not a finite number (m/s)")
         self.samples += 1
         actions = self._follow_schedule(stamp)
         self._follow_ramp(stamp)

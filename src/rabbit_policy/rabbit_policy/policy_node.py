@@ -275,15 +275,17 @@ class PolicyNode(Node):
         try:
             self._do(self.core.on_hip_velocity(stamp_to_ns(msg.header.stamp), msg.twist.linear.x))
         except ValueError as exc:
-            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}",
-                                    throttle_duration_sec=1.0)
+            self._refused("hip_velocity", f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}")
 
-    def _batch_refused(self, line: str) -> None:
-        """A refused ``/sim/state_batch``: counted, logged at most once a second with the
-        core's rejections (rclpy's own throttle costs more per call than a flood leaves)."""
-        text = self.core.rejections.line("state_batch", line)
+    def _refused(self, kind: str, line: str) -> None:
+        """Refused input of ``kind``: counted, logged at most once a second with the core's
+        rejections (rclpy's own throttle costs more per call than a flood leaves)."""
+        text = self.core.rejections.line(kind, line)
         if text is not None:
             self.get_logger().error(text)
+
+    def _batch_refused(self, line: str) -> None:
+        self._refused("state_batch", line)
 
     def _on_state_batch(self, raw: bytes) -> None:
         """The simulator's states (the batch's serialized bytes), oldest first: each its hip
@@ -296,15 +298,13 @@ class PolicyNode(Node):
             try:
                 self._do(self.core.on_hip_velocity(state.stamp, state.velocity[0]))
             except ValueError as exc:
-                self.get_logger().error(f"ignoring a state in {self.resolve_topic_name(topics.STATE_BATCH)}: {exc}",
-                                        throttle_duration_sec=1.0)
+                self._refused("state_batch", f"ignoring a state in {self._batch_topic}: {exc}")
 
     def _on_joint_state(self, msg: JointState) -> None:
         try:
             q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
-            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}",
-                                    throttle_duration_sec=1.0)
+            self._refused("joint_states", f"ignoring {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}")
             return
         self._do(self.core.on_body_state(stamp_to_ns(msg.header.stamp), q, dq))
 
@@ -312,8 +312,7 @@ class PolicyNode(Node):
         try:
             stamp, tau, rate = phase_from_msg(msg)
         except MessageError as exc:
-            self.get_logger().error(f"ignoring {self.resolve_topic_name(topics.PHASE)}: {exc}",
-                                    throttle_duration_sec=1.0)
+            self._refused("phase", f"ignoring {self.resolve_topic_name(topics.PHASE)}: {exc}")
             return
         self._do(self.core.on_phase(stamp, tau, rate))
 

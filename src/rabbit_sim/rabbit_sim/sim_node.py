@@ -38,6 +38,7 @@ from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
+from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.service_callers import CallerLog
 from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
@@ -109,6 +110,9 @@ class SimNode(Node):
         key, mode = self.driver.pairing.key, self.settings.mode  # signed where keyed: a controller takes no other
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(
             data=key.sign_settings(self.source, mode) if key is not None else mode))
+        self._torque_topic = self.resolve_topic_name(topics.JOINT_TORQUES)
+        self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
+        wall_timer(self, 1.0, lambda: [self.get_logger().warning(line) for line in self._rejections.flush()])
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
         # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
         # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)
@@ -193,7 +197,7 @@ class SimNode(Node):
         try:
             qpos, qvel = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
-            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.INITIAL_STATE)}: {exc}")
+            self._refused("initial_state", f"ignoring malformed {self.resolve_topic_name(topics.INITIAL_STATE)}: {exc}")
             return
         self._run(self.driver.on_initial_state, qpos, qvel)
 
@@ -202,8 +206,8 @@ class SimNode(Node):
         try:
             _timing, period = parse_gait_timing(msg.data)
         except ValueError as exc:
-            self.get_logger().warning(f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; batches keep their "
-                                      f"{self.settings.batch_ticks}-tick grid", throttle_duration_sec=5.0)
+            self._refused("gait_timing", f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; batches keep their "
+                                         f"{self.settings.batch_ticks}-tick grid")
             return
         with self._lock:
             self._states.batcher.follow_decisions(period)
@@ -215,10 +219,16 @@ class SimNode(Node):
             stamp, frame_id, torques = torques_from_bytes(msg)
         except MessageError as exc:
             self.driver.on_malformed_torques()
-            self.get_logger().error(f"ignoring malformed {self.resolve_topic_name(topics.JOINT_TORQUES)}: {exc}",
-                                    throttle_duration_sec=1.0)
+            self._refused("joint_torques", f"ignoring malformed {self._torque_topic}: {exc}")
             return
         self._run(self.driver.on_torques, stamp, frame_id, torques, now)
+
+    def _refused(self, kind: str, text: str) -> None:
+        """Bad input of ``kind``: counted, one line a second (rclpy's throttle costs more per call
+        than a flood leaves the loop)."""
+        line = self._rejections.line(kind, text)
+        if line is not None:
+            self.get_logger().error(line)
 
     def _on_push(self, msg: Wrench) -> None:
         self._run(self.driver.on_push, msg.force.x, msg.force.z, msg.torque.y,

@@ -47,7 +47,9 @@
   subscribe; every one is refused), ``flood_<layout>_baseline_rtf`` with one busy loop in its
   place (the flooder's own CPU, so the ratio is what the stack pays), their ratio
   (``_ratio``; issue 75's bar: at least 0.5), ``flood_<layout>_sent_per_s`` (as sent) and
-  whether the flooded walk completed.
+  whether the flooded walk completed. ``--flood-topic`` floods another topic a node subscribes
+  to instead (:data:`FLOOD_TOPICS`: what each sends, each refused where it arrives), its keys
+  ``flood_<layout>_<topic>_...``; ``--flood-topic all`` runs each in turn.
 
 RTFs are measured from the first to the last state the supervisor saw (start-up
 excluded). Usage: scripts/bench_stack.py [--duration 10] [--realtime-duration 10]
@@ -75,6 +77,17 @@ SCENARIOS = ("floor", "startup", "stop", "lockstep_in_process", "lockstep_compos
 FLOOD_RATE = 10_000.0
 """Hz: the flood scenarios' messages a second (issue 75's hostile user)."""
 FLOOD_LAYOUTS = {"flood_in_process": "in-process", "flood_composed": "composed", "flood_multi_process": "separate"}
+FLOOD_TOPICS = {
+    "state_batch": "/sim/state_batch: a Float64MultiArray of 30 NaN (the policy and the supervisor refuse it)",
+    "joint_states": "/joint_states: a JointState of 7 NaN positions (the controller refuses it)",
+    "joint_torques": "/joint_torques: a JointState of 4 NaN efforts, unsigned (the simulator refuses it)",
+    "alpha": "/hzd/alpha: a 4 x 6 Float64MultiArray of zeros, unsigned (the controller refuses it)",
+    "gait_timing": "/hzd/gait_timing: 'at_once:7', unsigned (the controller refuses it)",
+    "cmd_speed": "/cmd_speed: NaN (the policy refuses it)",
+    "phase": "/hzd/phase: a JointState phase of NaN (the policy refuses it)",
+}
+"""What ``--flood-topic`` floods: the topics the stack's nodes subscribe to, each with a message
+its subscriber refuses."""
 
 
 def rounded(value: float | None, digits: int) -> float | None:
@@ -146,7 +159,7 @@ def stop_times(repeats: int = 3) -> dict[str, object]:
 
 
 def run_scenario(name: str, duration: float, realtime_duration: float, speed: float,
-                 rtf: float = 1.0) -> dict[str, object]:
+                 rtf: float = 1.0, flood_topic: str = "state_batch") -> dict[str, object]:
     """One measurement; each runs in a fresh interpreter (see main)."""
     from rabbit_policy.bringup.config import StackConfig
     from rabbit_policy.bringup.in_process import run_in_process
@@ -186,7 +199,7 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
         return {f"lockstep_rtf_{name[9:]}": round(report.rtf, 3), f"{name}_fell": report.fell,
                 f"{name}_cpu_us_per_tick": report.cpu_us_per_tick}
     if name in FLOOD_LAYOUTS:
-        return flood(name, StackConfig(duration=duration, schedule=schedule, layout=FLOOD_LAYOUTS[name]))
+        return flood(name, StackConfig(duration=duration, schedule=schedule, layout=FLOOD_LAYOUTS[name]), flood_topic)
     if name == "realtime_in_process":
         report, nodes = run_in_process(StackConfig(duration=realtime_duration, schedule=schedule, mode="realtime"))
         stats = nodes["sim_node"].statistics()
@@ -236,9 +249,9 @@ def run_scenario(name: str, duration: float, realtime_duration: float, speed: fl
     }
 
 
-def flood(name: str, config) -> dict[str, object]:
-    """The lockstep walk of ``config`` beside a busy loop, then beside a 10 kHz flooder (see
-    the module docstring)."""
+def flood(name: str, config, topic: str = "state_batch") -> dict[str, object]:
+    """The lockstep walk of ``config`` beside a busy loop, then beside a 10 kHz flooder of
+    ``topic`` (:data:`FLOOD_TOPICS`; see the module docstring)."""
     from rabbit_policy.bringup.in_process import run_in_process
     from rabbit_policy.bringup.processes import run_multi_process
 
@@ -250,8 +263,8 @@ def flood(name: str, config) -> dict[str, object]:
         baseline = walk()
     finally:
         busy.kill()
-    flooder = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--flooder"],
-                               stdout=subprocess.PIPE, text=True)
+    flooder = subprocess.Popen([sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--flooder",
+                                "--flood-topic", topic], stdout=subprocess.PIPE, text=True)
     try:
         flooded = walk()
     finally:
@@ -262,29 +275,53 @@ def flood(name: str, config) -> dict[str, object]:
             flooder.kill()
             raise
     sent = json.loads(out.strip().splitlines()[-1])
+    name = name if topic == "state_batch" else f"{name}_{topic}"  # (state_batch: the keys measured first)
     return {f"{name}_baseline_rtf": round(baseline.rtf, 3), f"{name}_rtf": round(flooded.rtf, 3),
             f"{name}_ratio": round(flooded.rtf / baseline.rtf, 3), f"{name}_sent_per_s": sent["per_s"],
             f"{name}_completed": flooded.completed and not flooded.fell and not flooded.stalled}
 
 
-def flooder(rate: float = FLOOD_RATE) -> dict[str, float]:
-    """Publish 30 NaN values on ``/sim/state_batch`` at ``rate`` Hz until SIGTERM (a handler of
-    its own: a process started in the background inherits SIGINT ignored); returns what was
-    sent (``sent``, ``per_s``)."""
+def flood_message(topic: str):
+    """(message type, topic name, QoS, the message) of :data:`FLOOD_TOPICS`' ``topic``, each
+    on its subscribers' QoS."""
     import math
+
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64, Float64MultiArray, String
+
+    from rabbit_msgs_py import qos, topics
+    from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
+
+    nan = math.nan
+    return {
+        "state_batch": (Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS, Float64MultiArray(data=[nan] * 30)),
+        "joint_states": (JointState, topics.JOINT_STATES, qos.STREAM_QOS,
+                         JointState(name=list(JOINT_NAMES), position=[nan] * 7, velocity=[0.0] * 7)),
+        "joint_torques": (JointState, topics.JOINT_TORQUES, qos.TORQUE_QOS,
+                          JointState(name=list(ACTUATED_JOINTS), effort=[nan] * 4)),
+        "alpha": (Float64MultiArray, topics.ALPHA, qos.GAIT_QOS, Float64MultiArray(data=[0.0] * 24)),
+        "gait_timing": (String, topics.GAIT_TIMING, qos.GAIT_QOS, String(data="at_once:7")),
+        "cmd_speed": (Float64, topics.CMD_SPEED, qos.COMMAND_QOS, Float64(data=nan)),
+        "phase": (JointState, topics.PHASE, qos.STREAM_QOS, JointState(name=["gait_phase"], position=[nan],
+                                                                         velocity=[nan])),
+    }[topic]
+
+
+def flooder(rate: float = FLOOD_RATE, topic: str = "state_batch") -> dict[str, float]:
+    """Publish ``topic``'s message (:func:`flood_message`) at ``rate`` Hz until SIGTERM (a
+    handler of its own: a process started in the background inherits SIGINT ignored); returns
+    what was sent (``sent``, ``per_s``)."""
     import signal
     import time
 
     import rclpy
-    from std_msgs.msg import Float64MultiArray
 
-    from rabbit_msgs_py import qos
     from rabbit_msgs_py.node_runner import init_context
 
     context = init_context()
     node = rclpy.create_node("bench_flooder", context=context)
-    publisher = node.create_publisher(Float64MultiArray, "/sim/state_batch", qos.BATCH_QOS)
-    message = Float64MultiArray(data=[math.nan] * 30)
+    kind, name, profile, message = flood_message(topic)
+    publisher = node.create_publisher(kind, "/" + name, profile)
     stopped: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, _frame: stopped.append(signum))
     print(f"flooding {publisher.topic_name} at {rate:g} Hz until SIGTERM", file=sys.stderr, flush=True)
@@ -328,26 +365,31 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--speed", type=positive, default=1.0, help="commanded speed (m/s)")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--flooder", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--flood-topic", choices=(*FLOOD_TOPICS, "all"), default="state_batch",
+                        help="what the flood scenarios flood (default state_batch; all: each in turn)")
     parser.add_argument("--rtf", type=positive, default=1.0, help="paced runs: target real-time factor")
     parser.add_argument("--busy", type=int, default=0, metavar="N", help="busy loops beside every scenario")
     parser.add_argument("--only", choices=SCENARIOS, action="append",
                         help="run only this scenario (repeatable)")
     args = parser.parse_args(argv)
     if args.flooder:
-        print(strict_json.dumps(flooder()))
+        print(strict_json.dumps(flooder(topic=args.flood_topic)))
         return 0
     if args.child:
         print(strict_json.dumps(run_scenario(args.only[0], args.duration, args.realtime_duration, args.speed,
-                                             args.rtf)))
+                                             args.rtf, args.flood_topic)))
         return 0
     # every scenario in a fresh interpreter: a run must not inherit another's ROS state
     out: dict[str, object] = {}
     hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.busy)]
     try:
-        for name in args.only or SCENARIOS:
+        flood_topics = tuple(FLOOD_TOPICS) if args.flood_topic == "all" else (args.flood_topic,)
+        runs = [(name, topic) for name in args.only or SCENARIOS
+                for topic in (flood_topics if name in FLOOD_LAYOUTS else ("state_batch",))]
+        for name, topic in runs:
             cmd = [sys.executable, "-m", "rabbit_policy.commands.bench_stack", "--child", "--only", name, "--duration", str(args.duration),
                    "--realtime-duration", str(args.realtime_duration), "--speed", str(args.speed),
-                   "--rtf", str(args.rtf)]
+                   "--rtf", str(args.rtf), "--flood-topic", topic]
             result = subprocess.run(cmd, stdout=subprocess.PIPE, text=True)
             if result.returncode != 0:
                 print(f"error: scenario {name} failed with status {result.returncode}", file=sys.stderr)

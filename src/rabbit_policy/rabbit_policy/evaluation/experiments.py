@@ -71,7 +71,7 @@ class EvaluationConfig:
     repeated: RepeatedConfig | None = field(default_factory=RepeatedConfig)
     video_scenarios: tuple[str, ...] = ("small_backward", "large_backward")
     video_fps: float = 10.0
-    video_size: tuple[int, int] = (224, 168)
+    video_size: tuple[int, int] = (320, 240)
     series_rate: float = 50.0  # Hz of the time series stored in results.json
     robustness: RobustnessConfig | None = field(default_factory=RobustnessConfig)
 

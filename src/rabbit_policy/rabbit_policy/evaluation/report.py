@@ -3,6 +3,8 @@ figures and videos (file names relative to the report)."""
 
 from __future__ import annotations
 
+from statistics import median
+
 from rabbit_policy.evaluation.acceptance import broad_table
 from rabbit_policy.evaluation.figures import LABELS
 from rabbit_policy.evaluation.statistics import format_rate, mcnemar_exact, rate
@@ -320,10 +322,18 @@ def headline_table(results: dict) -> list[str]:
                 " / ".join(f"{margins[n][v]['largest_survived_Ns']:g}" + ("+" if margins[n][v]["capped"] else "")
                            for v in speeds) for n in names) + " |")
         legend.append(f"*backward / forward margins*: the largest push (N s) survived at every phase, at "
-                      f"{' / '.join(f'{v:g}' for v in speeds)} m/s")
+                      f"{' / '.join(f'{v:g}' for v in speeds)} m/s (a worst case over the phases on a 1 N s grid: "
+                      "one failing trial sets it, so it has no interval; the 90 % rows are its rates with theirs)")
     text = ("Rows: " + "; ".join(legend) + ". Each rate is trials passed of trials run [its 95 % Wilson interval, "
             "in %].")
     return lines + [""] + textwrap.wrap(text, 110, break_on_hyphens=False)
+
+
+def _seed_range(poincare: dict) -> str:
+    """`` [0.89–0.96]``: the range of a Poincaré analysis's largest |λ| over its perturbation
+    seeds ('' with fewer than two)."""
+    seeds = [v for v in poincare.get("largest_by_seed") or [] if v is not None]
+    return f" [{min(seeds):.2f}–{max(seeds):.2f}]" if len(seeds) > 1 else ""
 
 
 def summary_section(results: dict) -> list[str]:
@@ -342,15 +352,17 @@ def summary_section(results: dict) -> list[str]:
         settle = [seg["settling_time"] for seg in tracking["segments"]]
         known = [t for t in settle if t is not None]
         walked = "without a fall" if tracking["outcome"] == "walked" else _outcome(tracking)
-        lines.append(f"- {_label(name)}: speed tracking {walked}, second-half errors within "
-                     f"{max(errors):.3f} m/s, settling {min(known):.1f}–{max(known):.1f} s"
+        lines.append(f"- {_label(name)}: speed tracking {walked}, second-half |error| over the {len(errors)} segments "
+                     f"median {median(errors):.3f}, range {min(errors):.3f}–{max(errors):.3f} m/s, "
+                     f"settling {min(known):.1f}–{max(known):.1f} s"
                      + (f" ({settle.count(None)} segment(s) never settled)" if None in settle else "")
                      if errors and known else f"- {_label(name)}: speed tracking {walked}")
     for name, by_speed in results["poincare"].items():
-        largest = {speed: r.get("largest") for speed, r in sorted(by_speed.items())}
         stable = all(r.get("stable") for r in by_speed.values())
         lines.append(f"- {_label(name)}: walking cycle {'stable' if stable else 'NOT stable'} at every speed tested; "
-                     "largest |λ| " + ", ".join(f"{_fmt(v, '.2f')} at {float(k):.1f} m/s" for k, v in largest.items()))
+                     "largest |λ| (median [range] over the perturbation seeds) "
+                     + ", ".join(f"{_fmt(r.get('largest'), '.2f')}{_seed_range(r)} at {float(k):.1f} m/s"
+                                 for k, r in sorted(by_speed.items())))
     for claim, by_name in headline_rates(results).items():
         lines.append(f"- {claim}: " + ", ".join(f"{_label(n)} {format_rate(r)}" for n, r in by_name.items()))
     times = results.get("config", {}).get("sweep") or {}
