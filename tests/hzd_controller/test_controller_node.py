@@ -10,6 +10,7 @@ from rabbit_hzd_controller.hzd_controller_node import HZDControllerNode
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import stamp_from_ns
 from rabbit_msgs_py.joints import JOINT_NAMES
+from rabbit_msgs_py.pairing import resolve_key
 from rabbit_sim.model import load_model
 
 from ros_helpers import ros_context, spin_for, spin_until
@@ -18,11 +19,14 @@ pytestmark = pytest.mark.ros
 
 
 def _state(stamp_ns: int) -> JointState:
-    """RABBIT as the model places it (keyframe-free: qpos0), at ``stamp_ns``."""
+    """RABBIT as the model places it (keyframe-free: qpos0), at ``stamp_ns``, signed with the
+    user's key as a simulator started by hand signs its states (the controller takes no other)."""
     model = load_model("paper")
-    msg = JointState(name=list(JOINT_NAMES), position=[float(v) for v in model.qpos0],
-                     velocity=[0.0] * len(JOINT_NAMES), effort=[0.0] * len(JOINT_NAMES))
+    q, dq = [float(v) for v in model.qpos0], [0.0] * len(JOINT_NAMES)
+    key, _source = resolve_key("")
+    msg = JointState(name=list(JOINT_NAMES), position=q, velocity=dq, effort=[0.0] * len(JOINT_NAMES))
     msg.header.stamp = stamp_from_ns(stamp_ns)
+    msg.header.frame_id = key.sign_state("state_sender/test", stamp_ns, q, dq)
     return msg
 
 

@@ -43,7 +43,7 @@ def test_joint_state_bytes_round_trip_against_rclpys_serialization():
 
 def test_bytes_that_are_not_a_joint_state_are_refused_in_one_line():
     good = JointStateWriter(JOINT_NAMES).bytes(5_000_000, "", [0.1] * 7, [0.2] * 7, [0.0] * 7)
-    assert joint_state_from_bytes(good) == (5_000_000, [0.1] * 7, [0.2] * 7)
+    assert joint_state_from_bytes(good) == (5_000_000, "", [0.1] * 7, [0.2] * 7)
     for bad in (good[:30], good[:-8], b"\x01\x00\x00\x00" + good[4:], b"", good[:12] + b"\xff\xff\xff\x7f"):
         with pytest.raises((CdrError, MessageError)):
             read_joint_state(bad)

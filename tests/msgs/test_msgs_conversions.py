@@ -100,7 +100,7 @@ def test_joint_state_any_order():
 
 def test_topic_names_are_relative_unique_and_resolve_in_a_namespace():
     names = [v for k, v in vars(topics).items() if k.isupper() and isinstance(v, str)]  # (SIM_MODES: values)
-    assert len(names) == len(set(names)) == 26  # 23 topics, 3 services
+    assert len(names) == len(set(names)) == 27  # 24 topics, 3 services
     assert not any(n.startswith("/") for n in names)  # relative: a node's namespace applies
     assert topics.resolve(topics.ALPHA) == "/hzd/alpha" and topics.resolve(topics.CMD_SPEED) == "/cmd_speed"
     assert topics.resolve(topics.JOINT_STATES, "/rabbit2") == "/rabbit2/joint_states"

@@ -273,3 +273,37 @@ def test_bench_stacks_flooder_stops_on_sigterm_when_started_in_the_background():
     finally:
         flooder.kill()
     assert flooder.returncode == 0 and set(json.loads(out.strip().splitlines()[-1])) == {"sent", "per_s"}
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_forged_joint_states_are_refused_by_the_keyed_controller_and_the_walk_completes(capfd):
+    """A stranger's /joint_states (finite values, a stamp 1000 s ahead: before states were
+    signed, three of them made the controller wait for a decision that never came, and the
+    run was not complete): the simulator signs its states, a keyed controller takes no other."""
+    import rclpy
+    from rosgraph_msgs.msg import Clock
+    from sensor_msgs.msg import JointState
+
+    from rabbit_msgs_py.conversions import stamp_from_ns, stamp_to_ns
+    from rabbit_msgs_py.joints import JOINT_NAMES
+    from rabbit_policy.bringup.in_process import run_in_process
+
+    def forger(context):
+        node = rclpy.create_node("forger", context=context)
+        publisher = node.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        forged = JointState(name=list(JOINT_NAMES), position=[0.0, 0.75, 0.1, 0.2, 0.3, 0.2, 0.3],
+                            velocity=[1.0] + [0.0] * 6)
+        forged.header.stamp = stamp_from_ns(1000 * 10 ** 9)
+
+        def on_clock(msg: Clock) -> None:
+            if stamp_to_ns(msg.clock) == 10 ** 9:  # at t = 1 s of sim time
+                for _ in range(3):
+                    publisher.publish(forged)
+        node.create_subscription(Clock, topics.CLOCK, on_clock, qos.CLOCK_QOS)
+        return node
+
+    report, nodes = run_in_process(StackConfig(duration=3.0, schedule=((0.0, 1.0),)), observers=[forger])
+    assert report.completed and not report.fell and report.decisions_lost == 0
+    assert nodes["hzd_controller_node"].rejected_states >= 1
+    assert "not signed with this stack's pairing key" in capfd.readouterr().err

@@ -448,12 +448,14 @@ class HZDControllerNode(Node):
     def _on_state(self, msg: bytes) -> None:
         """A state, serialized (taken raw: the 1 kHz path builds no message object)."""
         try:
-            stamp, q, dq = joint_state_from_bytes(msg)
+            stamp, frame_id, q, dq = joint_state_from_bytes(msg)
         except MessageError as exc:  # counted, one line a second: a 10 kHz flood costs the loop little
-            self.rejected_states += 1
-            line = self._rejections.line("joint_states", f"ignoring malformed {self._state_topic}: {exc}")
-            if line is not None:
-                self.get_logger().error(line)
+            self._refuse_state("joint_states", f"ignoring malformed {self._state_topic}: {exc}")
+            return
+        if self.pairing is not None and self.pairing.verify_state(frame_id, stamp, q, dq) is None:
+            self._refuse_state("unsigned state", f"refused a state on {self._state_topic} not signed with this "
+                                                 "stack's pairing key (its simulator runs without it, or another "
+                                                 "node sent it)")
             return
         self._do(self.sync.on_state(stamp, q, dq))
         missing = self.sync.missing
@@ -468,6 +470,12 @@ class HZDControllerNode(Node):
                 waiting = " and ".join(filter(None, (waiting, self.resolve_topic_name(topics.GAIT_TIMING))))
             self.get_logger().warning(f"no gait yet (waiting for {waiting}); the state will be answered once it is "
                                       "complete", throttle_duration_sec=2.0)
+
+    def _refuse_state(self, kind: str, text: str) -> None:
+        self.rejected_states += 1
+        line = self._rejections.line(kind, text)
+        if line is not None:
+            self.get_logger().error(line)
 
     # -------------------------------------------------------------- actions
     def _do(self, actions: list) -> None:

@@ -176,14 +176,15 @@ def short(value: object, limit: int = 120) -> str:
     return one_line(value if isinstance(value, str) else repr(value), limit)
 
 
-def joint_state_from_bytes(data: bytes) -> tuple[int, list[float], list[float]]:
-    """A serialized JointState (``rabbit_msgs_py.cdr``) -> (stamp ns, q, dq) in ``JOINT_NAMES``
-    order, checked as :func:`joint_state_vectors` checks them; :class:`MessageError` otherwise."""
+def joint_state_from_bytes(data: bytes) -> tuple[int, str, list[float], list[float]]:
+    """A serialized JointState (``rabbit_msgs_py.cdr``) -> (stamp ns, frame_id, q, dq) in
+    ``JOINT_NAMES`` order, checked as :func:`joint_state_vectors` checks them;
+    :class:`MessageError` otherwise."""
     try:
-        stamp, _frame_id, names, position, velocity, _effort = read_joint_state(data)
+        stamp, frame_id, names, position, velocity, _effort = read_joint_state(data)
     except CdrError as exc:
         raise MessageError(str(exc)) from None
-    return (stamp, *joint_state_vectors(names, position, velocity))
+    return (stamp, frame_id, *joint_state_vectors(names, position, velocity))
 
 
 def joint_state_vectors(names: Sequence[str], position: Sequence[float], velocity: Sequence[float]

@@ -155,6 +155,23 @@ class PairingKey:
         payload = source.encode() + b"\0" + text.encode()
         return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-settings").hexdigest()
 
+    def sign_state(self, source: str, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
+        """The ``frame_id`` of a signed ``/joint_states`` from simulator instance ``source``: the
+        MAC of the stamp (ns), positions and velocities (m, rad, m/s, rad/s)."""
+        return f"{source}{TAG_SEPARATOR}{self._state_tag(stamp, q, dq)}"
+
+    def verify_state(self, frame_id: str, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str | None:
+        """The simulator instance of a state signed with this key, else None (unsigned, another
+        key, or changed since it was signed)."""
+        source, separator, tag = frame_id.rpartition(TAG_SEPARATOR)
+        if not separator or not hmac.compare_digest(tag, self._state_tag(stamp, q, dq)):
+            return None
+        return source
+
+    def _state_tag(self, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
+        payload = struct.pack(f"<q{len(q) + len(dq)}d", stamp, *q, *dq)
+        return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-state").hexdigest()
+
     def verify(self, frame_id: str, stamp: int, torques: Sequence[float]) -> str | None:
         """The instance id of a reply signed with this key, else None (unsigned, another
         key, or torques or stamp changed since it was signed)."""

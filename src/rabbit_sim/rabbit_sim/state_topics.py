@@ -46,7 +46,9 @@ class StateTopics:
 
     def publish(self, state: State) -> None:
         """One state on every topic that takes it now."""
-        self._state_pub.publish(self._joint_states.bytes(state.stamp, "", state.qpos, state.qvel, state.effort))
+        # keyed: signed (frame_id, PairingKey.sign_state), so a keyed controller takes no other node's states
+        signed = self._key.sign_state(self._source, state.stamp, state.qpos, state.qvel) if self._key is not None else ""
+        self._state_pub.publish(self._joint_states.bytes(state.stamp, signed, state.qpos, state.qvel, state.effort))
         if self.batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
             self.send_batch()
         if self._hip_pub.get_subscription_count():
