@@ -328,6 +328,22 @@ def test_every_quoted_results_table_is_the_one_rendered_from_the_committed_resul
         assert block == rendered, f"{doc.name}'s results table differs from docs/results/headline.md"
 
 
+@pytest.mark.unit
+def test_every_figure_the_status_page_quotes_is_in_the_report_or_the_research_log():
+    """docs/status.md quotes, never computes: each p-value it gives is written so in the
+    committed report, results.md or the research log (issue 73: hand-copied figures drifted;
+    its table is checked to the character above)."""
+    import re
+
+    status = (ROOT / "docs" / "status.md").read_text()
+    sources = "\n".join((ROOT / "docs" / name).read_text() for name in ("results/report.md", "results.md",
+                                                                        "learning.md"))
+    quoted = set(re.findall(r"p = [0-9][0-9.e-]*[0-9]", status))
+    assert len(quoted) >= 5, quoted  # (the page quotes them: the test reads it)
+    missing = sorted(p for p in quoted if p not in sources)
+    assert not missing, f"status.md quotes p-values no committed report or log holds: {missing}"
+
+
 @pytest.mark.sim
 def test_the_gymnasium_quickstart_runs_as_written():
     text = (ROOT / "docs" / "learning.md").read_text()
