@@ -274,7 +274,7 @@ def test_function_local_project_imports_are_few_and_each_says_why():
 def folder_imports() -> dict[str, set[str]]:
     """Which folder of the four packages imports which (``rabbit_policy/spec`` ->
     ``rabbit_policy/runtime``), counting every import: module level, function-local and
-    relative. A package's top-level modules (its nodes, ``rabbit_sim/simulation.py``) are the
+    relative. A package's top-level modules (its nodes, ``rabbit_sim/physics/simulation.py``) are the
     package itself, which holds its sub-folders: an import between them is not between folders."""
     import ast
 

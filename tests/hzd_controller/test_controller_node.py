@@ -11,7 +11,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import stamp_from_ns
 from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.pairing import resolve_key
-from rabbit_sim.model import load_model
+from rabbit_sim.physics.model import load_model
 
 from ros_helpers import ros_context, spin_for, spin_until
 

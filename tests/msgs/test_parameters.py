@@ -211,8 +211,8 @@ def test_string_parameters_with_fixed_values_list_them_in_the_descriptor():
     gait_timing (additional_constraints), the very tuples the nodes check against."""
     from rabbit_hzd_controller.hzd_controller_node import GAIT_TIMINGS
     from rabbit_policy.runtime.policies import CONTROLLER_CHOICES, LIBRARY_MODES
-    from rabbit_sim.model import MODEL_VARIANTS
-    from rabbit_sim.settings import MODES
+    from rabbit_sim.physics.model import MODEL_VARIANTS
+    from rabbit_sim.stepping.settings import MODES
 
     with ros_context() as (context, _executor):
         nodes = {"hzd_controller_node": HZDControllerNode(context=context), "policy_node": PolicyNode(context=context),

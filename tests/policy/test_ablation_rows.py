@@ -114,7 +114,7 @@ def test_a_zero_residual_on_the_speed_integral_is_classic_with_that_integral_bit
     same arithmetic as the classic controller's speed integral: the zero residual walks the
     very same trajectory as classic + integral (a model that walks too slow, so the integral
     works), not classic's."""
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     for speed in (1.0, 1.45):  # at 1.45 m/s the integral is held where the gait reaches the library's 1.5
         scenario = Scenario(schedule=((0.0, speed),), model=ModelOptions("drives"))

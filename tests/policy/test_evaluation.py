@@ -232,7 +232,7 @@ def test_render_frames_and_gif(tmp_path):
 import sys
 import numpy as np
 from PIL import Image
-from rabbit_sim.model import load_model
+from rabbit_sim.physics.model import load_model
 from rabbit_sim.rendering import frame_indices, render_frames, save_gif
 model = load_model("paper")
 idx = frame_indices(np.arange(0, 1001) * 1e-3, 5.0)
@@ -283,7 +283,7 @@ import os
 from rabbit_msgs_py.gl_backend import choose_headless_gl
 assert choose_headless_gl() == "disable"  # the user's choice is kept
 import numpy as np
-from rabbit_sim.model import load_model
+from rabbit_sim.physics.model import load_model
 from rabbit_sim.rendering import RenderingUnavailable, render_frames
 try:
     render_frames(load_model("paper"), np.zeros((1, 7)))
@@ -387,7 +387,7 @@ def test_a_walk_that_ends_early_fails_every_schedule_segment_it_never_began():
     result has no reach time (a random start network used to crash ``train.py`` here)."""
     from rabbit_policy.evaluation.acceptance import Criteria, acceptance
     from rabbit_policy.learning.training import evaluation_row
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     criteria = Criteria.quick()
     result = acceptance(CLASSIC, criteria, model=ModelOptions(friction=0.05), speeds=(1.0,))  # it slips at once

@@ -16,8 +16,8 @@ from rabbit_policy.experiment.result import json_number
 from rabbit_policy.experiment.scenario import PhasePush, Push, Scenario
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import LibraryPolicy
-from rabbit_sim.model import ModelOptions, load_model
-from rabbit_sim.simulation import FallLimits, Simulator, StopRules
+from rabbit_sim.physics.model import ModelOptions, load_model
+from rabbit_sim.physics.simulation import FallLimits, Simulator, StopRules
 
 pytestmark = pytest.mark.sim
 

@@ -232,7 +232,7 @@ def test_the_shipped_specs_name_every_constant_of_the_recovery_rule_and_the_cont
     announces, ``decision_ticks.CONTROLLER_SETTINGS``)."""
     from rabbit_hzd_controller.controller import ControllerConfig
     from rabbit_msgs_py.decision_ticks import CONTROLLER_SETTINGS
-    from rabbit_sim.model import model_sha256
+    from rabbit_sim.physics.model import model_sha256
 
     rule = load_spec(packaged_spec("learned")).recovery_rule
     assert {f for f in RecoveryConfig.__dataclass_fields__} == set(vars(rule))

@@ -111,7 +111,7 @@ def test_lockstep_runs_a_learned_memory_policy_on_the_speed_integral_as_the_ros_
     speed integral and the last action) from /hip_velocity and its own decisions, the
     residual's base gait moves with the integral (the ``drives`` model walks too slow, so it
     does), and lockstep publishes every state of the ROS-free loop bit for bit."""
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     path = residual_policy_file(tmp_path / "final_kind.pt")
     policy = make_policy("learned", policy_file=path)

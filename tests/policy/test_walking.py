@@ -155,7 +155,7 @@ def test_the_speed_integral_removes_the_steady_error_of_the_drives_model():
     too slow at 1.0 m/s; Westervelt's event-based integral on the command removes it."""
     from rabbit_policy.experiment.loop import walk
     from rabbit_policy.spec.make import make_policy
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     scenario = Scenario.constant(1.0, model=ModelOptions("drives"))
     plain = walk(make_policy("classic"), scenario, 20.0)

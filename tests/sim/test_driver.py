@@ -8,9 +8,9 @@ import pytest
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_msgs_py.pairing import PairingKey, new_key
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_sim.model import load_model
-from rabbit_sim.settings import SimSettings
-from rabbit_sim.simulation import Simulator
+from rabbit_sim.physics.model import load_model
+from rabbit_sim.stepping.settings import SimSettings
+from rabbit_sim.physics.simulation import Simulator
 from rabbit_sim.stepping import (
     FOLLOW_PATIENCE, RECORDER_LAG, SILENCE_WARNING_AFTER, Fallen, Log, Placed, PushApplied, SimDriver, State,
     TorquePublishers, silence_cause)

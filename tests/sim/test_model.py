@@ -6,7 +6,7 @@ import pytest
 
 from rabbit_hzd_controller.kinematics import LegGeometry, foot_from_hip
 from rabbit_msgs_py.joints import ACTUATED_JOINTS, JOINT_NAMES
-from rabbit_sim.model import DriveParameters, load_model, model_path
+from rabbit_sim.physics.model import DriveParameters, load_model, model_path
 
 pytestmark = pytest.mark.sim
 
@@ -158,7 +158,7 @@ def test_controller_kinematics_match_the_model(model):
 def test_a_push_lasts_its_duration_in_whole_steps(start_steps, duration):
     """Sim time sums 1 ms steps and drifts below exact values; a 0.1 s push is still
     exactly 100 steps of force, whenever it starts."""
-    from rabbit_sim.simulation import Simulator
+    from rabbit_sim.physics.simulation import Simulator
 
     sim = Simulator(load_model("paper"))
     sim.reset([0.0, 0.75, 0.0, 0.3, 0.4, -0.2, 0.4], [0.0] * 7)

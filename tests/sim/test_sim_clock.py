@@ -11,9 +11,9 @@ import pytest
 from rabbit_hzd_controller.gait_state import state_on_gait
 from rabbit_msgs_py.decision_ticks import PeriodicDecisions, precedes_decision
 from rabbit_policy.runtime.gait_library import GaitLibrary
-from rabbit_sim.model import load_model
-from rabbit_sim.settings import SimSettings
-from rabbit_sim.simulation import Simulator, timestep_ns
+from rabbit_sim.physics.model import load_model
+from rabbit_sim.stepping.settings import SimSettings
+from rabbit_sim.physics.simulation import Simulator, timestep_ns
 from rabbit_sim.stepping import SimDriver, State
 from rabbit_sim.stepping.batch import StateBatcher
 

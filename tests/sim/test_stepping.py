@@ -215,7 +215,7 @@ def test_recorder_gate_holds_the_start_and_any_lag_beyond_its_limit_by_stamps():
 def test_sim_settings_are_checked_without_ros():
     """sim_node's settings are a ROS-free dataclass: bad values are one-line ValueErrors
     (the node turns them into its start-up error)."""
-    from rabbit_sim.settings import SimSettings
+    from rabbit_sim.stepping.settings import SimSettings
 
     assert SimSettings().mode == "lockstep"
     for bad, message in (({"mode": "fast"}, "mode must be one of"), ({"rtf": 0.0}, "rtf must be"),

@@ -13,7 +13,7 @@ import pytest
 import yourdfpy
 
 from rabbit_msgs_py.joints import JOINT_NAMES
-from rabbit_sim.model import ModelOptions, load_model
+from rabbit_sim.physics.model import ModelOptions, load_model
 from rabbit_sim.urdf import PACKAGED_URDF, packaged_urdf, urdf_from_model
 
 pytestmark = pytest.mark.sim

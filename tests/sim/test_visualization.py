@@ -21,9 +21,9 @@ from rabbit_policy.bringup.config import StackConfig
 from rabbit_policy.bringup.in_process import run_in_process
 from rabbit_policy.experiment.scenario import Push
 from rabbit_sim.marker_plot import render_png
-from rabbit_sim.markers import PUSH_ID, RobotShapes, marker_period_ticks
-from rabbit_sim.model import load_model
-from rabbit_sim.simulation import Simulator
+from rabbit_sim.stepping.markers import PUSH_ID, RobotShapes, marker_period_ticks
+from rabbit_sim.physics.model import load_model
+from rabbit_sim.physics.simulation import Simulator
 
 pytestmark = pytest.mark.ros
 

@@ -51,6 +51,7 @@ STACK_TOPICS: dict[str, TopicSpec] = {
         TopicSpec(topics.ALPHA, Float64MultiArray, qos.GAIT_QOS),
         TopicSpec(topics.KD, Float64, qos.GAIT_QOS),
         TopicSpec(topics.GAIT_TIMING, String, qos.GAIT_QOS),
+        TopicSpec(topics.DECISIONS_LOST, UInt32, qos.STATUS_QOS),
         TopicSpec(topics.CMD_SPEED, Float64, qos.COMMAND_QOS),
         TopicSpec(topics.CMD_VEL, Twist, qos.COMMAND_QOS),
         TopicSpec(topics.PUSH, Wrench, qos.COMMAND_QOS),

@@ -48,3 +48,11 @@ class RejectionLog:
                 del self._unwritten[kind]
                 self._last[kind] = now
         return lines
+
+
+def refuse(logger, log: RejectionLog, kind: str, text: str) -> None:
+    """Count a refusal of ``kind`` in ``log`` and, when one is due, write its line with
+    ``logger.error`` (a node's logger): one line a second per kind however many come."""
+    line = log.line(kind, text)
+    if line is not None:
+        logger.error(line)

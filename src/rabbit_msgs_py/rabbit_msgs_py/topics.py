@@ -109,7 +109,7 @@ MARKERS = "rabbit/markers"
 """visualization_msgs/MarkerArray: RABBIT in 3D for RViz and Foxglove (sim_node, every
 ``1 / markers_rate`` s of sim time; frame ``world``, namespace ``rabbit``): torso, femurs and
 tibias as cylinders, feet as spheres (larger and yellow on the ground), a ground plate, the
-push acting now as a red arrow. See ``rabbit_sim.markers``."""
+push acting now as a red arrow. See ``rabbit_sim.stepping.markers``."""
 
 ROBOT_DESCRIPTION = "robot_description"
 """std_msgs/String (transient local), published once by sim_node: the URDF of the model it

@@ -1,4 +1,4 @@
-""":class:`rabbit_sim.markers.Shape` records as ``visualization_msgs/MarkerArray`` (the
+""":class:`rabbit_sim.stepping.markers.Shape` records as ``visualization_msgs/MarkerArray`` (the
 message side of ``/rabbit/markers``)."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point
 from visualization_msgs.msg import Marker, MarkerArray
 
-from .markers import FRAME_ID, NAMESPACE, Shape
+from .stepping.markers import FRAME_ID, NAMESPACE, Shape
 
 MARKER_TYPES = {"arrow": Marker.ARROW, "cube": Marker.CUBE, "sphere": Marker.SPHERE, "cylinder": Marker.CYLINDER}
 

@@ -1,14 +1,11 @@
 """``sim_node``: the RABBIT MuJoCo simulation as a ROS 2 node.
 
 Publishes each state (every 1 ms tick of sim time) as :class:`~rabbit_sim.state_topics.StateTopics`
-says (``/joint_states``; ``/sim/state_batch``, batches ending on the states a policy decides on
-as ``/hzd/gait_timing`` announces; ``/hip_velocity`` and ``/clock`` for listeners),
-``/fallen`` when it changes, and the URDF
-of its model once on ``/robot_description`` (transient local); applies the four
-``/joint_torques`` of the controller it is paired with (``rabbit_msgs_py.pairing``); takes
-``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause`` and ``/sim/release_controller``.
-The robot starts (and restarts on a reset) in the newest ``/sim/initial_state``; it knows no
-gait and no controller. How it steps in each ``mode`` (lockstep, paced, realtime) is
+says, ``/fallen`` when it changes, and the URDF of its model once on ``/robot_description``;
+applies the four ``/joint_torques`` of the controller it is paired with
+(``rabbit_msgs_py.pairing``); takes ``/push`` wrenches; serves ``/sim/reset``, ``/sim/pause``
+and ``/sim/release_controller``. The robot starts (and restarts on a reset) in the newest
+``/sim/initial_state``; it knows no gait and no controller. How it steps in each ``mode`` is
 :class:`rabbit_sim.stepping.SimDriver` (ROS-free): this node hands it its events and carries
 out the actions it returns. The modes and their guarantees: docs/architecture.md.
 """
@@ -38,16 +35,16 @@ from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
 from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
-from rabbit_msgs_py.rejections import RejectionLog
+from rabbit_msgs_py.rejections import RejectionLog, refuse
 from rabbit_msgs_py.service_callers import CallerLog
 from rabbit_msgs_py.pairing import resolve_key
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
 from rabbit_msgs_py.timers import OneShot, wall_timer
 
 from .marker_msgs import MarkerArrayBuilder
-from .model import load_model
-from .settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
-from .simulation import Simulator
+from .physics.model import load_model
+from .stepping.settings import RUN_TIME_PARAMS, SECRET_PARAMS, SimSettings
+from .physics.simulation import Simulator
 from .state_topics import StateTopics
 from .stepping import Fallen, Frame, Log, Markers, Placed, PushApplied, SimDriver, State, TorquePublishers
 from .urdf import urdf_from_model
@@ -110,8 +107,7 @@ class SimNode(Node):
         key, mode = self.driver.pairing.key, self.settings.mode  # signed where keyed: a controller takes no other
         pub(String, topics.SIM_MODE, qos.STATUS_QOS).publish(String(
             data=key.sign_settings(self.source, mode) if key is not None else mode))
-        self._torque_topic = self.resolve_topic_name(topics.JOINT_TORQUES)
-        self._rejections = RejectionLog()  # bad input: counted, logged at most once a second per kind
+        self._torque_topic, self._rejections = self.resolve_topic_name(topics.JOINT_TORQUES), RejectionLog()
         wall_timer(self, 1.0, lambda: [self.get_logger().warning(line) for line in self._rejections.flush()])
         self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
         # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
@@ -197,7 +193,8 @@ class SimNode(Node):
         try:
             qpos, qvel = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
-            self._refused("initial_state", f"ignoring malformed {self.resolve_topic_name(topics.INITIAL_STATE)}: {exc}")
+            refuse(self.get_logger(), self._rejections, "initial_state",
+                   f"ignoring malformed {self.resolve_topic_name(topics.INITIAL_STATE)}: {exc}")
             return
         self._run(self.driver.on_initial_state, qpos, qvel)
 
@@ -206,8 +203,8 @@ class SimNode(Node):
         try:
             _timing, period = parse_gait_timing(msg.data)
         except ValueError as exc:
-            self._refused("gait_timing", f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; batches keep their "
-                                         f"{self.settings.batch_ticks}-tick grid")
+            refuse(self.get_logger(), self._rejections, "gait_timing", f"{self.resolve_topic_name(topics.GAIT_TIMING)}: "
+                   f"{exc}; batches keep their {self.settings.batch_ticks}-tick grid")
             return
         with self._lock:
             self._states.batcher.follow_decisions(period)
@@ -219,16 +216,9 @@ class SimNode(Node):
             stamp, frame_id, torques = torques_from_bytes(msg)
         except MessageError as exc:
             self.driver.on_malformed_torques()
-            self._refused("joint_torques", f"ignoring malformed {self._torque_topic}: {exc}")
+            refuse(self.get_logger(), self._rejections, "joint_torques", f"ignoring malformed {self._torque_topic}: {exc}")
             return
         self._run(self.driver.on_torques, stamp, frame_id, torques, now)
-
-    def _refused(self, kind: str, text: str) -> None:
-        """Bad input of ``kind``: counted, one line a second (rclpy's throttle costs more per call
-        than a flood leaves the loop)."""
-        line = self._rejections.line(kind, text)
-        if line is not None:
-            self.get_logger().error(line)
 
     def _on_push(self, msg: Wrench) -> None:
         self._run(self.driver.on_push, msg.force.x, msg.force.z, msg.torque.y,

@@ -27,7 +27,7 @@ from .stepping.batch import StateBatcher
 
 class StateTopics:
     """Publishers of a node for its states; ``batch_ticks`` and ``clock_ticks`` as in
-    :class:`~rabbit_sim.settings.SimSettings`. With a pairing ``key`` every batch is signed by
+    :class:`~rabbit_sim.stepping.settings.SimSettings`. With a pairing ``key`` every batch is signed by
     simulator instance ``source``, counted from 1 (``PairingKey.batch_label``): keyed
     observers take no other."""
 

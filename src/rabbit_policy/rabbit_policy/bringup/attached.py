@@ -8,8 +8,13 @@ from __future__ import annotations
 import time
 from dataclasses import replace
 
+import rclpy
+from rclpy.parameter_client import AsyncParameterClient
+
 from rabbit_msgs_py.node_runner import init_context, make_executor
 from rabbit_msgs_py.pairing import user_key, user_key_file
+from rabbit_policy.runtime.policies import PolicyUnavailable
+from rabbit_policy.spec.make import spec_kind
 
 from .config import StackConfig, policy_name
 from .probe import STACK_NODE_NAMES
@@ -55,12 +60,6 @@ def stack_policy(node, executor, timeout: float = PARAMETER_WAIT) -> tuple[str, 
     """(controller, its file) the stack's policy_node runs, from its parameters: ``spec_file``'s
     kind, else ``policy`` with ``policy_file``; ``("", "")`` if it does not answer within
     ``timeout`` s."""
-    import rclpy
-    from rclpy.parameter_client import AsyncParameterClient
-
-    from rabbit_policy.runtime.policies import PolicyUnavailable
-    from rabbit_policy.spec.make import spec_kind
-
     client = AsyncParameterClient(node, "policy_node")
     if not client.wait_for_services(timeout_sec=timeout):
         return "", ""
@@ -86,8 +85,6 @@ def run_attached(config: StackConfig, stall_timeout: float = 30.0,
     are checked with the user's pairing key (the key nodes started by hand pair by); the
     report's controller is the policy node's (:func:`stack_policy`), its lost decisions the
     controller's ``/hzd/decisions_lost`` count since the start."""
-    import rclpy
-
     key_path = user_key_file()  # (never made here: without it the stack's nodes run with a key given, or none)
     config = replace(config, pairing_key=user_key(key_path).secret.decode() if key_path.exists() else "",
                      layout="attach")

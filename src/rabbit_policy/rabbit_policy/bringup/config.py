@@ -14,8 +14,8 @@ from rabbit_policy.experiment.scenario import (Push, Scenario, format_pushes, fo
                                                validate_schedule)
 from rabbit_policy.runtime.policies import PolicyUnavailable, controller_name
 from rabbit_policy.spec.make import make_policy
-from rabbit_sim.model import ModelOptions
-from rabbit_sim.simulation import StopRules
+from rabbit_sim.physics.model import ModelOptions
+from rabbit_sim.physics.simulation import StopRules
 
 
 NODE_MODULES = {

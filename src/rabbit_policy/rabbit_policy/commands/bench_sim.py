@@ -44,7 +44,7 @@ def main() -> None:
     from rabbit_policy.experiment.scenario import Scenario
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from rabbit_policy.runtime.policies import LibraryPolicy
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     library = GaitLibrary.load()
     gait = library.nearest(args.speed)

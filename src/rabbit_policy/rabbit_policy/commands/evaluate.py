@@ -60,7 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
 def render_videos(walks: dict, scenarios: tuple[str, ...], out: Path, config, model) -> list[dict]:
     """One GIF per controller and push scenario, from the recorded walks; a rendering
     failure is reported in the entry, not raised."""
-    from rabbit_sim.model import load_model
+    from rabbit_sim.physics.model import load_model
     from rabbit_sim.rendering import RenderingUnavailable, caption_frames, frame_indices, render_frames, save_gif
 
     model = load_model(model)
@@ -109,7 +109,7 @@ def main(argv: list[str] | None = None) -> int:
     from rabbit_policy.evaluation.steady_integral import network_alone
     from rabbit_policy.runtime.policies import CONTROLLERS, NetworkPolicy, PolicyUnavailable
     from rabbit_policy.spec.make import make_policy
-    from rabbit_sim.model import ModelOptions
+    from rabbit_sim.physics.model import ModelOptions
 
     try:
         learned = make_policy("learned", policy_file=args.policy_file)

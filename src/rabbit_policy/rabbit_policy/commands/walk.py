@@ -90,7 +90,7 @@ VIDEO_FPS = 25.0  # frames per s of sim time
 
 def write_video(result, scenario, path: Path) -> str:
     """The walk as an animated GIF at ``path`` (its fall held 1.5 s); an error line, or ''."""
-    from rabbit_sim.model import load_model
+    from rabbit_sim.physics.model import load_model
     from rabbit_sim.rendering import RenderingUnavailable, caption_frames, frame_indices, render_frames, save_gif
 
     shown = frame_indices(result.times, VIDEO_FPS)

@@ -34,7 +34,7 @@ from rabbit_policy.experiment.result import REACH_WITHIN, SETTLE_TOLERANCE
 from rabbit_policy.experiment.scenario import PhasePush, Scenario
 from rabbit_policy.runtime.policies import Policy, first_command
 from rabbit_policy.spec.make import make_policy
-from rabbit_sim.model import ModelOptions
+from rabbit_sim.physics.model import ModelOptions
 
 ACCEPTANCE_SPEEDS = tuple(round(0.7 + 0.1 * i, 1) for i in range(9))
 ACCEPTANCE_SEQUENCE = (0.8, 1.2, 0.9, 1.5, 0.7)  # m/s, one segment each

@@ -38,7 +38,7 @@ from rabbit_policy.experiment.loop import walk as run_walk
 from rabbit_policy.experiment.result import WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario, Schedule
 from rabbit_policy.runtime.policies import Policy
-from rabbit_sim.model import ModelOptions
+from rabbit_sim.physics.model import ModelOptions
 
 MapFn = Callable[[Callable, Iterable], Iterable]
 

@@ -27,7 +27,7 @@ from rabbit_policy.runtime.policies import Policy
 from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.result import WalkResult
 from rabbit_policy.experiment.scenario import Push, Scenario
-from rabbit_sim.model import ModelOptions
+from rabbit_sim.physics.model import ModelOptions
 
 
 CLASSIC_MARGINS = {-1: ((0.7, 5.0), (1.0, 9.0), (1.3, 14.0)), 1: ((0.7, 25.0), (1.0, 16.0), (1.3, 11.0))}

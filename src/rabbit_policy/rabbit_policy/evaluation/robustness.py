@@ -42,7 +42,7 @@ from rabbit_policy.experiment.loop import walk
 from rabbit_policy.experiment.result import REACH_TOLERANCE, REACH_WITHIN
 from rabbit_policy.experiment.scenario import Push, Scenario
 from rabbit_policy.runtime.policies import Policy
-from rabbit_sim.model import ModelOptions
+from rabbit_sim.physics.model import ModelOptions
 
 MapFn = Callable[[Callable, Iterable], Iterable]
 

@@ -39,7 +39,7 @@ import mujoco
 import numpy as np
 
 from rabbit_hzd_controller.controller import Leg
-from rabbit_sim.model import ModelOptions
+from rabbit_sim.physics.model import ModelOptions
 
 from rabbit_policy.evaluation.poincare import PoincareAnalysis, RegressionFit, regression_fit, section_crossing
 from rabbit_policy.runtime.policies import Policy, copy_policy, first_command, reset_policy

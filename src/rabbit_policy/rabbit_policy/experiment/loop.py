@@ -2,7 +2,7 @@
 gait policy, stepped together at 1 kHz. Every experiment runs it: ``scripts/walk.py``,
 the Gymnasium environment and training, the gait optimizer, the Poincaré analysis, the
 acceptance checks and the evaluation. The node stack runs the same pieces over topics
-(``sim_node`` steps the same :class:`~rabbit_sim.simulation.Simulator`, which applies the
+(``sim_node`` steps the same :class:`~rabbit_sim.physics.simulation.Simulator`, which applies the
 same push schedule; ``hzd_controller_node`` runs the same :class:`HZDController`;
 ``policy_node`` the same policy on the same :class:`SpeedWindow` observation), which is
 why a lockstep run reproduces this loop bit for bit.
@@ -48,8 +48,8 @@ from rabbit_policy.runtime.decision_clock import DecisionClock
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.speed_schedule import SpeedSchedule, stamp_of
 from rabbit_policy.runtime.speed_window import Observation
-from rabbit_sim.model import ModelOptions, load_model
-from rabbit_sim.simulation import Simulator, StopRules, TorqueDelay
+from rabbit_sim.physics.model import ModelOptions, load_model
+from rabbit_sim.physics.simulation import Simulator, StopRules, TorqueDelay
 
 CHUNK = 4096
 """Most ticks one compiled call runs (the size of its buffers)."""

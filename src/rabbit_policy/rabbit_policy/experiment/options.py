@@ -16,7 +16,7 @@ from rabbit_policy.runtime.speed_command import clamp_schedule
 from rabbit_policy.runtime.policies import controller_argument, controller_name
 from rabbit_policy.runtime.speed_integral import SPEED_INTEGRAL_HELP
 from rabbit_policy.spec.make import spec_kind
-from rabbit_sim.model import MODEL_VARIANTS, ModelOptions
+from rabbit_sim.physics.model import MODEL_VARIANTS, ModelOptions
 
 
 def add_walk_options(parser: argparse.ArgumentParser) -> None:

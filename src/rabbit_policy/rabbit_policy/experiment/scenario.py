@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 from rabbit_msgs_py.pushes import Push, format_pushes, parse_pushes
-from rabbit_sim.model import ModelOptions
-from rabbit_sim.simulation import StopRules
+from rabbit_sim.physics.model import ModelOptions
+from rabbit_sim.physics.simulation import StopRules
 
 __all__ = ["PhasePush", "Push", "Scenario", "Schedule", "format_pushes", "parse_pushes", "parse_schedule", "validate_schedule"]
 
@@ -123,10 +123,10 @@ class Scenario:
         effect, so that every time a walk reports is on the tick grid.
     pushes: pushes on the torso at sim times (:class:`~rabbit_msgs_py.pushes.Push`).
     phase_pushes: pushes at a phase of a step (:class:`PhasePush`; the fast path only).
-    model: the model and its errors (:class:`~rabbit_sim.model.ModelOptions`).
+    model: the model and its errors (:class:`~rabbit_sim.physics.model.ModelOptions`).
     torque_delay: the torques computed at a tick are applied this many seconds later
         (a multiple of the 1 ms timestep; until then the first torques are held).
-    rules: fall and stall (:class:`~rabbit_sim.simulation.StopRules`).
+    rules: fall and stall (:class:`~rabbit_sim.physics.simulation.StopRules`).
     window: longest speed window of the policy's observation (ticks), as ``policy_node``.
     """
 

@@ -2,7 +2,7 @@
 
 :func:`run_ticks` is the inner loop of :class:`~rabbit_policy.experiment.loop.ClosedLoop`: per
 tick the HZD law (:func:`rabbit_hzd_controller.law.control`), the torque delay, ``mj_step``
-(MuJoCo's C function, called directly), the push rule (:mod:`rabbit_sim.compiled`), the record
+(MuJoCo's C function, called directly), the push rule (:mod:`rabbit_sim.physics.compiled`), the record
 of time, hip position and speed, and the stop rules below; it returns after ``n`` ticks, or
 after a tick that touched down, fell, rolled back or reached the section phase. The loop chooses ``n`` so that nothing
 Python decides (a decision, a command change, a stall by time, an observer) falls strictly
@@ -11,7 +11,7 @@ implementation the node stack runs too (the controller node and ``sim_node`` cal
 compiled functions tick by tick).
 
 The loop state ``state`` (float64, :data:`LOOP_STATE_SIZE`): the tick (steps since the
-placement, a whole number: the :class:`~rabbit_sim.simulation.Simulator`'s count) and the tick in
+placement, a whole number: the :class:`~rabbit_sim.physics.simulation.Simulator`'s count) and the tick in
 ns, from which each tick's sim time is ``tick x tick_ns / 1e9`` s (the float nearest the exact
 stamp, never MuJoCo's drifting float sum), the timestep (s), the fall limits (m, m,
 rad), the early stall rule's length (ticks, 0: off) and its count, the peak |torque| (N m), the
@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit
 
 from rabbit_hzd_controller import law
-from rabbit_sim import compiled as sim_rules
+from rabbit_sim.physics import compiled as sim_rules
 
 TICK, TICK_NS, TIMESTEP, MIN_HEIGHT, MAX_HEIGHT, MAX_PITCH, ROLL_BACK_TICKS, ROLLING, PEAK, LEFT_FOOT, RIGHT_FOOT, \
     STOP, SECTION = range(13)

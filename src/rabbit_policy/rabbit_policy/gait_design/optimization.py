@@ -60,7 +60,7 @@ from rabbit_policy.experiment.scenario import Scenario
 from rabbit_policy.parallel import LocalBackend
 from rabbit_policy.runtime.gait_library import GaitLibrary
 from rabbit_policy.runtime.policies import GaitCommand, LibraryPolicy
-from rabbit_sim.model import ModelOptions, load_model
+from rabbit_sim.physics.model import ModelOptions, load_model
 
 KD_SCALE = 100.0
 """Kd enters the decision vector divided by this, so all variables are O(0.1..1)."""

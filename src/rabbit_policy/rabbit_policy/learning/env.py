@@ -102,7 +102,7 @@ TimeLimit wrapper only, so every id carries :class:`EpisodeLength`, which makes 
 
 | argument | default | meaning |
 |----------|---------|---------|
-| ``model`` | ``"paper"`` | the MJCF variant or a :class:`~rabbit_sim.model.ModelOptions` |
+| ``model`` | ``"paper"`` | the MJCF variant or a :class:`~rabbit_sim.physics.model.ModelOptions` |
 | ``speed_range`` | (0.7, 1.5) | commands are drawn from it (m/s) |
 | ``max_steps`` | 60 | env steps per episode (see Episode end) |
 | ``window`` | 1000 | speed-window length (ticks) |
@@ -153,8 +153,8 @@ from rabbit_policy.runtime.recovery import RecoveryConfig
 from rabbit_policy.spec.build import residual_base as rule_base
 from rabbit_policy.spec.schema import load_spec
 from rabbit_policy.runtime.speed_window import Observation
-from rabbit_sim.model import ModelOptions, load_model
-from rabbit_sim.simulation import StopRules
+from rabbit_sim.physics.model import ModelOptions, load_model
+from rabbit_sim.physics.simulation import StopRules
 
 START_ATTEMPTS = 10
 """Scenarios drawn at a reset until the starting gait's first step completes (about 1 in 750

@@ -41,8 +41,8 @@ from rabbit_policy.runtime.actions import ActionBounds, clip
 from rabbit_policy.runtime.gait_command import reset_policy
 from rabbit_policy.runtime.speed_window import Observation
 from rabbit_policy.spec import load_controller, packaged_spec
-from rabbit_sim.model import load_model
-from rabbit_sim.simulation import StopRules
+from rabbit_sim.physics.model import load_model
+from rabbit_sim.physics.simulation import StopRules
 
 DEFAULT_STEPS = 500
 """Decisions per episode (10 s of sim time at 20 ticks)."""

@@ -23,7 +23,7 @@ from rabbit_policy.runtime.recovery import RecoveryConfig, RecoveryOverlay, Reco
 from rabbit_policy.runtime.speed_integral import IntegralConfig
 from rabbit_policy.spec.files import checked_library_dir, load_weights, packaged_spec
 from rabbit_policy.spec.schema import ControllerSpec, NetworkSpec, SpecError, load_spec
-from rabbit_sim.model import model_sha256
+from rabbit_sim.physics.model import model_sha256
 
 
 def load_controller(path: str | Path) -> Policy:

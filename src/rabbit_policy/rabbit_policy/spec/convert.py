@@ -23,7 +23,7 @@ from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_w
 from rabbit_policy.spec.schema import (SPEC_VERSION, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
                                        LibrarySpec, NetworkSpec, ResidualSpec, WeightsSpec,
                                        dump_spec, load_spec, parse_spec)
-from rabbit_sim.model import model_sha256
+from rabbit_sim.physics.model import model_sha256
 
 RESIDUAL_BOUNDS_MARGIN = 0.15
 """rad: ``actions.residual_sum_bounds``' margin on the classic base (what the checkpoints ran with)."""

@@ -187,7 +187,7 @@ class ControllerSettingsSpec:
     """The 1 kHz HZD controller this controller runs on: every ``ControllerConfig`` field
     (units as there: N m/rad, N m, m, rad, N m s/rad, phase, 1/s) but the leg geometry and
     the tick, which are the robot model's: ``model_sha256`` names that model
-    (:func:`rabbit_sim.model.model_sha256`), and a spec made for another one is refused. A gait
+    (:func:`rabbit_sim.physics.model.model_sha256`), and a spec made for another one is refused. A gait
     that arrives within the step blends in over ``within_step_blend`` (0: at once) unless it
     arrives at or after ``within_step_until`` (then it waits for the touchdown); a gait that
     arrives with a touchdown blends in over ``blend_phase``."""

@@ -14,7 +14,7 @@ from rabbit_msgs_py.cli import ArgumentParser, positive
 
 
 def main(argv: list[str] | None = None) -> int:
-    from rabbit_sim.model import MODEL_VARIANTS, ModelOptions, load_model
+    from rabbit_sim.physics.model import MODEL_VARIANTS, ModelOptions, load_model
     from rabbit_sim.urdf import PACKAGED_URDF, urdf_from_model
 
     parser = ArgumentParser(description=__doc__)

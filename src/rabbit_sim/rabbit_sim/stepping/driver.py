@@ -26,10 +26,10 @@ from rabbit_msgs_py.pairing import PairingKey
 
 from rabbit_msgs_py.topics import REPLY_MODES
 
-from .. import compiled
-from ..markers import RobotShapes, marker_period_ticks
-from ..settings import SimSettings
-from ..simulation import Simulator, TorqueDelay
+from ..physics import compiled
+from .markers import RobotShapes, marker_period_ticks
+from .settings import SimSettings
+from ..physics.simulation import Simulator, TorqueDelay
 from .rules import (
     FOLLOW_PATIENCE,
     RECORDER_LAG,

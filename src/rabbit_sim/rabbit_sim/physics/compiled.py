@@ -1,5 +1,5 @@
 """The simulator's per-tick rules, compiled (numba ``@njit``): the one implementation of each,
-called by :class:`~rabbit_sim.simulation.Simulator` (and so by ``sim_node``) every step and by
+called by :class:`~rabbit_sim.physics.simulation.Simulator` (and so by ``sim_node``) every step and by
 the ROS-free loop's compiled inner loop (:mod:`rabbit_policy.experiment.ticks`) between its
 ``mj_step`` calls, which it makes through :data:`mj_step` (MuJoCo's C function, by symbol).
 

@@ -13,7 +13,7 @@ from rabbit_msgs_py.pairing import KEY_FILE_HELP, NO_KEY, PairingKey
 from rabbit_msgs_py.solo import SOLO_CHECK_HELP
 from rabbit_msgs_py.pushes import Push, parse_pushes
 
-from .model import MODEL_VARIANTS, ModelOptions
+from ..physics.model import MODEL_VARIANTS, ModelOptions
 
 TIMESTEP = 0.001
 """s: the model's timestep, one control tick."""
