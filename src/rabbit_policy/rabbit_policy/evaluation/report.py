@@ -322,8 +322,7 @@ def headline_table(results: dict) -> list[str]:
                 " / ".join(f"{margins[n][v]['largest_survived_Ns']:g}" + ("+" if margins[n][v]["capped"] else "")
                            for v in speeds) for n in names) + " |")
         legend.append(f"*backward / forward margins*: the largest push (N s) survived at every phase, at "
-                      f"{' / '.join(f'{v:g}' for v in speeds)} m/s (a worst case over the phases on a 1 N s grid: "
-                      "one failing trial sets it, so it has no interval; the 90 % rows are its rates with theirs)")
+                      f"{' / '.join(f'{v:g}' for v in speeds)} m/s (the worst phase, no interval: the 90 % rows have one)")
     text = ("Rows: " + "; ".join(legend) + ". Each rate is trials passed of trials run [its 95 % Wilson interval, "
             "in %].")
     return lines + [""] + textwrap.wrap(text, 110, break_on_hyphens=False)
