@@ -83,6 +83,20 @@ def test_attach_says_the_run_is_not_complete_when_the_policy_stops_deciding():
     assert not report.completed and "the policy stopped deciding" in report.error
 
 
+@pytest.mark.slow
+def test_attach_refuses_a_stack_that_a_run_stack_supervises():
+    """Another run_stack's supervisor has the name this one has: it is still seen on the graph."""
+    from rabbit_policy.bringup.supervisor import Supervisor
+
+    with hand_started() as (nodes, executor):
+        other = Supervisor(StackConfig(duration=1.0, schedule=((0.0, 1.0),)), context=nodes["sim_node"].context)
+        executor.add_node(other)
+        with pytest.raises(NothingToAttach, match="is a run_stack's"):
+            run_attached(StackConfig(duration=1.0, schedule=((0.0, 1.0),)))
+        executor.remove_node(other)
+        other.destroy_node()
+
+
 def test_attach_refuses_a_graph_without_a_stack_or_with_a_run_stacks():
     with pytest.raises(NothingToAttach, match="policy_node not found"):
         attachable(["hzd_controller_node", "sim_node"], "")
