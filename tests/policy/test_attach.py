@@ -16,7 +16,7 @@ from rabbit_policy.bringup.config import StackConfig
 from rabbit_policy.commands import run_stack
 from rabbit_policy.policy_node import PolicyNode
 from rabbit_sim.sim_node import SimNode
-from ros_helpers import ros_context
+from ros_helpers import ros_context, spinning
 
 pytestmark = pytest.mark.ros
 
@@ -32,19 +32,8 @@ def hand_started(policy: str = "learned", **sim):
                  "policy_node": PolicyNode(context=context, policy=policy)}
         for node in nodes.values():
             executor.add_node(node)
-        stop = threading.Event()
-
-        def spin() -> None:
-            while not stop.is_set():
-                executor.spin_once(timeout_sec=0.01)
-
-        spinner = threading.Thread(target=spin, daemon=True)
-        spinner.start()
-        try:
+        with spinning(executor):
             yield nodes, executor
-        finally:
-            stop.set()
-            spinner.join(timeout=10.0)
 
 
 @pytest.mark.slow
