@@ -373,7 +373,7 @@ class Supervisor(Node):
         :class:`~rabbit_policy.experiment.loop.ClosedLoop` dates it: the state after the
         tick on which the stance switched (the ``/hzd/step`` stamp is the state before it),
         with that state's hip x; the foot's x is on no topic (NaN). Attached, every time
-        counts from the first state seen (the run's t = 0; :attr:`attached_at` on the stack's clock)."""
+        counts from the first state seen (the run's t = 0)."""
         config = self.config
         off = self._offset_ns
         schedule = self.walked_schedule()
@@ -402,11 +402,6 @@ class Supervisor(Node):
                           stall_time=stall_time, start_time=t0, start_x=x0, times=(times - off) / 1e9, hip_x=xs,
                           touchdowns=touchdowns, peak_torque=self.peak_torque,
                           planned_duration=round(on_tick_grid(config.duration) - t0, 9))  # t0: the first state seen
-
-    @property
-    def attached_at(self) -> float | None:
-        """Attached: the stack's sim time (s) of the first state seen, the run's t = 0 (None before it)."""
-        return self._offset_ns / 1e9 if self.attached and self._start is not None else None
 
     def report(self, error: str | None = None, policy: str | None = None) -> RunReport:
         wall = (
