@@ -183,6 +183,30 @@ def test_paced_states_wait_for_their_wall_time(initial_state):
     assert driver.paced_wake() == []
 
 
+@pytest.mark.parametrize("paused_first", [False, True])
+def test_paced_time_spent_waiting_for_a_first_reply_is_not_made_up_by_running_fast(initial_state, paused_first):
+    """A controller that answers the placed state 40 ms late (a busy machine), after the start
+    or after a resume, must not let the next 40 ms x rtf of sim time go out at once."""
+    clock = FakeClock()
+    driver = _driver(initial_state, clock, mode="paced", rtf=4.0)
+    if paused_first:
+        driver.on_pause(True)
+        clock.now += 1.0
+        driver.on_pause(False)
+    clock.now += 0.040
+    stamp, burst = 0, 0
+    for _ in range(100):  # a controller that answers at once; the clock moves only while a state waits
+        sent = _states(driver.on_torques(stamp, C, ZERO, clock.now))
+        if not sent:
+            clock.now += driver.pace_wait + 1e-9  # (a timer fires at, or just after, its time)
+            sent = _states(driver.paced_wake())
+        elif stamp:
+            burst += 1
+        (stamp,) = sent
+    assert burst == 0  # every state after the first step waited for its wall time
+    assert driver.statistics()["achieved_rtf"] == pytest.approx(4.0, rel=1e-6)
+
+
 def test_recorder_lag_holds_lockstep_until_the_recorder_catches_up(initial_state):
     driver = _driver(initial_state, wait_for_recorder=True)
     driver.on_recorded(0)

@@ -109,7 +109,7 @@ def test_a_pairing_key_is_checked_where_it_enters():
 def test_pacer_holds_states_to_the_wall_clock_and_runs_slower_when_behind():
     clock = FakeClock()
     pacer = Pacer(rtf=1.0, slack=0.05, window=5.0, clock=clock)
-    pacer.restart(0.0)
+    pacer.begin(0.0)
     assert pacer.wait(0.001) == pytest.approx(0.001)  # too early: wait 1 ms
     clock.now += 0.001
     assert pacer.wait(0.001) == pytest.approx(0.0)
@@ -118,7 +118,7 @@ def test_pacer_holds_states_to_the_wall_clock_and_runs_slower_when_behind():
     assert pacer.wait(0.003) == pytest.approx(0.001)  # paced from the new anchor
     assert Pacer(rtf=2.0, clock=clock).wait(0.0) == 0.0
     half = Pacer(rtf=0.5, clock=clock)
-    half.restart(0.0)
+    half.begin(0.0)
     assert half.wait(0.01) == pytest.approx(0.02)  # rtf 0.5: 10 ms of sim time per 20 ms
     with pytest.raises(ValueError, match="rtf"):
         Pacer(rtf=0.0)
@@ -127,7 +127,7 @@ def test_pacer_holds_states_to_the_wall_clock_and_runs_slower_when_behind():
 def test_pacer_reports_the_achieved_real_time_factor_once_per_window():
     clock = FakeClock()
     pacer = Pacer(rtf=1.0, window=5.0, clock=clock)
-    pacer.restart(0.0)
+    pacer.begin(0.0)
     clock.now += 4.0
     assert pacer.achieved(2.0) is None
     clock.now += 1.0

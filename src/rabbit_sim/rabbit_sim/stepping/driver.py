@@ -244,7 +244,7 @@ class SimDriver:
         self._out = []
         self.paused = paused
         if not paused and self.pacer is not None:
-            self.pacer.restart(self.sim.time)  # pace from now: no rush to make up the pause
+            self.pacer.restart()  # pace from the next step: no rush to make up the pause
         if not paused and self.by_replies:
             self._resume()
         message = "paused" if paused else "running"
@@ -370,12 +370,12 @@ class SimDriver:
         """Counters for scripts and benchmarks (JSON-ready: None, never NaN)."""
         extra = {"damped_ticks": self.watchdog.damped_ticks, "resends": self.lockstep.resends,
                  "skipped_ticks": self.realtime.skipped, "halt_reason": self.halt_reason or None}
-        if self.pacer is not None:
-            first, last = self.stats.first_tick_wall, self.stats.last_tick_wall
-            wall = last - (first or 0.0)
-            extra["achieved_rtf"] = self.sim.time / wall if first is not None and wall > 0 else None
-            extra["paced_fell_behind"] = self.pacer.behind_count
-        return self.stats.summary(self.sim.time, extra)
+        summary = self.stats.summary(self.sim.time, extra)
+        if self.pacer is not None:  # sim s stepped per wall s, first tick to last (pauses included)
+            rate = summary["tick_rate_hz"]
+            summary["achieved_rtf"] = rate * self.sim.timestep if rate is not None else None
+            summary["paced_fell_behind"] = self.pacer.behind_count
+        return summary
 
     # ------------------------------------------------------------- internals
     def _log(self, level: str, text: str, throttle: float = 0.0, key: str = "") -> None:
@@ -452,7 +452,7 @@ class SimDriver:
         if self._delay is not None:
             self._delay.clear()
         if self.pacer is not None:
-            self.pacer.restart(0.0)
+            self.pacer.restart()
         self.stats.forget()
         self._latest_torque_wall = -1.0
         if self.fallen:
@@ -468,6 +468,8 @@ class SimDriver:
     def _advance(self, torques: list[float]) -> None:
         """Lockstep/paced: apply one reply, step, send the next state (its reply is then due,
         unless the physics halted); paced, the state waits for its wall time."""
+        if self.pacer is not None:
+            self.pacer.begin(self.sim.time)  # the first step after a placement or resume: pace from here
         self._step(torques)
         if self.pacer is not None and not self.halted and self.pacer.wait(self.sim.time) > 0.0:
             self.pace_pending = True  # paced_wake sends it

@@ -240,16 +240,19 @@ class Pacer:
         self.report_from: tuple[float, float] | None = None
         self.behind_count = 0  # re-anchorings: times the loop could not keep up
 
-    def restart(self, sim_time: float) -> None:
-        """Pace from now on (start, reset, resume)."""
-        now = self.clock()
-        self.anchor = (now, sim_time)
-        self.report_from = (now, sim_time)
+    def restart(self) -> None:
+        """Pace again from the next step (start, reset, resume): the wall time spent waiting
+        for a controller's first reply, or paused, is not made up by running fast."""
+        self.anchor = self.report_from = None
+
+    def begin(self, sim_time: float) -> None:
+        """The step from ``sim_time`` (s) runs now: pace from here, unless already pacing."""
+        if self.anchor is None:
+            self.anchor = self.report_from = (self.clock(), sim_time)
 
     def wait(self, sim_time: float) -> float:
         """Wall seconds until the state at ``sim_time`` may go out (<= 0: now)."""
-        if self.anchor is None:
-            self.restart(sim_time)
+        self.begin(sim_time)
         wall0, sim0 = self.anchor
         now = self.clock()
         ahead = wall0 + (sim_time - sim0) / self.rtf - now
