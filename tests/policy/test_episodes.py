@@ -133,3 +133,22 @@ def test_forward_guard_episodes_push_every_one_forward_at_a_phase_near_classics_
     for scenario, push, direction, ratio in _one_phase_push_each("forward_guard"):
         assert direction == 1 and 0.9 - 1e-9 <= ratio <= 1.4 + 1e-9
         assert 0.0 <= push.phase < 1.0 and len(scenario.schedule) >= 2
+
+
+def test_the_screen_guard_walks_steady_at_the_screens_speeds_pushed_forward_near_classics_margin():
+    """guard_set "screen": each episode one of the screen's push speeds, held (no change), one
+    forward push at a phase at 1.0-1.3x classic's margin, the nominal model without a delay."""
+    from rabbit_policy.evaluation.push_recovery import classic_margin
+    from rabbit_policy.evaluation.shipping import ScreenTrials
+    from rabbit_policy.learning.es import guard_episodes
+
+    episodes = guard_episodes(np.random.default_rng(0), 10, "screen")
+    assert [first for _seed, first, _second in episodes] == list(ScreenTrials().speeds) * 2
+    env = RabbitHZDEnv(max_steps=500, decision_period=20, distribution="screen_forward")
+    for seed, first, second in episodes:
+        env.reset(seed=seed, options={"desired_speed": first, "next_speed": second})
+        scenario = env.loop.scenario
+        assert {v for _t, v in scenario.schedule} == {first} and scenario.torque_delay == 0.0
+        (push,) = scenario.phase_pushes
+        assert push.impulse > 0 and 1.0 - 1e-9 <= push.impulse / classic_margin(first, 1) <= 1.3 + 1e-9
+    assert guard_episodes(np.random.default_rng(0), 10, "changes") != episodes

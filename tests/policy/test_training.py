@@ -32,7 +32,8 @@ ROOT = Path(__file__).resolve().parents[2]
 NEWER_FIELDS = {"features": "paper", "action": "direct", "integral_gain": 0.0, "alive_bonus": 0.0,
                 "slow_penalty": 0.0, "roll_back_after": 0.0, "residual_base": "classic", "top": 0,
                 "integral_band": 0.0, "integral_clip": 0.0, "integral_windup_decay": 0.0, "spec": "",
-                "optimizer": "adam", "reward": "tracking", "guard": 0, "guard_slack": 0}
+                "optimizer": "adam", "reward": "tracking", "guard": 0, "guard_slack": 0,
+                "guard_set": "changes"}
 """ES options newer than a checkpoint, at the defaults that keep its run as it was."""
 LIBRARY = GaitLibrary.load()
 

@@ -292,6 +292,12 @@ DISTRIBUTIONS = {
                                          relative_impulse=True, min_impulse=0.9, max_impulse=1.4,
                                          backward_fraction=0.0, torque_delays=(0.0, 0.0, 0.001, 0.002),
                                          observation_noise=0.02),
+    # the guard set drawn as the screen's forward trials are (ESConfig.guard_set "screen": a steady
+    # command at one of the screen's push speeds, a forward push at 1.0-1.3x classic's margin at a
+    # phase the screen does not use, no delay, no noise; docs/learning.md, 2026-12-07 (sixth))
+    "screen_forward": EpisodeDistribution(command_interval=None, push_probability=1.0, push_timing="phase",
+                                          relative_impulse=True, min_impulse=1.0, max_impulse=1.3,
+                                          backward_fraction=0.0),
     "decided": EpisodeDistribution(command_interval=(2.0, 5.0), push_probability=1.0, push_timing="phase",
                                    relative_impulse=True, min_impulse=0.8, max_impulse=1.6, backward_scale=1.5,
                                    torque_delays=(0.0, 0.0, 0.001, 0.002), observation_noise=0.02),
@@ -360,7 +366,9 @@ class EpisodeConfig:
                                         "decided (changes' "
                                         "commands, every episode pushed at a phase, forward 0.8-1.6x and backward "
                                         "1.2-2.4x classic's margin) or forward_guard (every episode pushed "
-                                        "forward at a phase, 0.9-1.4x: ES's guard set); DISTRIBUTIONS",
+                                        "forward at a phase, 0.9-1.4x: ES's guard set) or screen_forward (a steady "
+                                        "command, pushed forward at a phase, 1.0-1.3x: ES's screen guard set); "
+                                        "DISTRIBUTIONS",
                                choices=tuple(DISTRIBUTIONS))
     fall_penalty: float = option(-50.0, "reward once when an episode ends by a fall or stall, <= 0")
     reward: str = option("tracking", "tracking (the paper's: -(mean speed - v_d)^2 every env step) or evaluation "

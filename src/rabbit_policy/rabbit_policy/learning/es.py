@@ -15,8 +15,8 @@ Per generation, from the current parameters theta (flat vector of the network's 
    theta): raw returns, the step scaled by the std of the 2b returns, no Adam (which turns a
    noise gradient into full steps: docs/learning.md).
 With ``guard`` = n > 0 an update is a constrained step: the new parameters are rolled out on a
-fixed set of n episodes each pushed forward (:data:`GUARD_DISTRIBUTION`, drawn once from the
-seed) and taken only if they fall no more often there than the start did (plus
+fixed set of n episodes each pushed forward (:func:`guard_episodes` of ``guard_set``, drawn
+once from the seed) and taken only if they fall no more often there than the start did (plus
 ``guard_slack``); otherwise theta stays where it was and the next generation draws new
 directions. Forward pushes are what every trained network traded for backward pushes and
 changes (docs/learning.md): the guard keeps them out of the trade without a reward term.
@@ -37,13 +37,15 @@ from rabbit_msgs_py.cli import option
 from rabbit_policy.learning.env import EpisodeConfig, RabbitHZDEnv
 from rabbit_policy.learning.spec_env import make_env
 from rabbit_policy.parallel import Backend, LocalBackend, ignore_interrupts  # noqa: F401  (re-exported)
+from rabbit_policy.evaluation.shipping import ScreenTrials
 from rabbit_policy.runtime.fixed_order import vecmat
 from rabbit_policy.runtime.network import HZDPolicyNet, NetworkForward, spec_network
 
 
 OPTIMIZERS = ("adam", "ars")
-GUARD_DISTRIBUTION = "forward_guard"
-"""The guard set's episodes (:data:`~rabbit_policy.learning.env.DISTRIBUTIONS`)."""
+GUARD_SETS = {"changes": "forward_guard", "screen": "screen_forward"}
+"""The guard sets (:attr:`ESConfig.guard_set`) and the distribution each one's episodes draw from
+(:data:`~rabbit_policy.learning.env.DISTRIBUTIONS`)."""
 GUARD_STREAM = 1
 """The guard set is drawn from the generator seeded (seed, GUARD_STREAM): the same set for a
 seed on every machine and after a resume, apart from the generations' draws."""
@@ -65,6 +67,10 @@ class ESConfig(EpisodeConfig):
     guard: int = option(0, "episodes in the forward-push guard set: an update that falls there more often than the "
                            "start (+ guard_slack) is not taken (0: no guard)")
     guard_slack: int = option(0, "falls on the guard set an update may add to the start's, >= 0")
+    guard_set: str = option("changes", "the guard's episodes: changes (changes' commands, 0.7-1.5 m/s, "
+                                       "forward pushes 0.9-1.4x classic's margin) or screen (steady at the "
+                                       "screen's push speeds in turn, forward pushes 1.0-1.3x)",
+                            choices=tuple(GUARD_SETS))
     workers: int = option(1, "processes or Ray CPUs for the rollouts (the run's --workers)", cli=False)
 
     def __post_init__(self) -> None:
@@ -75,6 +81,8 @@ class ESConfig(EpisodeConfig):
             raise ValueError(f"top must be in [0, pairs], got {self.top}")
         if self.optimizer not in OPTIMIZERS:
             raise ValueError(f"optimizer must be one of {OPTIMIZERS}, got {self.optimizer!r}")
+        if self.guard_set not in GUARD_SETS:
+            raise ValueError(f"guard_set must be one of {tuple(GUARD_SETS)}, got {self.guard_set!r}")
         if min(self.guard, self.guard_slack) < 0:
             raise ValueError(f"guard and guard_slack must be >= 0, got {self.guard}, {self.guard_slack}")
         if not (self.sigma > 0.0 and self.lr > 0.0 and self.weight_decay >= 0.0):
@@ -148,6 +156,19 @@ def stratified_episodes(rng: np.random.Generator, count: int, speed_range: tuple
     return [(int(s), float(a), float(b)) for s, a, b in zip(seeds, first, second)]
 
 
+def guard_episodes(rng: np.random.Generator, count: int, guard_set: str) -> list[Episode]:
+    """The guard set's ``count`` episodes: ``changes``, :func:`stratified_episodes` over
+    0.7-1.5 m/s; ``screen``, steady commands at the screen's push speeds
+    (:class:`~rabbit_policy.evaluation.shipping.ScreenTrials`) in turn, each its own seed."""
+    if count == 0:
+        return []
+    if guard_set == "changes":
+        return stratified_episodes(rng, count, (0.7, 1.5))
+    speeds = ScreenTrials().speeds
+    seeds = rng.integers(0, 2**31 - 1, count)
+    return [(int(s), speeds[i % len(speeds)], speeds[i % len(speeds)]) for i, s in enumerate(seeds)]
+
+
 def episode_return(env: RabbitHZDEnv, net: HZDPolicyNet, episode: Episode) -> Rollout:
     """Deterministic policy rollout (the network's output is the action)."""
     seed, first, second = episode
@@ -215,9 +236,10 @@ class EvolutionStrategy:
         self.env_key: EnvKey = tuple(sorted(config.env_kwargs().items()))
         self._own_backend = backend is None
         self.backend = backend if backend is not None else LocalBackend(config.workers)
-        self.guard_key: EnvKey = tuple(sorted({**config.env_kwargs(), "distribution": GUARD_DISTRIBUTION}.items()))
-        self.guard_episodes = (stratified_episodes(np.random.default_rng((config.seed, GUARD_STREAM)), config.guard,
-                                                   (0.7, 1.5)) if config.guard else [])
+        self.guard_key: EnvKey = tuple(sorted({**config.env_kwargs(),
+                                               "distribution": GUARD_SETS[config.guard_set]}.items()))
+        self.guard_episodes = guard_episodes(np.random.default_rng((config.seed, GUARD_STREAM)), config.guard,
+                                             config.guard_set)
         self.guard_reference: int | None = None  # the start's falls on the guard set (measured at the first step)
 
     def close(self, terminate: bool = False) -> None:
