@@ -8,6 +8,7 @@ directly: 1,500 malformed messages published at once."""
 from __future__ import annotations
 
 import math
+import time
 
 import pytest
 import rclpy
@@ -72,3 +73,28 @@ def test_a_flood_of_refused_messages_is_counted_and_logged_once_a_second(flood):
     # refused (a reader's KEEP_LAST may drop some before they are taken), each counted, and logged
     # once a second at most: the logger called a few times, not once a refusal
     assert 100 <= refused <= BURST and len(logger.lines) <= 3, (refused, logger.lines[:5])
+
+
+def test_a_drained_subscription_takes_a_burst_in_one_executor_callback():
+    """``rabbit_msgs_py.polled.subscribe_drained`` (every input a stranger can flood): 300
+    messages waiting are all handed on, in order, by the first executor callback, so a flood
+    costs the executor one callback a burst, not one a message."""
+    from std_msgs.msg import Float64
+
+    from rabbit_msgs_py.polled import subscribe_drained
+
+    with ros_context() as (context, executor):
+        reader, writer = (rclpy.create_node(name, context=context) for name in ("reader", "writer"))
+        taken: list[float] = []
+        subscribe_drained(reader, Float64, "burst", lambda msg: taken.append(msg.data), qos._reliable(1000))
+        publisher = writer.create_publisher(Float64, "burst", qos._reliable(1000))
+        for n in (reader, writer):
+            executor.add_node(n)
+        assert spin_until(executor, lambda: publisher.get_subscription_count() >= 1)
+        for i in range(300):
+            publisher.publish(Float64(data=float(i)))
+        time.sleep(0.3)  # delivered into the reader, none taken
+        deadline = time.monotonic() + 5.0
+        while not taken and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.1)
+    assert taken == [float(i) for i in range(len(taken))] and len(taken) >= 250, len(taken)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import stat
 import tempfile
+import time
 from pathlib import Path
 
 import pytest
@@ -89,6 +90,61 @@ def test_a_keyed_controller_follows_only_its_paired_policys_signed_timing(capfd)
         assert controller.sync.decision_period == 20
     err = capfd.readouterr().err
     assert "rejected /hzd/gait_timing" in err and "not signed" in err
+
+
+@pytest.mark.unit
+def test_a_flood_of_unsigned_gaits_after_the_policys_first_loses_no_signed_gait():
+    """200 unsigned gaits published right after the policy's signed first gait, all waiting
+    before the controller takes any (a 10 kHz flood kept a stack from ever starting: the signed
+    gait, overwritten in a keep-last-1 reader, was never taken): the controller still takes it."""
+    from rabbit_policy.runtime.gait_library import GaitLibrary
+    from std_msgs.msg import Float64MultiArray
+
+    gait = GaitLibrary.load().nearest(1.0)
+    signer = GaitSigner()
+    with ros_context() as (context, executor):
+        import rclpy
+
+        controller = HZDControllerNode(context=context)
+        policy, stranger = (rclpy.create_node(name, context=context) for name in ("policy", "stranger"))
+        timing_pub = policy.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
+        alpha_pub = policy.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        forged_pub = stranger.create_publisher(Float64MultiArray, topics.ALPHA, qos.GAIT_QOS)
+        for node in (controller, policy, stranger):
+            executor.add_node(node)
+        assert spin_until(executor, lambda: forged_pub.get_subscription_count() >= 1
+                          and alpha_pub.get_subscription_count() >= 1)
+        timing_pub.publish(signer.announcement(20))
+        alpha_pub.publish(signer.alpha(gait.alpha, gait.kd))
+        for _ in range(200):  # nothing spins: every one waits in the controller's reader
+            forged_pub.publish(Float64MultiArray(data=[0.0] * 24))
+        time.sleep(0.5)  # delivered, not taken
+        assert spin_until(executor, lambda: controller.gait is not None, timeout=3.0)
+        assert controller.refused_gaits >= 100
+
+
+@pytest.mark.unit
+def test_a_keyed_simulator_batches_on_no_strangers_decision_period():
+    """The simulator ends a batch at each state its policy decides on; a bare ``at_once:7``
+    (a stranger's) moves no batch of a keyed simulator, its policy's signed one does."""
+    from rabbit_sim.sim_node import SimNode
+
+    signer = GaitSigner()
+    with ros_context() as (context, executor):
+        import rclpy
+
+        sim = SimNode(context=context, solo_check=0.0)  # started by hand: the user's key, as the signer's
+        user = rclpy.create_node("timing_sender", context=context)
+        for node in (sim, user):
+            executor.add_node(node)
+        timing_pub = user.create_publisher(String, topics.GAIT_TIMING, qos.GAIT_QOS)
+        assert spin_until(executor, lambda: timing_pub.get_subscription_count() >= 1)
+        period = lambda: getattr(sim._states.batcher._decisions, "period", None)  # noqa: E731 (ns, None: none)
+        timing_pub.publish(String(data="at_once:7"))
+        spin_for(executor, 0.3)
+        assert period() is None
+        timing_pub.publish(signer.announcement(20))
+        assert spin_until(executor, lambda: period() == 20_000_000, timeout=3.0)
 
 
 class Resetter:

@@ -31,6 +31,7 @@ from pathlib import Path
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64, Float64MultiArray, Header, String, UInt32
 
@@ -41,6 +42,7 @@ from rabbit_msgs_py.conversions import (
     alpha_signature,
     controller_id,
     joint_state_from_bytes,
+    may_carry_gait_signature,
     phase_to_msg,
     short,
     stamp_from_ns,
@@ -50,7 +52,8 @@ from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, TICK_NS, parse_gait_tim
 from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
-from rabbit_msgs_py.pairing import KEY_FILE_HELP, GaitOrder, resolve_key
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, UNSIGNED_GAIT, GaitOrder, resolve_key
+from rabbit_msgs_py.polled import subscribe_drained
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
@@ -184,10 +187,10 @@ class HZDControllerNode(Node):
             self._reference_pub = self.create_publisher(JointState, topics.REFERENCE, qos.STREAM_QOS)
             self._error_pub = self.create_publisher(JointState, topics.TRACKING_ERROR, qos.STREAM_QOS)
         self._state_topic = self.resolve_topic_name(topics.JOINT_STATES)
-        self.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS, raw=True)
-        self.create_subscription(Float64MultiArray, topics.ALPHA, self._on_alpha, qos.GAIT_QOS)
-        self.create_subscription(Float64, topics.KD, self._on_kd, qos.GAIT_QOS)
-        self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
+        subscribe_drained(self, JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS, raw=True)
+        self._read_gait_topic(Float64MultiArray, topics.ALPHA, self._on_alpha, self._unsigned_alpha)
+        self._read_gait_topic(Float64, topics.KD, self._on_kd, lambda _raw: self.pairing is not None)  # (see _on_kd)
+        self._read_gait_topic(String, topics.GAIT_TIMING, self._on_gait_timing)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         if "decision_sync" not in self._given:  # hold for due decisions as the simulator's stepping asks
             self.create_subscription(String, topics.SIM_MODE, self._on_sim_mode, qos.STATUS_QOS)
@@ -276,10 +279,28 @@ class HZDControllerNode(Node):
     # ------------------------------------------------------------- callbacks
     def _reject(self, kind: str, topic: str, exc: Exception, keeping: str) -> None:
         self.rejected_gaits += 1
-        line = self._rejections.line(kind, f"rejected {self.resolve_topic_name(topic)}: {short(str(exc), 200)}; "
-                                           f"keeping {keeping}")
+        line = self._rejections.line(kind, lambda: f"rejected {self.resolve_topic_name(topic)}: "
+                                                   f"{short(str(exc), 200)}; keeping {keeping}")
         if line is not None:
             self.get_logger().error(line)
+
+    def _read_gait_topic(self, msg_type, topic: str, handler, refused_raw=None) -> None:
+        """Subscribe ``handler`` to a gait topic, read raw at the reader's depth
+        (``GAIT_READER_QOS``: the policy's message stays among a flood's until taken) and
+        drained (:func:`~rabbit_msgs_py.polled.subscribe_drained`); ``refused_raw(raw)`` True:
+        refused on its bytes, never deserialized."""
+        def on_raw(raw: bytes) -> None:
+            if refused_raw is None or not refused_raw(raw):
+                handler(deserialize_message(raw, msg_type))
+
+        subscribe_drained(self, msg_type, topic, on_raw, qos.GAIT_READER_QOS, raw=True)
+
+    def _unsigned_alpha(self, raw: bytes) -> bool:
+        """Keyed: a gait whose bytes carry no signature, refused (True) before it is read."""
+        if self.pairing is None or may_carry_gait_signature(raw):
+            return False
+        self._refuse_gait(UNSIGNED_GAIT)
+        return True
 
     def _on_alpha(self, msg: Float64MultiArray) -> None:
         """A gait. With a pairing key only a signed one from the paired policy, new in its
@@ -293,18 +314,18 @@ class HZDControllerNode(Node):
             try:
                 source, count, kd = self.pairing.verify_gait(alpha_signature(msg), raw or [])
             except ValueError as exc:
-                self._refuse_gait(exc if raw is not None else problem)
+                self._refuse_gait(str(exc if raw is not None else problem))
                 return
             now = time.monotonic()
             if self._policy is not None and source != self._policy and now - self._policy_wall <= SILENT_WALL:
-                self._refuse_gait(ValueError(f"it is from policy {source} while {self._policy} is alive (a replayed "
-                                             "bag, or a second policy)"))
+                self._refuse_gait(f"it is from policy {source} while {self._policy} is alive (a replayed bag, or "
+                                  "a second policy)")
                 return
             if source not in self._settings_of:  # held until its settings come: none of its gaits runs without
                 _keep_newest(self._early, source, msg)
                 return
             if not self._gait_order.take(source, count):
-                self._refuse_gait(ValueError(f"gait {count} of {source} came again after a later one"))
+                self._refuse_gait(f"gait {count} of {source} came again after a later one")
                 return
             if source != self._policy:
                 if self._policy is not None:
@@ -340,11 +361,11 @@ class HZDControllerNode(Node):
             kd = None
         self._do(self.sync.on_gait_part("kd", kd))
 
-    def _refuse_gait(self, why: Exception) -> None:
+    def _refuse_gait(self, why: str) -> None:
         """A gait not from the paired policy: counted and logged, never applied."""
         self.refused_gaits += 1
-        line = self._rejections.line("unsigned gait", f"refused a gait on {self.resolve_topic_name(topics.ALPHA)}: "
-                                                      f"{short(str(why), 200)}; it moves nothing")
+        line = self._rejections.line("unsigned gait", lambda: f"refused a gait on {self.resolve_topic_name(topics.ALPHA)}"
+                                                              f": {short(why, 200)}; it moves nothing")
         if line is not None:
             self.get_logger().error(line)
 
@@ -360,9 +381,10 @@ class HZDControllerNode(Node):
             settings = timing_settings(msg.data)
             source = self.pairing.verify_settings(msg.data)[0] if self.pairing is not None else None
         except ValueError as exc:
-            line = self._rejections.line("gait_timing", f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} "
-                                                        f"{short(repr(msg.data), 80)}: {exc}; keeping "
-                                                        f"{self.sync.gait_timing} and this controller's settings")
+            topic = self.resolve_topic_name  # (called only for a line that is logged)
+            line = self._rejections.line("gait_timing", lambda: f"rejected {topic(topics.GAIT_TIMING)} "
+                                                                f"{short(repr(msg.data), 80)}: {exc}; keeping "
+                                                                f"{self.sync.gait_timing} and this controller's settings")
             if line is not None:
                 self.get_logger().error(line)
             return

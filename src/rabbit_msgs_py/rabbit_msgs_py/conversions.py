@@ -93,6 +93,18 @@ def alpha_signature(msg: Float64MultiArray) -> str:
     return ""
 
 
+_THREE_DIMENSIONS = (3).to_bytes(4, "little")
+"""The bytes after a signed gait's CDR header: its three dimensions' count."""
+
+
+def may_carry_gait_signature(raw: bytes) -> bool:
+    """False when a gait's serialized bytes (a raw ``/hzd/alpha`` message) cannot carry a
+    signature (:func:`alpha_to_msg`: a third dimension labelled ``SIGNATURE_LABEL``): a keyed
+    controller refuses it before it is deserialized, so a flood of unsigned gaits costs it a
+    few bytes compared a message."""
+    return raw[4:8] == _THREE_DIMENSIONS and SIGNATURE_LABEL.encode() in raw
+
+
 def controller_id(node_name: str) -> str:
     """A fresh id for one controller instance, ``<node name>/<8 hex digits>``: what it
     writes in the ``frame_id`` of its torque replies (a restarted controller is another)."""

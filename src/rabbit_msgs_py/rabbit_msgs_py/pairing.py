@@ -44,6 +44,8 @@ BATCH_LABEL = "state"
 MIN_KEY_CHARS = 16
 MAX_KEY_BYTES = 64  # BLAKE2b's longest key
 NO_KEY = "none"
+UNSIGNED_GAIT = "the gait is not signed (its policy runs without this stack's pairing key)"
+"""Why a gait without a signature is refused (:meth:`PairingKey.verify_gait`)."""
 """``pairing_key:=none``: pair with no key (unsafe: any node on the graph can drive the robot)."""
 KEY_FILE_HELP = ("read the pairing key from this file (owner read/write only; how run_stack hands its key to the "
                  "node processes it starts, never on a command line); '' = use pairing_key")
@@ -95,7 +97,7 @@ class PairingKey:
         """(source, count, Kd) of a gait signed with this key; ``ValueError`` saying why not
         (unsigned, malformed, another key, or alpha changed since it was signed)."""
         if not signature:
-            raise ValueError("the gait is not signed (its policy runs without this stack's pairing key)")
+            raise ValueError(UNSIGNED_GAIT)
         parts = signature.split(" ")
         try:
             source, count, kd, tag = parts[0], int(parts[1]), float(parts[2]), parts[3]

@@ -24,8 +24,10 @@ class RejectionLog:
     _last: dict[str, float] = field(default_factory=dict)
     _unwritten: dict[str, int] = field(default_factory=dict)
 
-    def line(self, kind: str, text: str) -> str | None:
-        """Count it; the line to log, or None within ``period`` of the last one of ``kind``."""
+    def line(self, kind: str, text: str | Callable[[], str]) -> str | None:
+        """Count it; the line to log, or None within ``period`` of the last one of ``kind``
+        (``text`` may be a function, called only for a line that is logged: a flood's refusal
+        then builds no text)."""
         self.counts[kind] = self.counts.get(kind, 0) + 1
         now = self.clock()
         last = self._last.get(kind)
@@ -34,7 +36,7 @@ class RejectionLog:
             return None
         skipped = self._unwritten.pop(kind, 0)
         self._last[kind] = now
-        return text + (f" (and {skipped} more of kind '{kind}' in the last {now - last:.1f} s, not logged: "
+        return (text() if callable(text) else text) + (f" (and {skipped} more of kind '{kind}' in the last {now - last:.1f} s, not logged: "
                        "counted by kind, their texts may differ)" if skipped and last is not None else "")
 
     def flush(self) -> list[str]:
@@ -50,7 +52,7 @@ class RejectionLog:
         return lines
 
 
-def refuse(logger, log: RejectionLog, kind: str, text: str) -> None:
+def refuse(logger, log: RejectionLog, kind: str, text: str | Callable[[], str]) -> None:
     """Count a refusal of ``kind`` in ``log`` and, when one is due, write its line with
     ``logger.error`` (a node's logger): one line a second per kind however many come."""
     line = log.line(kind, text)

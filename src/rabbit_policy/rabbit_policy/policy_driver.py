@@ -265,12 +265,12 @@ class PolicyDriver:
             speed = clamp_speed(value, self.min_speed, self.max_speed)
         except ValueError as exc:
             self.rejected_commands += 1
-            line = self.rejections.line(f"reject {source}", f"rejected {source}: {exc}; keeping "
-                                                            f"{self.desired_speed:.2f} m/s")
+            line = self.rejections.line(f"reject {source}", lambda: f"rejected {source}: {exc}; keeping "
+                                                                    f"{self.desired_speed:.2f} m/s")
             return [Log("error", line)] if line is not None else []
         if speed != value:
-            line = self.rejections.line(f"clamp {source}", clamp_message(value, self.min_speed, self.max_speed,
-                                                                         speed, source))
+            line = self.rejections.line(f"clamp {source}", lambda: clamp_message(value, self.min_speed,
+                                                                                 self.max_speed, speed, source))
             actions += [Log("warning", line)] if line is not None else []
         if speed != (self.target if self.target is not None else self.desired_speed) and source != SCHEDULE_SOURCE:
             line = self.rejections.line("command", f"commanded speed {speed:.2f} m/s")  # (scheduled: with its time)

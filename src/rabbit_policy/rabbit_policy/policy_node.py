@@ -71,6 +71,7 @@ from rabbit_msgs_py.joints import JOINT_NAMES
 from rabbit_msgs_py.log_lines import LineLogger
 from rabbit_msgs_py.pairing import KEY_FILE_HELP, SignedBatches, resolve_key
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets
+from rabbit_msgs_py.polled import subscribe_drained
 from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
@@ -220,21 +221,26 @@ class PolicyNode(Node):
         self._timing_pub.publish(String(data=self.pairing.sign_settings(self.source, timing)
                                         if self.pairing is not None else timing))
         self._speed_pub = self.create_publisher(Float64, topics.CMD_SPEED, qos.COMMAND_QOS)  # scheduled commands
-        self.create_subscription(Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
-        self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
+        # every input a stranger can flood drained (a burst costs one executor callback) and refused with a
+        # topic name resolved once here
+        self._topic = {name: self.resolve_topic_name(name) for name in (
+            topics.CMD_SPEED, topics.CMD_VEL, topics.STATE_BATCH, topics.HIP_VELOCITY, topics.JOINT_STATES,
+            topics.PHASE)}
+        subscribe_drained(self, Float64, topics.CMD_SPEED, self._on_cmd_speed, qos.COMMAND_QOS)
+        subscribe_drained(self, Twist, topics.CMD_VEL, self._on_cmd_vel, qos.COMMAND_QOS)
         if self._hip_source == "state_batch":
-            self._batch_topic = self.resolve_topic_name(topics.STATE_BATCH)
-            self.create_subscription(Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS,
-                                     raw=True)
+            self._batch_topic = self._topic[topics.STATE_BATCH]
+            subscribe_drained(self, Float64MultiArray, topics.STATE_BATCH, self._on_state_batch, qos.BATCH_QOS,
+                              raw=True)
         else:
-            self.create_subscription(TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
+            subscribe_drained(self, TwistStamped, topics.HIP_VELOCITY, self._on_hip_velocity, qos.HIP_VELOCITY_QOS)
         self.create_subscription(Header, topics.STEP, lambda msg: self._do(self.core.on_step(stamp_to_ns(msg.stamp))),
                                  qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, lambda msg: self.core.on_placed(msg.data), qos.STATUS_QOS)
         if self.core.body is not None:
             if self._hip_source == "hip_velocity":
-                self.create_subscription(JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
-            self.create_subscription(JointState, topics.PHASE, self._on_phase, qos.STREAM_QOS)
+                subscribe_drained(self, JointState, topics.JOINT_STATES, self._on_joint_state, qos.STREAM_QOS)
+            subscribe_drained(self, JointState, topics.PHASE, self._on_phase, qos.STREAM_QOS)
         self._do(self.core.start())
         self.get_logger().info(f"policy {self.core.policy.name}: {self.core.desired_speed:.2f} m/s; "
                                f"send speeds on {self.resolve_topic_name(topics.CMD_SPEED)}")
@@ -259,11 +265,11 @@ class PolicyNode(Node):
         return SetParametersResult(successful=True)
 
     def _on_cmd_speed(self, msg: Float64) -> None:
-        self._do(self.core.on_cmd_speed(msg.data, self.resolve_topic_name(topics.CMD_SPEED)))
+        self._do(self.core.on_cmd_speed(msg.data, self._topic[topics.CMD_SPEED]))
 
     def _on_cmd_vel(self, msg: Twist) -> None:
         """``/cmd_vel``: linear.x is the commanded speed; RABBIT walks straight in its plane."""
-        topic = self.resolve_topic_name(topics.CMD_VEL)
+        topic = self._topic[topics.CMD_VEL]
         if not self._warned_planar and (msg.linear.y or msg.linear.z or msg.angular.x or msg.angular.y
                                         or msg.angular.z):
             self._warned_planar = True
@@ -275,7 +281,7 @@ class PolicyNode(Node):
         try:
             self._do(self.core.on_hip_velocity(stamp_to_ns(msg.header.stamp), msg.twist.linear.x))
         except ValueError as exc:
-            self._refused("hip_velocity", f"ignoring {self.resolve_topic_name(topics.HIP_VELOCITY)}: {exc}")
+            self._refused("hip_velocity", f"ignoring {self._topic[topics.HIP_VELOCITY]}: {exc}")
 
     def _refused(self, kind: str, line: str) -> None:
         """Refused input of ``kind``: counted, logged at most once a second with the core's
@@ -304,7 +310,7 @@ class PolicyNode(Node):
         try:
             q, dq = joint_state_vectors(msg.name, msg.position, msg.velocity)
         except MessageError as exc:
-            self._refused("joint_states", f"ignoring {self.resolve_topic_name(topics.JOINT_STATES)}: {exc}")
+            self._refused("joint_states", f"ignoring {self._topic[topics.JOINT_STATES]}: {exc}")
             return
         self._do(self.core.on_body_state(stamp_to_ns(msg.header.stamp), q, dq))
 
@@ -312,7 +318,7 @@ class PolicyNode(Node):
         try:
             stamp, tau, rate = phase_from_msg(msg)
         except MessageError as exc:
-            self._refused("phase", f"ignoring {self.resolve_topic_name(topics.PHASE)}: {exc}")
+            self._refused("phase", f"ignoring {self._topic[topics.PHASE]}: {exc}")
             return
         self._do(self.core.on_phase(stamp, tau, rate))
 

@@ -38,6 +38,7 @@ from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails,
 from rabbit_msgs_py.rejections import RejectionLog, refuse
 from rabbit_msgs_py.service_callers import CallerLog
 from rabbit_msgs_py.pairing import resolve_key
+from rabbit_msgs_py.polled import subscribe_drained
 from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SoloStart
 from rabbit_msgs_py.timers import OneShot, wall_timer
 
@@ -109,16 +110,15 @@ class SimNode(Node):
             data=key.sign_settings(self.source, mode) if key is not None else mode))
         self._torque_topic, self._rejections = self.resolve_topic_name(topics.JOINT_TORQUES), RejectionLog()
         wall_timer(self, 1.0, lambda: [self.get_logger().warning(line) for line in self._rejections.flush()])
-        self.create_subscription(JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
-        # which controller is alive (a stopped or killed one vs a busy one): liveliness events of a raw
-        # subscription to its touchdowns (a few a second; its 1 kHz replies would cost a take per tick)
-        # that matches only publishers declaring a lease
+        subscribe_drained(self, JointState, topics.JOINT_TORQUES, self._on_torques, qos.STREAM_QOS, raw=True)
+        # which controller is alive (stopped or killed vs busy): liveliness events of a raw subscription to its
+        # touchdowns (a few a second, not its 1 kHz replies) that matches only publishers declaring a lease
         self.create_subscription(Header, topics.STEP, lambda _raw: None, qos.LIVELINESS_MONITOR_QOS,
                                  raw=True, event_callbacks=SubscriptionEventCallbacks(
                                      liveliness=self._on_liveliness, incompatible_qos=lambda _info: None))
         self.create_subscription(JointState, topics.INITIAL_STATE, self._on_initial_state, qos.GAIT_QOS)
         self.create_subscription(Wrench, topics.PUSH, self._on_push, qos.COMMAND_QOS)
-        self.create_subscription(String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_QOS)
+        subscribe_drained(self, String, topics.GAIT_TIMING, self._on_gait_timing, qos.GAIT_READER_QOS)
         if self.driver.by_replies:  # a recorder's progress: followed from its first report
             self.create_subscription(Clock, topics.RECORDED_UNTIL, self._on_recorded, qos.STATUS_QOS)
         self.create_service(Trigger, topics.RESET_SERVICE, self._on_reset, qos_profile=qos.SERVICE_QOS)
@@ -126,10 +126,9 @@ class SimNode(Node):
         self.create_service(Trigger, topics.RELEASE_CONTROLLER_SERVICE, self._on_release_controller,
                             qos_profile=qos.SERVICE_QOS)
         self._fallen_pub.publish(Bool(data=False))
-        # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also
-        # a one-shot wake-up armed only while a state waits for its wall time; realtime: the physics steps
-        # in the thread that spins this node, woken by a 1 ms timer and paced by the wall
-        # clock: no second thread, so a tick never waits for the GIL
+        # lockstep/paced: a 20 Hz supervisor (re-sends, the recorder), paced also a one-shot wake-up armed only
+        # while a state waits for its wall time; realtime: the physics steps in the thread that spins this node,
+        # woken by a 1 ms timer and paced by the wall clock: no second thread, so a tick never waits for the GIL
         mode = self.settings.mode
         if self.driver.by_replies:
             wall_timer(self, 0.05, lambda: self._run(self.driver.supervise, self._torque_publishers,
@@ -199,12 +198,13 @@ class SimNode(Node):
         self._run(self.driver.on_initial_state, qpos, qvel)
 
     def _on_gait_timing(self, msg: String) -> None:
-        """A policy's decision period (``at_once:N``): each state it decides on ends a batch."""
+        """A policy's decision period (``at_once:N``): each state it decides on ends a batch (keyed: signed only)."""
         try:
-            _timing, period = parse_gait_timing(msg.data)
+            key = self.driver.pairing.key
+            _timing, period = parse_gait_timing(key.verify_settings(msg.data)[1] if key is not None else msg.data)
         except ValueError as exc:
-            refuse(self.get_logger(), self._rejections, "gait_timing", f"{self.resolve_topic_name(topics.GAIT_TIMING)}: "
-                   f"{exc}; batches keep their {self.settings.batch_ticks}-tick grid")
+            refuse(self.get_logger(), self._rejections, "gait_timing", lambda: f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; "
+                   f"batches keep their {self.settings.batch_ticks}-tick grid")
             return
         with self._lock:
             self._states.batcher.follow_decisions(period)

@@ -19,7 +19,7 @@ from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.conversions import batch_states_or_log, stamp_to_ns
 from rabbit_msgs_py.decision_ticks import TICK_NS
 from rabbit_msgs_py.pairing import PairingKey, SignedBatches
-from rabbit_msgs_py.polled import PolledSubscription
+from rabbit_msgs_py.polled import PolledSubscription, subscribe_drained
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.service_callers import service_clients
 
@@ -160,7 +160,7 @@ class Supervisor(Node):
         self.create_subscription(Bool, topics.FALLEN, self._on_fallen, qos.STATUS_QOS)
         self.create_subscription(Header, topics.STEP, self._count_step, qos.EVENT_QOS)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
-        self.create_subscription(Float64, topics.CMD_SPEED, self._on_command, qos.COMMAND_QOS)
+        subscribe_drained(self, Float64, topics.CMD_SPEED, self._on_command, qos.COMMAND_QOS)  # a flood: one callback
         self.live_commands: list[tuple[float, float]] = []  # (sim s, m/s): commands sent during the run, not scheduled
         self._placements: int | None = None  # /sim/resets when first heard (the placement before the run)
         self.resets = 0  # placements since: resets nobody in the run asked for (run_stack never resets)
