@@ -7,10 +7,13 @@
 * State batches (``/sim/state_batch``, about 50 Hz): reliable, keep last 100 (2 s): the
   policy averages every state and must not lose one.
 * Gait parameters (alpha, Kd, gait timing): reliable, transient local, depth 1 — a
-  controller started late still receives the gait currently in force. The controller reads
-  them with depth 1000 (``GAIT_READER_QOS``): with depth 1 a flood of unsigned gaits
-  overwrote the policy's signed one in its reader before it was taken, and a stack kept
-  from its first gait never started (docs/faults.md).
+  controller started late still receives the gait currently in force. The controller and
+  the simulator read them with depth 100,000 (``GAIT_READER_QOS``; nothing is allocated
+  until messages wait): a flood of unsigned gaits pushes the policy's signed one out of a
+  reader that is not taken in time, and a stack kept from its first gait never starts. A
+  10 kHz flood that began before the controller filled 5,400 messages between its reader's
+  creation and its first take (depth 1000: the policy's first gait lost, the stack never
+  started; docs/faults.md); 100,000 is 10 s of such a flood.
 * User commands (speed, push): reliable, keep last 10.
 * Status (``/fallen``): reliable, transient local, depth 1 — a late subscriber learns
   the current state.
@@ -49,7 +52,7 @@ STREAM_QOS = _reliable(10)
 HIP_VELOCITY_QOS = _reliable(250)
 BATCH_QOS = _reliable(100)
 GAIT_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
-GAIT_READER_QOS = _reliable(1000, DurabilityPolicy.TRANSIENT_LOCAL)
+GAIT_READER_QOS = _reliable(100_000, DurabilityPolicy.TRANSIENT_LOCAL)
 STATUS_QOS = _reliable(1, DurabilityPolicy.TRANSIENT_LOCAL)
 COMMAND_QOS = _reliable(10)
 EVENT_QOS = _reliable(10)
