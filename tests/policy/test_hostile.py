@@ -94,9 +94,10 @@ def test_a_keyed_controller_follows_only_its_paired_policys_signed_timing(capfd)
 
 @pytest.mark.unit
 def test_a_flood_of_unsigned_gaits_after_the_policys_first_loses_no_signed_gait():
-    """200 unsigned gaits published right after the policy's signed first gait, all waiting
+    """3,000 unsigned gaits published right after the policy's signed first gait, all waiting
     before the controller takes any (a 10 kHz flood kept a stack from ever starting: the signed
-    gait, overwritten in a keep-last-1 reader, was never taken): the controller still takes it."""
+    gait was pushed out of the reader, at depth 1 and at depth 1000, before it was taken): the
+    controller still takes it."""
     from rabbit_policy.runtime.gait_library import GaitLibrary
     from std_msgs.msg import Float64MultiArray
 
@@ -116,11 +117,11 @@ def test_a_flood_of_unsigned_gaits_after_the_policys_first_loses_no_signed_gait(
                           and alpha_pub.get_subscription_count() >= 1)
         timing_pub.publish(signer.announcement(20))
         alpha_pub.publish(signer.alpha(gait.alpha, gait.kd))
-        for _ in range(200):  # nothing spins: every one waits in the controller's reader
+        for _ in range(3000):  # nothing spins: every one waits in the controller's reader
             forged_pub.publish(Float64MultiArray(data=[0.0] * 24))
-        time.sleep(0.5)  # delivered, not taken
+        time.sleep(1.0)  # delivered, not taken
         assert spin_until(executor, lambda: controller.gait is not None, timeout=3.0)
-        assert controller.refused_gaits >= 100
+        assert controller.refused_gaits >= 1000
 
 
 @pytest.mark.unit
