@@ -47,7 +47,7 @@ from rabbit_msgs_py.conversions import (
     short,
     stamp_from_ns,
 )
-from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, TICK_NS, parse_gait_timing,
+from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_NS, parse_gait_timing,
                                           precedes_decision, timing_settings)
 from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
@@ -190,7 +190,7 @@ class HZDControllerNode(Node):
         subscribe_drained(self, JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS, raw=True)
         self._read_gait_topic(Float64MultiArray, topics.ALPHA, self._on_alpha, self._unsigned_alpha)
         self._read_gait_topic(Float64, topics.KD, self._on_kd, lambda _raw: self.pairing is not None)  # (see _on_kd)
-        self._read_gait_topic(String, topics.GAIT_TIMING, self._on_gait_timing)
+        self._read_gait_topic(String, topics.GAIT_TIMING, self._on_gait_timing, self._unsigned_timing)
         self.create_subscription(UInt32, topics.RESETS, self._on_resets, qos.STATUS_QOS)
         if "decision_sync" not in self._given:  # hold for due decisions as the simulator's stepping asks
             self.create_subscription(String, topics.SIM_MODE, self._on_sim_mode, qos.STATUS_QOS)
@@ -377,16 +377,9 @@ class HZDControllerNode(Node):
         an earlier run with the same key, a second policy) is kept until its first gait is
         taken; an unsigned one is refused with one line a second. Without a key, at once."""
         try:
-            timing, period = parse_gait_timing(msg.data)
-            settings = timing_settings(msg.data)
-            source = self.pairing.verify_settings(msg.data)[0] if self.pairing is not None else None
-        except ValueError as exc:
-            topic = self.resolve_topic_name  # (called only for a line that is logged)
-            line = self._rejections.line("gait_timing", lambda: f"rejected {topic(topics.GAIT_TIMING)} "
-                                                                f"{short(repr(msg.data), 80)}: {exc}; keeping "
-                                                                f"{self.sync.gait_timing} and this controller's settings")
-            if line is not None:
-                self.get_logger().error(line)
+            timing, period, settings, source = self._checked_timing(msg.data)
+        except ValueError:
+            self._refuse_timing(lambda: msg.data)
             return
         if source is None:
             self._adopt(settings)
@@ -399,6 +392,37 @@ class HZDControllerNode(Node):
                 self._follow_timing(timing, period)
         if source is not None and source in self._early:
             self._on_alpha(self._early.pop(source))
+
+    def _checked_timing(self, data: str) -> tuple:
+        """(timing, period, settings, the signing policy instance or None unkeyed) of an
+        announcement; ``ValueError`` saying why it is refused."""
+        timing, period = parse_gait_timing(data)
+        settings = timing_settings(data)
+        return timing, period, settings, self.pairing.verify_settings(data)[0] if self.pairing is not None else None
+
+    def _refuse_timing(self, data) -> None:
+        """An announcement refused: counted, and one line a second (``data()``: its text,
+        read only for a line that is logged)."""
+        def line() -> str:
+            text = data()
+            try:
+                self._checked_timing(text)
+                why = "refused"  # (not reached: every caller's text is refused)
+            except ValueError as exc:
+                why = str(exc)
+            return (f"rejected {self.resolve_topic_name(topics.GAIT_TIMING)} {short(repr(text), 80)}: {why}; keeping "
+                    f"{self.sync.gait_timing} and this controller's settings")
+
+        line = self._rejections.line("gait_timing", line)
+        if line is not None:
+            self.get_logger().error(line)
+
+    def _unsigned_timing(self, raw: bytes) -> bool:
+        """Keyed: an announcement whose bytes carry no signature, refused (True) before it is read."""
+        if self.pairing is None or SIGNATURE_FIELD.encode() in raw:
+            return False
+        self._refuse_timing(lambda: deserialize_message(raw, String).data)
+        return True
 
     def _follow_timing(self, timing: str, period: int) -> None:
         """The paired policy's gait timing (``next_step`` or ``at_once`` every ``period`` ticks)."""
