@@ -136,9 +136,9 @@ def main(argv: list[str] | None = None) -> int:
         raise
 
     from rabbit_policy.runtime.policies import PolicyUnavailable
-    from rabbit_policy.experiment.options import resolve_controller, schedule_from_args
-    from rabbit_policy.experiment.scenario import parse_pushes
+    from rabbit_policy.experiment.options import resolve_controller
     from rabbit_policy.bringup.config import StackConfig
+    from rabbit_sim.viewer import ViewerUnavailable
     from rabbit_policy.bringup.attached import NothingToAttach, run_attached
     from rabbit_policy.bringup.in_process import run_in_process
     from rabbit_policy.bringup.probe import AnotherStack, other_stack
@@ -156,52 +156,14 @@ def main(argv: list[str] | None = None) -> int:
     config = None
     try:
         resolve_controller(args)
-        schedule = schedule_from_args(args)
-        pushes = parse_pushes(args.push) if args.push else ()
-        config = StackConfig(
-            duration=args.duration, schedule=schedule, controller=args.controller, mode=args.mode,
-            model=args.model, friction=args.friction or 0.0, torso_mass_scale=args.torso_mass_scale,
-            torque_delay=args.torque_delay, library_mode=args.library_mode, gait_dir=args.gait_dir,
-            policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
-            decision=args.decision_period, speed_integral=args.speed_integral,
-            record=os.path.abspath(args.record) if args.record else "",
-            record_compression=args.compression, record_overwrite=args.overwrite,
-            markers_rate=args.markers_rate, reference_rate=args.reference_rate, viewer=args.viewer, rtf=args.rtf,
-            recorder_timeout=args.recorder_timeout, namespace=args.namespace, layout=args.layout,
-        )
-        if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
-            raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
-        if args.viewer:
-            from rabbit_sim.viewer import ViewerUnavailable, require_display
-
-            try:
-                require_display()
-            except ViewerUnavailable as exc:
-                print(f"error: {exc}", file=sys.stderr)
-                refused(str(exc))
-                return 2
-        if args.layout == "attach":
-            given = [name for name, value in (("--record", args.record), ("--push", args.push),
-                                              ("--viewer", args.viewer)) if value]
-            if given:
-                raise ValueError(f"--attach starts no node: {', '.join(given)} belong to the stack's own nodes "
-                                 "(recorder_node, sim_node's push_schedule and viewer parameters)")
-        if args.record and os.path.exists(args.record):
-            from rabbit_sim.bag import is_bag_directory
-
-            if not args.overwrite:
-                raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
-            if not is_bag_directory(Path(args.record)):
-                raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
-        problem = unwritable_dir(Path(os.path.abspath(args.record)).parent) if args.record else None
-        if problem:
-            raise ValueError(f"--record {args.record}: {problem}")
+        config = _config_from(args)
+        _check_outputs(args)
         built = config.build_policy() if config.layout != "attach" else None  # once: refused before any node starts
         policy = built.name if built is not None else None
     except ValueError as exc:
         refused(str(exc))
         parser.error(str(exc))
-    except PolicyUnavailable as exc:  # (a --spec that is not one, a policy that cannot be built)
+    except (PolicyUnavailable, ViewerUnavailable) as exc:  # (a --spec that is not one; --viewer without a display)
         print(f"error: {exc}", file=sys.stderr)
         refused(str(exc))
         return 2
@@ -239,6 +201,56 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return _report_and_exit(RunReport.not_started(config, str(exc)), config, args.json)
     return _report_and_exit(report, config, args.json)
+
+
+def _config_from(args):
+    """The run's :class:`~rabbit_policy.bringup.config.StackConfig` from the parsed command line
+    (the controller already resolved); ``ValueError`` saying which option is wrong."""
+    from rabbit_policy.bringup.config import StackConfig
+    from rabbit_policy.experiment.options import schedule_from_args
+    from rabbit_policy.experiment.scenario import parse_pushes
+
+    pushes = parse_pushes(args.push) if args.push else ()
+    config = StackConfig(
+        duration=args.duration, schedule=schedule_from_args(args), controller=args.controller, mode=args.mode,
+        model=args.model, friction=args.friction or 0.0, torso_mass_scale=args.torso_mass_scale,
+        torque_delay=args.torque_delay, library_mode=args.library_mode, gait_dir=args.gait_dir,
+        policy_file=os.path.abspath(args.policy_file) if args.policy_file else "", pushes=pushes,
+        decision=args.decision_period, speed_integral=args.speed_integral,
+        record=os.path.abspath(args.record) if args.record else "",
+        record_compression=args.compression, record_overwrite=args.overwrite,
+        markers_rate=args.markers_rate, reference_rate=args.reference_rate, viewer=args.viewer, rtf=args.rtf,
+        recorder_timeout=args.recorder_timeout, namespace=args.namespace, layout=args.layout,
+    )
+    if not (math.isfinite(args.markers_rate) and args.markers_rate >= 0.0):
+        raise ValueError(f"--markers-rate must be a finite number >= 0, got {args.markers_rate}")
+    if args.layout == "attach":
+        given = [name for name, value in (("--record", args.record), ("--push", args.push),
+                                          ("--viewer", args.viewer)) if value]
+        if given:
+            raise ValueError(f"--attach starts no node: {', '.join(given)} belong to the stack's own nodes "
+                             "(recorder_node, sim_node's push_schedule and viewer parameters)")
+    return config
+
+
+def _check_outputs(args) -> None:
+    """What the run needs outside itself: a display for ``--viewer``
+    (:class:`~rabbit_sim.viewer.ViewerUnavailable`), a ``--record`` directory it may write
+    (``ValueError``)."""
+    if args.viewer:
+        from rabbit_sim.viewer import require_display
+
+        require_display()
+    if args.record and os.path.exists(args.record):
+        from rabbit_sim.bag import is_bag_directory
+
+        if not args.overwrite:
+            raise ValueError(f"--record {args.record} exists; choose another directory or pass --overwrite")
+        if not is_bag_directory(Path(args.record)):
+            raise ValueError(f"--record {args.record} is not a bag directory; refusing to overwrite it")
+    problem = unwritable_dir(Path(os.path.abspath(args.record)).parent) if args.record else None
+    if problem:
+        raise ValueError(f"--record {args.record}: {problem}")
 
 
 def _report_and_exit(report, config, as_json: bool) -> int:
