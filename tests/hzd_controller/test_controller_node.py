@@ -26,7 +26,7 @@ def _state(stamp_ns: int) -> JointState:
     key, _source = resolve_key("")
     msg = JointState(name=list(JOINT_NAMES), position=q, velocity=dq, effort=[0.0] * len(JOINT_NAMES))
     msg.header.stamp = stamp_from_ns(stamp_ns)
-    msg.header.frame_id = key.sign_state("state_sender/test", stamp_ns, q, dq)
+    msg.header.frame_id = key.sign_state("state_sender/test", 1, stamp_ns, q, dq)  # (placed once)
     return msg
 
 

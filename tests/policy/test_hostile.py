@@ -364,3 +364,69 @@ def test_forged_joint_states_are_refused_by_the_keyed_controller_and_the_walk_co
     assert report.completed and not report.fell and report.decisions_lost == 0
     assert nodes["hzd_controller_node"].rejected_states >= 1
     assert "not signed with this stack's pairing key" in capfd.readouterr().err
+
+
+class StateReplayer:
+    """A stranger's node on /joint_states: it keeps the signed state of t = 0.5 s and, when
+    /clock says 1 s, sends it again three times (before states were ordered, the controller
+    took it for a reset: it restarted its walk, waited out a decision and the run was not
+    complete). It also records each state's stamp, positions and velocities as it arrives."""
+
+    def __init__(self, context) -> None:
+        import rclpy
+        from rosgraph_msgs.msg import Clock
+        from sensor_msgs.msg import JointState
+
+        self.node = rclpy.create_node("state_replayer", context=context)
+        self._pub = self.node.create_publisher(JointState, topics.JOINT_STATES, qos.STREAM_QOS)
+        self.node.create_subscription(JointState, topics.JOINT_STATES, self._on_state, qos.STREAM_QOS)
+        self.node.create_subscription(Clock, topics.CLOCK, self._on_clock, qos.CLOCK_QOS)
+        self.kept, self.sent, self.rows = None, False, []
+
+    def _on_state(self, msg) -> None:
+        from rabbit_msgs_py.conversions import stamp_to_ns
+
+        stamp = stamp_to_ns(msg.header.stamp)
+        self.rows.append((stamp, *msg.position, *msg.velocity))
+        if stamp == 500_000_000 and self.kept is None:
+            self.kept = msg
+
+    def _on_clock(self, msg) -> None:
+        from rabbit_msgs_py.conversions import stamp_to_ns
+
+        if stamp_to_ns(msg.clock) == 10 ** 9 and self.kept is not None and not self.sent:
+            self.sent = True
+            for _ in range(3):
+                self._pub.publish(self.kept)
+
+    def destroy_node(self) -> None:
+        self.node.destroy_node()
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_a_replayed_signed_state_is_refused_and_the_walk_is_the_ros_free_loops_bit_for_bit(capfd):
+    """The simulator signs each state with its placement count; a keyed controller takes them
+    in (placement, stamp) order, so a signed state sent again after later ones moves nothing:
+    the walk completes with no decision lost, its states those of the ROS-free loop."""
+    import numpy as np
+
+    from rabbit_policy.bringup.in_process import run_in_process
+    from stack_helpers import loop_states
+
+    made = []
+
+    def factory(context):
+        made.append(StateReplayer(context))
+        return made[-1].node
+
+    report, nodes = run_in_process(StackConfig(duration=2.0, schedule=((0.0, 1.0),)), observers=[factory])
+    assert made[0].sent and report.completed and not report.fell and report.decisions_lost == 0
+    assert nodes["hzd_controller_node"].rejected_states == 3
+    walked, newest = [], -1
+    for stamp, *row in made[0].rows:  # the simulator's states: in stamp order (a re-send or the replays left out)
+        if stamp > newest:
+            walked.append(row)
+            newest = stamp
+    assert np.array_equal(np.array(walked), loop_states(2.0))
+    assert "(a replay)" in capfd.readouterr().err

@@ -52,7 +52,7 @@ from rabbit_msgs_py.decision_ticks import (GAIT_TIMINGS, SIGNATURE_FIELD, TICK_N
 from rabbit_msgs_py.cdr import JointStateWriter
 from rabbit_msgs_py.joints import ACTUATED_JOINTS
 from rabbit_msgs_py.parameters import Param, coerce, declare, finite, forget_secrets, overrides_given
-from rabbit_msgs_py.pairing import KEY_FILE_HELP, UNSIGNED_GAIT, GaitOrder, resolve_key
+from rabbit_msgs_py.pairing import KEY_FILE_HELP, UNSIGNED_GAIT, GaitOrder, SignedStates, resolve_key
 from rabbit_msgs_py.polled import subscribe_drained
 from rabbit_msgs_py.rejections import RejectionLog
 from rabbit_msgs_py.node_runner import NodeStartError, destroyed_if_start_fails, run_node
@@ -156,6 +156,7 @@ class HZDControllerNode(Node):
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self._states = SignedStates(self.pairing) if self.pairing is not None else None  # keyed: states in order
         self.torques_published = 0
         self.rejected_gaits = 0
         self.refused_gaits = 0  # gaits not signed by the paired policy (with a pairing key)
@@ -489,7 +490,9 @@ class HZDControllerNode(Node):
         self._do(self.sync.on_sim_mode(holds))
 
     def _on_resets(self, msg: UInt32) -> None:
-        self._do(self.sync.on_resets(msg.data))
+        """Unkeyed: a placement count on ``/sim/resets`` (keyed, the signed states carry it)."""
+        if self._states is None:
+            self._do(self.sync.on_resets(msg.data))
 
     def _on_state(self, msg: bytes) -> None:
         """A state, serialized (taken raw: the 1 kHz path builds no message object)."""
@@ -498,11 +501,13 @@ class HZDControllerNode(Node):
         except MessageError as exc:  # counted, one line a second: a 10 kHz flood costs the loop little
             self._refuse_state("joint_states", f"ignoring malformed {self._state_topic}: {exc}")
             return
-        if self.pairing is not None and self.pairing.verify_state(frame_id, stamp, q, dq) is None:
-            self._refuse_state("unsigned state", f"refused a state on {self._state_topic} not signed with this "
-                                                 "stack's pairing key (its simulator runs without it, or another "
-                                                 "node sent it)")
-            return
+        if self._states is not None:  # keyed: signed, in order; a later placement is a reset
+            try:
+                placement = self._states.check(frame_id, stamp, q, dq)
+            except ValueError as exc:
+                self._refuse_state("unsigned state", lambda: f"refused a state on {self._state_topic}: {exc}")
+                return
+            self._do(self.sync.on_resets(placement))
         self._do(self.sync.on_state(stamp, q, dq))
         missing = self.sync.missing
         if not missing:
@@ -517,7 +522,7 @@ class HZDControllerNode(Node):
             self.get_logger().warning(f"no gait yet (waiting for {waiting}); the state will be answered once it is "
                                       "complete", throttle_duration_sec=2.0)
 
-    def _refuse_state(self, kind: str, text: str) -> None:
+    def _refuse_state(self, kind: str, text) -> None:
         self.rejected_states += 1
         line = self._rejections.line(kind, text)
         if line is not None:

@@ -157,21 +157,28 @@ class PairingKey:
         payload = source.encode() + b"\0" + text.encode()
         return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-settings").hexdigest()
 
-    def sign_state(self, source: str, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
-        """The ``frame_id`` of a signed ``/joint_states`` from simulator instance ``source``: the
-        MAC of the stamp (ns), positions and velocities (m, rad, m/s, rad/s)."""
-        return f"{source}{TAG_SEPARATOR}{self._state_tag(stamp, q, dq)}"
+    def sign_state(self, source: str, placement: int, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
+        """The ``frame_id`` of a signed ``/joint_states`` from simulator instance ``source``,
+        ``<source>#<placement>:<tag>``: the MAC of the placement count (the robot placed for the
+        ``placement``-th time: 1 at the start, one more each reset), the stamp (ns), positions and
+        velocities (m, rad, m/s, rad/s). A keyed controller orders states by (placement, stamp):
+        an older one is a replay, a later placement a reset."""
+        return f"{source}{TAG_SEPARATOR}{placement}:{self._state_tag(placement, stamp, q, dq)}"
 
-    def verify_state(self, frame_id: str, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str | None:
-        """The simulator instance of a state signed with this key, else None (unsigned, another
-        key, or changed since it was signed)."""
-        source, separator, tag = frame_id.rpartition(TAG_SEPARATOR)
-        if not separator or not hmac.compare_digest(tag, self._state_tag(stamp, q, dq)):
+    def verify_state(self, frame_id: str, stamp: int, q: Sequence[float],
+                     dq: Sequence[float]) -> tuple[str, int] | None:
+        """(simulator instance, placement count) of a state signed with this key, else None
+        (unsigned, another key, or changed since it was signed)."""
+        source, separator, field = frame_id.rpartition(TAG_SEPARATOR)
+        placement, colon, tag = field.partition(":")
+        if not (separator and colon and placement.isdigit()):
             return None
-        return source
+        if not hmac.compare_digest(tag, self._state_tag(int(placement), stamp, q, dq)):
+            return None
+        return source, int(placement)
 
-    def _state_tag(self, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
-        payload = struct.pack(f"<q{len(q) + len(dq)}d", stamp, *q, *dq)
+    def _state_tag(self, placement: int, stamp: int, q: Sequence[float], dq: Sequence[float]) -> str:
+        payload = struct.pack(f"<qq{len(q) + len(dq)}d", placement, stamp, *q, *dq)
         return hashlib.blake2b(payload, key=self.secret, digest_size=8, person=b"rabbit-state").hexdigest()
 
     def verify(self, frame_id: str, stamp: int, torques: Sequence[float]) -> str | None:
@@ -303,6 +310,41 @@ class SignedBatches:
             self.refused += 1
             raise
         self.source, self._count, self._wall = source, count, now
+
+
+class SignedStates:
+    """A keyed controller's check of ``/joint_states``: a state signed with ``key``
+    (:meth:`PairingKey.sign_state`), from one simulator instance, in (placement, stamp) order:
+    the same state again is a lockstep re-send, an earlier one a replay (refused: before, three
+    copies of a recorded state made the controller restart its walk and lose a decision), a
+    later placement a reset. Another instance's states are taken only once the one followed
+    has been silent for :data:`BATCH_SWITCH_AFTER` wall s (``clock``: wall s; a simulator
+    restarted by hand)."""
+
+    def __init__(self, key: "PairingKey", clock: Callable[[], float] = time.monotonic) -> None:
+        self.key, self.clock = key, clock
+        self.source: str | None = None
+        self.placement = 0
+        self._stamp = -1
+        self._wall = 0.0
+
+    def check(self, frame_id: str, stamp: int, q: Sequence[float], dq: Sequence[float]) -> int:
+        """The placement count of a state to take, or ``ValueError`` saying why not."""
+        signed = self.key.verify_state(frame_id, stamp, q, dq)
+        if signed is None:
+            raise ValueError("not signed with this stack's pairing key (its simulator runs without it, or another "
+                             "node sent it)")
+        source, placement = signed
+        now = self.clock()
+        if source == self.source:
+            if (placement, stamp) < (self.placement, self._stamp):
+                raise ValueError(f"placement {placement} at t = {stamp / 1e9:.3f} s of {source} came after placement "
+                                 f"{self.placement} at t = {self._stamp / 1e9:.3f} s (a replay)")
+        elif self.source is not None and now - self._wall < BATCH_SWITCH_AFTER:
+            raise ValueError(f"it is from simulator {source} while {self.source} runs (a replay from another run, or "
+                             "a second simulator)")
+        self.source, self.placement, self._stamp, self._wall = source, placement, stamp, now
+        return placement
 
 
 class GaitOrder:

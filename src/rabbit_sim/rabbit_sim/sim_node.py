@@ -24,7 +24,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Bool, Header, String, UInt32
+from std_msgs.msg import Bool, Header, String
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
@@ -100,7 +100,6 @@ class SimNode(Node):
         self._states = StateTopics(self, self.settings.batch_ticks, self.settings.clock_ticks,
                                    self.driver.pairing.key, self.source)
         self._fallen_pub = pub(Bool, topics.FALLEN, qos.STATUS_QOS)
-        self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
         self._push_applied_pub = pub(WrenchStamped, topics.PUSH_APPLIED, qos.EVENT_QOS)
         self._markers_pub = pub(MarkerArray, topics.MARKERS, qos.MARKERS_QOS)
         self.driver.markers_wanted = lambda: self._markers_pub.get_subscription_count() > 0  # none built for nobody
@@ -283,7 +282,7 @@ class SimNode(Node):
             elif kind is Fallen:
                 self._fallen_pub.publish(Bool(data=action.value))
             elif kind is Placed:
-                self._resets_pub.publish(UInt32(data=action.count))
+                self._states.placed(action.count)
         if self.driver.halted or self.driver.paused:
             self._states.send_batch()  # nothing follows soon: the observers get the last states now
         wait = self.driver.pace_wait if self._pace_timer is not None else None

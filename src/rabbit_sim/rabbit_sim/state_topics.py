@@ -12,7 +12,7 @@ from __future__ import annotations
 from geometry_msgs.msg import TwistStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, Header
+from std_msgs.msg import Float64MultiArray, Header, UInt32
 
 from rabbit_msgs_py import qos, topics
 from rabbit_msgs_py.cdr import JointStateWriter
@@ -38,16 +38,26 @@ class StateTopics:
         self._batch_pub = pub(Float64MultiArray, topics.STATE_BATCH, qos.BATCH_QOS)
         self._hip_pub = pub(TwistStamped, topics.HIP_VELOCITY, qos.HIP_VELOCITY_QOS)
         self._clock_pub = pub(Clock, topics.CLOCK, qos.CLOCK_QOS)
+        self._resets_pub = pub(UInt32, topics.RESETS, qos.STATUS_QOS)
+        self.placement = 0  # the robot's placements so far (signed into every state)
         self.batcher = StateBatcher(batch_ticks)
         self._clock_every = clock_ticks * TICK_NS  # ns of sim time between /clock messages
         self._joint_states = JointStateWriter(JOINT_NAMES)  # serialized: no message object per tick
         self._hip_msg = TwistStamped(header=Header(frame_id="world"))
         self._key, self._source, self.batches_sent = key, source, 0
 
+    def placed(self, count: int) -> None:
+        """The robot was placed for the ``count``-th time: ``/sim/resets``, and the count every
+        state signs from now on."""
+        self.placement = count
+        self._resets_pub.publish(UInt32(data=count))
+
     def publish(self, state: State) -> None:
         """One state on every topic that takes it now."""
-        # keyed: signed (frame_id, PairingKey.sign_state), so a keyed controller takes no other node's states
-        signed = self._key.sign_state(self._source, state.stamp, state.qpos, state.qvel) if self._key is not None else ""
+        # keyed: signed with its placement (frame_id, PairingKey.sign_state): a keyed controller takes no other
+        # node's states, and no state of this one's again after a later one (a replay)
+        signed = (self._key.sign_state(self._source, self.placement, state.stamp, state.qpos, state.qvel)
+                  if self._key is not None else "")
         self._state_pub.publish(self._joint_states.bytes(state.stamp, signed, state.qpos, state.qvel, state.effort))
         if self.batcher.add(state.stamp, state.qpos, state.qvel, state.effort):
             self.send_batch()
