@@ -365,8 +365,9 @@ class HZDControllerNode(Node):
     def _refuse_gait(self, why: str) -> None:
         """A gait not from the paired policy: counted and logged, never applied."""
         self.refused_gaits += 1
-        line = self._rejections.line("unsigned gait", lambda: f"refused a gait on {self.resolve_topic_name(topics.ALPHA)}"
-                                                              f": {short(why, 200)}; it moves nothing")
+        topic = self.resolve_topic_name  # (called only for a line that is logged)
+        line = self._rejections.line("unsigned gait", lambda: f"refused a gait on {topic(topics.ALPHA)}: "
+                                                              f"{short(why, 200)}; it moves nothing")
         if line is not None:
             self.get_logger().error(line)
 

@@ -36,7 +36,8 @@ class RejectionLog:
             return None
         skipped = self._unwritten.pop(kind, 0)
         self._last[kind] = now
-        return (text() if callable(text) else text) + (f" (and {skipped} more of kind '{kind}' in the last {now - last:.1f} s, not logged: "
+        text = text() if callable(text) else text
+        return text + (f" (and {skipped} more of kind '{kind}' in the last {now - last:.1f} s, not logged: "
                        "counted by kind, their texts may differ)" if skipped and last is not None else "")
 
     def flush(self) -> list[str]:
