@@ -506,7 +506,7 @@ class HZDControllerNode(Node):
             try:
                 placement = self._states.check(frame_id, stamp, q, dq)
             except ValueError as exc:
-                self._refuse_state("unsigned state", lambda: f"refused a state on {self._state_topic}: {exc}")
+                self._refuse_state("unsigned state", lambda exc=exc: f"refused a state on {self._state_topic}: {exc}")
                 return
             self._do(self.sync.on_resets(placement))
         self._do(self.sync.on_state(stamp, q, dq))

@@ -265,8 +265,8 @@ class PolicyDriver:
             speed = clamp_speed(value, self.min_speed, self.max_speed)
         except ValueError as exc:
             self.rejected_commands += 1
-            line = self.rejections.line(f"reject {source}", lambda: f"rejected {source}: {exc}; keeping "
-                                                                    f"{self.desired_speed:.2f} m/s")
+            line = self.rejections.line(f"reject {source}", lambda exc=exc: f"rejected {source}: {exc}; keeping "
+                                                                            f"{self.desired_speed:.2f} m/s")
             return [Log("error", line)] if line is not None else []
         if speed != value:
             line = self.rejections.line(f"clamp {source}", lambda: clamp_message(value, self.min_speed,

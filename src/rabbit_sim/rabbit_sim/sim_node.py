@@ -202,7 +202,7 @@ class SimNode(Node):
             key = self.driver.pairing.key
             _timing, period = parse_gait_timing(key.verify_settings(msg.data)[1] if key is not None else msg.data)
         except ValueError as exc:
-            refuse(self.get_logger(), self._rejections, "gait_timing", lambda: f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; "
+            refuse(self.get_logger(), self._rejections, "gait_timing", lambda exc=exc: f"{self.resolve_topic_name(topics.GAIT_TIMING)}: {exc}; "
                    f"batches keep their {self.settings.batch_ticks}-tick grid")
             return
         with self._lock:
