@@ -329,3 +329,38 @@ def test_no_two_folders_import_each_other_round_a_circle():
                     path.pop()
         walk(start)
     assert not circles, f"folders importing round a circle: {circles[:5]}"
+
+
+def test_no_spec_section_mirrors_a_runtime_class():
+    """One class per rule (issue 74): a spec section is the runtime's own dataclass, or a
+    subclass adding what only the file needs (the controller section's model hash); no class
+    of the schema declares three or more of a runtime dataclass's fields again (a name and its
+    type: the network section's ``low`` is a list of numbers in the file, an array in the
+    forward pass; that is a file's description of the runtime's arrays, not a copy)."""
+    import dataclasses
+    import importlib
+    import pkgutil
+
+    import rabbit_hzd_controller
+    import rabbit_policy.runtime
+    from rabbit_policy.spec import schema
+
+    runtime = []
+    for package in (rabbit_policy.runtime, rabbit_hzd_controller):
+        for info in pkgutil.iter_modules(package.__path__):
+            if info.name.endswith("_node"):
+                continue
+            module = importlib.import_module(f"{package.__name__}.{info.name}")
+            runtime += [c for c in vars(module).values()
+                        if isinstance(c, type) and dataclasses.is_dataclass(c) and c.__module__ == module.__name__]
+    assert len(runtime) >= 10
+    spec_classes = [c for c in vars(schema).values()
+                    if isinstance(c, type) and dataclasses.is_dataclass(c) and c.__module__ == schema.__name__]
+    mirrors = []
+    for spec_class in spec_classes:
+        own = set(spec_class.__dict__.get("__annotations__", {}).items())
+        for cls in runtime:
+            shared = {name for name, kind in own & {(f.name, str(f.type)) for f in dataclasses.fields(cls)}}
+            if len(shared) >= 3:
+                mirrors.append(f"{spec_class.__name__} ~ {cls.__name__}: {sorted(shared)}")
+    assert not mirrors, mirrors

@@ -195,8 +195,11 @@ def _spec_copy(tmp_path: Path, kind: str = "learned") -> tuple[Path, dict]:
     (lambda d: d["speed_integral"].update(dt=0.5), "speed_integral.dt (0.5 s) must be the time between decisions, "
                                                    "0.02 s (decision.period_ticks 20)"),
     (lambda d: d["speed_integral"].update(speed_range=[1.5, 0.7]), "spec.speed_integral: the speed integral's speed range needs low < high"),
-    (lambda d: d["controller"].update(within_step_until=1.5), "controller.within_step_until must be a finite number "
-                                                              ">= 0 and <= 1, got 1.5"),
+    (lambda d: d["controller"].update(within_step_until=1.5), "spec.controller: within_step_until must be in (0, 1], "
+                                                              "got 1.5"),
+    (lambda d: d["controller"].update(knee_coefficient_range=[1.9, -0.3]),
+     "spec.controller: knee_coefficient_range must be finite and ordered low < high (rad), got [1.9, -0.3]"),
+    (lambda d: d["controller"].update(model_sha256="abc"), "controller.model_sha256 must be 64 hex digits"),
     (lambda d: d["blend"].update(length=-0.1), "spec.blend: an alpha blend needs a length and until in"),
     (lambda d: d["gait_library"].update(mode="nearest"), "gait_library.mode 'nearest': a learned controller's gaits"),
     (lambda d: d["network"]["residual"].update(base="raibert"), "network.residual.base must be one of"),

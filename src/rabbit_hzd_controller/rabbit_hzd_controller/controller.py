@@ -22,7 +22,7 @@ Per tick:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from enum import IntEnum
 from math import isfinite
 from typing import Sequence
@@ -52,12 +52,13 @@ _LEFT = Leg.LEFT  # one global lookup on the hot path instead of two
 
 
 @dataclass(frozen=True)
-class ControllerConfig:
-    """Fixed parameters of the HZD controller.
+class ControllerSettings:
+    """The HZD controller's own constants (a controller spec's ``controller`` section reads this
+    class, every field, and names the robot model beside it; the defaults below are the code's,
+    read by no shipped controller).
 
     kp: proportional gain (N m/rad), the same for the four joints (the paper's fixed Kp).
     torque_limit: actuator saturation (N m), RABBIT's 150 N m peak.
-    geometry: leg link lengths (m), must match the simulated model.
     touchdown_min_phase: the swing foot may only touch down once the unsaturated phase has
         reached this value (debounces scuffing right after a switch).
     touchdown_height: swing-foot tip height above the ground (m) at or below which the
@@ -81,11 +82,12 @@ class ControllerConfig:
         phase waits for the next touchdown instead (and blends in there over
         ``blend_phase``): changing the swing leg's path just before it lands can make a
         fast deceleration fall (docs/controller.md, "A gait within the step", measures it).
+    min_phase_rate: the phase advances at least this fast (1/s) from one tick to the next:
+        a slower measured phase is raised to that floor and its rate to this (0: off).
     """
 
     kp: float = 3000.0
     torque_limit: float = 150.0
-    geometry: LegGeometry = field(default_factory=LegGeometry)
     touchdown_min_phase: float = 0.5
     touchdown_height: float = 0.0
     min_step_length: float = 0.05
@@ -96,25 +98,46 @@ class ControllerConfig:
     within_step_blend: float = 0.2
     within_step_until: float = 0.6
     min_phase_rate: float = 0.0
-    tick: float = 0.001
 
     def __post_init__(self) -> None:
         for name in ("kp", "torque_limit", "min_step_length", "max_kd"):
             value = getattr(self, name)
             if not (isfinite(value) and value > 0.0):
-                raise ValueError(f"ControllerConfig.{name} must be finite and > 0, got {value}")
+                raise ValueError(f"{name} must be finite and > 0, got {value!r}")
         if not 0.0 < self.touchdown_min_phase < 1.0:
-            raise ValueError("ControllerConfig.touchdown_min_phase must be in (0, 1)")
+            raise ValueError(f"touchdown_min_phase must be in (0, 1), got {self.touchdown_min_phase!r}")
+        if not isfinite(self.touchdown_height):
+            raise ValueError(f"touchdown_height must be finite (m), got {self.touchdown_height!r}")
+        for name in ("hip_coefficient_range", "knee_coefficient_range"):
+            low, high = getattr(self, name)
+            if not (isfinite(low) and isfinite(high) and low < high):
+                raise ValueError(f"{name} must be finite and ordered low < high (rad), got {[low, high]}")
         if not 0.0 <= self.blend_phase <= 1.0:
-            raise ValueError("ControllerConfig.blend_phase must be in [0, 1]")
+            raise ValueError(f"blend_phase must be in [0, 1], got {self.blend_phase!r}")
         if not 0.0 <= self.within_step_blend <= 1.0:
-            raise ValueError("ControllerConfig.within_step_blend must be in [0, 1]")
+            raise ValueError(f"within_step_blend must be in [0, 1], got {self.within_step_blend!r}")
         if not 0.0 < self.within_step_until <= 1.0:
-            raise ValueError("ControllerConfig.within_step_until must be in (0, 1]")
+            raise ValueError(f"within_step_until must be in (0, 1], got {self.within_step_until!r}")
         if not (isfinite(self.min_phase_rate) and self.min_phase_rate >= 0.0):
-            raise ValueError("ControllerConfig.min_phase_rate must be finite and >= 0 (1/s)")
+            raise ValueError(f"min_phase_rate must be finite and >= 0 (1/s), got {self.min_phase_rate!r}")
+
+    def settings(self) -> dict:
+        """Every :class:`ControllerSettings` field by name (what ``ControllerConfig(**...)`` takes)."""
+        return {f.name: getattr(self, f.name) for f in fields(ControllerSettings)}
+
+
+@dataclass(frozen=True)
+class ControllerConfig(ControllerSettings):
+    """The controller's settings on a robot model: ``geometry``, its leg link lengths (m), must
+    match the simulated model; ``tick``, the control period (s)."""
+
+    geometry: LegGeometry = field(default_factory=LegGeometry)
+    tick: float = 0.001
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
         if not (isfinite(self.tick) and self.tick > 0.0):
-            raise ValueError("ControllerConfig.tick must be finite and > 0 (s)")
+            raise ValueError(f"tick must be finite and > 0 (s), got {self.tick!r}")
 
 
 def validate_alpha(alpha: Sequence[float], config: ControllerConfig) -> np.ndarray:

@@ -6,12 +6,12 @@ shipped."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
 
-from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_hzd_controller.controller import ControllerSettings
 from rabbit_msgs_py.decision_ticks import OWN, DecisionTiming
 from rabbit_policy.spec.provenance import code_commit
 from rabbit_policy.runtime.classic import DEFAULT_DECISION_WINDOW
@@ -20,7 +20,7 @@ from rabbit_policy.runtime.memory import MemoryConfig
 from rabbit_policy.runtime.recovery import CONTROLLER_SETTINGS, OverlayConfig, RecoveryConfig
 from rabbit_policy.runtime.speed_integral import decision_dt
 from rabbit_policy.spec.files import PACKAGED, library_dir, library_hash, save_weights
-from rabbit_policy.spec.schema import (SPEC_VERSION, ControllerSettingsSpec, ControllerSpec, DecisionSpec,
+from rabbit_policy.spec.schema import (SPEC_VERSION, ControllerSection, ControllerSpec, DecisionSpec,
                                        LibrarySpec, NetworkSpec, ResidualSpec, WeightsSpec,
                                        dump_spec, load_spec, parse_spec)
 from rabbit_sim.physics.model import model_sha256
@@ -35,12 +35,10 @@ def _library(source: str, base: Path, mode: str = "interpolate") -> LibrarySpec:
     return LibrarySpec(source, library_hash(library_dir(source, base)), mode)
 
 
-def _settings(values: dict) -> ControllerSettingsSpec:
-    """The controller section a checkpoint ran with: ``values`` over ``ControllerConfig``'s
+def _settings(values: dict) -> ControllerSection:
+    """The controller section a checkpoint ran with: ``values`` over ``ControllerSettings``'
     defaults, for the packaged robot model."""
-    config = replace(ControllerConfig(), **values)
-    return ControllerSettingsSpec(**{f.name: getattr(config, f.name) for f in fields(ControllerSettingsSpec)
-                                     if f.name != "model_sha256"}, model_sha256=model_sha256())
+    return ControllerSection(**replace(ControllerSettings(), **values).settings(), model_sha256=model_sha256())
 
 
 def network_arrays(checkpoint) -> tuple[list[np.ndarray], list[np.ndarray], dict[str, np.ndarray]]:
@@ -98,7 +96,7 @@ def checkpoint_spec(info: dict, layers: tuple[list, list], buffers: dict, weight
         values = info["recovery_overlay"]
         overlay = OverlayConfig(float(values["fast_gate"]), float(values["hold"]), float(values.get("rise_until", 1.0)))
         if values.get("policy_blend"):
-            defaults = ControllerConfig()
+            defaults = ControllerSettings()
             blend = BlendConfig(defaults.within_step_blend, defaults.within_step_until)
         rule = RecoveryConfig()
         settings = CONTROLLER_SETTINGS if values.get("at_once") else {}
@@ -115,7 +113,7 @@ def _floats(values) -> tuple[float, ...]:
 
 def upgrade_spec(path: str | Path) -> ControllerSpec:
     """Rewrite the spec file ``path`` of ``spec_version`` 1 (its ``controller`` named the
-    blends alone) as version 2, in place: every other ``ControllerConfig`` field with the
+    blends alone) as version 2, in place: every other ``ControllerSettings`` field with the
     value version 1 ran with (the code's default), and the packaged robot model's hash; its
     comment lines kept. A version 2 file is left as it is. Returns the spec."""
     import yaml

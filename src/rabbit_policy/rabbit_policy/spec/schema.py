@@ -21,8 +21,9 @@ controller in order and every constant it uses (ROS-free, no torch). Read by
    :class:`~rabbit_policy.runtime.recovery.OverlayConfig`; whether the controller applies
    gaits at once follows from the ``controller`` section, whether the overlay blends the
    network's gaits from ``blend``), or null;
-7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (every
-   ``ControllerConfig`` field but the robot model's geometry and tick, and that model's hash).
+7. ``controller``: the 1 kHz HZD controller's settings this controller runs on (the runtime's own
+   :class:`~rabbit_hzd_controller.controller.ControllerSettings`, every field) and the hash of
+   the robot model whose geometry and tick they run with.
 
 ``provenance`` is free text for people (what made it, from which commit); it is not read.
 A section that is a runtime class is read by the same strict loader as the spec's own:
@@ -40,7 +41,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from rabbit_hzd_controller.controller import ControllerConfig
+from rabbit_hzd_controller.controller import ControllerSettings
 from rabbit_msgs_py.cli import yaml_problem
 from rabbit_msgs_py.decision_ticks import check_ticks
 from rabbit_policy.runtime.actions import RESIDUAL_BASES
@@ -182,46 +183,19 @@ class NetworkSpec:
                 raise SpecError(f"network.low[{i}] ({lo!r}) must be below network.high[{i}] ({hi!r})")
 
 
-@dataclass(frozen=True)
-class ControllerSettingsSpec:
-    """The 1 kHz HZD controller this controller runs on: every ``ControllerConfig`` field
-    (units as there: N m/rad, N m, m, rad, N m s/rad, phase, 1/s) but the leg geometry and
-    the tick, which are the robot model's: ``model_sha256`` names that model
-    (:func:`rabbit_sim.physics.model.model_sha256`), and a spec made for another one is refused. A gait
-    that arrives within the step blends in over ``within_step_blend`` (0: at once) unless it
-    arrives at or after ``within_step_until`` (then it waits for the touchdown); a gait that
-    arrives with a touchdown blends in over ``blend_phase``."""
+@dataclass(frozen=True, kw_only=True)
+class ControllerSection(ControllerSettings):
+    """The ``controller`` section: the 1 kHz HZD controller's own settings class
+    (:class:`~rabbit_hzd_controller.controller.ControllerSettings`, every field, checked by it)
+    and ``model_sha256``, the robot model whose leg geometry and tick those run with
+    (:func:`rabbit_sim.physics.model.model_sha256`): a spec made for another model is refused."""
 
-    kp: float
-    torque_limit: float
-    touchdown_min_phase: float
-    touchdown_height: float
-    min_step_length: float
-    hip_coefficient_range: tuple[float, float]
-    knee_coefficient_range: tuple[float, float]
-    max_kd: float
-    blend_phase: float
-    within_step_blend: float
-    within_step_until: float
-    min_phase_rate: float
     model_sha256: str
 
     def __post_init__(self) -> None:
-        for name in ("within_step_blend", "within_step_until", "blend_phase"):
-            _number(getattr(self, name), f"controller.{name}", 0.0, 1.0)
-        for name in ("hip_coefficient_range", "knee_coefficient_range"):
-            _ordered(getattr(self, name), f"controller.{name}")
-        _number(self.touchdown_height, "controller.touchdown_height")
+        super().__post_init__()
         if not _is_sha256(self.model_sha256):
             raise SpecError(f"controller.model_sha256 must be 64 hex digits, got {self.model_sha256!r}")
-        try:
-            ControllerConfig(**self.settings())
-        except ValueError as exc:
-            raise SpecError(f"controller: {exc}") from None
-
-    def settings(self) -> dict:
-        """The ``ControllerConfig`` fields (by name) this spec sets: all but the model's."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "model_sha256"}
 
 
 def _is_sha256(text: str) -> bool:
@@ -242,7 +216,7 @@ class ControllerSpec:
     blend: BlendConfig | None
     recovery_rule: RecoveryConfig | None
     overlay: OverlayConfig | None
-    controller: ControllerSettingsSpec
+    controller: ControllerSection
     provenance: dict = field(default_factory=dict)
     OPTIONAL_KEYS: typing.ClassVar[tuple[str, ...]] = ("provenance",)
 
