@@ -53,6 +53,40 @@ def ensure_output_dir(parser: argparse.ArgumentParser, path, flag: str = "--out"
         parser.error(f"{flag} {path} is not empty: give a new directory")
 
 
+def run_dir_problem(out: Path, resume: bool, checkpoint: str) -> str | None:
+    """Why ``out`` cannot hold a training run (one line), or None: it cannot be written, or it
+    holds files and ``resume`` is not given, or ``resume`` is given and ``out/checkpoint`` (the
+    file a resumed run continues from) is not there."""
+    out = Path(out)
+    problem = unwritable_dir(out)
+    if problem:
+        return f"--out {out}: {problem}"
+    if resume and not (out / checkpoint).is_file():
+        return f"--resume: no {out / checkpoint}"
+    if not resume and out.is_dir() and any(out.iterdir()):
+        return f"{out} is not empty; use --resume or another --out"
+    return None
+
+
+def refuse_unusable_run_dir(argv: list[str] | None, prog: str, checkpoint: str) -> None:
+    """A training command's first step, before its heavy imports (torch, the environments):
+    read ``--out`` and ``--resume`` alone from ``argv`` (the command's own parser reads them
+    again with everything else) and, when :func:`run_dir_problem` says why the run cannot go
+    there, print ``prog: error: ...`` and exit with status 2. Without ``--out`` it does nothing:
+    the command's parser says it is missing."""
+    early = argparse.ArgumentParser(prog=prog, add_help=False, allow_abbrev=False, exit_on_error=False)
+    early.add_argument("--out", type=Path)
+    early.add_argument("--resume", action="store_true")
+    try:
+        known, _ = early.parse_known_args(sys.argv[1:] if argv is None else argv)
+    except argparse.ArgumentError:  # such as --out without a value: the command's parser says so
+        return
+    problem = None if known.out is None else run_dir_problem(known.out, known.resume, checkpoint)
+    if problem:
+        print(f"{prog}: error: {problem}", file=sys.stderr)
+        sys.exit(2)
+
+
 def positive(text: str) -> float:
     """An argparse type: a finite number > 0."""
     value = float(text)

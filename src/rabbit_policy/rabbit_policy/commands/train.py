@@ -20,21 +20,28 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, unwritable_dir
-from rabbit_policy.learning.env import EpisodeConfig
-from rabbit_policy.learning.es import ESConfig
-from rabbit_policy.learning.ppo import PPOConfig
-from rabbit_policy.learning.presets import parse_with_preset
-from rabbit_policy.learning.training import TrainingConfig
-from rabbit_policy.parallel import add_backend_arguments, backend_config
+from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, \
+    refuse_unusable_run_dir
 
-TRAINERS = {"es": ESConfig, "ppo": PPOConfig}
+if TYPE_CHECKING:
+    from rabbit_policy.learning.training import TrainingConfig
+
+ALGORITHMS = ("es", "ppo")
 
 
 def build_parser() -> ArgumentParser:
+    # The configuration classes import torch and the environments (2-3 s): main refuses an
+    # unusable --out before they load.
+    from rabbit_policy.learning.env import EpisodeConfig
+    from rabbit_policy.learning.es import ESConfig
+    from rabbit_policy.learning.ppo import PPOConfig
+    from rabbit_policy.learning.training import TrainingConfig
+    from rabbit_policy.parallel import add_backend_arguments
+
     parser = ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
-    parser.add_argument("--algo", choices=tuple(TRAINERS), required=True, help="the trainer")
+    parser.add_argument("--algo", choices=ALGORITHMS, required=True, help="the trainer")
     parser.add_argument("--out", type=Path, required=True, help="run directory (new, or --resume)")
     add_config_arguments(parser, TrainingConfig)
     add_backend_arguments(parser, workers=False)
@@ -47,11 +54,16 @@ def build_parser() -> ArgumentParser:
 def parse_config(argv: list[str] | None) -> TrainingConfig:
     """The run's configuration from a command line and an optional ``--config`` preset
     (``rabbit_policy.learning.presets``; bad values: one line, exit status 2)."""
+    from rabbit_policy.learning.es import ESConfig
+    from rabbit_policy.learning.ppo import PPOConfig
+    from rabbit_policy.learning.presets import parse_with_preset
+    from rabbit_policy.learning.training import TrainingConfig
+    from rabbit_policy.parallel import backend_config
+
     parser = build_parser()
     args = parse_with_preset(parser, argv)
     try:
-        trainer_cls = TRAINERS[args.algo]
-        trainer = (config_from_args(ESConfig, args, workers=args.workers) if trainer_cls is ESConfig
+        trainer = (config_from_args(ESConfig, args, workers=args.workers) if args.algo == "es"
                    else config_from_args(PPOConfig, args))
         return config_from_args(TrainingConfig, args, algo=args.algo, out=args.out, trainer=trainer,
                                 backend=backend_config(args))
@@ -60,11 +72,8 @@ def parse_config(argv: list[str] | None) -> TrainingConfig:
 
 
 def main(argv: list[str] | None = None) -> int:
+    refuse_unusable_run_dir(argv, "train.py", "checkpoint.pt")  # before the heavy imports: one line, exit 2
     config = parse_config(argv)
-    problem = unwritable_dir(config.out)  # before any work (parse_config itself writes nothing)
-    if problem:
-        print(f"train.py: error: --out {config.out}: {problem}", file=sys.stderr)
-        return 2
     from rabbit_policy.learning.training import train
 
     return train(config)

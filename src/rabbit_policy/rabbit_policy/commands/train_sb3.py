@@ -20,20 +20,32 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, unwritable_dir
-from rabbit_policy.learning.presets import parse_with_preset
-from rabbit_policy.learning.sb3 import SB3Config
-from rabbit_policy.parallel import BackendConfig, add_backend_arguments, backend_config
+from rabbit_msgs_py.cli import ArgumentParser, HelpFormatter, add_config_arguments, config_from_args, \
+    refuse_unusable_run_dir
+
+if TYPE_CHECKING:
+    from rabbit_policy.learning.sb3 import SB3Config
+    from rabbit_policy.parallel import BackendConfig
+
+CHECKPOINT = "sb3_checkpoint.zip"
+"""What ``--resume`` continues from (``rabbit_policy.learning.sb3.CHECKPOINT``, named here without its imports)."""
 
 
 def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, BackendConfig, bool]:
     """(configuration, output directory, progress bar, evaluation backend, resume) from a
     command line and an optional ``--config`` preset (bad values: one line, exit status 2)."""
+    # SB3Config's module imports torch and the environments (2 s): main refuses an unusable
+    # --out before they load.
+    from rabbit_policy.learning.presets import parse_with_preset
+    from rabbit_policy.learning.sb3 import SB3Config
+    from rabbit_policy.parallel import add_backend_arguments, backend_config
+
     parser = ArgumentParser(description=__doc__, formatter_class=HelpFormatter)
     parser.add_argument("--out", type=Path, required=True, help="run directory (new or empty)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("--resume", action="store_true", help="continue from OUT/sb3_checkpoint.zip (give the same "
+    parser.add_argument("--resume", action="store_true", help=f"continue from OUT/{CHECKPOINT} (give the same "
                                                               "options)")
     add_config_arguments(parser, SB3Config)
     add_backend_arguments(parser, workers=False)
@@ -43,21 +55,12 @@ def parse_config(argv: list[str] | None) -> tuple[SB3Config, Path, bool, Backend
         backend = backend_config(args)
     except ValueError as exc:
         parser.error(str(exc))
-    if args.resume:
-        if not (args.out / "sb3_checkpoint.zip").is_file():
-            parser.error(f"--resume: no {args.out / 'sb3_checkpoint.zip'}")
-    elif args.out.exists() and any(args.out.iterdir()):
-        parser.error(f"{args.out} is not empty; use --resume or another --out")
-
     return config, args.out, not args.no_progress, backend, args.resume
 
 
 def main(argv: list[str] | None = None) -> int:
+    refuse_unusable_run_dir(argv, "train_sb3.py", CHECKPOINT)  # before the heavy imports: one line, exit 2
     config, out, progress, backend, resume = parse_config(argv)
-    problem = unwritable_dir(out)  # before any work (parse_config itself writes nothing)
-    if problem:
-        print(f"train_sb3.py: error: --out {out}: {problem}", file=sys.stderr)
-        return 2
     try:
         import stable_baselines3  # noqa: F401  (an optional dependency: requirements-extras.txt)
     except ImportError:

@@ -50,7 +50,7 @@ import torch
 from tqdm import tqdm
 
 from rabbit_msgs_py import strict_json
-from rabbit_msgs_py.cli import option, positive_int
+from rabbit_msgs_py.cli import option, positive_int, run_dir_problem
 from rabbit_policy.evaluation.acceptance import acceptance, acceptance_rank
 from rabbit_policy.spec.provenance import provenance
 from rabbit_policy.learning.es import EvolutionStrategy
@@ -138,11 +138,9 @@ def evaluation_row(iteration: int, wall: float, env_steps: int, result: dict) ->
 
 def _refusal(args: TrainingConfig) -> str | None:
     """Why ``args`` cannot run (an unusable --out or --resume, --spec with PPO), else None."""
-    out = args.out
-    if out.exists() and not args.resume and any(out.iterdir()):
-        return f"{out} is not empty; use --resume or another --out"
-    if args.resume and not (out / "checkpoint.pt").is_file():
-        return f"--resume: no {out / 'checkpoint.pt'}"
+    problem = run_dir_problem(args.out, args.resume, "checkpoint.pt")
+    if problem:
+        return problem
     if getattr(args.trainer, "spec", "") and args.algo != "es":
         return ("--spec trains with ES (the spec's network in its deployed loop); PPO's sampler and critic are "
                 "not wired to it")
