@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from rabbit_policy.evaluation.experiments import convergence, filtered_speed, settling_time
+from rabbit_policy.evaluation.section_iv import convergence, filtered_speed, settling_time
 from rabbit_policy.evaluation.stability import WalkReturnMap, analyse_stability
 from rabbit_policy.runtime.policies import CONTROLLERS
 from rabbit_policy.spec.make import make_policy
@@ -462,7 +462,7 @@ def test_compare_policies_refuses_bad_input_with_one_line_and_exit_2(args, messa
 
 
 def test_check_6_judges_the_median_seed_and_keeps_the_spread():
-    from rabbit_policy.evaluation.experiments import median_analysis
+    from rabbit_policy.evaluation.section_iv import median_analysis
 
     runs = [{"largest": x, "magnitudes": [x, 0.1], "stable": x < 1.0} for x in (1.02, 0.8, 0.95)]
     median = median_analysis(runs)

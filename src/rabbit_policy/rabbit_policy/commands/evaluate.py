@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     ensure_output_dir(parser, args.out)  # before any work: one line, exit 2
 
-    from rabbit_policy.evaluation import experiments as evaluation
+    from rabbit_policy.evaluation import section_iv as evaluation
     from rabbit_policy.evaluation import figures
     from rabbit_policy.evaluation.report import headline_table, load_comparisons, render_ablation, render_report
     from rabbit_policy.evaluation.robustness import robustness

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Callable, Iterable, Iterator
 
 from rabbit_hzd_controller.alpha import reduce_alpha
-from rabbit_policy.evaluation.experiments import POINCARE_SEEDS, seeded_analyses
+from rabbit_policy.evaluation.section_iv import POINCARE_SEEDS, seeded_analyses
 from rabbit_policy.evaluation.push_recovery import PushScenario, classic_margin, push_trial
 from rabbit_policy.evaluation.robustness import RobustnessConfig, push_margins, robustness
 from rabbit_policy.experiment.loop import walk
@@ -187,7 +187,7 @@ class BroadCriteria:
        torque delay within ``model_tolerance`` (the second learning issue: the delay at 3 ms,
        judged on its speed; 5 ms and the rest are probes, reported);
     6. still HZD: every Poincaré |lambda| < 1 at the analysed speeds (the median of
-       :data:`.experiments.POINCARE_SEEDS`' analyses, :func:`stability_analyses`), peak torque within
+       :data:`.section_iv.POINCARE_SEEDS`' analyses, :func:`stability_analyses`), peak torque within
        ``torque_limit``, the outputs the paper's (20 free Bezier coefficients + Kd)."""
 
     push_factor: float = 2.0
@@ -299,7 +299,7 @@ def stability_analyses(policy: Policy, samples: int, config=None,
     """Check 6's Poincaré analyses of ``policy`` with speed feedback, ``samples`` perturbed
     runs each, under each of ``seeds``, on ``config``'s nominal model (a
     :class:`.robustness.RobustnessConfig`): ``{"0.70": analysis, "1.00": ..., "1.30": ...}``
-    (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`.experiments.median_analysis`
+    (m/s; 1.0 m/s alone below 100 samples), an analysis being the seeds' :func:`.section_iv.median_analysis`
     of ``StabilityAnalysis.to_dict()`` or ``{"error", "stable": False}``."""
 
     model = (config or RobustnessConfig()).model_errors[0].model

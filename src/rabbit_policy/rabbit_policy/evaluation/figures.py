@@ -1,6 +1,6 @@
 """The evaluation's figures (PNG, matplotlib's Agg backend: no display needed).
 
-Each function draws one figure from :mod:`.experiments`' results (the dicts that go to
+Each function draws one figure from :mod:`.section_iv`' results (the dicts that go to
 ``results.json``; the phase portraits also need the recorded walks) and saves it.
 """
 

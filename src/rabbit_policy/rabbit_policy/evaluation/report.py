@@ -82,7 +82,7 @@ def poincare_section(poincare: dict) -> list[str]:
              "perturbation shrinks per step. `decay` is the same factor measured by walking a "
              "perturbation along the slowest eigenvector (— when it vanished into the walk's own "
              "step-to-step jitter within three steps). Each row is the median of analyses under several "
-             "perturbation seeds (`experiments.POINCARE_SEEDS`), the seeds' largest |λ| in brackets: one "
+             "perturbation seeds (`section_iv.POINCARE_SEEDS`), the seeds' largest |λ| in brackets: one "
              "analysis moves by 0.1-0.25 from seed to seed, so differences below about 0.15 are noise.", "",
              "![eigenvalue magnitudes](poincare.png)", "",
              "| controller | speed (m/s) | dim | largest \\|λ\\| | all \\|λ\\| | stable | decay/step | pairs used (failed) |",
