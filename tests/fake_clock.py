@@ -1,5 +1,5 @@
 """A settable wall clock for the ROS-free rules that read the time (the simulator's stepping
-rules and driver, the controller's gait sync)."""
+rules and driver, the controller's driver)."""
 
 from __future__ import annotations
 

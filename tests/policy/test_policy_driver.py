@@ -1,5 +1,5 @@
 """``PolicyDriver``, policy_node's ROS-free core: the node's rules run without a node (events
-in, actions out), as SimDriver's and GaitSync's do."""
+in, actions out), as SimDriver's and ControllerDriver's do."""
 
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ error, for tuning Kp and Kd).
 The control law is :class:`rabbit_hzd_controller.controller.HZDController`, the same code
 the ROS-free loop runs; which gait answers which state (the first gait, gaits queued to the
 touchdown or applied at once as ``/hzd/gait_timing`` says, ``decision_sync``, resets,
-re-sent states, a controller joining mid-run) is :class:`~.gait_sync.GaitSync`, ROS-free and
+re-sent states, a controller joining mid-run) is :class:`~.controller_driver.ControllerDriver`, ROS-free and
 unit-tested. This node parses and validates what arrives (malformed alpha/Kd, states and
 timings are rejected with a logged error; the last good gait stays in force), hands it over
 and publishes what comes back.
@@ -60,7 +60,7 @@ from rabbit_msgs_py.solo import PROCESS_SOLO_CHECK, SOLO_CHECK_HELP, SoloStart
 from rabbit_msgs_py.timers import wall_timer
 
 from .controller import ControllerConfig, Leg, validate_alpha, validate_kd
-from .gait_sync import SILENT_WALL, Answer, GaitSync, Repeat
+from .controller_driver import SILENT_WALL, Answer, ControllerDriver, Repeat
 
 FOOT_FRAMES = {Leg.LEFT: "left_foot", Leg.RIGHT: "right_foot"}
 
@@ -133,7 +133,7 @@ def _setting(value) -> str:
 class HZDControllerNode(Node):
     """Parameters: :data:`CONTROLLER_PARAMS` (``kp``, ``max_kd``, ``blend_phase`` and
     ``within_step_blend`` may change at run time; the rest are read-only) and
-    :data:`NODE_PARAMS`. The rules are :class:`~.gait_sync.GaitSync` (ROS-free); this node
+    :data:`NODE_PARAMS`. The rules are :class:`~.controller_driver.ControllerDriver` (ROS-free); this node
     parses and validates what arrives, hands it over and publishes what comes back."""
 
     @destroyed_if_start_fails
@@ -151,7 +151,7 @@ class HZDControllerNode(Node):
             self.stats_file = values.pop("stats_file")
             rate = values.pop("reference_rate")
             self._reference_every = int(round(1e9 / rate)) if rate else 0  # ns of sim time (0: off)
-            self.sync = GaitSync(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout,
+            self.sync = ControllerDriver(ControllerConfig(**values), gait_timing, decision_sync, decision_timeout,
                                  mode_known="decision_sync" in self._given)
         except (ValueError, TypeError) as exc:
             raise NodeStartError(f"hzd_controller_node: {exc}") from None
@@ -531,7 +531,7 @@ class HZDControllerNode(Node):
 
     # -------------------------------------------------------------- actions
     def _do(self, actions: list) -> None:
-        """Carry out what :class:`GaitSync` returned, in order."""
+        """Carry out what :class:`ControllerDriver` returned, in order."""
         for action in actions:
             if isinstance(action, Answer):
                 self._answer(action)

@@ -1,6 +1,6 @@
 """The ROS-free core of ``policy_node`` (:mod:`.policy_node`): events in, actions out (as
 :class:`rabbit_sim.stepping.SimDriver` is sim_node's and
-:class:`rabbit_hzd_controller.gait_sync.GaitSync` the controller node's).
+:class:`rabbit_hzd_controller.controller_driver.ControllerDriver` the controller node's).
 
 :class:`PolicyDriver` holds the policy, the commanded speed (clamped into
 [``min_speed``, ``max_speed``] m/s, a non-finite one rejected), the speed schedule, the

@@ -1,4 +1,4 @@
-"""The controller node's rules, without ROS: which gait answers which state. :class:`GaitSync`
+"""The controller node's rules, without ROS: which gait answers which state. :class:`ControllerDriver`
 takes ``hzd_controller_node``'s events (a gait part, the policy's gait timing parsed by
 ``rabbit_msgs_py.decision_ticks.parse_gait_timing``, a reset count,
 a state, the decision timer) and returns what to do, in order (:class:`Answer` a state,
@@ -101,7 +101,7 @@ SIM_MODE_WAIT = 2.0
 comes, for at most this long after the first state (a simulator that never says)."""
 
 
-class GaitSync:
+class ControllerDriver:
     """See the module docstring. ``gait_timing``: ``"policy"`` (follow ``/hzd/gait_timing``;
     ``next_step`` until it says) or one of :data:`GAIT_TIMINGS`."""
 

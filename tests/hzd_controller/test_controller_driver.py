@@ -1,4 +1,4 @@
-"""The controller node's rules without ROS (rabbit_hzd_controller.gait_sync.GaitSync): events
+"""The controller node's rules without ROS (rabbit_hzd_controller.controller_driver.ControllerDriver): events
 in, actions out, on real gaits and states with a fake wall clock."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ import pytest
 
 from rabbit_hzd_controller.controller import ControllerConfig, HZDController, infer_stance
 from rabbit_hzd_controller.gait_state import state_on_gait
-from rabbit_hzd_controller.gait_sync import Answer, GaitSync, Log, Repeat
+from rabbit_hzd_controller.controller_driver import Answer, ControllerDriver, Log, Repeat
 from rabbit_msgs_py.decision_ticks import parse_gait_timing
 from rabbit_policy.runtime.gait_library import GaitLibrary
 
@@ -32,7 +32,7 @@ def _answers(actions) -> list[int]:
 
 def test_a_state_before_the_gait_waits_and_is_answered_once_it_is_complete(gaits):
     slow, _fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig())
+    sync = ControllerDriver(ControllerConfig())
     assert sync.on_state(0, q, dq) == [] and sync.missing == ["alpha", "kd"]
     assert sync.on_gait_part("alpha", slow) == []
     (answer,) = sync.on_gait_part("kd", 50.0)
@@ -43,7 +43,7 @@ def test_a_state_before_the_gait_waits_and_is_answered_once_it_is_complete(gaits
 
 def test_decision_sync_holds_a_due_state_until_its_decision_and_applies_it_to_that_state(gaits):
     slow, fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig(), decision_sync=True, clock=FakeClock())
+    sync = ControllerDriver(ControllerConfig(), decision_sync=True, clock=FakeClock())
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     assert sync.on_state(0, q, dq) == [] and sync.missing == ["gait_timing"]  # a due decision would be missed
@@ -61,11 +61,11 @@ def test_decision_sync_holds_a_due_state_until_its_decision_and_applies_it_to_th
     assert answer.torques == reference.compute(q, dq)  # the decision applied to that very state
 
 
-def _holding_a_due_state(alpha, q, dq) -> tuple[FakeClock, GaitSync]:
+def _holding_a_due_state(alpha, q, dq) -> tuple[FakeClock, ControllerDriver]:
     """A lockstep controller (decision_sync, a 2 s timeout, a fake clock) deciding every 20 ticks
     on ``alpha``, Kd 50, after the states of ticks 0-20: the one of tick 20 is held for its decision."""
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
+    sync = ControllerDriver(ControllerConfig(), decision_sync=True, decision_timeout=2.0, clock=clock)
     sync.on_gait_part("alpha", alpha)
     sync.on_gait_part("kd", 50.0)
     sync.on_gait_timing("at_once", 20)
@@ -92,7 +92,7 @@ def test_a_decision_that_never_comes_is_given_up_and_gaits_then_apply_on_arrival
 
 def test_a_rejected_part_counts_as_its_decisions_part(gaits):
     slow, _fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig(), decision_sync=True)
+    sync = ControllerDriver(ControllerConfig(), decision_sync=True)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     sync.on_gait_timing("at_once", 20)
@@ -105,7 +105,7 @@ def test_a_rejected_part_counts_as_its_decisions_part(gaits):
 
 def test_a_resent_state_gets_the_same_reply_and_a_reset_answers_it_anew(gaits):
     slow, _fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig())
+    sync = ControllerDriver(ControllerConfig())
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     sync.on_resets(1)  # the count in force at start: nothing to restart
@@ -121,7 +121,7 @@ def test_a_controller_joining_mid_run_answers_its_first_state_at_once(gaits):
     """The stack restarted the controller: its first state is due for a decision that went
     to the old instance; it is answered at once, the next due one waits as usual."""
     slow, _fast, (q, dq) = gaits
-    sync = GaitSync(ControllerConfig(), decision_sync=True)
+    sync = ControllerDriver(ControllerConfig(), decision_sync=True)
     sync.on_resets(1)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
@@ -140,7 +140,7 @@ def test_gait_timing_is_parsed_where_it_enters():
         with pytest.raises(ValueError, match="at_once:N"):
             parse_gait_timing(bad)
     with pytest.raises(ValueError, match="gait_timing must be"):
-        GaitSync(ControllerConfig(), "whenever")
+        ControllerDriver(ControllerConfig(), "whenever")
 
 
 def test_the_timing_log_says_how_gaits_apply_under_the_controllers_settings():
@@ -148,7 +148,7 @@ def test_the_timing_log_says_how_gaits_apply_under_the_controllers_settings():
     at once with no blend and no queue (the recovery settings a policy may ask for), or at
     the next touchdown."""
     recovery = ControllerConfig(within_step_blend=0.0, within_step_until=1.0, blend_phase=0.0)
-    sync = GaitSync(recovery, clock=FakeClock())
+    sync = ControllerDriver(recovery, clock=FakeClock())
     at_once = sync.on_gait_timing("at_once", 20)[0].text
     assert "at once (no blend, no queue)" in at_once and "blended" not in at_once
     assert "next touchdown" in sync.on_gait_timing("next_step", 0)[0].text
@@ -161,7 +161,7 @@ def test_a_policy_gone_silent_is_logged_once_with_since_when_and_its_return_too(
     its gaits keep coming in wall time) is not silent."""
     slow, fast, (q, dq) = gaits
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), clock=clock)
+    sync = ControllerDriver(ControllerConfig(), clock=clock)
     sync.on_gait_timing("at_once", 20)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
@@ -180,7 +180,7 @@ def test_a_policy_gone_silent_is_logged_once_with_since_when_and_its_return_too(
 def test_a_policy_deciding_once_per_step_is_silent_after_two_seconds(gaits):
     slow, _fast, (q, dq) = gaits
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), clock=clock)
+    sync = ControllerDriver(ControllerConfig(), clock=clock)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     clock.now += 2.0
@@ -193,11 +193,11 @@ def test_following_the_simulator_no_state_is_answered_before_it_says_how_it_step
     ``/sim/mode``; lockstep turns the hold for due decisions on (a due state then waits for its
     decision), realtime leaves it off; a simulator that never says is waited for 2 s of wall
     time, then the controller answers as given, with one warning."""
-    from rabbit_hzd_controller.gait_sync import SIM_MODE_WAIT
+    from rabbit_hzd_controller.controller_driver import SIM_MODE_WAIT
 
     slow, fast, (q, dq) = gaits
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    sync = ControllerDriver(ControllerConfig(), clock=clock, mode_known=False)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     sync.on_gait_timing("at_once", 20)
@@ -208,13 +208,13 @@ def test_following_the_simulator_no_state_is_answered_before_it_says_how_it_step
     assert sync.on_state(20 * MS, q, dq) == []  # due: held for its decision, as run_stack's controller does
     sync.on_gait_part("alpha", fast)
     assert _answers(sync.on_gait_part("kd", 60.0)) == [20 * MS]
-    realtime = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    realtime = ControllerDriver(ControllerConfig(), clock=clock, mode_known=False)
     realtime.on_gait_part("alpha", slow)
     realtime.on_gait_part("kd", 50.0)
     realtime.on_gait_timing("at_once", 20)
     realtime.on_state(0, q, dq)
     assert _answers(realtime.on_sim_mode(False)) == [0] and not realtime.decision_sync
-    silent = GaitSync(ControllerConfig(), clock=clock, mode_known=False)
+    silent = ControllerDriver(ControllerConfig(), clock=clock, mode_known=False)
     silent.on_gait_part("alpha", slow)
     silent.on_gait_part("kd", 50.0)
     assert silent.on_state(0, q, dq) == [] and silent.check_held() == []
@@ -229,7 +229,7 @@ def test_a_policy_back_after_a_reset_is_logged_without_a_negative_duration(gaits
     the line says so instead of "after -313.421 s without one" (issue 76)."""
     slow, fast, (q, dq) = gaits
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), clock=clock)
+    sync = ControllerDriver(ControllerConfig(), clock=clock)
     sync.on_resets(1)
     sync.on_gait_timing("at_once", 20)
     sync.on_gait_part("alpha", slow)
@@ -250,11 +250,11 @@ def test_a_controller_that_never_gets_a_state_says_so_once(gaits):
     """A gait is in but no state comes (no simulator, or one whose states do not reach this
     controller): said once, FIRST_STATE_WAIT s after the start, with what it has; never once
     a state came."""
-    from rabbit_hzd_controller.gait_sync import FIRST_STATE_WAIT
+    from rabbit_hzd_controller.controller_driver import FIRST_STATE_WAIT
 
     slow, _fast, (q, dq) = gaits
     clock = FakeClock()
-    sync = GaitSync(ControllerConfig(), decision_sync=True, clock=clock)
+    sync = ControllerDriver(ControllerConfig(), decision_sync=True, clock=clock)
     sync.on_gait_part("alpha", slow)
     sync.on_gait_part("kd", 50.0)
     sync.on_gait_timing("at_once", 20)
@@ -265,7 +265,7 @@ def test_a_controller_that_never_gets_a_state_says_so_once(gaits):
     assert line.level == "info" and "no state on the joint states yet" in line.text and "a gait is in" in line.text
     clock.now += 60.0
     assert sync.check_held() == []  # once
-    other = GaitSync(ControllerConfig(), clock=clock)
+    other = ControllerDriver(ControllerConfig(), clock=clock)
     other.on_state(0, q, dq)  # waits for its gait
     clock.now += 2 * FIRST_STATE_WAIT
     assert all("yet" not in a.text for a in other.check_held())  # (its simulator is silent: said as such)
