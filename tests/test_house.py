@@ -364,3 +364,18 @@ def test_no_spec_section_mirrors_a_runtime_class():
             if len(shared) >= 3:
                 mirrors.append(f"{spec_class.__name__} ~ {cls.__name__}: {sorted(shared)}")
     assert not mirrors, mirrors
+
+
+def test_no_function_in_the_packages_passes_120_lines():
+    """Straight roads (issue 74): no function or method of the four packages is longer than 120
+    lines, so each reads on a screen or two."""
+    import ast
+
+    long = []
+    for name in tracked("src"):
+        if name.endswith(".py"):
+            for node in ast.walk(ast.parse((ROOT / name).read_text())):
+                if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and \
+                        node.end_lineno - node.lineno + 1 > 120:
+                    long.append(f"{name}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)")
+    assert not long, long
